@@ -1,0 +1,3 @@
+"""Design: augmented system, H and assumption checks, LMIs, certificates, the Design record."""
+
+from .record import Design as Design

@@ -1,0 +1,253 @@
+"""The design record: a frozen object with atomic JSON save/load exactly as CONTRACT.md.
+
+Every key of CONTRACT.md's design document is here under its contract name. Extra keys
+(all additions, none renamed) carry what the simulator and the C generator need to rebuild
+the step without the plant's Python code: the affine offsets ``a`` of each local model, the
+reference input, the scheduling map (y, xhat) -> h as a serialised CasADi Function, signal
+names, and the certificate's full report.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DesignFileError
+
+__all__ = ["Design", "REQUIRED_KEYS", "atomic_write_text"]
+
+REQUIRED_KEYS = (
+    "plant", "variant", "solver", "params", "dims", "premises", "local_models", "C", "Df", "H", "T", "X", "P",
+    "K", "Kf", "Pbar", "Q", "N", "theta", "L1", "L2", "R", "Ls", "checks", "timings",
+)
+_MATS = ("C", "Df", "H", "T", "X", "P", "Kf", "Pbar", "N", "Ls")
+_LISTS = ("K", "Q", "L1", "L2", "R")
+_LM_KEYS = ("A", "B", "Bd", "Bf", "W")
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``path`` atomically: a temporary file in the same folder, then a rename.
+
+    A failure leaves any existing file untouched and no partial file behind.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def _arr(x) -> np.ndarray:
+    return np.asarray(x, dtype=float)
+
+
+@dataclass(frozen=True)
+class Design:
+    """A certified (or honestly uncertified) observer/controller design for one plant."""
+
+    plant: str
+    plant_spec: str
+    variant: str
+    solver: str
+    params: dict
+    dims: dict
+    premises: list
+    local_models: tuple  # of dicts of numpy arrays: A, B, Bd, Bf, W, a, G, Gf, M
+    C: np.ndarray
+    Df: np.ndarray
+    H: np.ndarray
+    T: np.ndarray
+    X: np.ndarray
+    P: np.ndarray
+    K: tuple
+    Kf: np.ndarray
+    Pbar: np.ndarray
+    Q: tuple
+    N: np.ndarray
+    theta: float
+    L1: tuple
+    L2: tuple
+    R: tuple
+    Ls: np.ndarray
+    checks: dict
+    timings: dict
+    u_ref: np.ndarray
+    scheduling: str  # serialised casadi Function (y, xhat) -> h
+    names: dict = field(default_factory=dict)  # states, inputs, outputs, faults, units
+    certified: bool = True
+    status: list = field(default_factory=list)  # what was done: solver statuses, retries, fallbacks
+    x_ref: np.ndarray | None = None
+
+    # -- convenience ---------------------------------------------------------------------
+    @property
+    def r(self) -> int:
+        return int(self.dims["r"])
+
+    @property
+    def nbar(self) -> int:
+        return int(self.dims["nbar"])
+
+    def scheduling_function(self):
+        """The CasADi Function ``(y, xhat) -> h``."""
+        import casadi as ca
+
+        return ca.Function.deserialize(self.scheduling)
+
+    def affine(self, i: int) -> np.ndarray:
+        """Affine offset ``a_i`` of rule ``i`` (zeros for sector models)."""
+        return _arr(self.local_models[i]["a"])
+
+    # -- JSON ----------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        lms = []
+        for lm in self.local_models:
+            lms.append({k: _arr(v).tolist() for k, v in lm.items()})
+        out = {
+            "plant": self.plant,
+            "variant": self.variant,
+            "solver": self.solver,
+            "params": {k: float(v) for k, v in self.params.items()},
+            "dims": {k: int(v) for k, v in self.dims.items()},
+            "premises": self.premises,
+            "local_models": lms,
+        }
+        for k in _MATS:
+            out[k] = _arr(getattr(self, k)).tolist()
+        for k in _LISTS:
+            out[k] = [_arr(M).tolist() for M in getattr(self, k)]
+        out["theta"] = float(self.theta)
+        out["checks"] = _jsonable(self.checks)
+        out["timings"] = {k: float(v) for k, v in self.timings.items()}
+        out["plant_spec"] = self.plant_spec
+        out["u_ref"] = _arr(self.u_ref).tolist()
+        out["x_ref"] = None if self.x_ref is None else _arr(self.x_ref).tolist()
+        out["scheduling"] = self.scheduling
+        out["names"] = self.names
+        out["certified"] = bool(self.certified)
+        out["status"] = list(self.status)
+        return out
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=1, allow_nan=False)
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the design document atomically (an existing file survives a failed run)."""
+        try:
+            text = self.to_json()
+        except ValueError as exc:
+            raise DesignFileError(f"the design holds a non-finite number and cannot be written as JSON ({exc})") from None
+        try:
+            atomic_write_text(path, text)
+        except OSError as exc:
+            raise DesignFileError(f"cannot write the design to {path}: {exc.strerror or exc}; choose a writable path with -o") from None
+
+    @classmethod
+    def from_dict(cls, doc: dict, source: str = "design document") -> Design:
+        if not isinstance(doc, dict):
+            raise DesignFileError(f"{source} is not a JSON object")
+        missing = [k for k in REQUIRED_KEYS + ("u_ref", "scheduling") if k not in doc]
+        if missing:
+            raise DesignFileError(
+                f"{source} lacks key(s) {missing}: it is not a complete fte design document; "
+                "make it again with `fte design PLANT -o FILE`"
+            )
+        try:
+            r = int(doc["dims"]["r"])
+            kw = {k: _finite(source, k, doc[k]) for k in _MATS}
+            for k in _LISTS:
+                v = doc[k]
+                if not isinstance(v, list) or len(v) != r:
+                    raise DesignFileError(f"{source}: {k!r} must be a list of r = {r} matrices")
+                kw[k] = tuple(_finite(source, f"{k}[{i}]", M) for i, M in enumerate(v))
+            lms = []
+            for i, lm in enumerate(doc["local_models"]):
+                lms.append({k: _finite(source, f"local_models[{i}].{k}", v) for k, v in lm.items()})
+            if len(lms) != r:
+                raise DesignFileError(f"{source}: 'local_models' must hold r = {r} models")
+            for lm in lms:
+                lm.setdefault("a", np.zeros(lm["A"].shape[0]))
+            theta = float(doc["theta"])
+            u_ref = _finite(source, "u_ref", doc["u_ref"])
+        except (TypeError, KeyError, ValueError) as exc:
+            if isinstance(exc, DesignFileError):
+                raise
+            raise DesignFileError(f"{source} is malformed ({exc}); make it again with `fte design`") from None
+        return cls(
+            plant=str(doc["plant"]),
+            plant_spec=str(doc.get("plant_spec", doc["plant"])),
+            variant=str(doc["variant"]),
+            solver=str(doc["solver"]),
+            params=dict(doc["params"]),
+            dims=dict(doc["dims"]),
+            premises=list(doc["premises"]),
+            local_models=tuple(lms),
+            theta=theta,
+            checks=dict(doc["checks"]),
+            timings=dict(doc["timings"]),
+            u_ref=u_ref,
+            x_ref=None if doc.get("x_ref") is None else _arr(doc["x_ref"]),
+            scheduling=str(doc["scheduling"]),
+            names=dict(doc.get("names", {})),
+            certified=bool(doc.get("certified", True)),
+            status=list(doc.get("status", [])),
+            **kw,
+        )
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Design:
+        """Read a design document, refusing a missing, truncated or corrupt file with a clear message."""
+        p = Path(path)
+        if not p.is_file():
+            raise DesignFileError(f"design file {str(p)!r} does not exist; make one with `fte design PLANT -o {p}`")
+        try:
+            doc = json.loads(p.read_text(), parse_constant=_reject_constant)
+        except json.JSONDecodeError as exc:
+            raise DesignFileError(
+                f"design file {str(p)!r} is not valid JSON (truncated or corrupt: {exc.msg} at line {exc.lineno}); "
+                "make it again with `fte design`"
+            ) from None
+        except UnicodeDecodeError:
+            raise DesignFileError(f"design file {str(p)!r} is not a text file") from None
+        return cls.from_dict(doc, source=f"design file {str(p)!r}")
+
+
+def _reject_constant(name: str):
+    raise DesignFileError(f"the design document holds {name}; every number must be finite")
+
+
+def _finite(source: str, key: str, value) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise DesignFileError(f"{source}: {key!r} holds a NaN or infinite entry; the design is unusable")
+    return a
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if math.isfinite(v) else (1e308 if v > 0 else -1e308)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    return obj

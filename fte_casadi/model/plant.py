@@ -1,0 +1,373 @@
+"""The symbolic stochastic plant: a frozen record and the builder that validates it.
+
+A user writes the nonlinear plant with CasADi ``SX`` symbols handed out by
+:class:`PlantBuilder`::
+
+    dx = drift(x, u, d, f, z) dt + diffusion(x, u, f, d2, z) dw,   y = C x + Df f
+
+``z`` are *scheduling symbols*: premise variables of the sector-nonlinearity method
+(``b.premise("mu", sin(th)/th)``) or the memberships of local linearisation
+(``b.operating_points(...)``). The true nonlinear plant is obtained by substituting
+their expressions in ``x``; the T-S derivation uses the symbols themselves. Every check
+is done once, in :meth:`PlantBuilder.build`; the returned :class:`Plant` is frozen.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from ..errors import PlantError
+
+__all__ = ["Plant", "PlantBuilder"]
+
+
+@dataclass(frozen=True)
+class Plant:
+    """A validated nonlinear stochastic plant (see :class:`PlantBuilder`)."""
+
+    name: str
+    state_names: tuple[str, ...]
+    state_units: tuple[str, ...]
+    input_names: tuple[str, ...]
+    unknown_input_names: tuple[str, ...]
+    fault_names: tuple[str, ...]
+    fault_kinds: tuple[str, ...]
+    output_names: tuple[str, ...]
+    output_units: tuple[str, ...]
+    diffusion_input_names: tuple[str, ...]
+    x: ca.SX
+    u: ca.SX
+    d: ca.SX
+    f: ca.SX
+    d2: ca.SX
+    z: ca.SX
+    z_names: tuple[str, ...]
+    z_exprs: ca.SX
+    z_texts: tuple[str, ...]
+    drift_z: ca.SX
+    diffusion_z: ca.SX
+    C: np.ndarray
+    Df: np.ndarray
+    region_lo: np.ndarray
+    region_hi: np.ndarray
+    x0: np.ndarray
+    method: str  # "sector" or "linearisation"
+    u_ref: np.ndarray | None = None
+    x_ref: np.ndarray | None = None
+    operating_points: np.ndarray | None = None
+    operating_inputs: np.ndarray | None = None
+    scheduling_state: int | None = None
+    params: Mapping[str, float] = field(default_factory=dict)
+    time_unit: str = "s"
+    #: default design parameters (gamma, gamma1, sigma, delta, epsilon) for this plant
+    design_defaults: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.x.numel()
+
+    @property
+    def m(self) -> int:
+        return self.u.numel()
+
+    @property
+    def ld(self) -> int:
+        return self.d.numel()
+
+    @property
+    def lf(self) -> int:
+        return self.f.numel()
+
+    @property
+    def p(self) -> int:
+        return self.C.shape[0]
+
+    def nonlinear_drift(self) -> ca.SX:
+        """Drift with the scheduling symbols replaced by their expressions in x."""
+        return ca.substitute(self.drift_z, self.z, self.z_exprs)
+
+    def nonlinear_diffusion(self) -> ca.SX:
+        return ca.substitute(self.diffusion_z, self.z, self.z_exprs)
+
+    def drift_function(self) -> ca.Function:
+        """``(x, u, d, f) -> dx/dt`` of the nonlinear plant."""
+        return ca.Function(
+            f"{_cname(self.name)}_drift",
+            [self.x, self.u, self.d, self.f],
+            [self.nonlinear_drift()],
+            ["x", "u", "d", "f"],
+            ["xdot"],
+        )
+
+    def diffusion_function(self) -> ca.Function:
+        """``(x, u, f, d2) -> g``, the coefficient of the scalar Brownian increment."""
+        return ca.Function(
+            f"{_cname(self.name)}_diffusion",
+            [self.x, self.u, self.f, self.d2],
+            [self.nonlinear_diffusion()],
+            ["x", "u", "f", "d2"],
+            ["g"],
+        )
+
+
+def _cname(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name)
+
+
+def _names(kind: str, names: Sequence[str]) -> tuple[str, ...]:
+    if isinstance(names, str):
+        names = (names,)
+    names = tuple(names)
+    for nm in names:
+        if not isinstance(nm, str) or not nm.isidentifier():
+            raise PlantError(f"{kind} name {nm!r} is not a valid identifier; use letters, digits and '_'")
+    return names
+
+
+def _units(kind: str, units, count: int) -> tuple[str, ...]:
+    if units is None:
+        return ("",) * count
+    if isinstance(units, str):
+        units = (units,) * count
+    units = tuple(units)
+    if len(units) != count:
+        raise PlantError(f"{kind} units: expected {count} entries instead of {len(units)}")
+    return units
+
+
+def _column(kind: str, expr, expected: int | None) -> ca.SX:
+    if isinstance(expr, ca.SX):
+        v = expr
+    else:
+        try:
+            v = ca.vertcat(*[ca.SX(e) if not isinstance(e, ca.SX) else e for e in expr])
+        except Exception as exc:  # noqa: BLE001 - CasADi raises plain RuntimeError/TypeError
+            raise PlantError(f"{kind} must be a list of CasADi SX expressions ({exc})") from None
+    if v.shape[1] != 1 and v.shape[0] == 1:
+        v = v.T
+    if v.shape[1] != 1:
+        raise PlantError(f"{kind} must be a column of expressions; got shape {v.shape}")
+    if expected is not None and v.shape[0] != expected:
+        raise PlantError(f"{kind} has the wrong number of rows; expected {expected} instead of {v.shape[0]}")
+    return v
+
+
+class PlantBuilder:
+    """Collects a plant's symbols and equations, then validates them once in :meth:`build`.
+
+    Examples
+    --------
+    >>> import casadi as ca
+    >>> b = PlantBuilder("pendulum")
+    >>> th, om = b.states("theta", "omega")
+    >>> (u,) = b.inputs("u")
+    >>> (d,) = b.unknown_inputs("d")
+    >>> (fa,) = b.faults("fa", kind="actuator")
+    >>> mu = b.premise("mu", ca.if_else(ca.fabs(th) < 1e-6, 1 - th**2 / 6, ca.sin(th) / th))
+    >>> b.drift([om + 0.1 * d, -9.8 * mu * th - 0.5 * om + u + fa])
+    >>> b.diffusion([0.01 * om, 0.0])
+    >>> b.outputs([th])
+    >>> b.region(theta=(-3.14, 3.14))
+    >>> b.reference(u=[0.0])
+    >>> b.initial_state([0.1, 0.0])
+    >>> plant = b.build()
+    >>> plant.n, plant.m, plant.p
+    (2, 1, 1)
+    """
+
+    def __init__(self, name: str):
+        if not isinstance(name, str) or not name.strip():
+            raise PlantError("plant name must be a non-empty string, e.g. PlantBuilder('manipulator')")
+        self._name = name
+        self._x: list[ca.SX] = []
+        self._xn: tuple[str, ...] = ()
+        self._xu: tuple[str, ...] = ()
+        self._u: list[ca.SX] = []
+        self._un: tuple[str, ...] = ()
+        self._d: list[ca.SX] = []
+        self._dn: tuple[str, ...] = ()
+        self._d2: list[ca.SX] = []
+        self._d2n: tuple[str, ...] = ()
+        self._f: list[ca.SX] = []
+        self._fn: list[str] = []
+        self._fk: list[str] = []
+        self._z: list[ca.SX] = []
+        self._zn: list[str] = []
+        self._ze: list[ca.SX] = []
+        self._zt: list[str] = []
+        self._drift = None
+        self._diff = None
+        self._y = None
+        self._yn: tuple[str, ...] | None = None
+        self._yu: tuple[str, ...] | None = None
+        self._region: dict[str, tuple[float, float]] = {}
+        self._uref = None
+        self._xref = None
+        self._x0 = None
+        self._ops = None
+        self._opu = None
+        self._sched = None
+        self._params: dict[str, float] = {}
+        self._time_unit = "s"
+        self._design: dict[str, float] = {}
+
+    # -- symbols -------------------------------------------------------------------------
+    def _new(self, kind: str, names) -> tuple[list[ca.SX], tuple[str, ...]]:
+        names = _names(kind, names)
+        taken = set(self._xn) | set(self._un) | set(self._dn) | set(self._fn) | set(self._zn) | set(self._d2n)
+        for nm in names:
+            if nm in taken:
+                raise PlantError(f"{kind} name {nm!r} is already used by another symbol of this plant")
+        if len(set(names)) != len(names):
+            raise PlantError(f"{kind} names must be distinct; got {names}")
+        return [ca.SX.sym(nm) for nm in names], names
+
+    def states(self, *names: str, units=None) -> tuple[ca.SX, ...]:
+        """Declare the states; returns their symbols in order."""
+        syms, names = self._new("state", names)
+        self._x, self._xn, self._xu = syms, names, _units("state", units, len(names))
+        return tuple(syms)
+
+    def inputs(self, *names: str) -> tuple[ca.SX, ...]:
+        syms, names = self._new("input", names)
+        self._u, self._un = syms, names
+        return tuple(syms)
+
+    def unknown_inputs(self, *names: str) -> tuple[ca.SX, ...]:
+        """Unknown inputs ``d`` of the drift (decoupled by the observer gain H)."""
+        syms, names = self._new("unknown input", names)
+        self._d, self._dn = syms, names
+        return tuple(syms)
+
+    def diffusion_unknown_inputs(self, *names: str) -> tuple[ca.SX, ...]:
+        """Unknown inputs ``d2`` of the diffusion (Section 5 of the paper)."""
+        syms, names = self._new("diffusion unknown input", names)
+        self._d2, self._d2n = syms, names
+        return tuple(syms)
+
+    def faults(self, *names: str, kind: str = "actuator") -> tuple[ca.SX, ...]:
+        """Declare faults of one kind (``"actuator"`` or ``"sensor"``); may be called twice."""
+        if kind not in ("actuator", "sensor"):
+            raise PlantError(f"fault kind must be 'actuator' or 'sensor', not {kind!r}")
+        syms, names = self._new("fault", names)
+        self._f += syms
+        self._fn += names
+        self._fk += [kind] * len(names)
+        return tuple(syms)
+
+    def premise(self, name: str, expr: ca.SX, text: str | None = None) -> ca.SX:
+        """A premise variable of the sector-nonlinearity method; returns its symbol.
+
+        Write the drift and diffusion with the returned symbol where the nonlinearity sits
+        (``-c * mu * theta`` for ``-c * sin(theta)``): for fixed premise values the plant
+        must be linear in ``x, u, d, f``.
+        """
+        if self._ops is not None:
+            raise PlantError("a plant uses either premises (sector nonlinearity) or operating points, not both")
+        (sym,), (name,) = self._new("premise", (name,))
+        if not isinstance(expr, ca.SX) or expr.numel() != 1:
+            raise PlantError(f"premise {name!r} must be a scalar CasADi SX expression of the states")
+        self._z.append(sym)
+        self._zn.append(name)
+        self._ze.append(expr)
+        self._zt.append(text if text is not None else str(expr))
+        return sym
+
+    def operating_points(self, scheduling: ca.SX, points, inputs=None) -> tuple[ca.SX, ...]:
+        """Local linearisation at ``points`` (rows of state values), scheduled on one state.
+
+        Memberships are triangular in the scheduling state, centred on its value at each
+        point (which must increase strictly), and saturated outside the first and last
+        centre so that they stay a convex sum. ``inputs`` are the inputs at each point;
+        by default the input that best holds the point in equilibrium (least squares).
+        Returns the membership symbols ``h_1..h_r``: drift or diffusion may use them to
+        give rule-wise terms (e.g. the paper's W_i of the three-tank).
+        """
+        if self._z:
+            raise PlantError("a plant uses either premises (sector nonlinearity) or operating points, not both")
+        if not self._x:
+            raise PlantError("declare the states before the operating points")
+        idx = [k for k, s in enumerate(self._x) if ca.is_equal(s, scheduling)]
+        if not idx:
+            raise PlantError("operating_points: 'scheduling' must be one of the state symbols")
+        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        if pts.shape[1] != len(self._x):
+            raise PlantError(f"operating points have {pts.shape[1]} columns; expected {len(self._x)} (one per state)")
+        if pts.shape[0] < 2:
+            raise PlantError("give at least two operating points")
+        if not np.all(np.isfinite(pts)):
+            raise PlantError("operating points must be finite numbers")
+        v = pts[:, idx[0]]
+        if np.any(np.diff(v) <= 0):
+            raise PlantError(
+                f"the scheduling state must increase strictly over the operating points; got {v.tolist()}"
+            )
+        self._ops, self._sched = pts, idx[0]
+        self._opu = None if inputs is None else np.atleast_2d(np.asarray(inputs, dtype=float))
+        syms, names = self._new("membership", [f"rule{k + 1}" for k in range(pts.shape[0])])
+        self._z, self._zn = syms, list(names)
+        return tuple(syms)
+
+    # -- equations -----------------------------------------------------------------------
+    def drift(self, exprs) -> None:
+        self._drift = exprs
+
+    def diffusion(self, exprs) -> None:
+        """Coefficient of the scalar Brownian increment dw (one entry per state)."""
+        self._diff = exprs
+
+    def outputs(self, exprs, names=None, units=None) -> None:
+        """Outputs ``y = C x + Df f``; names default to ``y1, y2, ...``."""
+        self._y = exprs
+        self._yn = None if names is None else _names("output", names)
+        self._yu = units
+
+    def region(self, **bounds: tuple[float, float]) -> None:
+        """Bounds of operation per state name, e.g. ``region(theta_l=(-6.3, 6.3))``."""
+        self._region.update(bounds)
+
+    def reference(self, u=None, x=None) -> None:
+        """Reference input ``u`` (added to the feedback), or a reference state ``x``.
+
+        With ``x`` the design computes the input ``u_eq`` that holds the nonlinear plant
+        at ``x`` and uses ``u_ref = u_eq - K x`` so that ``u = u_eq + K (xhat - x)``.
+        """
+        if (u is None) == (x is None):
+            raise PlantError("reference: give exactly one of u= (reference input) or x= (reference state)")
+        self._uref = None if u is None else np.atleast_1d(np.asarray(u, dtype=float))
+        self._xref = None if x is None else np.atleast_1d(np.asarray(x, dtype=float))
+
+    def initial_state(self, x0) -> None:
+        self._x0 = np.atleast_1d(np.asarray(x0, dtype=float))
+
+    def parameters(self, **params: float) -> None:
+        """Physical parameters, recorded with the plant (documentation and reports)."""
+        self._params.update({k: float(v) for k, v in params.items()})
+
+    def time_unit(self, unit: str) -> None:
+        self._time_unit = unit
+
+    def design_defaults(self, **values: float) -> None:
+        """Default design parameters: any of gamma, gamma1, sigma, delta, epsilon."""
+        allowed = {"gamma", "gamma1", "sigma", "delta", "epsilon"}
+        for k, v in values.items():
+            if k not in allowed:
+                raise PlantError(f"design_defaults: unknown parameter {k!r}; allowed are {sorted(allowed)}")
+            try:
+                fv = float(v)
+            except (TypeError, ValueError):
+                raise PlantError(f"design_defaults: {k} must be a number; got {v!r}") from None
+            if not (np.isfinite(fv) and fv > 0):
+                raise PlantError(f"design_defaults: {k} must be a positive finite number; got {v!r}")
+            self._design[k] = fv
+
+    # -- validation ----------------------------------------------------------------------
+    def build(self) -> Plant:
+        """Check everything once and return the frozen :class:`Plant`."""
+        from .validate import validate
+
+        return validate(self)

@@ -1,0 +1,59 @@
+"""Single-link manipulator of Section 6.1, equations (82) — written as a user writes a plant.
+
+Sector nonlinearity on the premise ``mu = sin(theta_l) / theta_l`` (1 at theta_l = 0).
+The coefficient ratios reproduce the paper's printed A_1, A_2 and B exactly.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ..model import Plant, PlantBuilder
+
+#: coefficient ratios of (82) (k/Jm, G/Jm, ktau/Jm, k/Jl, mgh/Jl)
+PARAMS = {"k_Jm": 48.6, "G_Jm": 1.25, "ktau_Jm": 21.6, "k_Jl": 19.5, "mgh_Jl": 3.33}
+#: unknown-input coefficients alpha_d1..alpha_d4
+ALPHA_D = (0.1, -0.2, 0.3, 0.5)
+#: Brownian parameter perturbations of (82)
+W = {"W12": 0.0006, "W23": 0.001, "W21": -0.002, "W22": -0.0001, "W34": 0.0005, "W43": 0.006, "W41": -0.0004, "Ws": 0.003}
+
+
+def sinc(v: ca.SX) -> ca.SX:
+    """``sin(v)/v`` with its removable singularity at 0 filled by the Taylor series."""
+    return ca.if_else(ca.fabs(v) < 1e-4, 1 - v**2 / 6 + v**4 / 120, ca.sin(v) / v)
+
+
+def manipulator() -> Plant:
+    """The paper's single-link manipulator (state theta_m, w_m, theta_l, w_l)."""
+    p, a, w = PARAMS, ALPHA_D, W
+    b = PlantBuilder("manipulator")
+    th_m, w_m, th_l, w_l = b.states("theta_m", "w_m", "theta_l", "w_l", units=["rad", "rad/s", "rad", "rad/s"])
+    (u,) = b.inputs("u")
+    (d,) = b.unknown_inputs("d")
+    (fa,) = b.faults("fa", kind="actuator")
+    (fs,) = b.faults("fs", kind="sensor")
+    mu = b.premise("mu", sinc(th_l), text="sin(theta_l)/theta_l")
+    b.drift(
+        [
+            w_m + a[0] * d,
+            p["k_Jm"] * (th_l - th_m) - p["G_Jm"] * w_m + p["ktau_Jm"] * (u + fa) + a[1] * d,
+            w_l + a[2] * d,
+            -p["k_Jl"] * (th_l - th_m) - p["mgh_Jl"] * mu * th_l + a[3] * d,  # sin(th_l) = mu * th_l
+        ]
+    )
+    b.diffusion(
+        [
+            w["W12"] * w_m,
+            w["W23"] * th_l + w["W21"] * th_m + w["W22"] * w_m,
+            w["W34"] * w_l,
+            w["W43"] * th_l + w["W41"] * th_m + w["Ws"] * mu * th_l,
+        ]
+    )
+    b.outputs([th_m + fs, w_m, th_l], names=["theta_m", "w_m", "theta_l"])
+    b.region(theta_l=(-2 * ca.pi, 2 * ca.pi), theta_m=(-2 * ca.pi, 2 * ca.pi), w_m=(-5.0, 5.0), w_l=(-5.0, 5.0))
+    b.reference(u=[2.0])
+    b.initial_state([0.1, 0.05, 0.02, 0.03])
+    # Section 6.1: gamma = 2, gamma1 = 0.01, sigma = 0.2, rho0 = eps = 1e-5; delta not given: = eps
+    b.design_defaults(gamma=2.0, gamma1=0.01, sigma=0.2, delta=1e-5, epsilon=1e-5)
+    b.parameters(**p, **{f"alpha_d{k + 1}": v for k, v in enumerate(a)}, **w)
+    return b.build()

@@ -1,0 +1,41 @@
+"""T-S derivation: sector nonlinearity, local linearisation, memberships, fidelity."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Plant
+from .fidelity import fidelity as fidelity
+from .linearise import linearised_local_models
+from .memberships import scheduling_from_measurements as scheduling_from_measurements
+from .model import Fidelity as Fidelity
+from .model import LocalModel as LocalModel
+from .model import Premise as Premise
+from .model import TSModel as TSModel
+from .sector import sector_local_models
+
+
+def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TSModel:
+    """Derive the T-S fuzzy model of ``plant`` and check its fidelity.
+
+    Sector nonlinearity when the plant declares premises, local linearisation when it
+    declares operating points.
+
+    Examples
+    --------
+    >>> from fte_casadi.plants import manipulator
+    >>> ts = derive(manipulator())
+    >>> ts.r, round(ts.premises[0].min, 4)
+    (2, -0.2172)
+    """
+    if plant.method == "sector":
+        premises, models, premise_fn, membership_fn = sector_local_models(plant)
+    else:
+        premises, models, premise_fn, membership_fn = linearised_local_models(plant)
+    tmp = TSModel(plant, plant.method, premises, models, plant.C, plant.Df, premise_fn, membership_fn,
+                  Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0))
+    fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
+    return TSModel(plant, plant.method, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid)
+
+
+__all__ = ["derive", "TSModel", "LocalModel", "Premise", "Fidelity", "fidelity", "scheduling_from_measurements"]

@@ -1,0 +1,112 @@
+"""Bounds of a premise expression over a box, found globally and certified by a Lipschitz argument.
+
+Method: evaluate the expression (and its gradient) on a dense grid of the states it depends
+on; a cell of half-widths ``hw`` around a grid point ``c`` cannot hold a value below
+``f(c) - sum_j L_j hw_j`` where ``L_j`` bounds ``|df/dx_j|`` (the sampled maximum times a
+safety factor of 2, taken over the cell's grid neighbours). Every cell whose lower bound could beat the best value found is searched
+by a bounded local optimiser (L-BFGS-B) started at its centre; the bound is the best value
+found, widened to the smallest cell bound that was not searched, if any (``gap`` says by how
+much). An extremum between grid points is therefore found by the local search from the
+neighbouring cell, not missed.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+from scipy.optimize import minimize
+
+from ..errors import DerivationError
+
+__all__ = ["premise_bounds"]
+
+_SAMPLES = 200_001
+_MAX_SEARCHES = 200
+
+
+def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """Per cell and direction: 2 x the largest |gradient| at the cell and its grid neighbours."""
+    k = grads.shape[0]
+    g = np.abs(grads).reshape((k, *shape))
+    out = g.copy()
+    for ax in range(1, k + 1):
+        lo = [slice(None)] * (k + 1)
+        hi = [slice(None)] * (k + 1)
+        lo[ax], hi[ax] = slice(0, -1), slice(1, None)
+        out[tuple(lo)] = np.maximum(out[tuple(lo)], g[tuple(hi)])
+        out[tuple(hi)] = np.maximum(out[tuple(hi)], g[tuple(lo)])
+    return (2.0 * out.reshape(k, -1) + 1e-12).T
+
+
+def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
+    """Minimum of sign*f over the box; returns (value, gap)."""
+    v = sign * vals
+    cell_lb = v - _local_lipschitz(grads, shape) @ hw
+    order = np.argsort(v)
+    best = v[order[0]]
+    cand = np.flatnonzero(cell_lb < best)
+    cand = cand[np.argsort(v[cand])]
+    starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]
+    searched = set()
+
+    def fun(xx):
+        return sign * float(F(xx)), sign * np.array(G(xx)).ravel()
+
+    for k in starts[:_MAX_SEARCHES]:
+        searched.add(int(k))
+        res = minimize(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+        if np.isfinite(res.fun) and res.fun < best:
+            best = float(res.fun)
+    rest = [c for c in cand if int(c) not in searched]
+    gap = 0.0
+    if rest:
+        lb = float(np.min(cell_lb[rest]))
+        if lb < best:
+            gap = best - lb
+            best = lb
+    return sign * best, gap
+
+
+def premise_bounds(name: str, expr: ca.SX, x: ca.SX, lo: np.ndarray, hi: np.ndarray, state_names) -> tuple[float, float, tuple[int, ...], float]:
+    """Global min and max of ``expr(x)`` over the box ``[lo, hi]`` (only the states it uses).
+
+    Returns ``(min, max, states, gap)``; ``gap`` > 0 means the bounds were widened by that
+    amount because not every suspicious cell could be searched.
+    """
+    idx = tuple(j for j in range(x.numel()) if ca.depends_on(expr, x[j]))
+    if not idx:
+        val = float(ca.Function("c", [x], [expr])(np.zeros(x.numel())))
+        return val, val, idx, 0.0
+    xs = ca.vertcat(*[x[j] for j in idx])
+    others = [j for j in range(x.numel()) if j not in idx]
+    e = ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others))) if others else expr
+    F = ca.Function("F", [xs], [e])
+    G = ca.Function("G", [xs], [ca.gradient(e, xs)])
+    k = len(idx)
+    per = max(3, int(round(_SAMPLES ** (1.0 / k))))
+    lo_s, hi_s = lo[list(idx)], hi[list(idx)]
+    axes = [np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)]
+    grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(k, -1)
+    N = grid.shape[1]
+    vals = np.array(F.map(N)(grid)).ravel()
+    bad = ~np.isfinite(vals)
+    if np.any(bad):
+        pt = grid[:, np.flatnonzero(bad)[0]]
+        where = ", ".join(f"{state_names[j]} = {v:g}" for j, v in zip(idx, pt))
+        raise DerivationError(
+            f"premise {name!r} is not finite at {where}: define it there (e.g. with casadi.if_else for a "
+            "removable singularity such as sin(v)/v at 0) or shrink the region"
+        )
+    grads = np.array(G.map(N)(grid)).reshape(k, N)
+    grads[~np.isfinite(grads)] = 0.0
+    hw = (hi_s - lo_s) / (per - 1) / 2
+    mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k)
+    mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k)
+    if not (np.isfinite(mn) and np.isfinite(mx)):
+        raise DerivationError(f"premise {name!r} is unbounded over the region; shrink the region")
+    if mx - mn < 1e-12:
+        raise DerivationError(
+            f"premise {name!r} is constant ({mn:g}) over the region: it schedules nothing; remove it "
+            "and write the constant into the equations"
+        )
+    return mn, mx, idx, max(gap1, gap2)

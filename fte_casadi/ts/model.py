@@ -1,0 +1,145 @@
+"""The T-S fuzzy model record: premises, local models, memberships, fidelity."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..model import Plant
+
+__all__ = ["Premise", "LocalModel", "Fidelity", "TSModel"]
+
+
+@dataclass(frozen=True)
+class Premise:
+    """A premise (scheduling) variable and its bounds over the plant's region."""
+
+    name: str
+    expr: str
+    min: float
+    max: float
+    states: tuple[int, ...]
+    #: half-width of the interval by which the bound search could still be wrong (0 when certified)
+    bound_gap: float = 0.0
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "expr": self.expr, "min": float(self.min), "max": float(self.max)}
+
+
+@dataclass(frozen=True)
+class LocalModel:
+    """One rule: ``dx = (A x + B u + Bd d + Bf f + a) dt + (W x + G u + Gf f + M d2) dw``.
+
+    ``a`` is the affine offset that local linearisation leaves (zero for sector models).
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    Bd: np.ndarray
+    Bf: np.ndarray
+    W: np.ndarray
+    a: np.ndarray
+    G: np.ndarray
+    Gf: np.ndarray
+    M: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {k: np.asarray(getattr(self, k)).tolist() for k in ("A", "B", "Bd", "Bf", "W")} | {
+            "a": np.asarray(self.a).tolist(),
+            "G": self.G.tolist(),
+            "Gf": self.Gf.tolist(),
+            "M": self.M.tolist(),
+        }
+
+    @property
+    def has_diffusion_extension(self) -> bool:
+        """True when faults, inputs or d2 enter the diffusion (Section 5, Theorem 5)."""
+        return bool(np.any(self.G) or np.any(self.Gf) or self.M.size and np.any(self.M))
+
+
+@dataclass(frozen=True)
+class Fidelity:
+    """How far the blended T-S model is from the nonlinear plant.
+
+    ``max_abs_error`` is the largest absolute difference of drift or diffusion over
+    ``samples`` points of the region; ``trajectory_max_abs_error`` the same along a
+    simulated open-loop trajectory from x0 (``trajectory_points`` points).
+    """
+
+    max_abs_error: float
+    samples: int
+    drift_max_abs_error: float
+    diffusion_max_abs_error: float
+    drift_max_rel_error: float
+    trajectory_max_abs_error: float
+    trajectory_points: int
+    trajectory_horizon: float
+
+    def to_dict(self) -> dict:
+        return {k: (float(v) if isinstance(v, float) else v) for k, v in self.__dict__.items()}
+
+
+@dataclass(frozen=True)
+class TSModel:
+    """A T-S fuzzy model derived from a :class:`~fte_casadi.model.Plant`."""
+
+    plant: Plant
+    method: str
+    premises: tuple[Premise, ...]
+    local_models: tuple[LocalModel, ...]
+    C: np.ndarray
+    Df: np.ndarray
+    #: ``x -> premise values`` (q)
+    premise_fn: ca.Function
+    #: ``premise values -> h`` (r), a convex sum on the premises' bounds
+    membership_fn: ca.Function
+    fidelity: Fidelity
+
+    @property
+    def r(self) -> int:
+        return len(self.local_models)
+
+    @property
+    def n(self) -> int:
+        return self.C.shape[1]
+
+    @property
+    def m(self) -> int:
+        return self.local_models[0].B.shape[1]
+
+    @property
+    def p(self) -> int:
+        return self.C.shape[0]
+
+    @property
+    def ld(self) -> int:
+        return self.local_models[0].Bd.shape[1]
+
+    @property
+    def lf(self) -> int:
+        return self.local_models[0].Bf.shape[1]
+
+    def memberships(self, x) -> np.ndarray:
+        """Membership values at state(s) ``x`` (shape (n,) or (n, N)) -> (r,) or (r, N)."""
+        x = np.asarray(x, dtype=float)
+        h = np.array(self.membership_fn(self.premise_fn(x)))
+        return h.ravel() if x.ndim == 1 else h
+
+    def to_dict(self) -> dict:
+        """The derive document of CONTRACT.md (plus a few extra keys)."""
+        return {
+            "plant": self.plant.name,
+            "method": self.method,
+            "rules": self.r,
+            "premises": [p.to_dict() for p in self.premises],
+            "local_models": [lm.to_dict() for lm in self.local_models],
+            "C": self.C.tolist(),
+            "Df": self.Df.tolist(),
+            "fidelity": self.fidelity.to_dict(),
+            "states": list(self.plant.state_names),
+            "inputs": list(self.plant.input_names),
+            "faults": list(self.plant.fault_names),
+            "outputs": list(self.plant.output_names),
+        }
