@@ -23,8 +23,31 @@ from ..errors import DesignFileError
 __all__ = ["Design", "REQUIRED_KEYS", "atomic_write_text"]
 
 REQUIRED_KEYS = (
-    "plant", "variant", "solver", "params", "dims", "premises", "local_models", "C", "Df", "H", "T", "X", "P",
-    "K", "Kf", "Pbar", "Q", "N", "theta", "L1", "L2", "R", "Ls", "checks", "timings",
+    "plant",
+    "variant",
+    "solver",
+    "params",
+    "dims",
+    "premises",
+    "local_models",
+    "C",
+    "Df",
+    "H",
+    "T",
+    "X",
+    "P",
+    "K",
+    "Kf",
+    "Pbar",
+    "Q",
+    "N",
+    "theta",
+    "L1",
+    "L2",
+    "R",
+    "Ls",
+    "checks",
+    "timings",
 )
 _MATS = ("C", "Df", "H", "T", "X", "P", "Kf", "Pbar", "N", "Ls")
 _LISTS = ("K", "Q", "L1", "L2", "R")
@@ -151,11 +174,15 @@ class Design:
         try:
             text = self.to_json()
         except ValueError as exc:
-            raise DesignFileError(f"the design holds a non-finite number and cannot be written as JSON ({exc})") from None
+            raise DesignFileError(
+                f"the design holds a non-finite number and cannot be written as JSON ({exc})"
+            ) from None
         try:
             atomic_write_text(path, text)
         except OSError as exc:
-            raise DesignFileError(f"cannot write the design to {path}: {exc.strerror or exc}; choose a writable path with -o") from None
+            raise DesignFileError(
+                f"cannot write the design to {path}: {exc.strerror or exc}; choose a writable path with -o"
+            ) from None
 
     @classmethod
     def from_dict(cls, doc: dict, source: str = "design document") -> Design:
@@ -214,7 +241,9 @@ class Design:
         """Read a design document, refusing a missing, truncated or corrupt file with a clear message."""
         p = Path(path)
         if not p.is_file():
-            raise DesignFileError(f"design file {str(p)!r} does not exist; make one with `fte design PLANT -o {p}`")
+            raise DesignFileError(
+                f"design file {str(p)!r} does not exist; make one with `fte design PLANT -o {p}`"
+            )
         try:
             doc = json.loads(p.read_text(), parse_constant=_reject_constant)
         except json.JSONDecodeError as exc:

@@ -267,7 +267,9 @@ class PlantBuilder:
         must be linear in ``x, u, d, f``.
         """
         if self._ops is not None:
-            raise PlantError("a plant uses either premises (sector nonlinearity) or operating points, not both")
+            raise PlantError(
+                "a plant uses either premises (sector nonlinearity) or operating points, not both"
+            )
         (sym,), (name,) = self._new("premise", (name,))
         if not isinstance(expr, ca.SX) or expr.numel() != 1:
             raise PlantError(f"premise {name!r} must be a scalar CasADi SX expression of the states")
@@ -288,7 +290,9 @@ class PlantBuilder:
         give rule-wise terms (e.g. the paper's W_i of the three-tank).
         """
         if self._z:
-            raise PlantError("a plant uses either premises (sector nonlinearity) or operating points, not both")
+            raise PlantError(
+                "a plant uses either premises (sector nonlinearity) or operating points, not both"
+            )
         if not self._x:
             raise PlantError("declare the states before the operating points")
         idx = [k for k, s in enumerate(self._x) if ca.is_equal(s, scheduling)]
@@ -296,7 +300,9 @@ class PlantBuilder:
             raise PlantError("operating_points: 'scheduling' must be one of the state symbols")
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         if pts.shape[1] != len(self._x):
-            raise PlantError(f"operating points have {pts.shape[1]} columns; expected {len(self._x)} (one per state)")
+            raise PlantError(
+                f"operating points have {pts.shape[1]} columns; expected {len(self._x)} (one per state)"
+            )
         if pts.shape[0] < 2:
             raise PlantError("give at least two operating points")
         if not np.all(np.isfinite(pts)):

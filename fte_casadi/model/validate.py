@@ -30,7 +30,9 @@ def _free_check(kind: str, expr: ca.SX, allowed: ca.SX, allowed_text: str) -> No
         )
 
 
-def _linearity(kind: str, rows: tuple[str, ...], expr: ca.SX, var: ca.SX, var_names: list[str], z: ca.SX) -> None:
+def _linearity(
+    kind: str, rows: tuple[str, ...], expr: ca.SX, var: ca.SX, var_names: list[str], z: ca.SX
+) -> None:
     """``expr`` must be affine in ``var`` with coefficients that depend on ``z`` only."""
     if var.numel() == 0:
         return
@@ -66,7 +68,9 @@ def validate(b: PlantBuilder) -> Plant:
     if not b._u:
         raise PlantError("the plant has no control inputs: call b.inputs('u', ...)")
     if not b._f:
-        raise PlantError("the plant has no faults: declare at least one with b.faults(..., kind='actuator'|'sensor')")
+        raise PlantError(
+            "the plant has no faults: declare at least one with b.faults(..., kind='actuator'|'sensor')"
+        )
     x, u, d, f, d2, z = (_vec(b._x), _vec(b._u), _vec(b._d), _vec(b._f), _vec(b._d2), _vec(b._z))
     n = x.numel()
     if b._drift is None:
@@ -78,8 +82,15 @@ def validate(b: PlantBuilder) -> Plant:
     y = _column("outputs", b._y, None)
     p = y.shape[0]
 
-    _free_check("drift", drift, ca.vertcat(x, u, d, f, z), "states, inputs, unknown inputs, faults or premises")
-    _free_check("diffusion", diff, ca.vertcat(x, u, f, d2, z), "states, inputs, faults, diffusion unknown inputs or premises")
+    _free_check(
+        "drift", drift, ca.vertcat(x, u, d, f, z), "states, inputs, unknown inputs, faults or premises"
+    )
+    _free_check(
+        "diffusion",
+        diff,
+        ca.vertcat(x, u, f, d2, z),
+        "states, inputs, faults, diffusion unknown inputs or premises",
+    )
     _free_check("outputs", y, ca.vertcat(x, f), "states or faults (y = C x + Df f)")
 
     xn = list(b._xn)
@@ -98,14 +109,20 @@ def validate(b: PlantBuilder) -> Plant:
     yf = ca.Function("y", [x, f], [y, ca.jacobian(y, x), ca.jacobian(y, f)])
     y0, Cs, Dfs = yf(np.zeros(n), np.zeros(f.numel()))
     if _depends(ca.jacobian(y, ca.vertcat(x, f)), ca.vertcat(x, f)):
-        raise PlantError("outputs must be linear in states and faults (y = C x + Df f); an output is nonlinear")
+        raise PlantError(
+            "outputs must be linear in states and faults (y = C x + Df f); an output is nonlinear"
+        )
     if np.max(np.abs(np.array(y0))) > 0:
-        raise PlantError("outputs must be y = C x + Df f with no constant offset; subtract it from the measurement")
+        raise PlantError(
+            "outputs must be y = C x + Df f with no constant offset; subtract it from the measurement"
+        )
     C, Df = np.array(Cs, dtype=float), np.array(Dfs, dtype=float)
     kinds = tuple(b._fk)
     for k, kind in enumerate(kinds):
         if kind == "sensor" and not np.any(Df[:, k]):
-            raise PlantError(f"sensor fault {b._fn[k]!r} does not appear in any output; add it to an output expression")
+            raise PlantError(
+                f"sensor fault {b._fn[k]!r} does not appear in any output; add it to an output expression"
+            )
 
     yn = b._yn or tuple(f"y{k + 1}" for k in range(p))
     if len(yn) != p:
@@ -128,7 +145,9 @@ def validate(b: PlantBuilder) -> Plant:
         try:
             a, c = (float(bounds[0]), float(bounds[1]))
         except (TypeError, ValueError, IndexError):
-            raise PlantError(f"region: bounds of {key!r} must be a pair (lower, upper); got {bounds!r}") from None
+            raise PlantError(
+                f"region: bounds of {key!r} must be a pair (lower, upper); got {bounds!r}"
+            ) from None
         if not (np.isfinite(a) and np.isfinite(c)):
             raise PlantError(f"region: bounds of {key!r} must be finite; got ({a}, {c})")
         if not a < c:
@@ -176,7 +195,9 @@ def validate(b: PlantBuilder) -> Plant:
                 raise PlantError(f"operating-point inputs must be {r} x {m}; got {opu.shape}")
         else:
             opu = np.zeros((r, m))
-            fz = ca.Function("fz", [x, u, z], [ca.substitute(drift, ca.vertcat(d, f), ca.DM.zeros(d.numel() + f.numel()))])
+            fz = ca.Function(
+                "fz", [x, u, z], [ca.substitute(drift, ca.vertcat(d, f), ca.DM.zeros(d.numel() + f.numel()))]
+            )
             for k in range(r):
                 zk = np.eye(r)[k]
                 f0 = np.array(fz(ops[k], np.zeros(m), zk)).ravel()

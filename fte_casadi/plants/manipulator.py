@@ -15,7 +15,16 @@ PARAMS = {"k_Jm": 48.6, "G_Jm": 1.25, "ktau_Jm": 21.6, "k_Jl": 19.5, "mgh_Jl": 3
 #: unknown-input coefficients alpha_d1..alpha_d4
 ALPHA_D = (0.1, -0.2, 0.3, 0.5)
 #: Brownian parameter perturbations of (82)
-W = {"W12": 0.0006, "W23": 0.001, "W21": -0.002, "W22": -0.0001, "W34": 0.0005, "W43": 0.006, "W41": -0.0004, "Ws": 0.003}
+W = {
+    "W12": 0.0006,
+    "W23": 0.001,
+    "W21": -0.002,
+    "W22": -0.0001,
+    "W34": 0.0005,
+    "W43": 0.006,
+    "W41": -0.0004,
+    "Ws": 0.003,
+}
 
 
 def sinc(v: ca.SX) -> ca.SX:
@@ -27,7 +36,9 @@ def manipulator() -> Plant:
     """The paper's single-link manipulator (state theta_m, w_m, theta_l, w_l)."""
     p, a, w = PARAMS, ALPHA_D, W
     b = PlantBuilder("manipulator")
-    th_m, w_m, th_l, w_l = b.states("theta_m", "w_m", "theta_l", "w_l", units=["rad", "rad/s", "rad", "rad/s"])
+    th_m, w_m, th_l, w_l = b.states(
+        "theta_m", "w_m", "theta_l", "w_l", units=["rad", "rad/s", "rad", "rad/s"]
+    )
     (u,) = b.inputs("u")
     (d,) = b.unknown_inputs("d")
     (fa,) = b.faults("fa", kind="actuator")
@@ -50,7 +61,9 @@ def manipulator() -> Plant:
         ]
     )
     b.outputs([th_m + fs, w_m, th_l], names=["theta_m", "w_m", "theta_l"])
-    b.region(theta_l=(-2 * ca.pi, 2 * ca.pi), theta_m=(-2 * ca.pi, 2 * ca.pi), w_m=(-5.0, 5.0), w_l=(-5.0, 5.0))
+    b.region(
+        theta_l=(-2 * ca.pi, 2 * ca.pi), theta_m=(-2 * ca.pi, 2 * ca.pi), w_m=(-5.0, 5.0), w_l=(-5.0, 5.0)
+    )
     b.reference(u=[2.0])
     b.initial_state([0.1, 0.05, 0.02, 0.03])
     # Section 6.1: gamma = 2, gamma1 = 0.01, sigma = 0.2, rho0 = eps = 1e-5; delta not given: = eps

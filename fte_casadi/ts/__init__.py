@@ -32,10 +32,27 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
         premises, models, premise_fn, membership_fn = sector_local_models(plant)
     else:
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
-    tmp = TSModel(plant, plant.method, premises, models, plant.C, plant.Df, premise_fn, membership_fn,
-                  Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0))
+    tmp = TSModel(
+        plant,
+        plant.method,
+        premises,
+        models,
+        plant.C,
+        plant.Df,
+        premise_fn,
+        membership_fn,
+        Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
+    )
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
     return TSModel(plant, plant.method, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid)
 
 
-__all__ = ["derive", "TSModel", "LocalModel", "Premise", "Fidelity", "fidelity", "scheduling_from_measurements"]
+__all__ = [
+    "derive",
+    "TSModel",
+    "LocalModel",
+    "Premise",
+    "Fidelity",
+    "fidelity",
+    "scheduling_from_measurements",
+]

@@ -44,7 +44,8 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
     cell_lb = v - _local_lipschitz(grads, shape) @ hw
     order = np.argsort(v)
     best = v[order[0]]
-    cand = np.flatnonzero(cell_lb < best)
+    tol = 1e-9 * (1.0 + abs(best))  # a cell must be able to beat the best value by more than round-off
+    cand = np.flatnonzero(cell_lb < best - tol)
     cand = cand[np.argsort(v[cand])]
     starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]
     searched = set()
@@ -61,13 +62,15 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
     gap = 0.0
     if rest:
         lb = float(np.min(cell_lb[rest]))
-        if lb < best:
+        if lb < best - tol:
             gap = best - lb
             best = lb
     return sign * best, gap
 
 
-def premise_bounds(name: str, expr: ca.SX, x: ca.SX, lo: np.ndarray, hi: np.ndarray, state_names) -> tuple[float, float, tuple[int, ...], float]:
+def premise_bounds(
+    name: str, expr: ca.SX, x: ca.SX, lo: np.ndarray, hi: np.ndarray, state_names
+) -> tuple[float, float, tuple[int, ...], float]:
     """Global min and max of ``expr(x)`` over the box ``[lo, hi]`` (only the states it uses).
 
     Returns ``(min, max, states, gap)``; ``gap`` > 0 means the bounds were widened by that

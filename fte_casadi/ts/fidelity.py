@@ -40,7 +40,9 @@ def blended(ts, x, u, d, f, d2) -> tuple[np.ndarray, np.ndarray]:
     return drift, diff
 
 
-def fidelity(ts, samples: int = 20_000, seed: int = 0, horizon: float | None = None, points: int = 400) -> Fidelity:
+def fidelity(
+    ts, samples: int = 20_000, seed: int = 0, horizon: float | None = None, points: int = 400
+) -> Fidelity:
     """Largest drift/diffusion error over ``samples`` random points of the region, and along
     an open-loop trajectory of the nonlinear plant from x0 under the reference input."""
     plant = ts.plant
@@ -59,7 +61,11 @@ def fidelity(ts, samples: int = 20_000, seed: int = 0, horizon: float | None = N
     # trajectory: open loop under the reference (or equilibrium) input, no noise
     if plant.operating_inputs is not None:
         j = plant.scheduling_state
-        xr = plant.x_ref if plant.x_ref is not None else plant.operating_points[len(plant.operating_points) // 2]
+        xr = (
+            plant.x_ref
+            if plant.x_ref is not None
+            else plant.operating_points[len(plant.operating_points) // 2]
+        )
         k = int(np.argmin(np.abs(plant.operating_points[:, j] - xr[j])))
         uc = plant.operating_inputs[k]
     else:
@@ -68,20 +74,33 @@ def fidelity(ts, samples: int = 20_000, seed: int = 0, horizon: float | None = N
     zd, zf = np.zeros(plant.ld), np.zeros(plant.lf)
     if horizon is None:
         lam = max(np.max(np.abs(np.linalg.eigvals(lm.A))) for lm in ts.local_models)
-        slow = min((abs(v.real) for lm in ts.local_models for v in np.linalg.eigvals(lm.A) if abs(v.real) > 1e-9), default=1.0)
+        slow = min(
+            (abs(v.real) for lm in ts.local_models for v in np.linalg.eigvals(lm.A) if abs(v.real) > 1e-9),
+            default=1.0,
+        )
         horizon = float(np.clip(3.0 / slow, 1.0, 1000.0)) if lam > 0 else 10.0
     # start off the reference, a fifth of the region's span away, so the trajectory sweeps the region
     lo, hi = plant.region_lo, plant.region_hi
     start = plant.x0 + np.where(np.isnan(lo), 0.0, 0.2 * (np.nan_to_num(hi) - np.nan_to_num(lo)))
     start = np.where(np.isnan(lo), start, np.clip(start, np.nan_to_num(lo), np.nan_to_num(hi)))
-    sol = solve_ivp(lambda t, xx: np.array(f1(xx, uc, zd, zf)).ravel(), (0.0, horizon), start,
-                    t_eval=np.linspace(0, horizon, points), rtol=1e-8, atol=1e-10)
+    sol = solve_ivp(
+        lambda t, xx: np.array(f1(xx, uc, zd, zf)).ravel(),
+        (0.0, horizon),
+        start,
+        t_eval=np.linspace(0, horizon, points),
+        rtol=1e-8,
+        atol=1e-10,
+    )
     X = sol.y
     M = X.shape[1]
     U = np.tile(uc[:, None], (1, M))
     tf = np.array(f1.map(M)(X, U, np.zeros((plant.ld, M)), np.zeros((plant.lf, M))))
-    tg = np.array(plant.diffusion_function().map(M)(X, U, np.zeros((plant.lf, M)), np.zeros((plant.d2.numel(), M))))
-    bf2, bg2 = blended(ts, X, U, np.zeros((plant.ld, M)), np.zeros((plant.lf, M)), np.zeros((plant.d2.numel(), M)))
+    tg = np.array(
+        plant.diffusion_function().map(M)(X, U, np.zeros((plant.lf, M)), np.zeros((plant.d2.numel(), M)))
+    )
+    bf2, bg2 = blended(
+        ts, X, U, np.zeros((plant.ld, M)), np.zeros((plant.lf, M)), np.zeros((plant.d2.numel(), M))
+    )
     et = float(max(np.max(np.abs(tf - bf2)), np.max(np.abs(tg - bg2))))
     return Fidelity(
         max_abs_error=max(ef, eg),

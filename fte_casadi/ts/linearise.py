@@ -40,10 +40,19 @@ def linearised_local_models(plant: Plant):
     models = []
     for k in range(r):
         xk, uk = plant.operating_points[k], plant.operating_inputs[k]
-        vals = [np.array(v, dtype=float) for v in F(xk, uk, np.zeros(plant.ld), np.zeros(plant.lf), np.zeros(plant.d2.numel()), np.eye(r)[k])]
+        vals = [
+            np.array(v, dtype=float)
+            for v in F(
+                xk, uk, np.zeros(plant.ld), np.zeros(plant.lf), np.zeros(plant.d2.numel()), np.eye(r)[k]
+            )
+        ]
         f0, A, B, Bd, Bf, _g0, W, G, Gf, M = vals
         a = f0.ravel() - A @ xk - B @ uk
-        models.append(LocalModel(A=A, B=B, Bd=Bd.reshape(plant.n, -1), Bf=Bf, W=W, a=a, G=G, Gf=Gf, M=M.reshape(plant.n, -1)))
+        models.append(
+            LocalModel(
+                A=A, B=B, Bd=Bd.reshape(plant.n, -1), Bf=Bf, W=W, a=a, G=G, Gf=Gf, M=M.reshape(plant.n, -1)
+            )
+        )
     j = plant.scheduling_state
     centres = plant.operating_points[:, j]
     name = plant.state_names[j]

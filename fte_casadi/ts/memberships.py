@@ -52,7 +52,9 @@ def sector_memberships(mins, maxs) -> ca.Function:
 def triangular_membership_fn(centres) -> ca.Function:
     """``scheduling value -> h (r)``: triangular memberships, saturated outside the centres."""
     v = ca.SX.sym("v")
-    return ca.Function("memberships", [v], [ca.vertcat(*triangular_memberships(v, np.asarray(centres)))], ["premises"], ["h"])
+    return ca.Function(
+        "memberships", [v], [ca.vertcat(*triangular_memberships(v, np.asarray(centres)))], ["premises"], ["h"]
+    )
 
 
 def scheduling_from_measurements(ts) -> tuple[ca.Function, list[str]]:
@@ -69,7 +71,9 @@ def scheduling_from_measurements(ts) -> tuple[ca.Function, list[str]]:
     src = []
     xs = []
     for j in range(n):
-        rows = [k for k in range(p) if np.count_nonzero(ts.C[k]) == 1 and ts.C[k, j] != 0 and not np.any(ts.Df[k])]
+        rows = [
+            k for k in range(p) if np.count_nonzero(ts.C[k]) == 1 and ts.C[k, j] != 0 and not np.any(ts.Df[k])
+        ]
         if rows:
             xs.append(y[rows[0]] / ts.C[rows[0], j])
             src.append(f"{plant.state_names[j]} <- y[{rows[0]}] ({plant.output_names[rows[0]]})")

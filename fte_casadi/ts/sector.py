@@ -36,7 +36,9 @@ def _coefficients(plant: Plant):
     return mats, c
 
 
-def sector_local_models(plant: Plant) -> tuple[tuple[Premise, ...], tuple[LocalModel, ...], ca.Function, ca.Function]:
+def sector_local_models(
+    plant: Plant,
+) -> tuple[tuple[Premise, ...], tuple[LocalModel, ...], ca.Function, ca.Function]:
     mats, c = _coefficients(plant)
     z = plant.z
     q = z.numel()
@@ -46,7 +48,9 @@ def sector_local_models(plant: Plant) -> tuple[tuple[Premise, ...], tuple[LocalM
             "premises (b.premise(name, expr)) for its nonlinear terms"
         )
     if np.any(np.array(ca.Function("c", [z], [c])(np.zeros(q)))) or ca.depends_on(c, z):
-        raise DerivationError("the diffusion has a term that is not proportional to x, u, f or d2 (additive noise): the paper's model has none")
+        raise DerivationError(
+            "the diffusion has a term that is not proportional to x, u, f or d2 (additive noise): the paper's model has none"
+        )
     for key, M in mats.items():
         for k in range(q):
             dz = ca.jacobian(M.reshape((-1, 1)) if M.numel() else M, z[k]) if M.numel() else M
@@ -70,8 +74,15 @@ def sector_local_models(plant: Plant) -> tuple[tuple[Premise, ...], tuple[LocalM
         vals = dict(zip(mats, (np.array(v, dtype=float) for v in fn(zi))))
         models.append(
             LocalModel(
-                A=vals["A"], B=vals["B"], Bd=vals["Bd"].reshape(plant.n, -1), Bf=vals["Bf"], W=vals["W"],
-                a=vals["a"].ravel(), G=vals["G"], Gf=vals["Gf"], M=vals["M"].reshape(plant.n, -1),
+                A=vals["A"],
+                B=vals["B"],
+                Bd=vals["Bd"].reshape(plant.n, -1),
+                Bf=vals["Bf"],
+                W=vals["W"],
+                a=vals["a"].ravel(),
+                G=vals["G"],
+                Gf=vals["Gf"],
+                M=vals["M"].reshape(plant.n, -1),
             )
         )
     premise_fn = ca.Function("premises", [plant.x], [plant.z_exprs], ["x"], ["premises"])

@@ -1,0 +1,38 @@
+"""Your own plant, written the way the built-in ones are: a motor-driven pendulum.
+
+    fte derive examples/pendulum_plant.py:pendulum
+    fte design examples/pendulum_plant.py:pendulum -o pendulum.json
+    fte simulate pendulum.json --paths 20
+    fte codegen pendulum.json --out pendulum_c
+
+The angle theta and rate omega are measured; gravity sin(theta) is covered by the premise
+mu = sin(theta)/theta (sector nonlinearity over |theta| <= pi); an actuator fault fa adds to
+the motor torque and a sensor fault fs to the angle reading; d is an unknown input and the
+damping is perturbed by the Brownian motion.
+"""
+
+import casadi as ca
+
+from fte_casadi import PlantBuilder
+
+
+def pendulum():
+    g_l, c, b_u = 9.81, 0.8, 2.0  # g/l [1/s^2], damping [1/s], input gain [rad/s^2 per N m]
+    b = PlantBuilder("pendulum")
+    th, om = b.states("theta", "omega", units=["rad", "rad/s"])
+    (u,) = b.inputs("torque")
+    (d,) = b.unknown_inputs("d")
+    (fa,) = b.faults("fa", kind="actuator")
+    (fs,) = b.faults("fs", kind="sensor")
+    mu = b.premise(
+        "mu", ca.if_else(ca.fabs(th) < 1e-4, 1 - th**2 / 6, ca.sin(th) / th), text="sin(theta)/theta"
+    )
+    b.drift([om + 0.2 * d, -g_l * mu * th - c * om + b_u * (u + fa) - 0.5 * d])
+    b.diffusion([0.0, 0.01 * om + 0.005 * mu * th])
+    b.outputs([th + fs, om, th + om], names=["theta", "omega", "theta_plus_omega"])
+    b.region(theta=(-ca.pi, ca.pi), omega=(-4.0, 4.0))
+    b.reference(u=[0.5])
+    b.initial_state([0.2, 0.0])
+    b.design_defaults(gamma=2.0, gamma1=0.1, sigma=0.5, delta=1e-4, epsilon=1e-4)
+    b.parameters(g_l=g_l, c=c, b_u=b_u)
+    return b.build()

@@ -1,0 +1,106 @@
+"""Resolve a plant specification: a built-in name, ``path/to/file.py:function`` or ``package.module:function``."""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+import traceback
+from pathlib import Path
+
+from ..errors import FteError, PlantError, PlantLoadError
+from ..model import Plant
+
+__all__ = ["load_plant", "builtin_names"]
+
+
+def builtin_names() -> list[str]:
+    from . import BUILTIN
+
+    return sorted(BUILTIN)
+
+
+def _last_frame(exc: BaseException, path: str | None) -> str:
+    tb = traceback.extract_tb(exc.__traceback__)
+    frames = [f for f in tb if path is None or Path(f.filename).resolve() == Path(path).resolve()]
+    f = (frames or tb)[-1] if (frames or tb) else None
+    return f" (at {f.filename}:{f.lineno})" if f else ""
+
+
+def load_plant(spec: str) -> Plant:
+    """Return the :class:`Plant` named by ``spec``; every failure is a :class:`PlantLoadError`."""
+    from . import BUILTIN
+
+    if not isinstance(spec, str) or not spec.strip():
+        raise PlantLoadError(
+            "no plant given: name a built-in plant (manipulator, three-tank) or FILE.py:FUNCTION"
+        )
+    spec = spec.strip()
+    if spec in BUILTIN:
+        return BUILTIN[spec]()
+    if ":" not in spec:
+        hint = (
+            " (a file needs ':function' after it, e.g. my_plant.py:make_plant)"
+            if spec.endswith(".py")
+            else ""
+        )
+        raise PlantLoadError(
+            f"unknown plant {spec!r}{hint}: use a built-in name ({', '.join(builtin_names())}), "
+            "path/to/file.py:function or package.module:function"
+        )
+    target, func = spec.rsplit(":", 1)
+    if not func.isidentifier():
+        raise PlantLoadError(f"{func!r} in {spec!r} is not a function name; write FILE.py:FUNCTION")
+    path = None
+    if target.endswith(".py") or "/" in target or "\\" in target:
+        p = Path(target)
+        if not p.is_file():
+            raise PlantLoadError(
+                f"plant file {target!r} does not exist; check the path (relative to {Path.cwd()})"
+            )
+        path = str(p)
+        name = f"fte_user_plant_{abs(hash(str(p.resolve())))}"
+        try:
+            source = p.read_text()
+            compile(source, str(p), "exec")
+        except SyntaxError as exc:
+            raise PlantLoadError(
+                f"plant file {target!r} has a syntax error at line {exc.lineno}: {exc.msg}; fix the file"
+            ) from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise PlantLoadError(f"plant file {target!r} cannot be read: {exc}") from None
+        mspec = importlib.util.spec_from_file_location(name, p)
+        module = importlib.util.module_from_spec(mspec)
+        sys.modules[name] = module
+        try:
+            mspec.loader.exec_module(module)
+        except Exception as exc:  # noqa: BLE001 - user code may raise anything; report it
+            raise PlantLoadError(
+                f"importing plant file {target!r} raised {type(exc).__name__}: {exc}{_last_frame(exc, path)}; fix the file"
+            ) from None
+    else:
+        try:
+            module = importlib.import_module(target)
+        except ImportError as exc:
+            raise PlantLoadError(
+                f"cannot import module {target!r}: {exc}; is it installed or on PYTHONPATH?"
+            ) from None
+        except Exception as exc:  # noqa: BLE001
+            raise PlantLoadError(f"importing module {target!r} raised {type(exc).__name__}: {exc}") from None
+    fn = getattr(module, func, None)
+    if fn is None or not callable(fn):
+        avail = [k for k, v in vars(module).items() if callable(v) and not k.startswith("_")]
+        raise PlantLoadError(f"{target!r} has no function {func!r}; callables there: {avail[:10]}")
+    try:
+        plant = fn()
+    except FteError as exc:
+        raise PlantError(f"plant function {spec!r} failed: {exc}") from None
+    except Exception as exc:  # noqa: BLE001
+        raise PlantLoadError(
+            f"plant function {spec!r} raised {type(exc).__name__}: {exc}{_last_frame(exc, path)}; fix the plant definition"
+        ) from None
+    if not isinstance(plant, Plant):
+        raise PlantLoadError(
+            f"plant function {spec!r} returned {type(plant).__name__}, not a Plant: end it with `return builder.build()`"
+        )
+    return plant

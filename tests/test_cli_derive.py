@@ -1,0 +1,114 @@
+"""`fte derive`: the contract's document, file plants, and clear errors without tracebacks."""
+
+import json
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from tolerances import PAPER_A, PAPER_A_TANK, ROUNDOFF
+
+from fte_casadi.cli import main
+
+EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[1] / "examples"
+
+
+def fte(*args, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-m", "fte_casadi", *args], capture_output=True, text=True, cwd=cwd, timeout=300
+    )
+
+
+@pytest.fixture(scope="module")
+def manip_doc():
+    p = fte("derive", "manipulator", "--json")
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout)
+
+
+def test_derive_document_manipulator(manip_doc):
+    d = manip_doc
+    assert d["plant"] == "manipulator" and d["rules"] == 2
+    assert set(d["local_models"][0]) >= {"A", "B", "Bd", "Bf", "W"}
+    assert d["premises"][0]["min"] == pytest.approx(-0.217234, abs=1e-3)
+    assert d["premises"][0]["max"] == pytest.approx(1.0, abs=1e-3)
+    assert np.array(d["local_models"][0]["A"])[3, 2] == pytest.approx(-22.83, abs=PAPER_A)
+    assert np.array(d["local_models"][1]["A"])[3, 2] == pytest.approx(-18.77, abs=PAPER_A)
+    assert d["fidelity"]["max_abs_error"] <= ROUNDOFF and d["fidelity"]["samples"] > 0
+
+
+def test_derive_document_three_tank():
+    p = fte("derive", "three-tank", "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["rules"] == 3
+    assert np.array(d["local_models"][1]["A"])[1, 1] == pytest.approx(-0.0289, abs=PAPER_A_TANK)
+    assert d["fidelity"]["max_abs_error"] > 0
+
+
+def test_derive_table_and_example_file_plant():
+    p = fte("derive", str(EXAMPLES / "pendulum_plant.py") + ":pendulum")
+    assert p.returncode == 0, p.stderr
+    assert "rule 2:" in p.stdout and "fidelity" in p.stdout and "sin(theta)/theta" in p.stdout
+
+
+def _bad(tmp_path, args, needle):
+    p = fte(*args, cwd=tmp_path)
+    assert p.returncode != 0
+    assert "Traceback" not in p.stderr
+    assert needle in p.stderr.replace("\n", " "), p.stderr
+    return p
+
+
+def test_errors_are_clear(tmp_path):
+    _bad(tmp_path, ["derive", "manipulatr"], "unknown plant 'manipulatr'")
+    _bad(tmp_path, ["derive", "missing.py:f"], "does not exist")
+    (tmp_path / "syn.py").write_text("def f(:\n    pass\n")
+    _bad(tmp_path, ["derive", "syn.py:f"], "syntax error at line 1")
+    (tmp_path / "boom.py").write_text("def f():\n    raise RuntimeError('no coefficients')\n")
+    _bad(tmp_path, ["derive", "boom.py:f"], "raised RuntimeError: no coefficients")
+    (tmp_path / "notplant.py").write_text("def f():\n    return 42\n")
+    _bad(tmp_path, ["derive", "notplant.py:f"], "not a Plant")
+    _bad(tmp_path, ["derive", "notplant.py:g"], "has no function 'g'")
+    (tmp_path / "dims.py").write_text(
+        textwrap.dedent(
+            """
+            from fte_casadi import PlantBuilder
+            def f():
+                b = PlantBuilder("d")
+                x1, x2 = b.states("x1", "x2")
+                (u,) = b.inputs("u")
+                (fa,) = b.faults("fa")
+                b.drift([x2 + u + fa])
+                b.outputs([x1])
+                return b.build()
+            """
+        )
+    )
+    _bad(tmp_path, ["derive", "dims.py:f"], "expected 2 instead of 1")
+    (tmp_path / "unb.py").write_text(
+        textwrap.dedent(
+            """
+            import casadi as ca
+            from fte_casadi import PlantBuilder
+            def f():
+                b = PlantBuilder("d")
+                (x,) = b.states("x")
+                (u,) = b.inputs("u")
+                (fa,) = b.faults("fa")
+                m = b.premise("m", ca.exp(x))
+                b.drift([-m * x + u + fa])
+                b.outputs([x])
+                return b.build()
+            """
+        )
+    )
+    _bad(tmp_path, ["derive", "unb.py:f"], "no bounds")
+
+
+def test_click_runner_in_process(tmp_path):
+    from click.testing import CliRunner
+
+    r = CliRunner().invoke(main, ["derive", "manipulator"])
+    assert r.exit_code == 0 and "[-0.217234, 1]" in r.output
