@@ -125,3 +125,100 @@ def derive(plant: str, as_json: bool) -> None:
         f"diffusion {f.diffusion_max_abs_error:.3g}); along a {f.trajectory_horizon:.4g} {p.time_unit} "
         f"trajectory: {f.trajectory_max_abs_error:.3g}"
     )
+
+
+# -- design -------------------------------------------------------------------------------
+def _design_summary(d) -> str:
+    c = d.checks
+    lmi = c["lmi_max_eig"]
+    K = max(float(np.max(np.abs(k))) for k in d.K)
+    lines = [
+        f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
+        f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
+        "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.items()),
+        "  largest eigenvalue of each LMI at the returned point (negative = holds): "
+        + ", ".join(f"({k}) {v:.3g}" for k, v in lmi.items()),
+        f"  theta = {d.theta:.3g}, cond(Pbar) = {c['cond_Pbar']:.3g}, max|L1| = {c['max_abs_L1']:.3g}, max|K| = {K:.3g}",
+        f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
+        f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",
+        f"  time: {d.timings['total_s']:.2f} s in all, {d.timings['solver_s']:.2f} s in the solver",
+    ]
+    lines += [f"  note: {s}" for s in d.status]
+    return "\n".join(lines)
+
+
+def _check_params(**kw) -> dict:
+    out = {}
+    for k, v in kw.items():
+        if v is not None:
+            _positive(k, v)
+            out[k] = v
+    return out
+
+
+def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False):
+    from .design import design as run_design
+    from .plants.loader import load_plant
+    from .ts import derive as derive_ts
+
+    ts = derive_ts(load_plant(plant_spec))
+    return run_design(ts, variant=variant, solver=solver, allow_uncertified=allow_uncertified, plant_spec=plant_spec, **params)
+
+
+@main.command()
+@click.argument("plant")
+@click.option("--variant", type=click.Choice(["paper", "conditioned"]), default="conditioned", show_default=True,
+              help="paper: the problem as printed; conditioned: the same certificate posed with usable numbers.")
+@click.option("--solver", default="CLARABEL", show_default=True, help="SDP solver: CLARABEL or SCS.")
+@click.option("--gamma", type=float, help="H-infinity level gamma (default: the plant's, the paper's for built-ins).")
+@click.option("--gamma1", type=float, help="gamma1 < gamma.")
+@click.option("--sigma", type=float, help="sigma of Theorem 2.")
+@click.option("--delta", type=float, help="bound on the second derivative of the faults.")
+@click.option("--epsilon", type=float, help="sliding gain margin eps.")
+@click.option("--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here.")
+@_guard
+def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, allow_uncertified, output):
+    """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
+    params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon)
+    if output is not None and Path(output).is_dir():
+        raise ParameterError(f"-o {output} is a directory; give a file name such as {Path(output) / 'design.json'}")
+    d = _make_design(plant, variant, solver.upper(), params, allow_uncertified)
+    click.echo(_design_summary(d))
+    if output:
+        d.save(output)
+        click.echo(f"design document written to {output}")
+    else:
+        click.echo("(design document not saved: add -o FILE)")
+
+
+def _design_or_plant(target: str, progress: bool = True):
+    """A design document path, or a plant spec designed on the fly (conditioned variant)."""
+    from .design.record import Design
+
+    p = Path(target)
+    if target.endswith(".json") or p.is_file():
+        return Design.load(p)
+    if progress:
+        click.echo(f"designing {target} (conditioned variant) ...", err=True)
+    return _make_design(target, "conditioned", "CLARABEL", {})
+
+
+# -- codegen ------------------------------------------------------------------------------
+@main.command()
+@click.argument("target", metavar="DESIGN.json|PLANT")
+@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files.")
+@click.option("--ts", type=float, help="Sample time (default: a tenth of the design's ts_max, rounded down).")
+@click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
+@click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
+@_guard
+def codegen(target, out_dir, ts, real, boundary_layer):
+    """Generate the embedded C of the observer/controller step."""
+    from .codegen import generate_c
+
+    _positive("ts", ts)
+    _positive("boundary-layer", boundary_layer)
+    d = _design_or_plant(target)
+    files = generate_c(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
+    click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
+    click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")

@@ -1,0 +1,19 @@
+"""Embedded C of the discrete observer/controller step (CONTRACT.md, "Generated C")."""
+
+from .build import compile_program as compile_program
+from .build import compile_shared as compile_shared
+from .build import find_compiler as find_compiler
+from .generate import default_ts as default_ts
+from .generate import generate_c as generate_c
+from .generate import output_files as output_files
+from .generate import regenerate_builtin as regenerate_builtin
+
+__all__ = [
+    "generate_c",
+    "default_ts",
+    "output_files",
+    "regenerate_builtin",
+    "find_compiler",
+    "compile_shared",
+    "compile_program",
+]

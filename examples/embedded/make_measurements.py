@@ -1,0 +1,56 @@
+"""Record the measurements of examples/embedded/measurements.txt (run from the repository root).
+
+A short Euler closed loop of the nonlinear manipulator, driven by the in-process CasADi step of
+the design in generated/manipulator/design.json at the generated sample time, with a 40 % loss
+of actuator effectiveness from t = 0.3 s. Deterministic (no noise), so the file can be
+regenerated bit for bit: ``python examples/embedded/make_measurements.py``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from fte_casadi.codegen.generate import default_ts
+from fte_casadi.design.record import Design
+from fte_casadi.plants import manipulator
+from fte_casadi.step import step_function
+
+ROOT = Path(__file__).resolve().parents[2]
+HORIZON_S = 0.6
+FAULT_START_S = 0.3
+
+
+def record(design: Design, horizon: float = HORIZON_S) -> tuple[float, np.ndarray]:
+    """Sample time and measurements (rows of y) of the closed loop."""
+    plant = manipulator()
+    F = plant.drift_function()
+    ts = default_ts(design)
+    fn = step_function(design, ts)
+    x = np.asarray(plant.x0, float).copy()
+    z = np.zeros(design.nbar)
+    u = np.zeros(plant.m)
+    ys = []
+    for k in range(int(round(horizon / ts))):
+        f = np.array([-0.4 * u[0] if k * ts >= FAULT_START_S else 0.0, 0.0])
+        y = design.C @ x + design.Df @ f
+        ys.append(y)
+        zn, un, *_ = (np.asarray(v).ravel() for v in fn(z, y))
+        x = x + ts * np.asarray(F(x, un, np.zeros(plant.ld), f)).ravel()
+        z, u = zn, un
+    return ts, np.array(ys)
+
+
+def main() -> None:
+    design = Design.load(ROOT / "generated" / "manipulator" / "design.json")
+    ts, ys = record(design)
+    lines = [
+        f"# manipulator measurements theta_m w_m theta_l, Ts = {ts!r} s, actuator fault from {FAULT_START_S} s"
+    ]
+    lines += [" ".join(f"{v:.12g}" for v in y) for y in ys]
+    (Path(__file__).parent / "measurements.txt").write_text("\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()

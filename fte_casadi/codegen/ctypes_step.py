@@ -1,0 +1,106 @@
+"""Load a compiled generated step with ctypes and run it against the in-process CasADi step.
+
+Used by the tests (the way CasADi tests its own code generation: compile, load back, compare)
+and by the benchmarks.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+
+import numpy as np
+
+from ..design.record import Design
+from ..step import step_function
+from .generate import c_name
+
+__all__ = ["CStep", "closed_loop_compare"]
+
+_CTYPES = {"double": ctypes.c_double, "float": ctypes.c_float}
+_NP = {"double": np.float64, "float": np.float32}
+
+
+class CStep:
+    """The generated ``fte_NAME_init``/``fte_NAME_step`` of a shared library, callable from numpy."""
+
+    def __init__(self, lib_path: str | os.PathLike, design: Design, real: str = "double"):
+        self.lib = ctypes.CDLL(str(lib_path))
+        self.real = real
+        self.dtype = _NP[real]
+        self.nbar, self.p, self.m = int(design.dims["nbar"]), int(design.dims["p"]), int(design.dims["m"])
+        name = c_name(design.plant)
+        self._init = getattr(self.lib, f"fte_{name}_init")
+        self._step = getattr(self.lib, f"fte_{name}_step")
+        ptr = ctypes.POINTER(_CTYPES[real])
+        self._init.argtypes = [ctypes.c_void_p, ptr]
+        self._init.restype = None
+        self._step.argtypes = [ctypes.c_void_p, ptr, ptr, ptr, ptr]
+        self._step.restype = ctypes.c_int
+        self._ptr = ptr
+        # the struct starts with z[nbar], z_next[nbar]; work arrays follow (generously sized buffer)
+        self.state = (ctypes.c_char * 65536)()
+
+    def _p(self, a: np.ndarray):
+        return a.ctypes.data_as(self._ptr)
+
+    def init(self, z0=None) -> None:
+        if z0 is None:
+            self._init(ctypes.byref(self.state), None)
+        else:
+            z = np.ascontiguousarray(z0, dtype=self.dtype)
+            self._init(ctypes.byref(self.state), self._p(z))
+
+    @property
+    def z(self) -> np.ndarray:
+        return np.frombuffer(bytes(self.state), dtype=self.dtype, count=self.nbar).astype(float)
+
+    def step(self, y) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
+        yy = np.ascontiguousarray(y, dtype=self.dtype)
+        u = np.zeros(self.m, dtype=self.dtype)
+        xb = np.zeros(self.nbar, dtype=self.dtype)
+        yc = np.zeros(self.p, dtype=self.dtype)
+        rc = self._step(ctypes.byref(self.state), self._p(yy), self._p(u), self._p(xb), self._p(yc))
+        return int(rc), u.astype(float), xb.astype(float), yc.astype(float)
+
+
+def closed_loop_compare(
+    design: Design, cstep: CStep, ts: float, steps: int, *, fault=None, boundary_layer=None
+):
+    """Euler closed loop of the nonlinear plant driven by the CasADi step; the C step gets the same y.
+
+    Returns a dict of the largest absolute differences (z, u, xbarhat, yc) over the run, plus
+    the trajectories. ``fault(t, u) -> f`` gives the fault signal (default none).
+    """
+    from ..plants import BUILTIN
+
+    plant = BUILTIN[design.plant]()
+    F = plant.drift_function()
+    fn = step_function(design, ts, boundary_layer=boundary_layer)
+    n, m, ld, lf = plant.n, plant.m, plant.ld, plant.lf
+    x = np.asarray(plant.x0, float).copy()
+    z = np.zeros(int(design.dims["nbar"]))
+    cstep.init(z)
+    C, Df = np.asarray(design.C), np.asarray(design.Df)
+    err = {"z": 0.0, "u": 0.0, "xbarhat": 0.0, "yc": 0.0}
+    traj = {"y": [], "u": [], "fhat": []}
+    u_prev = np.zeros(m)
+    for k in range(steps):
+        t = k * ts
+        f = np.zeros(lf) if fault is None else np.asarray(fault(t, u_prev), float)
+        y = C @ x + Df @ f
+        zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
+        rc, uc, xbc, ycc = cstep.step(y)
+        if rc != 0:
+            raise AssertionError(f"C step returned {rc} at sample {k}")
+        err["z"] = max(err["z"], float(np.max(np.abs(cstep.z - zn))))
+        err["u"] = max(err["u"], float(np.max(np.abs(uc - u))))
+        err["xbarhat"] = max(err["xbarhat"], float(np.max(np.abs(xbc - xb))))
+        err["yc"] = max(err["yc"], float(np.max(np.abs(ycc - yc))))
+        traj["y"].append(y)
+        traj["u"].append(u)
+        traj["fhat"].append(xb[n + lf :])
+        x = x + ts * np.asarray(F(x, u, np.zeros(ld), f)).ravel()
+        z = zn
+        u_prev = u
+    return err, {k: np.array(v) for k, v in traj.items()}

@@ -1,0 +1,482 @@
+"""Export the discrete observer/controller step of a design as self-contained embedded C.
+
+CasADi's :class:`casadi.CodeGenerator` writes the maths of :func:`fte_casadi.step.step_function`
+(the single source of truth that the simulator uses too) into ``fte_NAME_casadi.c``/``.h``;
+:mod:`fte_casadi.codegen.template` writes the human-facing wrapper ``fte_NAME.h``/``.c`` of
+CONTRACT.md and a README. What the CasADi output is made to satisfy, and how:
+
+- no heap, no static mutable data: an ``SX`` Function is generated as straight-line code on
+  scalar locals (``casadi_real a0, a1, ...``); the only statics are ``const`` sparsity tables.
+  The work sizes CasADi reports (``*_SZ_IW``, ``*_SZ_W``) become arrays of the state struct.
+- no I/O: ``verbose``, ``verbose_runtime``, ``main``, ``mex``, ``with_mem`` and ``with_export``
+  are off, so ``stdio.h`` is never included (checked after generation: a hit raises).
+- ``-Wall -Wextra -Werror -pedantic``: CasADi's entry points keep parameters they do not use
+  (``iw``, ``w``, ``mem``); a ``(void)name;`` line is added for each, nothing else is changed.
+- deterministic: no timestamps, CasADi prints constants with 17 significant digits.
+
+Default sample time (when ``ts`` is not given): ``0.1 * ts_max`` rounded down to 1, 2 or 5
+times a power of ten, and for a built-in plant at most the time step its paper scenario is
+simulated with (manipulator 1 ms, three-tank 10 ms), so that the C runs the very step the
+simulator runs. ``ts_max`` is the design's largest stable observer sample time
+(``design.checks["ts_max"]``); a tenth of it keeps ``|Ts lambda|`` of the fastest observer mode
+near 0.2, so the discrete observer follows the continuous one closely.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from ..design.record import Design
+from ..errors import CodegenError, ParameterError
+from ..step import step_function
+from . import template
+
+__all__ = ["generate_c", "default_ts", "c_name", "output_files", "regenerate_builtin", "BUILTIN_DIRS"]
+
+#: directory name under ``generated/`` of each built-in plant
+BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank"}
+
+_REALS = ("double", "float")
+_REAL_BYTES = {"double": 8, "float": 4}
+_FORBIDDEN = ("stdio.h", "printf", "fopen", "malloc", "calloc", "realloc", "free(")
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("fte_casadi")
+    except Exception:  # noqa: BLE001 - metadata missing in a source checkout
+        return "0"
+
+
+def c_name(plant: str) -> str:
+    """C identifier part for a plant name (``three-tank`` -> ``three_tank``)."""
+    out = "".join(ch if (ch.isalnum() or ch == "_") else "_" for ch in plant)
+    if not out or out[0].isdigit():
+        out = "p_" + out
+    return out
+
+
+def output_files(plant: str) -> list[str]:
+    """The fixed list of file names :func:`generate_c` writes for ``plant``."""
+    nm = c_name(plant)
+    return [f"fte_{nm}.h", f"fte_{nm}.c", f"fte_{nm}_casadi.h", f"fte_{nm}_casadi.c", "README.md"]
+
+
+def _nice_floor(v: float) -> float:
+    """Largest 1, 2 or 5 times a power of ten not above ``v``."""
+    e = math.floor(math.log10(v))
+    for mant in (5.0, 2.0, 1.0):
+        c = float(f"{mant}e{e}")
+        if c <= v * (1 + 1e-12):
+            return c
+    return float(f"1e{e - 1}")
+
+
+def _ts_max(design: Design) -> float:
+    tsm = design.checks.get("ts_max") if isinstance(design.checks, dict) else None
+    try:
+        tsm = float(tsm)
+    except (TypeError, ValueError):
+        tsm = float("nan")
+    if not (math.isfinite(tsm) and tsm > 0):
+        raise CodegenError(
+            f"the design gives no usable largest sample time (checks.ts_max = {design.checks.get('ts_max')!r}); "
+            "its observer may be unstable in discrete time: make the design again with `fte design`"
+        )
+    return tsm
+
+
+#: simulation time step of the built-in plants' paper scenarios (``fte_casadi.plants.SCENARIOS``)
+BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2}
+
+
+def default_ts(design: Design) -> float:
+    """Default sample time: ``0.1 * ts_max`` rounded down to 1, 2 or 5 times a power of ten,
+    and no more than the simulation step of a built-in plant (:data:`BUILTIN_DT`)."""
+    ts = _nice_floor(0.1 * _ts_max(design))
+    return min(ts, BUILTIN_DT.get(design.plant, ts))
+
+
+def _check_ts(design: Design, ts) -> float:
+    tsm = _ts_max(design)
+    if ts is None:
+        return default_ts(design)
+    try:
+        tsf = float(ts)
+    except (TypeError, ValueError):
+        raise ParameterError(f"sample time --ts must be a number; got {ts!r}") from None
+    if not (math.isfinite(tsf) and tsf > 0):
+        raise ParameterError(
+            f"sample time --ts must be positive and finite; got {ts!r} (the design allows Ts < {tsm:.6g})"
+        )
+    if tsf >= tsm:
+        raise ParameterError(
+            f"sample time Ts = {tsf:.6g} is not below the design's ts_max = {tsm:.6g}: the discrete observer "
+            f"would be unstable; choose --ts below {tsm:.6g} (default {default_ts(design):.6g})"
+        )
+    return tsf
+
+
+_FUNC_RE = re.compile(r"^(?:static )?[A-Za-z_][\w \*]*?\b(\w+)\(([^()]*)\) \{\n", re.M)
+
+
+def _void_unused(src: str) -> str:
+    """Add ``(void)p;`` for each parameter a generated function body does not use."""
+    out = []
+    pos = 0
+    for mt in _FUNC_RE.finditer(src):
+        end = src.find("\n}\n", mt.end())
+        body = src[mt.end() : end + 1]
+        params = [p.strip() for p in mt.group(2).split(",") if p.strip() and p.strip() != "void"]
+        unused = []
+        for p in params:
+            pname = re.findall(r"\w+", p)[-1]
+            if not re.search(rf"\b{pname}\b", body):
+                unused.append(pname)
+        out.append(src[pos : mt.end()])
+        out.extend(f"  (void){p};\n" for p in unused)
+        pos = mt.end()
+    out.append(src[pos:])
+    return "".join(out)
+
+
+def _casadi_sources(fn: ca.Function, name: str, real: str) -> tuple[str, str]:
+    opts = {
+        "with_header": True,
+        "prefix": f"fte_{name}_cs",
+        "casadi_real": real,
+        "casadi_int": "int",
+        "with_mem": False,
+        "with_export": False,
+        "with_import": False,
+        "verbose": False,
+        "verbose_runtime": False,
+        "main": False,
+        "mex": False,
+        "cpp": False,
+        "codegen_scalars": False,
+        "include_math": True,
+    }
+    base = f"fte_{name}_casadi"
+    with tempfile.TemporaryDirectory(prefix="fte_codegen_") as tmp:
+        gen = ca.CodeGenerator(f"{base}.c", opts)
+        gen.add(fn)
+        gen.generate(tmp + os.sep)
+        c_src = Path(tmp, f"{base}.c").read_text()
+        h_src = Path(tmp, f"{base}.h").read_text()
+    c_src = _void_unused(c_src)
+    c_src = c_src.replace("#include <math.h>\n", f'#include <math.h>\n#include "{base}.h"\n', 1)
+    for text in (c_src, h_src):
+        low = text.lower()
+        hits = [w for w in _FORBIDDEN if w in low]
+        if hits:
+            raise CodegenError(
+                f"CasADi's generated code contains {hits}; this CasADi version cannot be used for embedded C"
+            )
+    return c_src, h_src
+
+
+def _sizes(h_src: str, fname: str) -> dict:
+    out = {}
+    for key in ("SZ_ARG", "SZ_RES", "SZ_IW", "SZ_W"):
+        mt = re.search(rf"#define {fname}_{key} (\d+)", h_src)
+        if mt is None:
+            raise CodegenError(
+                f"CasADi's header lacks {fname}_{key}; unsupported CasADi version {ca.__version__}"
+            )
+        out[key] = int(mt.group(1))
+    return out
+
+
+def _memory(c_src: str, real: str, nxbar: int, sizes: dict) -> dict:
+    rb = _REAL_BYTES[real]
+    literals = len(re.findall(r"^\s*a\d+=[-+]?[0-9][0-9.eE+-]*;$", c_src, re.M))
+    sparsity = sum(int(k) for k in re.findall(r"static const casadi_int \w+\[(\d+)\]", c_src))
+    decl = re.findall(r"^\s*casadi_real (a\d+(?:, a\d+)*);$", c_src, re.M)
+    local_count = sum(len(d.split(",")) for d in decl)
+    state = 2 * nxbar * rb + sizes["SZ_W"] * rb + sizes["SZ_IW"] * 4
+    detail = f"z and z_next, {nxbar} `{real}` each"
+    if sizes["SZ_W"]:
+        detail += f"; w, {sizes['SZ_W']} `{real}`"
+    if sizes["SZ_IW"]:
+        detail += f"; iw, {sizes['SZ_IW']} `int`"
+    return {
+        "state_bytes": state,
+        "state_detail": detail,
+        "const_values": literals,
+        "const_bytes": literals * rb,
+        "sparsity_ints": sparsity,
+        "sparsity_bytes": 4 * sparsity,
+        "locals": local_count,
+        "locals_bytes": local_count * rb,
+        "pointer_count": sizes["SZ_ARG"] + sizes["SZ_RES"],
+    }
+
+
+def _fmt(v: float) -> str:
+    return repr(float(v))
+
+
+def _wrapper(
+    design: Design, name: str, real: str, ts: float, tsm: float, boundary_layer, c_src: str, h_src: str
+):
+    fname = f"fte_{name}_casadi_step"
+    sizes = _sizes(h_src, fname)
+    dims = design.dims
+    n, m, p, lf, nbar = (int(dims[k]) for k in ("n", "m", "p", "lf", "nbar"))
+    names = design.names or {}
+
+    def joined(key, count, stem):
+        v = names.get(key) or [f"{stem}{k}" for k in range(count)]
+        return ", ".join(str(t) for t in v)
+
+    NAME = name.upper()
+    work_fields = ""
+    work_init = ""
+    if sizes["SZ_W"]:
+        work_fields += f"  fte_real w[{sizes['SZ_W']}];     /* CasADi real work array */\n"
+        work_init += f"  for (i = 0; i < {sizes['SZ_W']}; ++i) s->w[i] = (fte_real)0;\n"
+    if sizes["SZ_IW"]:
+        work_fields += f"  int iw[{sizes['SZ_IW']}];     /* CasADi integer work array */\n"
+        work_init += f"  for (i = 0; i < {sizes['SZ_IW']}; ++i) s->iw[i] = 0;\n"
+    setup = ["arg[0] = s->z;", "arg[1] = y;"]
+    setup += [f"arg[{k}] = 0;" for k in range(2, sizes["SZ_ARG"])]
+    setup += [
+        "res[0] = s->z_next;",
+        "res[1] = u;",
+        "res[2] = xbarhat;",
+        "res[3] = yc;",
+        "res[4] = 0; /* s: not exported */",
+    ]
+    setup += [f"res[{k}] = 0;" for k in range(5, sizes["SZ_RES"])]
+    mem = _memory(c_src, real, nbar, sizes)
+    certified = "certified" if design.certified else "NOT certified"
+    affine = any(np.any(np.asarray(lm.get("a", 0.0))) for lm in design.local_models)
+    sub = {
+        "name": name,
+        "NAME": NAME,
+        "plant": design.plant,
+        "version": _version(),
+        "variant": design.variant,
+        "certified": certified,
+        "real": real,
+        "ny": p,
+        "nu": m,
+        "nxbar": nbar,
+        "n": n,
+        "lf": lf,
+        "ts_c": f"({_fmt(ts)})",
+        "ts_text": _fmt(ts),
+        "ts_max_text": f"{tsm:.6g}",
+        "time_unit": names.get("time_unit", "s"),
+        "y_names": joined("outputs", p, "y"),
+        "u_names": joined("inputs", m, "u"),
+        "x_names": joined("states", n, "x"),
+        "f_names": joined("faults", lf, "f"),
+        "work_fields": work_fields,
+        "work_init": work_init,
+        "sz_arg": sizes["SZ_ARG"],
+        "sz_res": sizes["SZ_RES"],
+        "arg_setup": "".join(f"  {t}\n" for t in setup),
+        "casadi_fn": fname,
+        "iw_arg": "s->iw" if sizes["SZ_IW"] else "0",
+        "w_arg": "s->w" if sizes["SZ_W"] else "0",
+        "sliding": "sgn(s)" if boundary_layer is None else f"sat(s / {_fmt(boundary_layer)})",
+        "affine": " + T abar_i" if affine else "",
+        "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
+        **mem,
+    }
+    files = output_files(design.plant)
+    table = {
+        files[0]: "types, sizes and the two calls (include this one)",
+        files[1]: "the wrapper: input check, state update",
+        files[2]: "CasADi's declarations of the generated step",
+        files[3]: "the maths, written by CasADi's CodeGenerator",
+        files[4]: "this file",
+    }
+    sub["file_table"] = "\n".join(f"| `{k}` | {v} |" for k, v in table.items())
+    return {
+        files[0]: template.HEADER.substitute(sub),
+        files[1]: template.SOURCE.substitute(sub),
+        files[4]: template.README.substitute(sub),
+    }, mem
+
+
+def _prepare_dir(out_dir: Path) -> None:
+    if out_dir.exists() and not out_dir.is_dir():
+        raise CodegenError(
+            f"output directory {str(out_dir)!r} exists and is not a directory; choose another --out"
+        )
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CodegenError(
+            f"cannot create output directory {str(out_dir)!r}: {exc.strerror or exc}; choose a writable --out"
+        ) from None
+    if not os.access(out_dir, os.W_OK | os.X_OK):
+        raise CodegenError(f"output directory {str(out_dir)!r} is not writable; choose a writable --out")
+
+
+def _file_mode() -> int:
+    """``0o666`` less the process umask (what ``open`` would give; mkstemp gives 0o600)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _write_all(out_dir: Path, texts: dict[str, str]) -> list[Path]:
+    """Write every file to a temporary name first, then rename them all; a failure removes the temporaries."""
+    temps: list[tuple[str, Path]] = []
+    mode = _file_mode()
+    try:
+        for fname, text in texts.items():
+            fd, tmp = tempfile.mkstemp(prefix=f".{fname}.", suffix=".tmp", dir=out_dir)
+            temps.append((fname, Path(tmp)))
+            with os.fdopen(fd, "w", newline="\n") as fh:
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.chmod(tmp, mode)
+        for fname, tmp in temps:
+            os.replace(tmp, out_dir / fname)
+    except OSError as exc:
+        for _, tmp in temps:
+            try:
+                tmp.unlink()
+            except OSError:
+                pass
+        raise CodegenError(
+            f"cannot write the generated C into {str(out_dir)!r}: {exc.strerror or exc}"
+        ) from None
+    return [out_dir / f for f in texts]
+
+
+def generate_c(
+    design: Design | str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    ts: float | None = None,
+    real: str = "double",
+    boundary_layer: float | None = None,
+) -> list[Path]:
+    """Write the embedded C of ``design``'s discrete step into ``out_dir``.
+
+    Parameters
+    ----------
+    design : Design or path
+        The design record, or the path of a design document (read with ``Design.load``).
+    out_dir : path
+        Created if needed. Only the files of :func:`output_files` are written (atomically:
+        temporary files, then renames); nothing else in the directory is touched.
+    ts : float, optional
+        Sample time; positive and below ``design.checks["ts_max"]``. Default :func:`default_ts`.
+    real : {"double", "float"}
+        The C type of ``fte_real``.
+    boundary_layer : float, optional
+        Replace ``sgn(s)`` by ``sat(s / phi)``.
+
+    Returns
+    -------
+    list of Path
+        The files written, in the order of :func:`output_files`.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from fte_casadi.plants import three_tank
+    >>> from fte_casadi.ts import derive
+    >>> from fte_casadi.codegen.stand_in import stand_in_design
+    >>> d = stand_in_design(derive(three_tank(), fidelity_samples=200))
+    >>> [p.name for p in generate_c(d, tempfile.mkdtemp(), ts=0.1)][:2]
+    ['fte_three_tank.h', 'fte_three_tank.c']
+    """
+    if isinstance(design, (str, os.PathLike)):
+        design = Design.load(design)  # DesignFileError on a missing, truncated or corrupt file
+    if not isinstance(design, Design):
+        raise CodegenError(
+            f"generate_c needs a Design record (Design.load(path)); got {type(design).__name__}"
+        )
+    if real not in _REALS:
+        raise ParameterError(f"--real must be one of {list(_REALS)}; got {real!r}")
+    tsf = _check_ts(design, ts)
+    tsm = _ts_max(design)
+    name = c_name(design.plant)
+    out = Path(out_dir)
+    _prepare_dir(out)
+    try:
+        fn = step_function(
+            design, tsf, tolerant=True, boundary_layer=boundary_layer, name=f"fte_{name}_casadi_step"
+        )
+    except ParameterError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - a CasADi failure on a malformed record
+        raise CodegenError(
+            f"cannot build the step of this design ({exc}); make the design again with `fte design`"
+        ) from None
+    c_src, h_src = _casadi_sources(fn, name, real)
+    texts, _ = _wrapper(design, name, real, tsf, tsm, boundary_layer, c_src, h_src)
+    files = output_files(design.plant)
+    ordered = {
+        files[0]: texts[files[0]],
+        files[1]: texts[files[1]],
+        files[2]: h_src,
+        files[3]: c_src,
+        files[4]: texts[files[4]],
+    }
+    return _write_all(out, ordered)
+
+
+def memory_report(design: Design, *, ts: float | None = None, real: str = "double") -> dict:
+    """Bytes of state, constant data and stack of the generated step (as the README states them)."""
+    tsf = _check_ts(design, ts)
+    name = c_name(design.plant)
+    fn = step_function(design, tsf, tolerant=True, name=f"fte_{name}_casadi_step")
+    c_src, h_src = _casadi_sources(fn, name, real)
+    return _memory(c_src, real, int(design.dims["nbar"]), _sizes(h_src, f"fte_{name}_casadi_step"))
+
+
+def builtin_design(plant_name: str, *, stand_in: bool | None = None) -> Design:
+    """The design used for ``generated/``: the real LMI design when it exists, else the LQR stand-in."""
+    from ..plants import BUILTIN
+    from ..ts import derive
+
+    ts_model = derive(BUILTIN[plant_name]())
+    if not stand_in:
+        try:
+            from ..design import design as lmi_design  # written by another module; may not exist yet
+        except ImportError:
+            lmi_design = None
+        if lmi_design is not None:
+            return lmi_design(ts_model, variant="conditioned")
+        if stand_in is False:
+            raise CodegenError("the LMI design (fte_casadi.design.design) is not available")
+    from .stand_in import stand_in_design
+
+    return stand_in_design(ts_model)
+
+
+def regenerate_builtin(root: str | os.PathLike, *, stand_in: bool | None = None) -> dict[str, list[Path]]:
+    """Regenerate ``root/manipulator`` and ``root/three_tank`` (``root`` is the ``generated/`` folder).
+
+    Each folder gets ``design.json`` (the design the code was made from, so that the code can
+    be regenerated bit for bit) and the files of :func:`generate_c` with the default sample
+    time and ``double``.
+    """
+    out = {}
+    for plant_name, sub in BUILTIN_DIRS.items():
+        d = builtin_design(plant_name, stand_in=stand_in)
+        folder = Path(root) / sub
+        _prepare_dir(folder)
+        d.save(folder / "design.json")
+        os.chmod(folder / "design.json", _file_mode())
+        out[plant_name] = [folder / "design.json", *generate_c(Design.load(folder / "design.json"), folder)]
+    return out

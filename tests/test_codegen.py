@@ -1,0 +1,344 @@
+"""Generated C: compiled with the strict flags, loaded back with ctypes, compared with CasADi.
+
+The way CasADi tests its own code generation: the in-process Function is the reference, the
+compiled code must reproduce it per step (double: C_DOUBLE absolute on O(1) values; float:
+C_FLOAT_REL relative to the size of each output vector) and along a closed-loop run of each
+built-in nonlinear plant.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tolerances import C_DOUBLE, C_FLOAT_REL
+
+from fte_casadi.codegen import build
+from fte_casadi.codegen.ctypes_step import CStep, closed_loop_compare
+from fte_casadi.codegen.generate import _nice_floor, c_name, default_ts, generate_c, output_files
+from fte_casadi.codegen.stand_in import stand_in_design
+from fte_casadi.errors import CodegenError, DesignFileError, ParameterError
+from fte_casadi.step import step_function
+
+PLANTS = ("manipulator", "three-tank")
+REPO = Path(__file__).resolve().parents[1]
+FORBIDDEN = re.compile(
+    r"\b(malloc|calloc|realloc|free|printf|fprintf|sprintf|puts|fopen|fwrite|fread)\b|stdio\.h"
+)
+
+needs_cc = pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
+
+
+@pytest.fixture(scope="module")
+def designs(ts_models):
+    """The real conditioned design when fte_casadi.design.design exists, else the LQR stand-in."""
+    try:
+        from fte_casadi.design import design
+    except ImportError:
+        return {k: stand_in_design(ts) for k, ts in ts_models.items()}
+    return {k: design(ts, variant="conditioned") for k, ts in ts_models.items()}
+
+
+@pytest.fixture(scope="module")
+def libs(designs, tmp_path_factory):
+    """Shared libraries of every plant in double and float, compiled under the strict flags."""
+    if build.find_compiler() is None:
+        pytest.skip("no C compiler (cc, gcc, clang) on PATH")
+    out = {}
+    for plant, d in designs.items():
+        for real in ("double", "float"):
+            src = tmp_path_factory.mktemp(f"{c_name(plant)}_{real}")
+            generate_c(d, src, real=real)
+            out[plant, real] = (src, build.compile_shared(src, src / "libstep.so"))
+    return out
+
+
+def _samples(design, k: int, seed: int):
+    rng = np.random.default_rng(seed)
+    nbar, p = int(design.dims["nbar"]), int(design.dims["p"])
+    y0 = np.asarray(design.C) @ (np.zeros(design.dims["n"]) if design.x_ref is None else design.x_ref)
+    for _ in range(k):
+        yield rng.normal(scale=0.5, size=nbar), y0 + rng.normal(scale=0.5, size=p)
+
+
+@needs_cc
+@pytest.mark.parametrize("plant", PLANTS)
+def test_double_step_matches_casadi(plant, designs, libs):
+    d = designs[plant]
+    fn = step_function(d, default_ts(d))
+    c = CStep(libs[plant, "double"][1], d, "double")
+    worst = 0.0
+    for z, y in _samples(d, 200, seed=1):
+        zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
+        c.init(z)
+        rc, uc, xbc, ycc = c.step(y)
+        assert rc == 0
+        for a, b in ((c.z, zn), (uc, u), (xbc, xb), (ycc, yc)):
+            worst = max(worst, float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b)))))
+    assert worst <= C_DOUBLE
+
+
+@needs_cc
+@pytest.mark.parametrize("plant", PLANTS)
+def test_float_step_matches_casadi(plant, designs, libs):
+    """Float code from the same (z, y): each output within C_FLOAT_REL of its vector's size."""
+    d = designs[plant]
+    fn = step_function(d, default_ts(d))
+    c = CStep(libs[plant, "float"][1], d, "float")
+    worst = 0.0
+    for z, y in _samples(d, 200, seed=2):
+        z32, y32 = np.float32(z).astype(float), np.float32(y).astype(float)
+        zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z32, y32))
+        c.init(z32)
+        rc, uc, xbc, ycc = c.step(y32)
+        assert rc == 0
+        for a, b in ((c.z, zn), (uc, u), (xbc, xb), (ycc, yc)):
+            worst = max(worst, float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b)))))
+    assert worst <= C_FLOAT_REL
+    assert worst > 0.0  # it is float arithmetic: a zero difference would mean double code was loaded
+
+
+def _fault(plant):
+    if plant == "manipulator":  # 40 % loss of actuator effectiveness after 0.5 s
+        return lambda t, u: np.array([-0.4 * u[0] if t >= 0.5 else 0.0, 0.0])
+    return lambda t, u: np.array([-10.0 if t >= 5.0 else 0.0])  # pump 2 delivers 10 cm^3/s less
+
+
+@needs_cc
+@pytest.mark.parametrize("plant", PLANTS)
+def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
+    d = designs[plant]
+    ts = default_ts(d)
+    steps = int(round((1.5 if plant == "manipulator" else 20.0) / ts))
+    c = CStep(libs[plant, "double"][1], d, "double")
+    err, traj = closed_loop_compare(d, c, ts, min(steps, 2000), fault=_fault(plant))
+    scale = max(1.0, float(np.max(np.abs(traj["y"]))), float(np.max(np.abs(traj["u"]))))
+    assert max(err.values()) <= C_DOUBLE * scale, err  # same operations in the same order: round-off only
+    assert np.all(np.isfinite(traj["u"]))
+    assert np.max(np.abs(traj["fhat"][-1])) > 0  # the fault estimate moved: the loop was exercised
+
+
+@needs_cc
+@pytest.mark.parametrize("real", ["double", "float"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_measurement_refused_state_unchanged(bad, real, designs, libs):
+    d = designs["manipulator"]
+    c = CStep(libs["manipulator", real][1], d, real)
+    z0 = np.arange(1.0, d.nbar + 1) / 10
+    c.init(z0)
+    before = bytes(c.state)
+    y = np.array([0.1, bad, 0.2])
+    rc, *_ = c.step(y)
+    assert rc != 0
+    assert bytes(c.state) == before
+    rc, *_ = c.step(np.array([0.1, 0.0, 0.2]))  # a finite y afterwards works and moves the state
+    assert rc == 0 and bytes(c.state) != before
+
+
+@needs_cc
+def test_boundary_layer_variant_matches(designs, tmp_path):
+    d = designs["manipulator"]
+    generate_c(d, tmp_path, boundary_layer=0.05)
+    c = CStep(build.compile_shared(tmp_path, tmp_path / "lib.so"), d)
+    fn = step_function(d, default_ts(d), boundary_layer=0.05)
+    for z, y in _samples(d, 50, seed=3):
+        c.init(z)
+        rc, uc, xbc, _ = c.step(y)
+        zn, u, *_ = (np.asarray(v).ravel() for v in fn(z, y))
+        assert rc == 0 and np.max(np.abs(c.z - zn)) <= C_DOUBLE * max(1.0, np.max(np.abs(zn)))
+
+
+def _generated_dirs(libs):
+    dirs = [src for src, _ in libs.values()]
+    dirs += [REPO / "generated" / sub for sub in ("manipulator", "three_tank")]
+    return [d for d in dirs if d.is_dir()]
+
+
+@needs_cc
+def test_no_heap_io_or_mutable_globals(libs):
+    checked = 0
+    for folder in _generated_dirs(libs):
+        for f in sorted(folder.glob("*.[ch]")):
+            text = f.read_text()
+            code = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
+            assert not FORBIDDEN.search(code), f"{f}: {FORBIDDEN.search(code).group(0)}"
+            for line in code.splitlines():  # file-scope statics must be const
+                if line.startswith("static ") and "(" not in line:
+                    assert "const" in line, f"{f}: mutable static {line!r}"
+            checked += 1
+    assert checked >= 16
+
+
+@needs_cc
+@pytest.mark.parametrize("plant", PLANTS)
+@pytest.mark.parametrize("real", ["double", "float"])
+def test_strict_compile_with_callers_main(plant, real, designs, libs, tmp_path):
+    src = libs[plant, real][0]
+    name = c_name(plant)
+    main = tmp_path / "main.c"
+    main.write_text(
+        f'#include "fte_{name}.h"\n'
+        "int main(void) {\n"
+        f"  fte_{name}_state s;\n"
+        f"  fte_real y[FTE_{name.upper()}_NY] = {{0}};\n"
+        f"  fte_real u[FTE_{name.upper()}_NU];\n"
+        "  int k, rc = 0;\n"
+        f"  fte_{name}_init(&s, 0);\n"
+        f"  for (k = 0; k < 10; ++k) rc |= fte_{name}_step(&s, y, u, 0, 0);\n"
+        f"  y[0] = (fte_real)(0.0 / (double)(k - k));\n"
+        f"  return rc == 0 && fte_{name}_step(&s, y, u, 0, 0) == 1 && FTE_{name.upper()}_TS > 0 ? 0 : 1;\n"
+        "}\n"
+    )
+    exe = build.compile_program(src, main, tmp_path / "prog")
+    build.run_program(exe)
+
+
+@needs_cc
+def test_readme_states_memory_and_sample_time(designs, libs):
+    d = designs["three-tank"]
+    src = libs["three-tank", "double"][0]
+    text = (src / "README.md").read_text()
+    assert f"Ts = {default_ts(d)!r}" in text
+    nbar = int(d.dims["nbar"])
+    assert f"{2 * nbar * 8} bytes" in text
+    assert "numeric literals" in text
+
+
+# ---- bad inputs: each refused with a clear message, nothing half-written -------------------------
+
+
+def _listing(folder: Path):
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else None
+
+
+def test_ts_above_ts_max_refused(designs, tmp_path):
+    d = designs["manipulator"]
+    tsm = d.checks["ts_max"]
+    out = tmp_path / "out"
+    with pytest.raises(ParameterError, match=f"ts_max = {tsm:.6g}"):
+        generate_c(d, out, ts=2 * tsm)
+    for bad in (0.0, -1e-3, float("nan")):
+        with pytest.raises(ParameterError, match="positive"):
+            generate_c(d, out, ts=bad)
+    assert not out.exists()
+
+
+def test_bad_real_refused(designs, tmp_path):
+    with pytest.raises(ParameterError, match="double"):
+        generate_c(designs["manipulator"], tmp_path / "o", real="long double")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "mutate, match",
+    [
+        (lambda t: t.replace('"H": [\n  [\n   ', '"H": [\n  [\n   NaN, ', 1), "NaN"),
+        (lambda t: json.dumps({k: v for k, v in json.loads(t).items() if k != "H"}), "lacks key"),
+        (lambda t: t[: len(t) // 2], "truncated"),
+    ],
+    ids=["nan", "missing-key", "truncated"],
+)
+def test_bad_design_document_refused(mutate, match, designs, tmp_path):
+    text = designs["manipulator"].to_json()
+    bad = mutate(text)
+    assert bad != text
+    path = tmp_path / "design.json"
+    path.write_text(bad)
+    out = tmp_path / "out"
+    with pytest.raises(DesignFileError, match=match):
+        generate_c(path, out)
+    assert not out.exists()
+
+
+def test_design_document_path_accepted(designs, tmp_path):
+    path = tmp_path / "design.json"
+    designs["three-tank"].save(path)
+    files = generate_c(path, tmp_path / "out")
+    assert [f.name for f in files] == output_files("three-tank")
+
+
+def test_unwritable_dir_refused(designs, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    for out in (blocker / "sub", blocker):
+        with pytest.raises(CodegenError, match="directory"):
+            generate_c(designs["manipulator"], out)
+    assert blocker.read_text() == "not a directory"
+
+
+def test_only_own_files_written_others_kept(designs, tmp_path):
+    (tmp_path / "main.c").write_text("/* mine */\n")
+    (tmp_path / "notes.txt").write_text("keep")
+    generate_c(designs["manipulator"], tmp_path)
+    assert _listing(tmp_path) == sorted(output_files("manipulator") + ["main.c", "notes.txt"])
+    assert (tmp_path / "main.c").read_text() == "/* mine */\n"
+
+
+def test_failed_write_leaves_nothing_half_written(designs, tmp_path, monkeypatch):
+    generate_c(designs["manipulator"], tmp_path, ts=0.001)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    real_fsync, calls = os.fsync, []
+
+    def failing_fsync(fd):
+        calls.append(fd)
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device")
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", failing_fsync)
+    with pytest.raises(CodegenError, match="No space left"):
+        generate_c(designs["manipulator"], tmp_path, ts=0.002)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before  # old files intact, no temporaries
+
+
+def test_default_ts(designs):
+    """A tenth of ts_max rounded down to 1-2-5, capped by the built-in scenario's simulation step."""
+    from fte_casadi.codegen.generate import BUILTIN_DT
+    from fte_casadi.plants import SCENARIOS
+
+    for plant, d in designs.items():
+        ts, tsm = default_ts(d), d.checks["ts_max"]
+        assert ts <= 0.1 * tsm and f"{ts:e}"[0] in "125"
+        assert ts == min(BUILTIN_DT[plant], _nice_floor(0.1 * tsm))
+        assert BUILTIN_DT[plant] == SCENARIOS[plant]().dt  # kept in step with the simulator
+    import dataclasses
+
+    user = dataclasses.replace(designs["three-tank"], plant="my-tank")
+    assert default_ts(user) == _nice_floor(0.1 * user.checks["ts_max"])
+    assert 0.04 * user.checks["ts_max"] < default_ts(user) <= 0.1 * user.checks["ts_max"]
+    assert [_nice_floor(v) for v in (0.0999, 0.1, 0.35, 7.0, 1.99e-3)] == [0.05, 0.1, 0.2, 5.0, 1e-3]
+
+
+def test_missing_ts_max_refused(designs, tmp_path):
+    import dataclasses
+
+    d = designs["manipulator"]
+    bad = dataclasses.replace(d, checks={k: v for k, v in d.checks.items() if k != "ts_max"})
+    with pytest.raises(CodegenError, match="ts_max"):
+        generate_c(bad, tmp_path / "o")
+    assert not (tmp_path / "o").exists()
+
+
+def test_no_compiler_is_reported(monkeypatch, tmp_path):
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("CC", raising=False)
+    assert build.find_compiler() is None
+    with pytest.raises(CodegenError, match="no C compiler"):
+        build.compile_shared(tmp_path, tmp_path / "x.so")
+
+
+@needs_cc
+def test_bench_measures_and_baseline_agrees(designs):
+    """The benchmark runs; its hand-written baseline computes the same step; no mutable globals."""
+    from fte_casadi.codegen.bench import bench_design
+
+    res = bench_design(designs["three-tank"], iters=2000, reps=1)
+    assert res["c_ns"] > 0 and res["hand_ns"] > 0 and res["casadi_us"] > 0
+    assert res["hand_max_diff"] <= 1e-9  # same maths up to summation order, values of O(10)
+    assert res["sizeof_state"] == res["state_bytes"]
+    if res["objects"] is not None:
+        assert res["objects"]["data"] == 0 and res["objects"]["bss"] == 0
