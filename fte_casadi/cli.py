@@ -10,6 +10,7 @@ import functools
 import json
 import sys
 import textwrap
+from pathlib import Path
 
 import click
 import numpy as np

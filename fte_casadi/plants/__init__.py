@@ -4,3 +4,9 @@ from .manipulator import manipulator as manipulator
 from .three_tank import three_tank as three_tank
 
 BUILTIN = {"manipulator": manipulator, "three-tank": three_tank}
+
+from .manipulator import scenario as _manipulator_scenario  # noqa: E402
+from .three_tank import scenario as _three_tank_scenario  # noqa: E402
+
+#: the paper's experiments, by built-in plant name (functions returning a Scenario)
+SCENARIOS = {"manipulator": _manipulator_scenario, "three-tank": _three_tank_scenario}

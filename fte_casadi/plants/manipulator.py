@@ -70,3 +70,21 @@ def manipulator() -> Plant:
     b.design_defaults(gamma=2.0, gamma1=0.01, sigma=0.2, delta=1e-5, epsilon=1e-5)
     b.parameters(**p, **{f"alpha_d{k + 1}": v for k, v in enumerate(a)}, **w)
     return b.build()
+
+
+def scenario():
+    """Section 6.1's experiment: 40 % loss of actuator effectiveness for 2.5 <= t < 5 s (``fa = -0.4 u``),
+    first sensor stuck at its reading at t = 7 s for 7 <= t < 10 s, d uniform in [-0.1, 0.1] each step,
+    x0 = [0.1, 0.05, 0.02, 0.03] plus Gaussian noise (std 0.005), T = 10 s, dt = 1 ms, 5 paths."""
+    from ..sim.scenario import LossOfEffectiveness, Scenario, Stuck, UniformNoise
+
+    return Scenario(
+        name="manipulator",
+        T=10.0,
+        dt=1e-3,
+        faults=(LossOfEffectiveness("fa", loss=0.4, start=2.5, stop=5.0), Stuck("fs", start=7.0, stop=10.0)),
+        unknown_input=UniformNoise(0.1),
+        x0=(0.1, 0.05, 0.02, 0.03),
+        x0_noise=0.005,
+        paths=5,
+    )

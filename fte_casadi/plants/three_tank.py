@@ -58,3 +58,21 @@ def three_tank() -> Plant:
     b.design_defaults(gamma=1.0, gamma1=0.9, sigma=5.0, delta=1e-4, epsilon=1e-4)
     b.parameters(**p)
     return b.build()
+
+
+def scenario():
+    """Section 6.2's experiment: pump 2 delivers 10 cm^3/s less for 200 <= t < 400 s (additive ``fa = -10``),
+    d uniform in [-0.1, 0.1] each step, x0 = [20, 10, 15] cm plus Gaussian noise (std 0.2 cm), T = 600 s,
+    dt = 10 ms (well below the designs' ts_max; the simulator lowers it if a design needs), 10 paths."""
+    from ..sim.scenario import Bias, Scenario, UniformNoise
+
+    return Scenario(
+        name="three-tank",
+        T=600.0,
+        dt=1e-2,
+        faults=(Bias("fa", value=-10.0, start=200.0, stop=400.0),),
+        unknown_input=UniformNoise(0.1),
+        x0=(20.0, 10.0, 15.0),
+        x0_noise=0.2,
+        paths=10,
+    )

@@ -1,0 +1,9 @@
+"""Figures from simulation results; never computes, never calls show()."""
+
+from .figures import fault_figure as fault_figure
+from .figures import figure_set as figure_set
+from .figures import output_figure as output_figure
+from .figures import output_means_figure as output_means_figure
+from .figures import output_paths_figure as output_paths_figure
+from .figures import state_figure as state_figure
+from .figures import write_figures as write_figures
