@@ -1,0 +1,209 @@
+"""Speed of the Monte Carlo engine against sdeint and a plain Python loop, measured in one process.
+
+A *path-step* is one sample of the closed loop for one path, all three runs (fault-free,
+faulty without and with tolerant control). The baselines integrate the very same closed-loop
+SDE — the same sample Function, called interpreted from Python once per step (what a user
+writes by hand around CasADi) — on a few paths, and are scaled to path-steps per second.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+
+import casadi as ca
+import numpy as np
+
+from ..design.record import Design
+from ..errors import SimulationError
+from .engine import _lm, closed_loop_sample, monte_carlo, simulate
+from .scenario import UniformNoise, fault_schedule
+
+__all__ = ["bench", "baseline_functions"]
+
+
+def baseline_functions(design: Design, plant, scenario, dt: float):
+    """``(drift_fn, diffusion_fn, state0)`` of the closed loop as one SDE ``ds = a(s, t) dt + b(s, t) dw``.
+
+    Built from the engine's own sample Function: ``next(s) = s + a dt + b dW`` is affine in dW,
+    so ``a = (next(s, dW=0) - s) / dt`` and ``b = next(s, dW=1) - next(s, dW=0)`` reproduce the
+    Euler-Maruyama step exactly. The unknown input of step k is drawn once, up front.
+    """
+    nsteps = int(round(scenario.T / dt))
+    t = np.arange(nsteps + 2000) * dt
+    sched = fault_schedule(
+        scenario,
+        plant.fault_names,
+        plant.fault_kinds,
+        _lm(design, "B"),
+        _lm(design, "Bf"),
+        np.asarray(plant.Df),
+        plant.input_names,
+        t,
+        dt,
+    )
+    fn, lay = closed_loop_sample(design, plant, dt, sched)
+    FP = sched.stacked()
+    rng = np.random.default_rng(0)
+    ui = scenario.unknown_input
+    pad = nsteps + 2000  # the engine pads its last block
+    D = (
+        rng.uniform(-ui.amplitude, ui.amplitude, (lay.ld, pad))
+        if isinstance(ui, UniformNoise)
+        else np.zeros((lay.ld, pad))
+    )
+
+    def k_of(tt):
+        return min(int(round(tt / dt)), nsteps)
+
+    def a(s, tt):
+        k = k_of(tt)
+        w = np.concatenate([[0.0], D[:, k]])
+        return (np.asarray(fn(s, w, FP[:, k])[0]).ravel() - s) / dt
+
+    def b(s, tt):
+        k = k_of(tt)
+        w0 = np.concatenate([[0.0], D[:, k]])
+        w1 = np.concatenate([[1.0], D[:, k]])
+        return (np.asarray(fn(s, w1, FP[:, k])[0]) - np.asarray(fn(s, w0, FP[:, k])[0])).reshape(-1, 1)
+
+    x0 = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, float)
+    s0 = np.zeros(lay.ns)
+    y0 = np.asarray(plant.C) @ x0
+    z0 = np.concatenate([x0, np.zeros(lay.nbar - plant.n)]) - np.asarray(design.H) @ y0
+    for r in range(3):
+        o = r * lay.run_state
+        s0[o : o + plant.n] = x0
+        s0[o + plant.n : o + plant.n + lay.nbar] = z0
+    return fn, a, b, s0, D, FP, lay
+
+
+def bench(
+    design: Design | None = None,
+    *,
+    paths: int = 1000,
+    baseline_paths: int = 2,
+    seed: int = 0,
+    threads: int | None = None,
+    horizon: float | None = None,
+) -> dict:
+    """Manipulator scenario (T = 10 s, dt = 1 ms, three runs): engine at ``paths`` paths vs baselines.
+
+    Returns a dict with absolute rates (path-steps per second), wall times and the ratios, and
+    ``max_abs_diff_engine_vs_sdeint``: the compiled engine and sdeint driven by the same noise
+    give the same trajectory (the baselines compute the same thing, only slower).
+    ``design`` defaults to the conditioned LMI design of the built-in manipulator;
+    ``horizon`` shortens T (for tests).
+    """
+    from ..plants import manipulator
+    from ..plants.manipulator import scenario as manipulator_scenario
+
+    plant = manipulator()
+    scen = manipulator_scenario()
+    if horizon is not None:
+        scen = dataclasses.replace(scen, T=float(horizon))
+    if design is None:
+        try:
+            from ..design import design as make_design
+        except ImportError as exc:
+            raise SimulationError("bench needs a design: pass one, or install the design module") from exc
+        from ..ts import derive
+
+        design = make_design(derive(plant), variant="conditioned")
+    dt = scen.dt
+    nsteps = int(round(scen.T / dt))
+
+    # engine; a first short call compiles (or loads) the same block so compile time is reported apart
+    t0 = time.perf_counter()
+    probe = simulate(design, plant, scen, paths=paths, seed=seed, progress=False, threads=threads)
+    first_wall = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    res = simulate(
+        design,
+        plant,
+        scen,
+        paths=paths,
+        seed=seed,
+        progress=False,
+        threads=threads,
+        record_every=probe.record_every,
+    )
+    wall = time.perf_counter() - t0
+    engine_rate = paths * nsteps / wall
+
+    fn, a, b, s0, D, FP, lay = baseline_functions(design, plant, scen, dt)
+    rng = np.random.default_rng(seed)
+    tspan = np.arange(nsteps + 1) * dt
+
+    # (a) sdeint's itoEuler on the same closed-loop SDE
+    import sdeint
+
+    t0 = time.perf_counter()
+    for _ in range(baseline_paths):
+        dW = np.sqrt(dt) * rng.standard_normal((nsteps, 1))
+        sde = sdeint.itoEuler(a, b, s0, tspan, dW=dW)
+    sde_wall = time.perf_counter() - t0
+
+    # the engine's core on the same noise as the last sdeint path
+    def fill(W, k0):
+        L = W.shape[1]
+        W[:] = 0.0
+        k1 = min(k0 + L, nsteps)
+        W[0, : k1 - k0, 0] = dW[k0:k1, 0]
+        W[0, : k1 - k0, 1:] = D[:, k0:k1].T
+
+    rec, _ = monte_carlo(fn, s0[None, :], FP, nsteps, 1, fill, dt=dt)
+    diff = max(
+        float(
+            np.max(
+                np.abs(
+                    rec[0, :, r * lay.run_rec : r * lay.run_rec + plant.n]
+                    - sde[:, r * lay.run_state : r * lay.run_state + plant.n]
+                )
+            )
+        )
+        for r in range(3)
+    )
+    sde_rate = baseline_paths * nsteps / sde_wall
+
+    # (b) a plain Python loop calling the sample Function once per step
+    t0 = time.perf_counter()
+    for _ in range(baseline_paths):
+        s = s0.copy()
+        dW = np.sqrt(dt) * rng.standard_normal(nsteps)
+        for k in range(nsteps):
+            s = np.asarray(fn(s, np.concatenate([[dW[k]], D[:, k]]), FP[:, k])[0]).ravel()
+    loop_wall = time.perf_counter() - t0
+    loop_rate = baseline_paths * nsteps / loop_wall
+
+    return {
+        "scenario": "manipulator, T = 10 s, dt = 1 ms, three runs per path",
+        "engine": {
+            "paths": paths,
+            "steps": nsteps,
+            "wall_s": wall,
+            "first_call_wall_s": first_wall,
+            "path_steps_per_s": engine_rate,
+            "compiled": res.compiled,
+            "threads": threads or min(8, os.cpu_count() or 1),
+            "record_every": res.record_every,
+        },
+        "sdeint_itoEuler": {
+            "paths": baseline_paths,
+            "wall_s": sde_wall,
+            "path_steps_per_s": sde_rate,
+            "scaled_wall_s_for_engine_paths": paths * nsteps / sde_rate,
+        },
+        "python_loop": {
+            "paths": baseline_paths,
+            "wall_s": loop_wall,
+            "path_steps_per_s": loop_rate,
+            "scaled_wall_s_for_engine_paths": paths * nsteps / loop_rate,
+        },
+        "speedup_vs_sdeint": engine_rate / sde_rate,
+        "max_abs_diff_engine_vs_sdeint": diff,
+        "speedup_vs_python_loop": engine_rate / loop_rate,
+        "sample_instructions": int(fn.n_instructions()),
+        "casadi": ca.__version__,
+    }

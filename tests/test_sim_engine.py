@@ -1,0 +1,222 @@
+"""Monte Carlo engine: Euler-Maruyama statistics, equality with a reference loop, faults, errors."""
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from fte_casadi.errors import ParameterError, SimulationError
+from fte_casadi.plants import SCENARIOS
+from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate
+from fte_casadi.sim.engine import closed_loop_sample, monte_carlo
+from fte_casadi.sim.scenario import fault_schedule
+
+GBM_A, GBM_B = 0.5, 0.8  # dX = a X dt + b X dW
+
+
+def _gbm_sample(dt):
+    x = ca.SX.sym("x")
+    w = ca.SX.sym("w")
+    fp = ca.SX.sym("fp", 0)
+    return ca.Function("gbm", [x, w, fp], [x + GBM_A * x * dt + GBM_B * x * w, x])
+
+
+def _filler(dW: np.ndarray):
+    """``fill(W, k0)`` for the engine: increments dW (paths, steps), zeros past the end (padding)."""
+    n = dW.shape[1]
+
+    def fill(W, k0):
+        W[:, :, 0] = 0.0
+        take = dW[:, k0 : min(k0 + W.shape[1], n)]
+        W[:, : take.shape[1], 0] = take
+
+    return fill
+
+
+def test_em_reproduces_gbm_mean_and_variance():
+    rng = np.random.default_rng(12345)
+    paths, T, dt = 20000, 1.0, 1e-2
+    n = int(T / dt)
+    dW = np.sqrt(dt) * rng.standard_normal((paths, n))
+    rec, compiled = monte_carlo(
+        _gbm_sample(dt), np.ones((paths, 1)), np.zeros((0, n)), n, 1, _filler(dW), dt=dt
+    )
+    assert compiled and rec.shape == (paths, n + 1, 1)
+    xT = rec[:, n, 0]
+    mean_exact = np.exp(GBM_A * T)
+    var_exact = np.exp(2 * GBM_A * T) * (np.exp(GBM_B**2 * T) - 1)
+    se_mean = np.sqrt(var_exact / paths)
+    # EM's own bias on the mean is (1 + a dt)^n vs e^{aT}: ~0.4 % here, below 3 standard errors
+    assert abs(xT.mean() - mean_exact) < 3 * se_mean
+    assert abs(xT.var() / var_exact - 1) < 0.08
+    # and exactly the EM recursion: product of (1 + a dt + b dW)
+    np.testing.assert_allclose(xT, np.prod(1 + GBM_A * dt + GBM_B * dW, axis=1), rtol=1e-12)
+
+
+def test_em_strong_order_half():
+    rng = np.random.default_rng(7)
+    paths, T, kmax = 4000, 1.0, 10
+    fine = np.sqrt(T / 2**kmax) * rng.standard_normal((paths, 2**kmax))
+    WT = fine.sum(axis=1)
+    exact = np.exp((GBM_A - GBM_B**2 / 2) * T + GBM_B * WT)
+    dts, errs = [], []
+    for k in (4, 5, 6, 7, 8):
+        n = 2**k
+        dt = T / n
+        dW = fine.reshape(paths, n, -1).sum(axis=2)
+
+        rec, _ = monte_carlo(_gbm_sample(dt), np.ones((paths, 1)), np.zeros((0, n)), n, 1, _filler(dW), dt=dt)
+        dts.append(dt)
+        errs.append(np.mean(np.abs(rec[:, n, 0] - exact)))
+    slope = np.polyfit(np.log(dts), np.log(errs), 1)[0]
+    assert 0.35 <= slope <= 0.75, (slope, errs)
+
+
+def _short_manip(T=1.0):
+    return Scenario(
+        name="short",
+        T=T,
+        dt=1e-3,
+        faults=(LossOfEffectiveness("fa", 0.4, 0.25, 0.5), Stuck("fs", 0.7, 0.9)),
+        unknown_input=UniformNoise(0.1),
+        x0=(0.1, 0.05, 0.02, 0.03),
+        x0_noise=0.005,
+    )
+
+
+def test_engine_equals_reference_loop(plants, lqr_designs):
+    """Compiled, mapped engine == the uninterpreted sample Function stepped by hand with the same noise."""
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = _short_manip(0.3)
+    sc = Scenario(
+        name="s",
+        T=1.0,
+        dt=1e-3,
+        faults=sc.faults[:1] + (Stuck("fs", 0.6, 0.8),),
+        unknown_input=sc.unknown_input,
+        x0=sc.x0,
+        x0_noise=sc.x0_noise,
+    )
+    res = simulate(design, plant, sc, paths=3, seed=5, progress=False, record_every=1)
+    n = 1000
+    t = np.arange(n + 1) * 1e-3
+    sched = fault_schedule(
+        sc,
+        plant.fault_names,
+        plant.fault_kinds,
+        design.local_models[0]["B"],
+        design.local_models[0]["Bf"],
+        plant.Df,
+        plant.input_names,
+        t,
+        1e-3,
+    )
+    fn, lay = closed_loop_sample(design, plant, 1e-3, sched)
+    FP = sched.stacked()
+    q = 2
+    g = np.random.default_rng(5).spawn(3)[q].spawn(3)
+    x0 = np.asarray(sc.x0) + sc.x0_noise * g[0].standard_normal(4)
+    dW = np.sqrt(1e-3) * g[1].standard_normal(n + 1000)
+    d = g[2].uniform(-0.1, 0.1, (n + 1000, 1))
+    s = np.zeros(lay.ns)
+    z0 = np.concatenate([sc.x0, np.zeros(4)]) - design.H @ (plant.C @ x0)
+    for r in range(3):
+        s[r * lay.run_state : r * lay.run_state + 4] = x0
+        s[r * lay.run_state + 4 : r * lay.run_state + 12] = z0
+    recs = []
+    for k in range(n + 1):
+        nxt, rec = fn(s, np.concatenate([[dW[k]], d[k]]), FP[:, k])
+        recs.append(np.asarray(rec).ravel())
+        s = np.asarray(nxt).ravel()
+    recs = np.array(recs)
+    got = np.concatenate(
+        [res.free.x[q], res.free.xbarhat[q], res.free.f[q], res.free.u[q], res.free.y[q], res.free.yc[q]],
+        axis=1,
+    )
+    np.testing.assert_allclose(got, recs[:, : lay.run_rec], rtol=0, atol=1e-10)
+    got_ftc = res.ftc.x[q]
+    o = 2 * lay.run_rec
+    np.testing.assert_allclose(got_ftc, recs[:, o : o + 4], rtol=0, atol=1e-10)
+
+
+@pytest.fixture(scope="module")
+def short_result(plants, lqr_designs):
+    return simulate(
+        lqr_designs["manipulator"], plants["manipulator"], _short_manip(), paths=4, seed=3, progress=False
+    )
+
+
+def test_fault_semantics(short_result):
+    r = short_result
+    t = r.t
+    on = (t >= 0.25 - 1e-12) & (t < 0.5 - 1e-12)
+    nf = r.no_ftc
+    # loss of effectiveness: fa = -0.4 u inside the window, 0 outside (B = Bf for the manipulator)
+    np.testing.assert_allclose(nf.f[:, on, 0], -0.4 * nf.u[:, on, 0], rtol=1e-12)
+    assert np.all(nf.f[:, ~on, 0] == 0.0)
+    # stuck: y1 frozen at its reading at the first sample of the window, t = 0.7
+    st = (t >= 0.7 - 1e-12) & (t < 0.9 - 1e-12)
+    k0 = np.flatnonzero(st)[0]
+    y1 = nf.y[:, st, 0]
+    np.testing.assert_allclose(y1, np.repeat(nf.x[:, k0 : k0 + 1, 0], st.sum(), axis=1), rtol=0, atol=1e-14)
+    assert np.all(nf.f[:, k0, 1] == 0.0)
+    assert np.all(np.abs(nf.f[:, ~st, 1]) == 0.0)
+    # the free run never sees a fault, and all three runs share x0
+    assert np.all(r.free.f == 0.0)
+    np.testing.assert_array_equal(r.free.x[:, 0], r.ftc.x[:, 0])
+    # the paths differ from each other (independent noise)
+    assert np.std(r.free.x[:, -1, 0]) > 0
+
+
+def test_same_noise_any_block_size(plants, lqr_designs):
+    """Path i's trajectory does not depend on the recording stride nor on the number of paths."""
+    sc = _short_manip(0.2)
+    a = simulate(
+        lqr_designs["manipulator"], plants["manipulator"], sc, paths=2, seed=9, progress=False, record_every=1
+    )
+    b = simulate(
+        lqr_designs["manipulator"], plants["manipulator"], sc, paths=3, seed=9, progress=False, record_every=5
+    )
+    np.testing.assert_allclose(a.ftc.x[:, ::5], b.ftc.x[:2], rtol=0, atol=1e-12)
+
+
+def test_settings_refused(plants, lqr_designs):
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = _short_manip(0.1)
+    ts_max = design.checks["ts_max"]
+    with pytest.raises(SimulationError, match="ts_max"):
+        simulate(design, plant, sc, paths=1, seed=0, dt=ts_max * 1.01, progress=False)
+    with pytest.raises(ParameterError, match="paths"):
+        simulate(design, plant, sc, paths=0, seed=0, progress=False)
+    with pytest.raises(SimulationError, match="positive"):
+        simulate(design, plant, sc, paths=1, seed=0, dt=-1e-3, progress=False)
+    with pytest.raises(ParameterError, match="seed"):
+        simulate(design, plant, sc, paths=1, seed=-1, progress=False)
+    with pytest.raises(SimulationError, match="does not fit"):
+        simulate(lqr_designs["three-tank"], plant, sc, paths=1, seed=0, progress=False)
+    with pytest.raises(ParameterError):
+        Scenario(name="bad", T=1.0, dt=-0.1)
+    with pytest.raises(ParameterError, match="loss"):
+        LossOfEffectiveness("fa", 1.5, 0.0, 1.0)
+
+
+def test_divergence_names_path_and_time(plants, lqr_designs):
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = Scenario(name="blowup", T=0.5, dt=1e-3, x0=(0.1, 0.05, 0.02, 0.03), divergence_bound=0.5)
+    with pytest.raises(SimulationError, match=r"path \d+ diverged at t = "):
+        simulate(design, plant, sc, paths=2, seed=0, progress=False)
+
+
+def test_default_dt_lowered_below_ts_max(plants, lqr_designs):
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = Scenario(name="coarse", T=0.1, dt=0.05, x0=(0.1, 0.05, 0.02, 0.03))
+    res = simulate(design, plant, sc, paths=1, seed=0, progress=False)
+    assert res.dt <= design.checks["ts_max"] / 2
+    assert res.notes and "ts_max" in res.notes[0]
+
+
+def test_builtin_scenarios():
+    m, t = SCENARIOS["manipulator"](), SCENARIOS["three-tank"]()
+    assert (m.T, m.dt, m.paths) == (10.0, 1e-3, 5)
+    assert m.windows("fa") == [(2.5, 5.0)] and m.windows("fs") == [(7.0, 10.0)]
+    assert (t.T, t.paths) == (600.0, 10) and t.windows("fa") == [(200.0, 400.0)]
+    assert Scenario.from_dict(m.to_dict()) == m
