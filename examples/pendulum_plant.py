@@ -36,3 +36,22 @@ def pendulum():
     b.design_defaults(gamma=2.0, gamma1=0.1, sigma=0.5, delta=1e-4, epsilon=1e-4)
     b.parameters(g_l=g_l, c=c, b_u=b_u)
     return b.build()
+
+
+def scenario():
+    """The pendulum's experiment: 30 % loss of torque for 3 <= t < 6 s, an angle-sensor bias of
+    0.05 rad for 8 <= t < 11 s, d uniform in [-0.1, 0.1], T = 14 s, 10 paths."""
+    from fte_casadi.sim import Bias, LossOfEffectiveness, Scenario, UniformNoise
+
+    return Scenario(
+        name="pendulum",
+        T=14.0,
+        dt=1e-3,
+        faults=(
+            LossOfEffectiveness("fa", loss=0.3, start=3.0, stop=6.0),
+            Bias("fs", value=0.05, start=8.0, stop=11.0),
+        ),
+        unknown_input=UniformNoise(0.1),
+        x0_noise=0.01,
+        paths=10,
+    )

@@ -10,6 +10,7 @@ import functools
 import json
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import click
@@ -163,27 +164,47 @@ def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow
     from .ts import derive as derive_ts
 
     ts = derive_ts(load_plant(plant_spec))
-    return run_design(ts, variant=variant, solver=solver, allow_uncertified=allow_uncertified, plant_spec=plant_spec, **params)
+    return run_design(
+        ts,
+        variant=variant,
+        solver=solver,
+        allow_uncertified=allow_uncertified,
+        plant_spec=plant_spec,
+        **params,
+    )
 
 
 @main.command()
 @click.argument("plant")
-@click.option("--variant", type=click.Choice(["paper", "conditioned"]), default="conditioned", show_default=True,
-              help="paper: the problem as printed; conditioned: the same certificate posed with usable numbers.")
+@click.option(
+    "--variant",
+    type=click.Choice(["paper", "conditioned"]),
+    default="conditioned",
+    show_default=True,
+    help="paper: the problem as printed; conditioned: the same certificate posed with usable numbers.",
+)
 @click.option("--solver", default="CLARABEL", show_default=True, help="SDP solver: CLARABEL or SCS.")
-@click.option("--gamma", type=float, help="H-infinity level gamma (default: the plant's, the paper's for built-ins).")
+@click.option(
+    "--gamma", type=float, help="H-infinity level gamma (default: the plant's, the paper's for built-ins)."
+)
 @click.option("--gamma1", type=float, help="gamma1 < gamma.")
 @click.option("--sigma", type=float, help="sigma of Theorem 2.")
 @click.option("--delta", type=float, help="bound on the second derivative of the faults.")
 @click.option("--epsilon", type=float, help="sliding gain margin eps.")
-@click.option("--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so).")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here.")
+@click.option(
+    "--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so)."
+)
+@click.option(
+    "-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here."
+)
 @_guard
 def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, allow_uncertified, output):
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon)
     if output is not None and Path(output).is_dir():
-        raise ParameterError(f"-o {output} is a directory; give a file name such as {Path(output) / 'design.json'}")
+        raise ParameterError(
+            f"-o {output} is a directory; give a file name such as {Path(output) / 'design.json'}"
+        )
     d = _make_design(plant, variant, solver.upper(), params, allow_uncertified)
     click.echo(_design_summary(d))
     if output:
@@ -208,7 +229,9 @@ def _design_or_plant(target: str, progress: bool = True):
 # -- codegen ------------------------------------------------------------------------------
 @main.command()
 @click.argument("target", metavar="DESIGN.json|PLANT")
-@click.option("--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files.")
+@click.option(
+    "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files."
+)
 @click.option("--ts", type=float, help="Sample time (default: a tenth of the design's ts_max, rounded down).")
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
@@ -223,3 +246,181 @@ def codegen(target, out_dir, ts, real, boundary_layer):
     files = generate_c(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
     click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
     click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")
+
+
+# -- simulate -----------------------------------------------------------------------------
+def _fmt_list(v) -> str:
+    return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
+
+
+@main.command()
+@click.argument("target", metavar="DESIGN.json|PLANT")
+@click.option(
+    "--paths", type=int, help="Brownian paths (default: the scenario's, the paper's for built-ins)."
+)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random generator.")
+@click.option(
+    "--dt", type=float, help="Euler-Maruyama step = controller sample time (default: the scenario's)."
+)
+@click.option(
+    "--plots", "plots", type=click.Path(file_okay=False), help="Write the figures (PNG) into this directory."
+)
+@click.option(
+    "--save", "save", type=click.Path(dir_okay=False), help="Save per-path arrays (.npz) to remake figures."
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the metrics document (JSON) on stdout.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@_guard
+def simulate(target, paths, seed, dt, plots, save, as_json, quiet):
+    """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
+    faulty without tolerant control, faulty with it."""
+    from .plants.loader import load_plant, load_scenario
+    from .sim import metrics as sim_metrics
+    from .sim import save_result
+    from .sim import simulate as run_sim
+
+    if paths is not None and paths < 1:
+        raise ParameterError(f"--paths must be a positive integer; got {paths}")
+    if seed < 0:
+        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    if dt is not None:
+        _positive("dt", dt)
+    d = _design_or_plant(target, progress=not quiet)
+    plant = load_plant(d.plant_spec)
+    scenario = load_scenario(d.plant_spec)
+    res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet)
+    m = sim_metrics(res)
+    if save:
+        save_result(res, save)
+    figs = []
+    if plots:
+        from .plot import write_figures
+
+        figs = write_figures(res, plots)
+    if as_json:
+        click.echo(json.dumps(m, indent=1))
+    else:
+        click.echo(
+            f"{d.plant}: {m['paths']} paths x 3 runs, T = {m['T']:g}, dt = {m['dt']:g}, seed {m['seed']}, "
+            f"{m['wall_s']:.2f} s\n"
+            f"  state RMS error (t >= 1 s, FTC run): {_fmt_list(m['state_rms_error'])}\n"
+            f"  fault relative RMS error: {_fmt_list(m['fault_rel_rms_error'])}\n"
+            f"  FTC deviation ratio (smaller is better): "
+            f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}"
+        )
+        for note in getattr(res, "notes", ()) or ():
+            click.echo(f"  note: {note}")
+    if save:
+        click.echo(f"per-path arrays written to {save}", err=True)
+    if figs:
+        click.echo(f"{len(figs)} figures written to {plots}", err=True)
+
+
+# -- reproduce ----------------------------------------------------------------------------
+@main.command()
+@click.argument("which", type=click.Choice(["manipulator", "three-tank", "all"]), default="all")
+@click.option("--out", "out_dir", default="fte-report", show_default=True, type=click.Path(file_okay=False))
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--paths", type=int, help="At least this many paths (default: the paper's counts).")
+@_guard
+def reproduce(which, out_dir, seed, paths):
+    """The main job: the paper's examples end to end, and a Markdown report with tables and figures."""
+    from .report import reproduce as run
+
+    if seed < 0:
+        raise ParameterError(f"--seed must be non-negative; got {seed}")
+    if paths is not None and paths < 1:
+        raise ParameterError(f"--paths must be a positive integer; got {paths}")
+    t0 = time.perf_counter()
+
+    def log(msg: str) -> None:
+        click.echo(f"{time.perf_counter() - t0:7.1f} s  {msg}", err=True)
+
+    report = run(which, out_dir, seed=seed, paths=paths, log=log)
+    click.echo(f"report written to {report} ({time.perf_counter() - t0:.1f} s)")
+
+
+# -- bench --------------------------------------------------------------------------------
+@main.command()
+@click.option("--json", "as_json", is_flag=True, help="Print all figures as JSON on stdout.")
+@click.option(
+    "--paths", type=int, default=1000, show_default=True, help="Monte Carlo paths of the engine run."
+)
+@_guard
+def bench(as_json, paths):
+    """Speed of design, Monte Carlo and the C step, against baselines run in the same process."""
+    from .design import design as run_design
+    from .plants import BUILTIN
+    from .ts import derive as derive_ts
+
+    if paths < 1:
+        raise ParameterError(f"--paths must be a positive integer; got {paths}")
+    out: dict = {"design": {}}
+
+    def log(msg):
+        click.echo(msg, err=True)
+
+    designs = {}
+    for name in BUILTIN:
+        ts = derive_ts(BUILTIN[name]())
+        row = {}
+        for solver in ("CLARABEL", "SCS"):
+            log(f"bench: design {name} with {solver}")
+            t0 = time.perf_counter()
+            try:
+                d = run_design(ts, variant="conditioned", solver=solver, plant_spec=name)
+                row[solver] = {
+                    "wall_s": time.perf_counter() - t0,
+                    "solver_s": d.timings["solver_s"],
+                    "certified": d.certified,
+                }
+                designs.setdefault(name, d)
+            except FteError as exc:
+                row[solver] = {"wall_s": time.perf_counter() - t0, "error": str(exc)[:200]}
+        if "wall_s" in row.get("SCS", {}) and "error" not in row["SCS"] and "error" not in row["CLARABEL"]:
+            row["ratio_scs_over_clarabel"] = row["SCS"]["wall_s"] / row["CLARABEL"]["wall_s"]
+        out["design"][name] = row
+
+    from .sim import bench as sim_bench
+
+    log(f"bench: Monte Carlo, manipulator, {paths} paths x 3 runs, T = 10 s, dt = 1 ms (and baselines)")
+    out["monte_carlo"] = sim_bench(designs.get("manipulator"), paths=paths)
+
+    from .codegen.bench import bench_design
+
+    out["c_step"] = {}
+    for name, d in designs.items():
+        log(f"bench: generated C step of {name}")
+        out["c_step"][name] = bench_design(d)
+    if as_json:
+        click.echo(json.dumps(out, indent=1, default=str))
+        return
+    click.echo("design (conditioned, wall time incl. certification):")
+    for name, row in out["design"].items():
+        cells = [
+            f"{s}: " + (f"{v['wall_s']:.2f} s" if "error" not in v else "failed")
+            for s, v in row.items()
+            if isinstance(v, dict)
+        ]
+        ratio = (
+            f", SCS/Clarabel = {row['ratio_scs_over_clarabel']:.2f}x"
+            if "ratio_scs_over_clarabel" in row
+            else ""
+        )
+        click.echo(f"  {name:12s} " + ", ".join(cells) + ratio)
+    mc = out["monte_carlo"]
+    e = mc["engine"]
+    click.echo(
+        f"Monte Carlo ({mc['scenario']}): {e['paths']} paths in {e['wall_s']:.2f} s "
+        f"({e['path_steps_per_s'] / 1e6:.2f} M path-steps/s; first call incl. compile {e['first_call_wall_s']:.2f} s)\n"
+        f"  sdeint itoEuler: {mc['sdeint_itoEuler']['path_steps_per_s']:.3g} path-steps/s -> engine is {mc['speedup_vs_sdeint']:.0f}x faster\n"
+        f"  plain Python loop: {mc['python_loop']['path_steps_per_s']:.3g} path-steps/s -> engine is "
+        f"{mc['speedup_vs_python_loop']:.0f}x faster (same trajectories to {mc['max_abs_diff_engine_vs_sdeint']:.1g})"
+    )
+    click.echo("generated C step (double, -O2):")
+    for name, b in out["c_step"].items():
+        click.echo(
+            f"  {name:12s} {b.get('c_ns') or float('nan'):.1f} ns/step vs hand-written {b.get('hand_ns') or float('nan'):.1f} ns "
+            f"(ratio {b.get('ratio') or float('nan'):.2f}); through CasADi from Python {b['casadi_us']:.1f} us; "
+            f"state {b['state_bytes']} B, constants {b['const_bytes']} B"
+        )

@@ -11,7 +11,7 @@ from pathlib import Path
 from ..errors import FteError, PlantError, PlantLoadError
 from ..model import Plant
 
-__all__ = ["load_plant", "builtin_names"]
+__all__ = ["load_plant", "load_scenario", "builtin_names"]
 
 
 def builtin_names() -> list[str]:
@@ -104,3 +104,41 @@ def load_plant(spec: str) -> Plant:
             f"plant function {spec!r} returned {type(plant).__name__}, not a Plant: end it with `return builder.build()`"
         )
     return plant
+
+
+def load_scenario(spec: str):
+    """The experiment that goes with a plant spec.
+
+    Built-in plants: the paper's scenario. ``file.py:function`` / ``module:function``: the
+    module's ``function_scenario()`` or else its ``scenario()``.
+    """
+    from . import SCENARIOS
+
+    spec = spec.strip()
+    if spec in SCENARIOS:
+        return SCENARIOS[spec]()
+    if ":" not in spec:
+        raise PlantLoadError(f"unknown plant {spec!r}: no scenario for it")
+    target, func = spec.rsplit(":", 1)
+    # the plant module was imported by load_plant; import it again the same way
+    if target.endswith(".py") or "/" in target or "\\" in target:
+        name = f"fte_user_plant_{abs(hash(str(Path(target).resolve())))}"
+        module = sys.modules.get(name)
+        if module is None:
+            load_plant(spec)
+            module = sys.modules[name]
+    else:
+        module = importlib.import_module(target)
+    for attr in (f"{func}_scenario", "scenario"):
+        fn = getattr(module, attr, None)
+        if callable(fn):
+            try:
+                return fn()
+            except FteError:
+                raise
+            except Exception as exc:  # noqa: BLE001
+                raise PlantLoadError(f"{target}:{attr}() raised {type(exc).__name__}: {exc}") from None
+    raise PlantLoadError(
+        f"{target!r} defines no scenario for {func!r}: add a function `scenario()` (or `{func}_scenario()`) "
+        "beside the plant that returns fte_casadi.sim.Scenario(...) with its faults, horizon and time step"
+    )
