@@ -1,3 +1,14 @@
 """Design: augmented system, H and assumption checks, LMIs, certificates, the Design record."""
 
+from .api import design as design
+from .augment import Augmented as Augmented
+from .augment import augment as augment
 from .record import Design as Design
+from .uio import AssumptionCheck as AssumptionCheck
+from .uio import check_assumptions as check_assumptions
+from .uio import enforce as enforce
+from .uio import invariant_zeros as invariant_zeros
+from .uio import uio_gain as uio_gain
+
+__all__ = ["design", "Design", "Augmented", "augment", "AssumptionCheck", "check_assumptions", "enforce",
+           "invariant_zeros", "uio_gain"]  # fmt: skip

@@ -1,0 +1,119 @@
+"""The augmented system (8) of the paper, for any number of rules, states and faults.
+
+With ``xbar = [x; fdot; f]`` (``nbar = n + 2 lf``)::
+
+    Abar_i = [[A_i, 0, Bf_i], [0, 0, 0], [0, I, 0]]     Bbar_i = [B_i; 0; 0]
+    Bdbar_i = [Bd_i; 0; 0]    Wbar_i = [W_i; 0; 0] (nbar x n)    Cbar = [C, 0, Df]
+    J0 = [I, 0, 0] (n x nbar)   J1 = [0; I; 0] (nbar x lf)   J2 = [0, 0, I] (lf x nbar)
+
+Theorem 5 (Section 5) adds ``Gbar_i = [G_i; 0; 0]``, ``Gfbar_i = [Gf_i; 0; 0]`` and
+``Mbar_i = [M_i; 0; 0]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Augmented", "augment", "pad_rows"]
+
+
+def pad_rows(M: np.ndarray, lf: int) -> np.ndarray:
+    """``[M; 0; 0]``: append ``2 lf`` zero rows (the fdot and f blocks of xbar)."""
+    M = np.atleast_2d(np.asarray(M, dtype=float))
+    return np.vstack([M, np.zeros((2 * lf, M.shape[1]))])
+
+
+@dataclass(frozen=True)
+class Augmented:
+    """The augmented matrices of (8) (and (76)), one entry per rule in the tuples."""
+
+    n: int
+    m: int
+    p: int
+    ld: int
+    lf: int
+    r: int
+    Abar: tuple[np.ndarray, ...]
+    Bbar: tuple[np.ndarray, ...]
+    Bdbar: tuple[np.ndarray, ...]
+    Wbar: tuple[np.ndarray, ...]
+    Gbar: tuple[np.ndarray, ...]
+    Gfbar: tuple[np.ndarray, ...]
+    Mbar: tuple[np.ndarray, ...]
+    Cbar: np.ndarray
+    J0: np.ndarray
+    J1: np.ndarray
+    J2: np.ndarray
+
+    @property
+    def nbar(self) -> int:
+        return self.n + 2 * self.lf
+
+
+def _get(lm, key: str):
+    return lm[key] if isinstance(lm, Mapping) else getattr(lm, key)
+
+
+def augment(local_models: Sequence, C: np.ndarray, Df: np.ndarray) -> Augmented:
+    """Build (8) from local models (``LocalModel`` objects or dicts with A, B, Bd, Bf, W[, G, Gf, M]).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> lm = dict(A=-np.eye(2), B=np.eye(2)[:, :1], Bd=np.ones((2, 1)), Bf=np.eye(2)[:, :1], W=0 * np.eye(2))
+    >>> aug = augment([lm], np.eye(2), np.zeros((2, 1)))
+    >>> aug.nbar, aug.Abar[0].shape, aug.Cbar.shape
+    (4, (4, 4), (2, 4))
+    """
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    p, n = C.shape
+    Df = np.asarray(Df, dtype=float).reshape(p, -1)
+    lf = Df.shape[1]
+    nbar = n + 2 * lf
+    Abar, Bbar, Bdbar, Wbar, Gbar, Gfbar, Mbar = ([] for _ in range(7))
+    m = ld = 0
+    for lm in local_models:
+        A = np.asarray(_get(lm, "A"), dtype=float)
+        B = np.asarray(_get(lm, "B"), dtype=float).reshape(n, -1)
+        Bd = np.asarray(_get(lm, "Bd"), dtype=float).reshape(n, -1)
+        Bf = np.asarray(_get(lm, "Bf"), dtype=float).reshape(n, lf)
+        W = np.asarray(_get(lm, "W"), dtype=float).reshape(n, n)
+        m, ld = B.shape[1], Bd.shape[1]
+        Ab = np.zeros((nbar, nbar))
+        Ab[:n, :n] = A
+        Ab[:n, n + lf :] = Bf
+        Ab[n + lf :, n : n + lf] = np.eye(lf)
+        Abar.append(Ab)
+        Bbar.append(pad_rows(B, lf))
+        Bdbar.append(pad_rows(Bd, lf))
+        Wbar.append(pad_rows(W, lf))
+        G = _optional(lm, "G", (n, m))
+        Gf = _optional(lm, "Gf", (n, lf))
+        M = _optional(lm, "M", (n, -1))
+        Gbar.append(pad_rows(G, lf))
+        Gfbar.append(pad_rows(Gf, lf))
+        Mbar.append(pad_rows(M, lf) if M.size else np.zeros((nbar, 0)))
+    J0 = np.hstack([np.eye(n), np.zeros((n, 2 * lf))])
+    J1 = np.vstack([np.zeros((n, lf)), np.eye(lf), np.zeros((lf, lf))])
+    J2 = np.hstack([np.zeros((lf, n + lf)), np.eye(lf)])
+    Cbar = np.hstack([C, np.zeros((p, lf)), Df])
+    return Augmented(
+        n, m, p, ld, lf, len(Abar), tuple(Abar), tuple(Bbar), tuple(Bdbar), tuple(Wbar),
+        tuple(Gbar), tuple(Gfbar), tuple(Mbar), Cbar, J0, J1, J2,
+    )  # fmt: skip
+
+
+def _optional(lm, key: str, shape: tuple[int, int]) -> np.ndarray:
+    try:
+        v = _get(lm, key)
+    except (KeyError, AttributeError):
+        v = None
+    if v is None:
+        return np.zeros((shape[0], max(shape[1], 0)))
+    v = np.asarray(v, dtype=float)
+    if v.size == 0:
+        return np.zeros((shape[0], 0))
+    return v.reshape(shape[0], -1)

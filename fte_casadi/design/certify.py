@@ -1,0 +1,228 @@
+"""A-posteriori certificates: every LMI rebuilt with numpy at the returned point.
+
+Nothing here touches cvxpy: the left sides of (45)/(78), (46)/(79), (55)/(80) and (64)/(81)
+are assembled again from the plain matrices (X, Y_j = K_j X, P, Pbar, Q_i, N, theta), so a
+solver that reports "optimal" at a point where an LMI does not hold is caught.
+
+The builders are written once for Theorem 5 (diffusion ``W_i x + G_i u + Gf_i f + M_i d2``);
+with ``G = Gf = 0`` and no ``d2`` they are exactly (45), (46) of Theorem 3. Corrections of the
+printed formulas (SPEC.md): block (1,4) of (45)/(78) is ``Bd_i`` (not ``P Bd_i``);
+``Psi = A X + X A^T + B Y + Y^T B^T + sigma I``; block (3,3) of (45) is ``-I_p``. In (79) the
+term ``(Wbar_i + Gbar_i K_j)^T T^T Pbar T Gbar_eij`` of Theta_13 enters with a minus sign: it
+is the cross term of the error diffusion ``T (Wbar + Gbar K) x - T Gbar_e e``, exactly like
+``-(W_i + G_i K_j)^T P G_eij`` beside it (the paper prints ``+``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .augment import Augmented
+
+__all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "certificate", "ts_max", "block_sizes"]
+
+
+def _sym(M: np.ndarray) -> np.ndarray:
+    return 0.5 * (M + M.T)
+
+
+def _parts(aug: Augmented, i: int, K: np.ndarray, Kf_unused=None):
+    n, lf = aug.n, aug.lf
+    A = aug.Abar[i][:n, :n]
+    B = aug.Bbar[i][:n]
+    Bf = aug.Abar[i][:n, n + lf :]
+    W = aug.Wbar[i][:n]
+    G = aug.Gbar[i][:n]
+    Gf = aug.Gfbar[i][:n]
+    M = aug.Mbar[i][:n]
+    return A, B, Bf, W, G, Gf, M
+
+
+def lmi45(aug: Augmented, i: int, X: np.ndarray, Y: np.ndarray, sigma: float, gamma: float, gamma1: float):
+    """Left side of (45) (and (78) when G_i != 0) for rule i and gain Y = Y_j."""
+    n, p, ld = aug.n, aug.p, aug.ld
+    A, B, _, W, G, _, _ = _parts(aug, i, None)
+    C = aug.Cbar[:, :n]
+    Bd = aug.Bdbar[i][:n]
+    Psi = A @ X + X @ A.T + B @ Y + Y.T @ B.T + sigma * np.eye(n)
+    XW = X @ W.T + Y.T @ G.T
+    Z = np.zeros
+    L = np.block([
+        [Psi, XW, X @ C.T, Bd],
+        [XW.T, -X, Z((n, p)), Z((n, ld))],
+        [C @ X, Z((p, n)), -np.eye(p), Z((p, ld))],
+        [Bd.T, Z((ld, n)), Z((ld, p)), (gamma1**2 - gamma**2) * np.eye(ld)],
+    ])  # fmt: skip
+    return _sym(L)
+
+
+def lmi46_terms(aug: Augmented, i: int, K: np.ndarray, P: np.ndarray, T: np.ndarray):
+    """The constant pieces of (46)/(79) for rule i, gain K = K_j (everything but Pbar and Q_i)."""
+    n, lf = aug.n, aug.lf
+    _, B, Bf, W, G, Gf, M = _parts(aug, i, K)
+    J0, J2 = aug.J0, aug.J2
+    De = aug.Cbar[:, n + lf :] @ J2
+    Be = B @ K @ J0 - Bf @ J2
+    Ge = G @ K @ J0 - Gf @ J2
+    Wk = W + G @ K
+    Wbk = aug.Wbar[i] + aug.Gbar[i] @ K
+    Gbe = aug.Gbar[i] @ K @ J0 - aug.Gfbar[i] @ J2
+    return dict(De=De, Be=Be, Ge=Ge, Wk=Wk, Wbk=Wbk, Gbe=Gbe, M=M, Mb=aug.Mbar[i], C=aug.Cbar[:, :n])
+
+
+def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0):
+    """Left side of (46) (Theorem 3) or (79) (Theorem 5) for rule i, gain K_j, observer Q_i.
+
+    ``alpha > 0`` adds the decay-rate term ``2 alpha Pbar`` to the (3,3) block (the
+    conditioned variant's design constraint); the recorded certificate uses ``alpha = 0``.
+    """
+    t = lmi46_terms(aug, i, K, P, T)
+    Ab, Cb = aug.Abar[i], aug.Cbar
+    TPT = T.T @ Pbar @ T
+    C, De, Be, Ge, Wk, Wbk, Gbe, M, Mb = (
+        t[k] for k in ("C", "De", "Be", "Ge", "Wk", "Wbk", "Gbe", "M", "Mb")
+    )
+    n, ld, nbar, l2 = aug.n, aug.ld, aug.nbar, M.shape[1]
+    T11 = -sigma * P @ P + Wbk.T @ TPT @ Wbk
+    T13 = -P @ Be - Wk.T @ P @ Ge - Wbk.T @ TPT @ Gbe + C.T @ De
+    T33 = (
+        Pbar @ T @ Ab
+        + Ab.T @ T.T @ Pbar
+        - Q @ Cb
+        - Cb.T @ Q.T
+        + Ge.T @ P @ Ge
+        + Gbe.T @ TPT @ Gbe
+        + De.T @ De
+    )
+    T33 = T33 + 2 * alpha * Pbar
+    Z = np.zeros
+    rows = [
+        [T11, Z((n, ld)), T13],
+        [Z((ld, n)), -(gamma1**2) * np.eye(ld), Z((ld, nbar))],
+        [T13.T, Z((nbar, ld)), T33],
+    ]
+    if l2:
+        T14 = Wk.T @ P @ M + Wbk.T @ TPT @ Mb
+        T34 = -Ge.T @ P @ M - Gbe.T @ TPT @ Mb
+        T44 = M.T @ P @ M + Mb.T @ TPT @ Mb - gamma2**2 * np.eye(l2)
+        rows[0].append(T14)
+        rows[1].append(Z((ld, l2)))
+        rows[2].append(T34)
+        rows.append([T14.T, Z((l2, ld)), T34.T, T44])
+    return _sym(np.block(rows))
+
+
+def lmi55(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray, theta: float):
+    E = aug.J1.T @ T.T @ Pbar - N @ aug.Cbar
+    return _sym(np.block([[-theta * np.eye(aug.nbar), E.T], [E, -np.eye(aug.lf)]]))
+
+
+def lmi64(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray, theta: float):
+    E = aug.J1.T @ T.T @ Pbar @ T @ aug.Wbar[i]
+    return _sym(np.block([[-theta * np.eye(aug.n), E.T], [E, -np.eye(aug.lf)]]))
+
+
+def block_sizes(aug: Augmented) -> dict:
+    l2 = aug.Mbar[0].shape[1]
+    return {
+        "45": [aug.n, aug.n, aug.p, aug.ld],
+        "46": [aug.n, aug.ld, aug.nbar] + ([l2] if l2 else []),
+        "55": [aug.nbar, aug.lf],
+        "64": [aug.n, aug.lf],
+    }
+
+
+def _maxeig(L: np.ndarray) -> float:
+    return float(np.max(np.linalg.eigvalsh(L))) if L.size else -np.inf
+
+
+def _block_max(L: np.ndarray, sizes) -> list[float]:
+    out, k = [], 0
+    for b in sizes:
+        out.append(_maxeig(L[k : k + b, k : k + b]) if b else float("-inf"))
+        k += b
+    return out
+
+
+def ts_max(R: list[np.ndarray]) -> float:
+    """Largest Ts with spectral radius of ``I + Ts R_i`` below one for every rule (explicit Euler).
+
+    Per eigenvalue ``lam = a + jb`` (a < 0): ``|1 + Ts lam| < 1`` iff ``Ts < -2 a / |lam|^2``.
+    Zero when some R_i is not Hurwitz.
+    """
+    best = np.inf
+    for Ri in R:
+        for lam in np.linalg.eigvals(Ri):
+            if lam.real >= 0:
+                return 0.0
+            best = min(best, -2.0 * lam.real / abs(lam) ** 2)
+    return float(best)
+
+
+def certificate(aug, d: dict, params: dict) -> dict:
+    """Recompute every LMI at the design point ``d`` (X, K, P, T, Pbar, Q, N, theta, R, L1).
+
+    Returns the ``checks`` dictionary of the design document.
+    """
+    X, K, P, T, Pbar, Q, N, theta = (d[k] for k in ("X", "K", "P", "T", "Pbar", "Q", "N", "theta"))
+    s, g, g1, g2 = params["sigma"], params["gamma"], params["gamma1"], params.get("gamma2", params["gamma"])
+    r = aug.r
+    sizes = block_sizes(aug)
+    lm = {"45": -np.inf, "46": -np.inf, "55": -np.inf, "64": -np.inf}
+    blocks = {k: [-np.inf] * len(v) for k, v in sizes.items()}
+
+    def note(key, L):
+        lm[key] = max(lm[key], _maxeig(L))
+        blocks[key] = [max(a, b) for a, b in zip(blocks[key], _block_max(L, sizes[key]))]
+
+    for i in range(r):
+        for j in range(r):
+            note("45", lmi45(aug, i, X, K[j] @ X, s, g, g1))
+            note("46", lmi46(aug, i, K[j], P, T, Pbar, Q[i], s, g1, g2))
+        note("64", lmi64(aug, i, T, Pbar, theta))
+    note("55", lmi55(aug, T, Pbar, N, theta))
+    cl = max(float(np.max(np.linalg.eigvals(aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ K[j]).real))
+             for i in range(r) for j in range(r))  # fmt: skip
+    R = d["R"]
+    ev_P = np.linalg.eigvalsh(_sym(Pbar))
+    ev_X = np.linalg.eigvalsh(_sym(X))
+    checks = {
+        "lmi_max_eig": dict(lm),
+        "lmi_block_max_eig": blocks,
+        "X_min_eig": float(ev_X[0]),
+        "Pbar_min_eig": float(ev_P[0]),
+        "R_max_real_eig": float(max(np.max(np.linalg.eigvals(Ri).real) for Ri in R)),
+        "closed_loop_max_real_eig": cl,
+        "cond_Pbar": float(ev_P[-1] / ev_P[0]) if ev_P[0] > 0 else float("inf"),
+        "max_abs_L1": float(max(np.max(np.abs(L)) for L in d["L1"])),
+        "max_abs_K": float(max(np.max(np.abs(Kj)) for Kj in K)),
+        "theta": float(theta),
+        "ts_max": ts_max(R),
+    }
+    if any(np.any(G) for G in aug.Gbar) or any(np.any(G) for G in aug.Gfbar) or aug.Mbar[0].shape[1]:
+        checks["theorem"] = 5
+        for a, b in (("45", "78"), ("46", "79"), ("55", "80"), ("64", "81")):
+            checks["lmi_max_eig"][b] = lm[a]
+    else:
+        checks["theorem"] = 3
+    return checks
+
+
+def failures(checks: dict) -> list[str]:
+    """Names of the certificate items that do not hold (empty: certified)."""
+    bad = []
+    names = {"45": "LMI (45)", "46": "LMI (46)", "55": "LMI (55)", "64": "LMI (64)"}
+    if checks.get("theorem") == 5:
+        names = {"45": "LMI (78)", "46": "LMI (79)", "55": "LMI (80)", "64": "LMI (81)"}
+    for k, v in names.items():
+        if not checks["lmi_max_eig"][k] < 0:
+            bad.append(f"{v} (largest eigenvalue {checks['lmi_max_eig'][k]:.3g})")
+    if not checks["X_min_eig"] > 0:
+        bad.append(f"X > 0 (smallest eigenvalue {checks['X_min_eig']:.3g})")
+    if not checks["Pbar_min_eig"] > 0:
+        bad.append(f"Pbar > 0 (smallest eigenvalue {checks['Pbar_min_eig']:.3g})")
+    if not checks["R_max_real_eig"] < 0:
+        bad.append(f"R_i Hurwitz (largest real part {checks['R_max_real_eig']:.3g})")
+    if not checks["closed_loop_max_real_eig"] < 0:
+        bad.append(f"A_i + B_i K_j Hurwitz (largest real part {checks['closed_loop_max_real_eig']:.3g})")
+    return bad
