@@ -164,6 +164,10 @@ def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow
     from .ts import derive as derive_ts
 
     ts = derive_ts(load_plant(plant_spec))
+    if ":" in plant_spec and plant_spec.rsplit(":", 1)[0].endswith(".py"):
+        # record the file by absolute path so the design document works from any directory
+        target, func = plant_spec.rsplit(":", 1)
+        plant_spec = f"{Path(target).resolve()}:{func}"
     return run_design(
         ts,
         variant=variant,

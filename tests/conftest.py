@@ -23,6 +23,7 @@ import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
 
+from fte_casadi.design import design  # noqa: E402
 from fte_casadi.design.record import Design  # noqa: E402
 from fte_casadi.plants import manipulator, three_tank  # noqa: E402
 from fte_casadi.ts import derive, scheduling_from_measurements  # noqa: E402
@@ -131,14 +132,6 @@ def lqr_design(ts, *, q_state=1.0, q_fault=1e3, r_obs=1e-2) -> Design:
     )
 
 
-def real_design_available() -> bool:
-    try:
-        from fte_casadi.design import design  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 @pytest.fixture(scope="session")
 def plants():
     return {"manipulator": manipulator(), "three-tank": three_tank()}
@@ -156,9 +149,5 @@ def lqr_designs(ts_models):
 
 @pytest.fixture(scope="session")
 def real_designs(ts_models):
-    """The LMI designs (conditioned variant); skips the test while design() does not exist."""
-    if not real_design_available():
-        pytest.skip("fte_casadi.design.design is not available yet")
-    from fte_casadi.design import design
-
+    """The LMI designs (conditioned variant) of the built-in plants, made once per session."""
     return {k: design(ts, variant="conditioned") for k, ts in ts_models.items()}

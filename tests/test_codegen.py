@@ -20,7 +20,6 @@ from tolerances import C_DOUBLE, C_FLOAT_REL
 from fte_casadi.codegen import build
 from fte_casadi.codegen.ctypes_step import CStep, closed_loop_compare
 from fte_casadi.codegen.generate import _nice_floor, c_name, default_ts, generate_c, output_files
-from fte_casadi.codegen.stand_in import stand_in_design
 from fte_casadi.errors import CodegenError, DesignFileError, ParameterError
 from fte_casadi.step import step_function
 
@@ -34,13 +33,9 @@ needs_cc = pytest.mark.skipif(build.find_compiler() is None, reason="no C compil
 
 
 @pytest.fixture(scope="module")
-def designs(ts_models):
-    """The real conditioned design when fte_casadi.design.design exists, else the LQR stand-in."""
-    try:
-        from fte_casadi.design import design
-    except ImportError:
-        return {k: stand_in_design(ts) for k, ts in ts_models.items()}
-    return {k: design(ts, variant="conditioned") for k, ts in ts_models.items()}
+def designs(real_designs):
+    """The conditioned LMI designs of the built-in plants (shared with the other test modules)."""
+    return real_designs
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ import os
 import numpy as np
 
 from ..design.record import Design
+from ..errors import CodegenError
 from ..step import step_function
 from .generate import c_name
 
@@ -72,9 +73,9 @@ def closed_loop_compare(
     Returns a dict of the largest absolute differences (z, u, xbarhat, yc) over the run, plus
     the trajectories. ``fault(t, u) -> f`` gives the fault signal (default none).
     """
-    from ..plants import BUILTIN
+    from ..plants.loader import load_plant
 
-    plant = BUILTIN[design.plant]()
+    plant = load_plant(design.plant_spec)
     F = plant.drift_function()
     fn = step_function(design, ts, boundary_layer=boundary_layer)
     n, m, ld, lf = plant.n, plant.m, plant.ld, plant.lf
@@ -92,7 +93,7 @@ def closed_loop_compare(
         zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
         rc, uc, xbc, ycc = cstep.step(y)
         if rc != 0:
-            raise AssertionError(f"C step returned {rc} at sample {k}")
+            raise CodegenError(f"the C step returned {rc} at sample {k} on a finite measurement")
         err["z"] = max(err["z"], float(np.max(np.abs(cstep.z - zn))))
         err["u"] = max(err["u"], float(np.max(np.abs(uc - u))))
         err["xbarhat"] = max(err["xbarhat"], float(np.max(np.abs(xbc - xb))))

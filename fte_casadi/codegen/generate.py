@@ -394,8 +394,8 @@ def generate_c(
     >>> import tempfile
     >>> from fte_casadi.plants import three_tank
     >>> from fte_casadi.ts import derive
-    >>> from fte_casadi.codegen.stand_in import stand_in_design
-    >>> d = stand_in_design(derive(three_tank(), fidelity_samples=200))
+    >>> from fte_casadi.design import design
+    >>> d = design(derive(three_tank(), fidelity_samples=200))
     >>> [p.name for p in generate_c(d, tempfile.mkdtemp(), ts=0.1)][:2]
     ['fte_three_tank.h', 'fte_three_tank.c']
     """
@@ -444,27 +444,16 @@ def memory_report(design: Design, *, ts: float | None = None, real: str = "doubl
     return _memory(c_src, real, int(design.dims["nbar"]), _sizes(h_src, f"fte_{name}_casadi_step"))
 
 
-def builtin_design(plant_name: str, *, stand_in: bool | None = None) -> Design:
-    """The design used for ``generated/``: the real LMI design when it exists, else the LQR stand-in."""
+def builtin_design(plant_name: str) -> Design:
+    """The design used for ``generated/``: the conditioned LMI design of the built-in plant."""
+    from ..design import design as lmi_design
     from ..plants import BUILTIN
     from ..ts import derive
 
-    ts_model = derive(BUILTIN[plant_name]())
-    if not stand_in:
-        try:
-            from ..design import design as lmi_design  # written by another module; may not exist yet
-        except ImportError:
-            lmi_design = None
-        if lmi_design is not None:
-            return lmi_design(ts_model, variant="conditioned")
-        if stand_in is False:
-            raise CodegenError("the LMI design (fte_casadi.design.design) is not available")
-    from .stand_in import stand_in_design
-
-    return stand_in_design(ts_model)
+    return lmi_design(derive(BUILTIN[plant_name]()), variant="conditioned", plant_spec=plant_name)
 
 
-def regenerate_builtin(root: str | os.PathLike, *, stand_in: bool | None = None) -> dict[str, list[Path]]:
+def regenerate_builtin(root: str | os.PathLike) -> dict[str, list[Path]]:
     """Regenerate ``root/manipulator`` and ``root/three_tank`` (``root`` is the ``generated/`` folder).
 
     Each folder gets ``design.json`` (the design the code was made from, so that the code can
@@ -473,7 +462,7 @@ def regenerate_builtin(root: str | os.PathLike, *, stand_in: bool | None = None)
     """
     out = {}
     for plant_name, sub in BUILTIN_DIRS.items():
-        d = builtin_design(plant_name, stand_in=stand_in)
+        d = builtin_design(plant_name)
         folder = Path(root) / sub
         _prepare_dir(folder)
         d.save(folder / "design.json")
