@@ -1,0 +1,130 @@
+"""The `fte` commands end to end: contract documents and clear errors, never a traceback."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from tolerances import PAPER_H
+
+from fte_casadi.cli import main
+from fte_casadi.plants.paper import PRINTED
+
+
+def run(*args):
+    r = CliRunner().invoke(main, list(args))
+    assert "Traceback" not in (r.output or ""), r.output
+    r.text = " ".join((r.output or "").split())  # messages are wrapped at 100 columns
+    return r
+
+
+@pytest.fixture(scope="module")
+def design_files(real_designs, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("designs")
+    out = {}
+    for name, d in real_designs.items():
+        out[name] = folder / f"{name}.json"
+        d.save(out[name])
+    return out
+
+
+def test_design_writes_contract_document(tmp_path):
+    f = tmp_path / "m.json"
+    r = run("design", "manipulator", "-o", str(f))
+    assert r.exit_code == 0, r.output
+    assert "CERTIFIED" in r.text
+    d = json.loads(f.read_text())
+    assert d["variant"] == "conditioned" and d["dims"]["r"] == 2
+    np.testing.assert_allclose(d["H"], PRINTED["manipulator"]["H"], atol=PAPER_H)
+    assert all(v < 0 for v in d["checks"]["lmi_max_eig"].values())
+
+
+def test_infeasible_gamma_names_the_lmi_and_keeps_existing_file(tmp_path):
+    f = tmp_path / "keep.json"
+    f.write_text("precious")
+    r = run("design", "manipulator", "--gamma", "1e-6", "-o", str(f))
+    assert r.exit_code != 0
+    assert "LMI (45)" in r.text
+    assert f.read_text() == "precious"
+    assert not [p for p in tmp_path.iterdir() if p.name != "keep.json"]  # no temporary left behind
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["--gamma", "-1"], "--gamma must be a positive"),
+        (["--sigma", "nan"], "--sigma must be a positive"),
+        (["--gamma", "abc"], "is not a valid float"),
+        (["--gamma", "1", "--gamma1", "2"], "gamma1"),
+        (["--solver", "NOPE"], "NOPE"),
+    ],
+)
+def test_design_parameter_errors(args, needle):
+    r = run("design", "manipulator", *args)
+    assert r.exit_code != 0
+    assert needle in r.text
+
+
+def test_simulate_json_contract(design_files):
+    r = run("simulate", str(design_files["manipulator"]), "--paths", "2", "--seed", "1", "--json", "--quiet")
+    assert r.exit_code == 0, r.output
+    m = json.loads(r.output)
+    assert (
+        m["paths"] == 2
+        and m["seed"] == 1
+        and len(m["state_rms_error"]) == 4
+        and len(m["fault_rel_rms_error"]) == 2
+    )
+    assert 0 <= m["ftc_deviation_ratio"] < 0.3
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["--paths", "0"], "--paths must be a positive integer"),
+        (["--dt", "-0.001"], "--dt must be a positive"),
+        (["--dt", "1.0"], "ts_max"),
+        (["--seed", "-3"], "--seed must be"),
+    ],
+)
+def test_simulate_errors(design_files, args, needle):
+    r = run("simulate", str(design_files["manipulator"]), "--quiet", *args)
+    assert r.exit_code != 0
+    assert needle in r.text
+
+
+def test_corrupt_design_files(design_files, tmp_path):
+    text = design_files["manipulator"].read_text()
+    (tmp_path / "trunc.json").write_text(text[: len(text) // 2])
+    doc = json.loads(text)
+    doc["K"][0][0][0] = float("nan")
+    (tmp_path / "nan.json").write_text(json.dumps(doc))
+    del doc["Pbar"]
+    (tmp_path / "missing.json").write_text(json.dumps(doc).replace("NaN", "0"))
+    for cmd in (["simulate"], ["codegen", "--out", str(tmp_path / "c")]):
+        r = run(*cmd[:1], str(tmp_path / "trunc.json"), *cmd[1:])
+        assert r.exit_code != 0 and "not valid JSON" in r.text
+        r = run(*cmd[:1], str(tmp_path / "nan.json"), *cmd[1:])
+        assert r.exit_code != 0 and "finite" in r.text
+        r = run(*cmd[:1], str(tmp_path / "missing.json"), *cmd[1:])
+        assert r.exit_code != 0 and "'Pbar'" in r.text
+        r = run(*cmd[:1], str(tmp_path / "absent.json"), *cmd[1:])
+        assert r.exit_code != 0 and "does not exist" in r.text
+    assert not (tmp_path / "c").exists() or not any((tmp_path / "c").iterdir())
+
+
+def test_codegen_cli(design_files, tmp_path):
+    out = tmp_path / "c"
+    out.mkdir()
+    (out / "mine.txt").write_text("user file")
+    r = run("codegen", str(design_files["three-tank"]), "--out", str(out), "--real", "float")
+    assert r.exit_code == 0, r.output
+    assert (out / "fte_three_tank.h").is_file() and "typedef float fte_real;" in (
+        out / "fte_three_tank.h"
+    ).read_text()
+    assert (out / "mine.txt").read_text() == "user file"  # nothing else touched
+    r = run("codegen", str(design_files["three-tank"]), "--out", str(tmp_path / "d"), "--ts", "100")
+    assert r.exit_code != 0 and "ts_max" in r.text
+    (tmp_path / "afile").write_text("x")
+    r = run("codegen", str(design_files["three-tank"]), "--out", str(tmp_path / "afile" / "sub"))
+    assert r.exit_code != 0 and "--out" in r.text
