@@ -275,7 +275,3 @@ def bench_builtin(*, iters: int = 200_000, reps: int = 5) -> list[dict]:
         out.append(bench_design(d, iters=iters, reps=reps))
     return out
 
-
-if __name__ == "__main__":  # python -m fte_casadi.codegen.bench
-    for row in bench_builtin():
-        print(row)
