@@ -245,3 +245,48 @@ def test_theorem5_with_diffusion_in_u_and_f():
     L0 = lmi46(no_g, 0, d.K[0], d.P, d.T, d.Pbar, d.Q[0], pr["sigma"], pr["gamma1"])
     L5 = lmi46(aug, 0, d.K[0], d.P, d.T, d.Pbar, d.Q[0], pr["sigma"], pr["gamma1"])
     assert np.max(np.abs(L5 - L0)) > 1e-8  # the G, Gf terms of (79) are really there
+
+
+def test_three_tank_observer_decays_within_the_fault_window(designs):
+    """The three-tank observer must settle well inside the 200 s fault window, with gains that
+    the simulation at dt = 0.01 s can run (ts_max) and a controller gain below the printed ~2206."""
+    c = designs["three-tank"].checks
+    assert c["R_max_real_eig"] <= -0.01
+    assert c["ts_max"] >= 0.02
+    assert c["max_abs_K"] <= 2206
+    assert c["cond_Pbar"] <= 1e5 and c["max_abs_L1"] <= 1e4
+
+
+def test_no_solver_warning_leaks_and_status_records_it(ts_models):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        d = design(ts_models["manipulator"])
+    assert not [w for w in caught if "inaccurate" in str(w.message)]
+    assert d.certified
+    assert any("warned" in s for s in d.status) == any("inaccurate" in s for s in d.status)
+
+
+def test_step5_acceptance_uses_the_numpy_certificate(designs):
+    """A point is accepted only if its recomputed LMIs hold: a perturbed Q_i is rejected."""
+    from fte_casadi.design.lmi import _check5
+
+    d = designs["manipulator"]
+    aug = augment(d.local_models, d.C, d.Df)
+    point = (d.Pbar, list(d.Q), d.N, d.theta)
+    assert _check5(aug, d.params, d.P, list(d.K), d.T, point, 0.0)[0]
+    bad = (d.Pbar, [-Q for Q in d.Q], d.N, d.theta)
+    holds, why = _check5(aug, d.params, d.P, list(d.K), d.T, bad, 0.0)
+    assert not holds and "(46)" in why
+
+
+def test_scs_certifies_or_fails_fast(ts_models):
+    import time
+
+    t0 = time.perf_counter()
+    try:
+        d = design(ts_models["manipulator"], solver="SCS")
+    except InfeasibleDesignError as exc:
+        assert "SCS" in str(exc)
+    else:
+        assert d.certified
+    assert time.perf_counter() - t0 < 45

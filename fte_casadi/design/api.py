@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import InfeasibleDesignError, ParameterError
 from ..ts import TSModel, scheduling_from_measurements
 from .augment import augment
-from .certify import certificate, failures
+from .certify import certificate, failures, ts_max
 from .lmi import solve_step3, solve_step5
 from .record import Design
 from .uio import check_assumptions, enforce, uio_gain
@@ -75,6 +75,39 @@ def _u_reference(ts: TSModel, K, status: list):
     return ue - Kx @ xr, xr
 
 
+def _default_alpha_step5(ts, aug, params, P, K, T, solver, status):
+    """Step 5 with the default observer decay rate.
+
+    ``a0 = max(0.05 * max_i rho(A_i), 0.4 * s_cl)`` with ``s_cl = -max Re eig(A_i + B_i K_j)`` the slowest
+    closed-loop decay (an observer much slower than the loop it serves makes the fault estimate,
+    and hence the compensation, lag). Both ``a0`` and ``2 a0`` are solved and the certified design
+    whose observer allows the larger explicit-Euler step (``ts_max``) is kept.
+    """
+    n = aug.n
+    rho = max(float(np.max(np.abs(np.linalg.eigvals(lm.A)))) for lm in ts.local_models)
+    s_cl = -max(float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ Kj).real))
+                for i in range(aug.r) for Kj in K)  # fmt: skip
+    a0 = max(0.05 * rho, 0.4 * max(s_cl, 0.0))
+    best, best_ts, err = None, -1.0, None
+    for a in (a0, 2 * a0):
+        try:
+            s5 = solve_step5(aug, params, P, K, T, "conditioned", solver, alpha=a)
+        except InfeasibleDesignError as exc:
+            err = exc
+            if "time budget" in str(exc):
+                break  # the solver is too slow here: fail fast rather than try 2 a0 as well
+            continue
+        R = [T @ aug.Abar[i] - np.linalg.solve(s5.Pbar, s5.Q[i]) @ aug.Cbar for i in range(aug.r)]
+        t = ts_max(R)
+        if t > best_ts:
+            best, best_ts = s5, t
+    if best is None:
+        raise err
+    status.append(f"default observer decay rate: alpha in {{a0, 2 a0}} with a0 = max(0.05 rho(A) = {0.05 * rho:.3g}, "
+                  f"0.4 * closed-loop decay = {0.4 * s_cl:.3g}) = {a0:.3g}; kept alpha = {best.alpha:.3g} (larger ts_max)")  # fmt: skip
+    return best
+
+
 def design(
     ts: TSModel,
     *,
@@ -95,7 +128,7 @@ def design(
 
     Parameters left ``None`` come from ``ts.plant.design_defaults``, then from
     :data:`GENERIC_DEFAULTS`. ``alpha`` is the observer decay rate of the conditioned variant
-    (default ``0.05 * max_i spectral radius(A_i)``); ``gamma2`` the d2 attenuation of
+    (default: see :func:`_default_alpha_step5`); ``gamma2`` the d2 attenuation of
     Theorem 5 (default gamma). Raises :class:`~fte_casadi.errors.InfeasibleDesignError`
     when an LMI is infeasible or a certificate fails (unless ``allow_uncertified``),
     :class:`~fte_casadi.errors.AssumptionError` when an assumption of Section 3 fails and is
@@ -133,9 +166,7 @@ def design(
     H, T = uio_gain(aug)
     checks_a = check_assumptions(aug, T)
     status += enforce(checks_a, accept_assumptions)
-    if alpha is None:
-        alpha = 0.05 * max(float(np.max(np.abs(np.linalg.eigvals(lm.A)))) for lm in ts.local_models)
-    elif not (math.isfinite(alpha) and alpha >= 0):
+    if alpha is not None and not (math.isfinite(alpha) and alpha >= 0):
         raise ParameterError(f"alpha must be a non-negative finite number; got {alpha!r}")
     s3 = solve_step3(aug, params, variant, solver)
     X = s3.X
@@ -143,7 +174,12 @@ def design(
     K = [Y @ P for Y in s3.Y]
     status.append(f"step 3 ({solver}): {s3.status}")
     status += s3.notes
-    s5 = solve_step5(aug, params, P, K, T, variant, solver, alpha=alpha if variant == "conditioned" else 0.0)
+    if variant != "conditioned":
+        s5 = solve_step5(aug, params, P, K, T, variant, solver, alpha=0.0)
+    elif alpha is not None:
+        s5 = solve_step5(aug, params, P, K, T, variant, solver, alpha=alpha)
+    else:
+        s5 = _default_alpha_step5(ts, aug, params, P, K, T, solver, status)
     status.append(f"step 5 ({solver}): {s5.status}")
     status += s5.notes
     if variant == "conditioned":
