@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fte_casadi.codegen.generate import BUILTIN_DIRS, generate_c, output_files
@@ -39,3 +40,19 @@ def test_generation_is_deterministic(tmp_path):
     generate_c(design, b, real="float")
     for f in output_files("manipulator"):
         assert (a / f).read_bytes() == (b / f).read_bytes()
+
+
+@pytest.mark.parametrize("plant", sorted(BUILTIN_DIRS))
+def test_committed_design_is_todays_design(plant, real_designs):
+    """generated/<plant>/design.json is what `fte design <plant>` gives today (to SDP reproducibility)."""
+    from tolerances import SDP_REPRO_REL
+
+    committed = Design.load(GENERATED / BUILTIN_DIRS[plant] / "design.json")
+    fresh = real_designs[plant]
+    assert committed.variant == fresh.variant == "conditioned"
+    for key in ("H", "T", "Kf", "N", "Ls", "u_ref"):
+        a, b = np.asarray(getattr(committed, key)), np.asarray(getattr(fresh, key))
+        assert np.max(np.abs(a - b), initial=0) <= SDP_REPRO_REL * max(1.0, np.max(np.abs(b), initial=0)), key
+    for key in ("K", "L1", "L2", "R"):
+        for a, b in zip(getattr(committed, key), getattr(fresh, key)):
+            assert np.max(np.abs(a - b)) <= SDP_REPRO_REL * max(1.0, np.max(np.abs(b))), key

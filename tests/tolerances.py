@@ -10,3 +10,4 @@ PAPER_H = 1e-6  # H follows from (17) exactly; printed to 7 digits
 SDP_EIG = 0.0  # a certified LMI has a negative largest eigenvalue
 C_DOUBLE = 1e-12  # generated C vs CasADi, double precision (per step, absolute on O(1) values)
 C_FLOAT_REL = 1e-4  # generated C in float vs double reference, relative
+SDP_REPRO_REL = 1e-6  # the same SDP solved again on the same kind of machine (relative to the matrix size)
