@@ -137,7 +137,13 @@ def bench(
     tspan = np.arange(nsteps + 1) * dt
 
     # (a) sdeint's itoEuler on the same closed-loop SDE
-    import sdeint
+    try:
+        import sdeint
+    except ImportError:
+        raise SimulationError(
+            "the Monte Carlo benchmark compares against sdeint, which is not installed: "
+            "pip install 'fte_casadi[bench]' (or the [test] extra)"
+        ) from None
 
     t0 = time.perf_counter()
     for _ in range(baseline_paths):
