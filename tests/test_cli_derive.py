@@ -62,6 +62,8 @@ def _bad(tmp_path, args, needle):
 
 
 def test_errors_are_clear(tmp_path):
+    """Each bad plant gives a non-zero exit and its message, never a traceback (asserted in _bad)."""
+    assert _bad(tmp_path, ["derive", "manipulatr"], "unknown plant").returncode == 2
     _bad(tmp_path, ["derive", "manipulatr"], "unknown plant 'manipulatr'")
     _bad(tmp_path, ["derive", "missing.py:f"], "does not exist")
     (tmp_path / "syn.py").write_text("def f(:\n    pass\n")

@@ -274,4 +274,3 @@ def bench_builtin(*, iters: int = 200_000, reps: int = 5) -> list[dict]:
         d = Design.load(path) if path.is_file() else builtin_design(plant)
         out.append(bench_design(d, iters=iters, reps=reps))
     return out
-
