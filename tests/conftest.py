@@ -2,8 +2,8 @@
 
 ``lqr_design`` builds a Design record *without* the LMI machinery (H and T by SPEC.md's
 (17)-(18), K_j and L1_i by LQR, N = 0) so that simulation and plotting can be tested on a
-stable closed loop independently of the design code. ``design_of`` uses the real
-``fte_casadi.design.design`` when it exists and falls back to ``lqr_design``.
+stable closed loop independently of the design code; ``real_designs`` are the conditioned
+LMI designs, made once per session.
 """
 
 from __future__ import annotations

@@ -104,10 +104,7 @@ def bench(
     if horizon is not None:
         scen = dataclasses.replace(scen, T=float(horizon))
     if design is None:
-        try:
-            from ..design import design as make_design
-        except ImportError as exc:
-            raise SimulationError("bench needs a design: pass one, or install the design module") from exc
+        from ..design import design as make_design
         from ..ts import derive
 
         design = make_design(derive(plant), variant="conditioned")
