@@ -131,6 +131,8 @@ def _solve(prob: cp.Problem, solver: str, warned: list | None = None) -> tuple[s
 
 
 def _lmi45(aug: Augmented, i: int, X, Y, sigma, gamma, gamma1):
+    # Written out again, on purpose, as numpy in certify.lmi45: the certificate must not reuse
+    # the expression the solver was given, so a slip in one is caught by the other.
     n, p, ld = aug.n, aug.p, aug.ld
     A, B = aug.Abar[i][:n, :n], aug.Bbar[i][:n]
     W, G = aug.Wbar[i][:n], aug.Gbar[i][:n]

@@ -17,8 +17,8 @@ import numpy as np
 
 from ..design.record import Design
 from ..errors import SimulationError
-from .engine import _lm, closed_loop_sample, monte_carlo, simulate
-from .scenario import UniformNoise, fault_schedule
+from .engine import closed_loop_sample, monte_carlo, plant_schedule, simulate
+from .scenario import UniformNoise
 
 __all__ = ["bench", "baseline_functions"]
 
@@ -32,17 +32,7 @@ def baseline_functions(design: Design, plant, scenario, dt: float):
     """
     nsteps = int(round(scenario.T / dt))
     t = np.arange(nsteps + 2000) * dt
-    sched = fault_schedule(
-        scenario,
-        plant.fault_names,
-        plant.fault_kinds,
-        _lm(design, "B"),
-        _lm(design, "Bf"),
-        np.asarray(plant.Df),
-        plant.input_names,
-        t,
-        dt,
-    )
+    sched = plant_schedule(design, plant, scenario, t, dt)
     fn, lay = closed_loop_sample(design, plant, dt, sched)
     FP = sched.stacked()
     rng = np.random.default_rng(0)

@@ -265,17 +265,7 @@ def simulate(
         raise ParameterError(f"record_every must be a positive integer; got {record_every!r}")
     nrec = nsteps // record_every + 1
     t_all = np.arange(nsteps + record_every * 1000 + 1) * dt  # covers the padded last block
-    sched = fault_schedule(
-        scenario,
-        plant.fault_names,
-        plant.fault_kinds,
-        _lm(design, "B"),
-        _lm(design, "Bf"),
-        np.asarray(plant.Df),
-        plant.input_names,
-        t_all,
-        dt,
-    )
+    sched = plant_schedule(design, plant, scenario, t_all, dt)
     sample, lay = closed_loop_sample(design, plant, dt, sched)
 
     # initial states; per path three child generators (x0 noise, dW, d): a path's noise does not
@@ -432,6 +422,16 @@ def monte_carlo(
 
 def _lm(design: Design, key: str) -> np.ndarray:
     return np.asarray(design.local_models[0][key], dtype=float)
+
+
+def plant_schedule(
+    design: Design, plant: Plant, scenario: Scenario, t: np.ndarray, dt: float
+) -> FaultSchedule:
+    """The scenario's fault profiles resolved against this plant and design, sampled at ``t``."""
+    return fault_schedule(
+        scenario, plant.fault_names, plant.fault_kinds, _lm(design, "B"), _lm(design, "Bf"),
+        np.asarray(plant.Df), plant.input_names, t, dt,
+    )  # fmt: skip
 
 
 def _check_divergence(rec: np.ndarray, lay: Layout, bound: float, t: np.ndarray, plant: str) -> None:
