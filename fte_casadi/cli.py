@@ -15,6 +15,7 @@ from pathlib import Path
 
 import click
 import numpy as np
+from tqdm import tqdm
 
 from .errors import FteError, InfeasibleDesignError, ParameterError
 
@@ -134,6 +135,7 @@ def _design_summary(d) -> str:
     c = d.checks
     lmi = c["lmi_max_eig"]
     K = max(float(np.max(np.abs(k))) for k in d.K)
+    obs = d.observer or {}
     lines = [
         f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
         f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
@@ -143,8 +145,13 @@ def _design_summary(d) -> str:
         f"  theta = {d.theta:.3g}, cond(Pbar) = {c['cond_Pbar']:.3g}, max|L1| = {c['max_abs_L1']:.3g}, max|K| = {K:.3g}",
         f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
         f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",
-        f"  time: {d.timings['total_s']:.2f} s in all, {d.timings['solver_s']:.2f} s in the solver",
     ]
+    if obs.get("alpha") is not None:
+        lines.append(f"  observer decay rate alpha = {obs['alpha']:.4g}: {obs.get('why', '')}")
+    solves = f", {d.solves.get('total')} conic solves" if d.solves else ""
+    lines.append(
+        f"  time: {d.timings['total_s']:.2f} s in all, {d.timings['solver_s']:.2f} s in the solver{solves}"
+    )
     lines += [f"  note: {s}" for s in d.status]
     return "\n".join(lines)
 
@@ -153,9 +160,28 @@ def _check_params(**kw) -> dict:
     out = {}
     for k, v in kw.items():
         if v is not None:
-            _positive(k, v)
+            _positive(k, v, allow_zero=(k == "alpha"))
             out[k] = v
     return out
+
+
+def _scenario_dt(plant_spec: str) -> float | None:
+    """The sample time of the plant's scenario (its Euler-Maruyama step), when it has one."""
+    from .errors import PlantLoadError
+    from .plants.loader import load_scenario
+
+    try:
+        return float(load_scenario(plant_spec).dt)
+    except PlantLoadError:
+        return None
+
+
+def _absolute_spec(plant_spec: str) -> str:
+    """A ``file.py:function`` spec with the file's absolute path, so documents work from any directory."""
+    if ":" in plant_spec and plant_spec.rsplit(":", 1)[0].endswith(".py"):
+        target, func = plant_spec.rsplit(":", 1)
+        return f"{Path(target).resolve()}:{func}"
+    return plant_spec
 
 
 def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False):
@@ -164,18 +190,44 @@ def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow
     from .ts import derive as derive_ts
 
     ts = derive_ts(load_plant(plant_spec))
-    if ":" in plant_spec and plant_spec.rsplit(":", 1)[0].endswith(".py"):
-        # record the file by absolute path so the design document works from any directory
-        target, func = plant_spec.rsplit(":", 1)
-        plant_spec = f"{Path(target).resolve()}:{func}"
+    params = dict(params)
+    if params.get("sample_time") is None:
+        params["sample_time"] = _scenario_dt(plant_spec)
     return run_design(
         ts,
         variant=variant,
         solver=solver,
         allow_uncertified=allow_uncertified,
-        plant_spec=plant_spec,
+        plant_spec=_absolute_spec(plant_spec),
         **params,
     )
+
+
+def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
+    from .design import explore
+    from .plants.loader import load_plant
+    from .plot import frontier_figure
+    from .ts import derive as derive_ts
+
+    ts = derive_ts(load_plant(plant_spec))
+    with tqdm(total=12, desc=f"explore {ts.plant.name}", unit=" sigma", file=sys.stderr, delay=1.0) as bar:
+        points, info = explore(ts, solver=solver, gamma1=gamma1, sample_time=_scenario_dt(plant_spec),
+                               progress=lambda k, n: bar.update(1))  # fmt: skip
+    click.echo(
+        f"feasible frontier of {ts.plant.name} (gamma1 = {info['gamma1']:g}; (45) is feasible for any gamma only with "
+        f"sigma < {info['sigma_sup']:.4g}); the plant's defaults: gamma = {info['gamma']:g}, sigma = {info['sigma']:g}"
+    )
+    click.echo(f"{'sigma':>10} {'gamma_min (45)':>15} {'certified from':>15} {'alpha':>9} {'max|L1|':>9}")
+    for pt in points:
+        click.echo(
+            f"{pt.sigma:10.4g} {'-' if pt.gamma_min is None else format(pt.gamma_min, '.4g'):>15} "
+            f"{'-' if pt.gamma_tried is None else format(pt.gamma_tried, 'g'):>15} "
+            f"{'-' if pt.alpha is None else format(pt.alpha, '.3g'):>9} "
+            f"{'-' if pt.max_abs_L1 is None else format(pt.max_abs_L1, '.3g'):>9}"
+            + (f"  {pt.note}" if pt.note and not pt.certified else "")
+        )
+    fig = frontier_figure(points, info, ts.plant.name, out_dir)
+    click.echo(f"figure written to {fig}")
 
 
 @main.command()
@@ -196,15 +248,32 @@ def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow
 @click.option("--delta", type=float, help="bound on the second derivative of the faults.")
 @click.option("--epsilon", type=float, help="sliding gain margin eps.")
 @click.option(
+    "--alpha", type=float, help="observer decay rate (default: the largest the plant allows, see README)."
+)
+@click.option(
+    "--sample-time", "sample_time", type=float,
+    help="sample time the observer must run at (default: the plant's scenario step); caps the default alpha.",
+)  # fmt: skip
+@click.option(
     "--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so)."
 )
 @click.option(
     "-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here."
 )
+@click.option(
+    "--explore", is_flag=True, help="Print and plot the feasible frontier (smallest gamma over sigma)."
+)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="fte-explore", show_default=True,
+              help="With --explore: the directory of the frontier figure.")  # fmt: skip
 @_guard
-def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, allow_uncertified, output):
+def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, allow_uncertified, output,
+           explore, out_dir):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
-    params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon)
+    params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
+                           sample_time=sample_time)  # fmt: skip
+    if explore:
+        _explore(plant, solver.upper(), gamma1, out_dir)
+        return
     if output is not None and Path(output).is_dir():
         raise ParameterError(
             f"-o {output} is a directory; give a file name such as {Path(output) / 'design.json'}"
@@ -364,26 +433,16 @@ def bench(as_json, paths):
     def log(msg):
         click.echo(msg, err=True)
 
+    from .design.bench import bench_design
+    from .plants import SCENARIOS
+
     designs = {}
     for name in BUILTIN:
         ts = derive_ts(BUILTIN[name]())
-        row = {}
-        for solver in ("CLARABEL", "SCS"):
-            log(f"bench: design {name} with {solver}")
-            t0 = time.perf_counter()
-            try:
-                d = run_design(ts, variant="conditioned", solver=solver, plant_spec=name)
-                row[solver] = {
-                    "wall_s": time.perf_counter() - t0,
-                    "solver_s": d.timings["solver_s"],
-                    "certified": d.certified,
-                }
-                designs.setdefault(name, d)
-            except FteError as exc:
-                row[solver] = {"wall_s": time.perf_counter() - t0, "error": str(exc)[:200]}
-        if "wall_s" in row.get("SCS", {}) and "error" not in row["SCS"] and "error" not in row["CLARABEL"]:
-            row["ratio_scs_over_clarabel"] = row["SCS"]["wall_s"] / row["CLARABEL"]["wall_s"]
-        out["design"][name] = row
+        dt = SCENARIOS[name]().dt
+        log(f"bench: design {name} (Clarabel, SCS, and the 0.1 formulation as baseline)")
+        out["design"][name] = bench_design(ts, sample_time=dt)
+        designs[name] = run_design(ts, variant="conditioned", plant_spec=name, sample_time=dt)
 
     from .sim import bench as sim_bench
 
@@ -399,19 +458,18 @@ def bench(as_json, paths):
     if as_json:
         click.echo(json.dumps(out, indent=1, default=str))
         return
-    click.echo("design (conditioned, wall time incl. certification):")
+    click.echo(
+        "design (conditioned, wall time incl. certificates; baseline: the 0.1 formulation, same process):"
+    )
     for name, row in out["design"].items():
-        cells = [
-            f"{s}: " + (f"{v['wall_s']:.2f} s" if "error" not in v else "failed")
-            for s, v in row.items()
-            if isinstance(v, dict)
-        ]
-        ratio = (
-            f", SCS/Clarabel = {row['ratio_scs_over_clarabel']:.2f}x"
-            if "ratio_scs_over_clarabel" in row
-            else ""
-        )
-        click.echo(f"  {name:12s} " + ", ".join(cells) + ratio)
+        cells = []
+        for key in ("CLARABEL", "SCS", "legacy_0.1"):
+            v = row.get(key, {})
+            cells.append(f"{key}: " + (f"{v['wall_s']:.3f} s" if "wall_s" in v else "failed"))
+        extra = f", {row['speedup_vs_legacy']:.1f}x faster than 0.1" if "speedup_vs_legacy" in row else ""
+        if "max_rel_diff_clarabel_scs" in row:
+            extra += f", Clarabel and SCS designs equal to {row['max_rel_diff_clarabel_scs']:.1e}"
+        click.echo(f"  {name:12s} " + ", ".join(cells) + extra)
     mc = out["monte_carlo"]
     e = mc["engine"]
     click.echo(

@@ -183,7 +183,9 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
     for variant in ("conditioned", "paper"):
         log(f"[{name}] design, variant {variant}")
         try:
-            designs[variant] = run_design(ts, variant=variant, plant_spec=name)
+            designs[variant] = run_design(
+                ts, variant=variant, plant_spec=name, sample_time=SCENARIOS[name]().dt
+            )
         except InfeasibleDesignError as exc:
             designs[variant] = " ".join(str(exc).split())
             log(f"[{name}]   variant {variant} failed: {designs[variant][:160]}")

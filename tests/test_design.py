@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import re
 import warnings
 
 import casadi as ca
@@ -33,9 +35,13 @@ def ts_models():
     }
 
 
+#: the sample times of the paper scenarios (the default alpha keeps ts_max >= 2 x these)
+DT = {"manipulator": 1e-3, "three-tank": 1e-2}
+
+
 @pytest.fixture(scope="module")
 def designs(ts_models):
-    return {k: design(ts) for k, ts in ts_models.items()}
+    return {k: design(ts, sample_time=DT[k]) for k, ts in ts_models.items()}
 
 
 @pytest.mark.parametrize("name,H", [("manipulator", H_MANIP), ("three-tank", H_TANK)])
@@ -114,18 +120,63 @@ def test_enforce_raises_and_accepts():
 
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_conditioned_design_acceptance(designs, name):
+    """Issue #9: certified, cond(Pbar) <= 1e4, max |L_i1| <= 1e3, one conic solve per step, each optimal."""
     d = designs[name]
     c = d.checks
     assert d.certified and d.variant == "conditioned"
     assert np.max(np.abs(d.H - (H_MANIP if name == "manipulator" else H_TANK))) < H_TOL
     assert all(c["lmi_max_eig"][k] < 0 for k in ("45", "46", "55", "64"))
     assert c["R_max_real_eig"] < 0 and c["closed_loop_max_real_eig"] < 0
-    assert c["cond_Pbar"] <= 1e5 and c["max_abs_L1"] <= 1e4
-    assert c["ts_max"] > 0
+    assert c["cond_Pbar"] <= 1e4 and c["max_abs_L1"] <= 1e3
+    assert c["ts_max"] >= 2 * DT[name]  # the default alpha is capped by the scenario's sample time
+    assert d.solves == {"step3": 1, "step5": 1, "total": 2}
+    solves = [s for s in d.status if "solve (" in s]
+    assert len(solves) == 2 and all("solve (optimal)" in s for s in solves), solves
+    assert (
+        0 < d.observer["alpha"] < d.observer["alpha_max"] and c["R_max_real_eig"] <= -d.observer["alpha"] / 2
+    )
     if name == "manipulator":
         assert c["max_abs_K"] <= 5
-        assert c["ts_max"] >= 2e-3  # simulated at dt = 1e-3 s
         assert np.allclose(d.Kf, [[-1.0, 0.0]])
+
+
+def _rel(a, b) -> float:
+    a, b = np.asarray(a), np.asarray(b)
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+def _gains(d) -> dict:
+    return {"K": d.K, "L1": d.L1, "N": [d.N], "H": [d.H], "Kf": [d.Kf]}
+
+
+@pytest.mark.parametrize("name", ["manipulator", "three-tank"])
+def test_design_is_a_smooth_function_of_the_plant(ts_models, designs, name):
+    """A 1e-12 relative perturbation of the T-S matrices moves K_j, L_i1, N, H, Kf by at most 1e-6 relative."""
+    ts = ts_models[name]
+    rng = np.random.default_rng(7)
+
+    def jitter(M):
+        M = np.asarray(M, float)
+        return M * (1 + 1e-12 * rng.standard_normal(M.shape))
+
+    models = tuple(dataclasses.replace(lm, **{k: jitter(getattr(lm, k)) for k in ("A", "B", "Bd", "Bf", "W")})
+                   for lm in ts.local_models)  # fmt: skip
+    d2 = design(dataclasses.replace(ts, local_models=models), sample_time=DT[name])
+    for key, mats in _gains(d2).items():
+        for a, b in zip(mats, _gains(designs[name])[key]):
+            assert _rel(a, b) <= 1e-6, key
+
+
+@pytest.mark.parametrize("name", ["manipulator", "three-tank"])
+def test_clarabel_and_scs_give_the_same_design(ts_models, designs, name):
+    """Both solvers: every solve optimal, certified, and the same design to 1e-8 relative (the solver
+    only provides a feasible start; the centred point depends on the data alone)."""
+    d = design(ts_models[name], solver="SCS", sample_time=DT[name])
+    assert d.certified and d.solver == "SCS"
+    assert all("solve (optimal)" in s for s in d.status if "solve (" in s)
+    for key, mats in _gains(d).items():
+        for a, b in zip(mats, _gains(designs[name])[key]):
+            assert _rel(a, b) <= 1e-8, key
 
 
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
@@ -170,9 +221,16 @@ def test_three_tank_reference_input(designs):
     assert np.max(np.abs(np.array(f(d.x_ref, u, 0, 0)))) < 1e-9
 
 
-def test_infeasible_gamma_names_lmi(ts_models):
-    with pytest.raises(InfeasibleDesignError, match=r"LMI \(45\) is infeasible: gamma = 1e-06 is below"):
-        design(ts_models["manipulator"], gamma=1e-6)
+def test_infeasible_gamma_names_a_feasible_bound_that_works(ts_models):
+    ts = ts_models["manipulator"]
+    with pytest.raises(InfeasibleDesignError, match=r"LMI \(45\) is infeasible") as exc:
+        design(ts, gamma=0.3, gamma1=0.01, sample_time=1e-3)
+    msg = str(exc.value)
+    gmin = float(re.search(r"smallest gamma for which \(45\) is feasible .* is ([0-9.]+)", msg).group(1))
+    assert 0.3 < gmin < 0.5  # measured 0.453 (SPEC: about 0.44)
+    suggested = float(re.search(r"raise gamma to >= ([0-9.e+-]+)", msg, re.I).group(1))
+    assert suggested > gmin
+    assert design(ts, gamma=suggested, gamma1=0.01, sample_time=1e-3).certified
 
 
 @pytest.mark.parametrize("kw", [{"gamma": -1.0}, {"sigma": float("nan")}, {"gamma1": float("inf")},
@@ -266,27 +324,11 @@ def test_no_solver_warning_leaks_and_status_records_it(ts_models):
     assert any("warned" in s for s in d.status) == any("inaccurate" in s for s in d.status)
 
 
-def test_step5_acceptance_uses_the_numpy_certificate(designs):
-    """A point is accepted only if its recomputed LMIs hold: a perturbed Q_i is rejected."""
-    from fte_casadi.design.lmi import _check5
-
-    d = designs["manipulator"]
-    aug = augment(d.local_models, d.C, d.Df)
-    point = (d.Pbar, list(d.Q), d.N, d.theta)
-    assert _check5(aug, d.params, d.P, list(d.K), d.T, point, 0.0)[0]
-    bad = (d.Pbar, [-Q for Q in d.Q], d.N, d.theta)
-    holds, why = _check5(aug, d.params, d.P, list(d.K), d.T, bad, 0.0)
-    assert not holds and "(46)" in why
-
-
-def test_scs_certifies_or_fails_fast(ts_models):
-    import time
-
-    t0 = time.perf_counter()
-    try:
-        d = design(ts_models["manipulator"], solver="SCS")
-    except InfeasibleDesignError as exc:
-        assert "SCS" in str(exc)
-    else:
-        assert d.certified
-    assert time.perf_counter() - t0 < 45
+def test_user_alpha_too_fast_names_the_largest(ts_models, designs):
+    ts = ts_models["manipulator"]
+    with pytest.raises(InfeasibleDesignError, match=r"lower alpha to <= ([0-9.]+)") as exc:
+        design(ts, alpha=50.0, sample_time=1e-3)
+    alpha = float(re.search(r"lower alpha to <= ([0-9.e+-]+)", str(exc.value)).group(1))
+    assert alpha < designs["manipulator"].observer["alpha_max"]
+    d = design(ts, alpha=alpha)
+    assert d.certified and d.observer["alpha"] == alpha and "user" in d.observer["why"]

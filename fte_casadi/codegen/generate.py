@@ -447,10 +447,11 @@ def memory_report(design: Design, *, ts: float | None = None, real: str = "doubl
 def builtin_design(plant_name: str) -> Design:
     """The design used for ``generated/``: the conditioned LMI design of the built-in plant."""
     from ..design import design as lmi_design
-    from ..plants import BUILTIN
+    from ..plants import BUILTIN, SCENARIOS
     from ..ts import derive
 
-    return lmi_design(derive(BUILTIN[plant_name]()), variant="conditioned", plant_spec=plant_name)
+    return lmi_design(derive(BUILTIN[plant_name]()), variant="conditioned", plant_spec=plant_name,
+                      sample_time=SCENARIOS[plant_name]().dt)  # fmt: skip
 
 
 def regenerate_builtin(root: str | os.PathLike) -> dict[str, list[Path]]:

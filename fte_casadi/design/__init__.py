@@ -1,6 +1,7 @@
 """Design: augmented system, H and assumption checks, LMIs, certificates, the Design record."""
 
 from .api import design as design
+from .api import explore as explore
 from .augment import Augmented as Augmented
 from .augment import augment as augment
 from .record import Design as Design
@@ -10,5 +11,5 @@ from .uio import enforce as enforce
 from .uio import invariant_zeros as invariant_zeros
 from .uio import uio_gain as uio_gain
 
-__all__ = ["design", "Design", "Augmented", "augment", "AssumptionCheck", "check_assumptions", "enforce",
+__all__ = ["design", "explore", "Design", "Augmented", "augment", "AssumptionCheck", "check_assumptions", "enforce",
            "invariant_zeros", "uio_gain"]  # fmt: skip

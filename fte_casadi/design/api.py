@@ -8,15 +8,16 @@ import time
 import casadi as ca
 import numpy as np
 
-from ..errors import InfeasibleDesignError, ParameterError
+from ..errors import FteError, InfeasibleDesignError, ParameterError
 from ..ts import TSModel, scheduling_from_measurements
+from . import conditioned, paper
 from .augment import augment
-from .certify import certificate, failures, ts_max
-from .lmi import solve_step3, solve_step5
+from .certify import certificate, failures
+from .diagnose import FrontierPoint, gamma_min, nice_ceil, nice_floor, sigma_max
 from .record import Design
 from .uio import check_assumptions, enforce, uio_gain
 
-__all__ = ["design", "GENERIC_DEFAULTS"]
+__all__ = ["design", "explore", "GENERIC_DEFAULTS", "explain_45", "explain_46"]
 
 GENERIC_DEFAULTS = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}
 VARIANTS = ("paper", "conditioned")
@@ -75,39 +76,6 @@ def _u_reference(ts: TSModel, K, status: list):
     return ue - Kx @ xr, xr
 
 
-def _default_alpha_step5(ts, aug, params, P, K, T, solver, status):
-    """Step 5 with the default observer decay rate.
-
-    ``a0 = max(0.05 * max_i rho(A_i), 0.4 * s_cl)`` with ``s_cl = -max Re eig(A_i + B_i K_j)`` the slowest
-    closed-loop decay (an observer much slower than the loop it serves makes the fault estimate,
-    and hence the compensation, lag). Both ``a0`` and ``2 a0`` are solved and the certified design
-    whose observer allows the larger explicit-Euler step (``ts_max``) is kept.
-    """
-    n = aug.n
-    rho = max(float(np.max(np.abs(np.linalg.eigvals(lm.A)))) for lm in ts.local_models)
-    s_cl = -max(float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ Kj).real))
-                for i in range(aug.r) for Kj in K)  # fmt: skip
-    a0 = max(0.05 * rho, 0.4 * max(s_cl, 0.0))
-    best, best_ts, err = None, -1.0, None
-    for a in (a0, 2 * a0):
-        try:
-            s5 = solve_step5(aug, params, P, K, T, "conditioned", solver, alpha=a)
-        except InfeasibleDesignError as exc:
-            err = exc
-            if "time budget" in str(exc):
-                break  # the solver is too slow here: fail fast rather than try 2 a0 as well
-            continue
-        R = [T @ aug.Abar[i] - np.linalg.solve(s5.Pbar, s5.Q[i]) @ aug.Cbar for i in range(aug.r)]
-        t = ts_max(R)
-        if t > best_ts:
-            best, best_ts = s5, t
-    if best is None:
-        raise err
-    status.append(f"default observer decay rate: alpha in {{a0, 2 a0}} with a0 = max(0.05 rho(A) = {0.05 * rho:.3g}, "
-                  f"0.4 * closed-loop decay = {0.4 * s_cl:.3g}) = {a0:.3g}; kept alpha = {best.alpha:.3g} (larger ts_max)")  # fmt: skip
-    return best
-
-
 def design(
     ts: TSModel,
     *,
@@ -120,19 +88,26 @@ def design(
     epsilon: float | None = None,
     gamma2: float | None = None,
     alpha: float | None = None,
+    sample_time: float | None = None,
     allow_uncertified: bool = False,
     accept_assumptions=(),
     plant_spec: str | None = None,
+    diagnose: bool = True,
 ) -> Design:
     """Design the sliding-mode UIO and fault-tolerant controller of ``ts`` (Section 4.3 / Theorem 5).
 
     Parameters left ``None`` come from ``ts.plant.design_defaults``, then from
-    :data:`GENERIC_DEFAULTS`. ``alpha`` is the observer decay rate of the conditioned variant
-    (default: see :func:`_default_alpha_step5`); ``gamma2`` the d2 attenuation of
-    Theorem 5 (default gamma). Raises :class:`~fte_casadi.errors.InfeasibleDesignError`
-    when an LMI is infeasible or a certificate fails (unless ``allow_uncertified``),
-    :class:`~fte_casadi.errors.AssumptionError` when an assumption of Section 3 fails and is
-    not in ``accept_assumptions``, :class:`~fte_casadi.errors.ParameterError` on bad settings.
+    :data:`GENERIC_DEFAULTS`. ``variant="conditioned"`` (default) poses the printed LMIs so that
+    the answer is unique and well scaled (:mod:`fte_casadi.design.conditioned`); ``"paper"``
+    solves them as printed (:mod:`fte_casadi.design.paper`). ``alpha`` is the observer decay rate
+    of the conditioned variant (default: a fraction of the largest feasible one, lowered so that
+    ``ts_max >= 2 sample_time`` when ``sample_time`` is given); ``gamma2`` the d2 attenuation of
+    Theorem 5 (default gamma). Raises :class:`~fte_casadi.errors.InfeasibleDesignError` when an
+    LMI is infeasible (with the bounds that are feasible, when ``diagnose``) or a certificate
+    fails (unless ``allow_uncertified``), :class:`~fte_casadi.design.conditioned.SolverFailedError`
+    when the solver fails numerically, :class:`~fte_casadi.errors.AssumptionError` when an
+    assumption of Section 3 fails and is not in ``accept_assumptions``, and
+    :class:`~fte_casadi.errors.ParameterError` on bad settings.
 
     Examples
     --------
@@ -156,6 +131,12 @@ def design(
         params["gamma2"] = _params(
             ts, {"gamma": gamma2, "gamma1": None, "sigma": None, "delta": None, "epsilon": None}, []
         )["gamma"]
+    for name, v in (("alpha", alpha), ("sample_time", sample_time)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0
+                              or (name == "sample_time" and v == 0)):  # fmt: skip
+            raise ParameterError(
+                f"{name} must be a {'positive' if name == 'sample_time' else 'non-negative'} finite number; got {v!r}"
+            )
     aug = augment(ts.local_models, ts.C, ts.Df)
     theorem5 = any(lm.has_diffusion_extension for lm in ts.local_models)
     if theorem5:
@@ -166,28 +147,33 @@ def design(
     H, T = uio_gain(aug)
     checks_a = check_assumptions(aug, T)
     status += enforce(checks_a, accept_assumptions)
-    if alpha is not None and not (math.isfinite(alpha) and alpha >= 0):
-        raise ParameterError(f"alpha must be a non-negative finite number; got {alpha!r}")
-    s3 = solve_step3(aug, params, variant, solver)
-    X = s3.X
-    P = np.linalg.inv(X)
-    K = [Y @ P for Y in s3.Y]
-    status.append(f"step 3 ({solver}): {s3.status}")
-    status += s3.notes
-    if variant != "conditioned":
-        s5 = solve_step5(aug, params, P, K, T, variant, solver, alpha=0.0)
-    elif alpha is not None:
-        s5 = solve_step5(aug, params, P, K, T, variant, solver, alpha=alpha)
-    else:
-        s5 = _default_alpha_step5(ts, aug, params, P, K, T, solver, status)
-    status.append(f"step 5 ({solver}): {s5.status}")
-    status += s5.notes
-    if variant == "conditioned":
-        status.append(f"conditioned variant: observer decay rate alpha = {s5.alpha:g} imposed in (46)")
-    else:
+    retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
+                 gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions)  # fmt: skip
+    if variant == "paper":
+        s3, K = paper.step3(aug, params, solver)
+        s5 = paper.step5(aug, params, s3.X, K, T, solver)
         status.append(
             "paper variant: problem as printed (with SPEC.md's corrections); expect an ill-conditioned Pbar"
         )
+    else:
+        try:
+            s3 = conditioned.step3(aug, params, solver)
+        except conditioned.SolverFailedError:
+            raise
+        except InfeasibleDesignError as exc:
+            raise (explain_45(ts, aug, params, solver, retry) if diagnose else exc) from None
+        K = [s3.K] * aug.r
+        try:
+            s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time)
+        except conditioned.SolverFailedError:
+            raise
+        except InfeasibleDesignError as exc:
+            if diagnose and "alpha" not in str(exc):
+                raise explain_46(ts, aug, params, solver, retry, exc) from None
+            raise
+    status += s3.notes + s5.notes
+    X = s3.X
+    P = np.linalg.inv(X)
     L1 = [np.linalg.solve(s5.Pbar, Q) for Q in s5.Q]
     R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
     L2 = [Ri @ H for Ri in R]
@@ -211,7 +197,7 @@ def design(
         hint = (
             "use variant='conditioned'"
             if variant == "paper"
-            else "raise gamma1 or sigma, or lower alpha, or try solver='SCS'"
+            else "raise sigma, or lower alpha, or try solver='SCS'"
         )
         msg = f"the design is not certified at the returned point: {what} does not hold; {hint}"
         if not allow_uncertified:
@@ -221,6 +207,8 @@ def design(
     sched, sources = scheduling_from_measurements(ts)
     plant = ts.plant
     total = time.perf_counter() - t0
+    observer = {k: (float(v) if isinstance(v, (int, float, np.floating)) and v is not None else v)
+                for k, v in s5.observer.items()}  # fmt: skip
     return Design(
         plant=plant.name,
         plant_spec=plant_spec or plant.name,
@@ -253,7 +241,7 @@ def design(
         R=tuple(R),
         Ls=Ls,
         checks=checks,
-        timings={"total_s": total, "solver_s": s3.solver_s + s5.solver_s},
+        timings={"total_s": total, "solver_s": s3.seconds + s5.seconds},
         u_ref=u_ref,
         x_ref=x_ref,
         scheduling=sched.serialize(),
@@ -268,4 +256,142 @@ def design(
         },  # fmt: skip
         certified=certified,
         status=status,
+        solves={"step3": int(s3.solves), "step5": int(s5.solves), "total": int(s3.solves + s5.solves)},
+        observer=observer,
     )
+
+
+def _try(ts, retry: dict, **change) -> Design | None:
+    """The whole design with some parameters changed, or None when it does not give a certified design."""
+    kw = dict(retry) | change
+    try:
+        d = design(ts, diagnose=False, **kw)
+    except FteError:
+        return None
+    return d if d.certified else None
+
+
+def explain_45(ts, aug, params: dict, solver: str, retry: dict) -> InfeasibleDesignError:
+    """The error for an infeasible (45): the smallest feasible gamma and the largest feasible sigma,
+    each followed by a value that was tried and gives a certified design."""
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    gmin, _ = gamma_min(aug, sg, g1, solver)
+    smax, _ = sigma_max(aug, g, g1, solver)
+    parts, fixes = [], []
+    if gmin is None:
+        sup, _ = sigma_max(aug, None, g1, solver)
+        parts.append(f"no gamma makes (45) feasible at sigma = {sg:g}"
+                     + (f" (any gamma needs sigma < {sup:.3g})" if sup else ""))  # fmt: skip
+    else:
+        parts.append(
+            f"the smallest gamma for which (45) is feasible with gamma1 = {g1:g}, sigma = {sg:g} is {gmin:.3g}"
+        )
+        for f in (1.05, 1.25, 1.6, 2.5, 4.0):
+            cand = nice_ceil(max(gmin * f, g1 * 1.01))
+            if _try(ts, retry, gamma=cand) is not None:
+                fixes.append(f"raise gamma to >= {cand:g}")
+                break
+    if smax is None:
+        parts.append(f"no sigma > 0 makes it feasible at gamma = {g:g}")
+    else:
+        parts.append(f"the largest sigma for which it is feasible with gamma = {g:g} is {smax:.3g}")
+        for f in (0.95, 0.8, 0.6, 0.4, 0.2, 0.1):
+            cand = nice_floor(smax * f)
+            if _try(ts, retry, sigma=cand) is not None:
+                fixes.append(f"lower sigma to <= {cand:g}")
+                break
+    checked = "each checked: it gives" if len(fixes) > 1 else "checked: it gives"
+    advice = (
+        (" or ".join(fixes) + f" ({checked} a certified design)")
+        if fixes
+        else (
+            "no value tried gives a certified design: see `fte design PLANT --explore` for the feasible frontier"
+        )
+    )
+    return InfeasibleDesignError(
+        f"LMI (45) is infeasible: {'; '.join(parts)}. {advice[0].upper() + advice[1:]}."
+    )
+
+
+def explain_46(ts, aug, params: dict, solver: str, retry: dict, exc: Exception) -> InfeasibleDesignError:
+    """The error for an infeasible (46) at alpha = 0: a larger sigma (within what (45) allows) that works."""
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    smax, _ = sigma_max(aug, g, g1, solver)
+    fix = None
+    if smax is not None and smax > sg:
+        for f in (0.2, 0.4, 0.6, 0.8, 0.95):
+            cand = nice_floor(sg + f * (smax - sg))
+            if cand > sg and _try(ts, retry, sigma=cand) is not None:
+                fix = cand
+                break
+    msg = (f"{str(exc).rstrip('.')}. The -sigma I block of (46) must dominate the coupling of the observer with the loop; (45) allows "
+           f"sigma up to {smax:.3g} at gamma = {g:g}." if smax else f"{exc}")  # fmt: skip
+    msg += (
+        f" Raise sigma to {fix:g} (checked: it gives a certified design)."
+        if fix
+        else (" No larger sigma tried gives a certified design: see `fte design PLANT --explore`.")
+    )
+    return InfeasibleDesignError(msg)
+
+
+#: gammas tried above the frontier of (45), as multiples of its smallest gamma
+LADDER = (1.05, 1.25, 1.6, 2.5, 4.0, 6.3, 10.0)
+
+
+def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas=None, count: int = 12,
+            sample_time: float | None = None, progress=None) -> tuple[list[FrontierPoint], dict]:  # fmt: skip
+    """The feasible frontier: for each sigma, the smallest gamma for which (45) is feasible, and the
+    smallest gamma of :data:`LADDER` x that value for which the whole design (both steps and the
+    certificate) is certified: step 5 needs some room above the frontier of (45).
+
+    ``sigmas`` default: ``count`` values spaced in log scale from ``min(sigma / 30, 1e-3 sigma_sup)``
+    (``sigma`` the plant's default) to just below ``sigma_sup``, the largest sigma any gamma allows. Returns the points and a dict with the plant's default parameters and that sigma bound.
+    """
+    status: list[str] = []
+    params = _params(
+        ts, {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": None, "epsilon": None}, status
+    )
+    g1 = params["gamma1"]
+    aug = augment(ts.local_models, ts.C, ts.Df)
+    sup, _ = sigma_max(aug, None, g1, solver)
+    if sigmas is None:
+        if sup is None:
+            raise InfeasibleDesignError(
+                f"LMI (45) is infeasible for every gamma and sigma with gamma1 = {g1:g}: the loop cannot be made to "
+                "dominate the plant's diffusion with this output; check W_i and C"
+            )
+        sigmas = np.geomspace(min(params["sigma"] / 30, sup * 1e-3), sup * 0.98, count)
+    points = []
+    for k, sg in enumerate(sigmas):
+        gmin, _ = gamma_min(aug, float(sg), g1, solver)
+        if gmin is None:
+            points.append(
+                FrontierPoint(float(sg), None, None, False, None, None, "(45) infeasible for every gamma")
+            )
+        else:
+            point, why = None, ""
+            for f in LADDER:  # the smallest gamma on the ladder whose whole design is certified
+                gt = nice_ceil(max(f * gmin, 1.01 * g1))
+                try:
+                    d = design(
+                        ts,
+                        diagnose=False,
+                        solver=solver,
+                        gamma=gt,
+                        gamma1=g1,
+                        sigma=float(sg),
+                        sample_time=sample_time,
+                    )
+                except FteError as exc:
+                    why = " ".join(str(exc).split())[:100]
+                    continue
+                if d.certified:
+                    point = FrontierPoint(
+                        float(sg), gmin, gt, True, d.observer.get("alpha"), d.checks["max_abs_L1"]
+                    )
+                    break
+            points.append(point or FrontierPoint(float(sg), gmin, None, False, None, None, f"no gamma up to "
+                                                 f"{LADDER[-1]:g} x {gmin:.3g} certifies: {why}"))  # fmt: skip
+        if progress is not None:
+            progress(k + 1, len(sigmas))
+    return points, {"gamma": params["gamma"], "gamma1": g1, "sigma": params["sigma"], "sigma_sup": sup}

@@ -11,6 +11,11 @@ printed formulas (SPEC.md): block (1,4) of (45)/(78) is ``Bd_i`` (not ``P Bd_i``
 term ``(Wbar_i + Gbar_i K_j)^T T^T Pbar T Gbar_eij`` of Theta_13 enters with a minus sign: it
 is the cross term of the error diffusion ``T (Wbar + Gbar K) x - T Gbar_e e``, exactly like
 ``-(W_i + G_i K_j)^T P G_eij`` beside it (the paper prints ``+``).
+
+The same builders pose the LMIs for the solver (:mod:`fte_casadi.design.conditioned`): there the
+unknowns are scaled (``X = X'/s``, ``Pbar = Pt/s``) and every term free of the unknowns is
+multiplied by ``const = s``, which is ``s`` times the printed LMI at the unscaled point. With the
+default ``const = 1`` they are the printed LMIs, which is what the certificate evaluates.
 """
 
 from __future__ import annotations
@@ -19,7 +24,8 @@ import numpy as np
 
 from .augment import Augmented
 
-__all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "certificate", "ts_max", "block_sizes"]
+__all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "sliding_mismatch", "diffusion_coupling", "certificate", "ts_max",
+           "block_sizes", "failures"]  # fmt: skip
 
 
 def _sym(M: np.ndarray) -> np.ndarray:
@@ -38,20 +44,25 @@ def _parts(aug: Augmented, i: int, K: np.ndarray, Kf_unused=None):
     return A, B, Bf, W, G, Gf, M
 
 
-def lmi45(aug: Augmented, i: int, X: np.ndarray, Y: np.ndarray, sigma: float, gamma: float, gamma1: float):
-    """Left side of (45) (and (78) when G_i != 0) for rule i and gain Y = Y_j."""
+def lmi45(
+    aug: Augmented, i: int, X: np.ndarray, Y: np.ndarray, sigma: float, gamma: float, gamma1: float, const=1.0
+):
+    """Left side of (45) (and (78) when G_i != 0) for rule i and gain Y = Y_j.
+
+    ``const`` multiplies every term that involves neither X nor Y (see the module docstring).
+    """
     n, p, ld = aug.n, aug.p, aug.ld
     A, B, _, W, G, _, _ = _parts(aug, i, None)
     C = aug.Cbar[:, :n]
     Bd = aug.Bdbar[i][:n]
-    Psi = A @ X + X @ A.T + B @ Y + Y.T @ B.T + sigma * np.eye(n)
+    Psi = A @ X + X @ A.T + B @ Y + Y.T @ B.T + const * sigma * np.eye(n)
     XW = X @ W.T + Y.T @ G.T
     Z = np.zeros
     L = np.block([
-        [Psi, XW, X @ C.T, Bd],
+        [Psi, XW, X @ C.T, const * Bd],
         [XW.T, -X, Z((n, p)), Z((n, ld))],
-        [C @ X, Z((p, n)), -np.eye(p), Z((p, ld))],
-        [Bd.T, Z((ld, n)), Z((ld, p)), (gamma1**2 - gamma**2) * np.eye(ld)],
+        [C @ X, Z((p, n)), -const * np.eye(p), Z((p, ld))],
+        [const * Bd.T, Z((ld, n)), Z((ld, p)), const * (gamma1**2 - gamma**2) * np.eye(ld)],
     ])  # fmt: skip
     return _sym(L)
 
@@ -70,11 +81,12 @@ def lmi46_terms(aug: Augmented, i: int, K: np.ndarray, P: np.ndarray, T: np.ndar
     return dict(De=De, Be=Be, Ge=Ge, Wk=Wk, Wbk=Wbk, Gbe=Gbe, M=M, Mb=aug.Mbar[i], C=aug.Cbar[:, :n])
 
 
-def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0):
+def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0, const=1.0):
     """Left side of (46) (Theorem 3) or (79) (Theorem 5) for rule i, gain K_j, observer Q_i.
 
     ``alpha > 0`` adds the decay-rate term ``2 alpha Pbar`` to the (3,3) block (the
     conditioned variant's design constraint); the recorded certificate uses ``alpha = 0``.
+    ``const`` multiplies every term that involves neither Pbar nor Q (module docstring).
     """
     t = lmi46_terms(aug, i, K, P, T)
     Ab, Cb = aug.Abar[i], aug.Cbar
@@ -83,28 +95,27 @@ def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0):
         t[k] for k in ("C", "De", "Be", "Ge", "Wk", "Wbk", "Gbe", "M", "Mb")
     )
     n, ld, nbar, l2 = aug.n, aug.ld, aug.nbar, M.shape[1]
-    T11 = -sigma * P @ P + Wbk.T @ TPT @ Wbk
-    T13 = -P @ Be - Wk.T @ P @ Ge - Wbk.T @ TPT @ Gbe + C.T @ De
+    T11 = -const * sigma * P @ P + Wbk.T @ TPT @ Wbk
+    T13 = const * (-P @ Be - Wk.T @ P @ Ge + C.T @ De) - Wbk.T @ TPT @ Gbe
     T33 = (
         Pbar @ T @ Ab
         + Ab.T @ T.T @ Pbar
         - Q @ Cb
         - Cb.T @ Q.T
-        + Ge.T @ P @ Ge
+        + const * (Ge.T @ P @ Ge + De.T @ De)
         + Gbe.T @ TPT @ Gbe
-        + De.T @ De
     )
     T33 = T33 + 2 * alpha * Pbar
     Z = np.zeros
     rows = [
         [T11, Z((n, ld)), T13],
-        [Z((ld, n)), -(gamma1**2) * np.eye(ld), Z((ld, nbar))],
+        [Z((ld, n)), -const * (gamma1**2) * np.eye(ld), Z((ld, nbar))],
         [T13.T, Z((nbar, ld)), T33],
     ]
     if l2:
-        T14 = Wk.T @ P @ M + Wbk.T @ TPT @ Mb
-        T34 = -Ge.T @ P @ M - Gbe.T @ TPT @ Mb
-        T44 = M.T @ P @ M + Mb.T @ TPT @ Mb - gamma2**2 * np.eye(l2)
+        T14 = const * (Wk.T @ P @ M) + Wbk.T @ TPT @ Mb
+        T34 = -const * (Ge.T @ P @ M) - Gbe.T @ TPT @ Mb
+        T44 = const * (M.T @ P @ M - gamma2**2 * np.eye(l2)) + Mb.T @ TPT @ Mb
         rows[0].append(T14)
         rows[1].append(Z((ld, l2)))
         rows[2].append(T34)
@@ -112,13 +123,23 @@ def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0):
     return _sym(np.block(rows))
 
 
+def sliding_mismatch(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """``J1^T T^T Pbar - N Cbar``: how far the sliding surface (20) is from holding (the E of (55))."""
+    return aug.J1.T @ T.T @ Pbar - N @ aug.Cbar
+
+
+def diffusion_coupling(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray) -> np.ndarray:
+    """``J1^T T^T Pbar T Wbar_i``: the diffusion seen by the sliding variable (the E of (64))."""
+    return aug.J1.T @ T.T @ Pbar @ T @ aug.Wbar[i]
+
+
 def lmi55(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray, theta: float):
-    E = aug.J1.T @ T.T @ Pbar - N @ aug.Cbar
+    E = sliding_mismatch(aug, T, Pbar, N)
     return _sym(np.block([[-theta * np.eye(aug.nbar), E.T], [E, -np.eye(aug.lf)]]))
 
 
 def lmi64(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray, theta: float):
-    E = aug.J1.T @ T.T @ Pbar @ T @ aug.Wbar[i]
+    E = diffusion_coupling(aug, i, T, Pbar)
     return _sym(np.block([[-theta * np.eye(aug.n), E.T], [E, -np.eye(aug.lf)]]))
 
 

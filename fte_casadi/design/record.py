@@ -116,6 +116,10 @@ class Design:
     certified: bool = True
     status: list = field(default_factory=list)  # what was done: solver statuses, retries, fallbacks
     x_ref: np.ndarray | None = None
+    #: conic solves per step (the rest of the design is numpy: centring and phase-1 decisions)
+    solves: dict = field(default_factory=dict)
+    #: the observer decay rate alpha, the largest feasible one, and why alpha is what it is
+    observer: dict = field(default_factory=dict)
 
     # -- convenience ---------------------------------------------------------------------
     @property
@@ -164,6 +168,8 @@ class Design:
         out["names"] = self.names
         out["certified"] = bool(self.certified)
         out["status"] = list(self.status)
+        out["solves"] = {k: int(v) for k, v in self.solves.items()}
+        out["observer"] = _jsonable(self.observer)
         return out
 
     def to_json(self) -> str:
@@ -233,6 +239,8 @@ class Design:
             names=dict(doc.get("names", {})),
             certified=bool(doc.get("certified", True)),
             status=list(doc.get("status", [])),
+            solves=dict(doc.get("solves", {})),
+            observer=dict(doc.get("observer", {})),
             **kw,
         )
 

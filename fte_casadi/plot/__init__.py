@@ -7,3 +7,5 @@ from .figures import output_means_figure as output_means_figure
 from .figures import output_paths_figure as output_paths_figure
 from .figures import state_figure as state_figure
 from .figures import write_figures as write_figures
+from .frontier import frontier_figure as frontier_figure
+from .frontier import frontier_plot as frontier_plot

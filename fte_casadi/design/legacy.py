@@ -1,4 +1,10 @@
-"""The LMI design of Section 4.3 (Theorems 3/4; Theorem 5 when the diffusion carries u, f or d2).
+"""The design formulation of fte_casadi 0.1, kept only as the baseline of ``fte bench``.
+
+It was replaced by :mod:`fte_casadi.design.conditioned` (issue #9): the formulation below is not
+unique (N, Q_i, Y_j are free at its optimum, so different machines land on different points),
+needs about 30 solves (a grid over scales of Pbar x decay rates x a bisection on theta) and
+takes seconds. ``fte bench`` runs :func:`legacy_design` beside today's design in the same process
+so that the speed-up it reports is measured, not remembered. Nothing else uses this module.
 
 Corrections of the printed LMIs are listed in :mod:`fte_casadi.design.certify`.
 
@@ -54,9 +60,9 @@ import numpy as np
 
 from ..errors import InfeasibleDesignError
 from .augment import Augmented
-from .certify import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64
+from .certify import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64, ts_max
 
-__all__ = ["Step3", "Step5", "solve_step3", "solve_step5", "SOLVER_SETTINGS"]
+__all__ = ["legacy_design"]
 
 #: solver settings, passed explicitly to every solve
 SOLVER_SETTINGS = {
@@ -457,3 +463,48 @@ def solve_step5(aug, params, P, K, T, variant, solver, alpha=0.0, theta_slack=2.
                  f"theta_min = {theta_min:.4g} (to 1 part in {10 ** (hi - lo):.3g}), used theta = {th:.4g}")  # fmt: skip
     notes += sorted(set(prob.warned))
     return Step5(Pb, Q, N, th, status, total, a, notes)
+
+
+def _default_alpha_step5(ts, aug, params, P, K, T, solver):
+    """Step 5 with the 0.1 default decay rate ``a0 = max(0.05 rho(A), 0.4 s_cl)``, trying a0 and 2 a0."""
+    n = aug.n
+    rho = max(float(np.max(np.abs(np.linalg.eigvals(lm.A)))) for lm in ts.local_models)
+    s_cl = -max(float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ Kj).real))
+                for i in range(aug.r) for Kj in K)  # fmt: skip
+    a0 = max(0.05 * rho, 0.4 * max(s_cl, 0.0))
+    best, best_ts, err = None, -1.0, None
+    for a in (a0, 2 * a0):
+        try:
+            s5 = solve_step5(aug, params, P, K, T, "conditioned", solver, alpha=a)
+        except InfeasibleDesignError as exc:
+            err = exc
+            if "time budget" in str(exc):
+                break
+            continue
+        R = [T @ aug.Abar[i] - np.linalg.solve(s5.Pbar, s5.Q[i]) @ aug.Cbar for i in range(aug.r)]
+        t = ts_max(R)
+        if t > best_ts:
+            best, best_ts = s5, t
+    if best is None:
+        raise err
+    return best
+
+
+def legacy_design(ts, solver: str = "CLARABEL") -> dict:
+    """The 0.1 conditioned design of a T-S model with the plant's default parameters, and its certificate."""
+    from .augment import augment
+    from .certify import certificate
+    from .uio import uio_gain
+
+    defaults = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}
+    params = {k: float(ts.plant.design_defaults.get(k, v)) for k, v in defaults.items()}
+    aug = augment(ts.local_models, ts.C, ts.Df)
+    H, T = uio_gain(aug)
+    s3 = solve_step3(aug, params, "conditioned", solver)
+    P = np.linalg.inv(s3.X)
+    K = [Y @ P for Y in s3.Y]
+    s5 = _default_alpha_step5(ts, aug, params, P, K, T, solver)
+    L1 = [np.linalg.solve(s5.Pbar, Q) for Q in s5.Q]
+    R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
+    point = dict(X=s3.X, K=K, P=P, T=T, Pbar=s5.Pbar, Q=s5.Q, N=s5.N, theta=s5.theta, R=R, L1=L1)
+    return {"checks": certificate(aug, point, params), "K": K, "L1": L1, "N": s5.N, "alpha": s5.alpha}

@@ -1,0 +1,559 @@
+"""The conditioned design (the default): the printed LMIs, posed to be well scaled, unique and cheap.
+
+The certificate is exactly the printed one ((45), (46), (55), (64), or (78)-(81) for Theorem 5,
+recomputed at the end by :func:`fte_casadi.design.certify.certificate`); what changes is how the
+solver is asked for a point. Every choice below is an equivalent reformulation or an added
+constraint, never a changed certificate.
+
+Step 3 — LMI (45) for X and the gains
+    *Common gain.* (45) has no term coupling different gains: a Y_j that satisfies (45) for
+    every rule i is itself a valid gain for every j, so one gain ``K`` (``K_j = K``) loses
+    nothing and gives r LMIs instead of r^2 near-duplicates.
+    *Input scaling.* ``u = Su u~`` with ``Su`` making every column of B unit length (the
+    three-tank's B entries are 6.5e-3): ``B Y = (B Su)(Su^-1 Y)``, an exact change of variables.
+    *Homogenisation.* ``X = X'/s, Y = Y'/s``; ``s (45)(X'/s, Y'/s)`` is affine in ``(X', Y', s)``
+    (the builders multiply their constant terms by ``s``), so the scale of X is an unknown of
+    the one solve, and ``I <= X' <= 1e4 I`` bounds cond(X) without fixing its size.
+    *Objective.* ``min t`` with ``||Y'||_2 <= t``: since ``X' >= I``, ``||K~|| <= t`` — the
+    smallest gain the LMI allows, which keeps K implementable.
+
+Step 5 — LMIs (46), (55), (64) for Pbar, Q_i, N, theta
+    *Congruence by X*: ``diag(X, I) (46) diag(X, I)`` turns ``-sigma P P`` into ``-sigma I``
+    and ``-P Be`` into ``-Be``, so the fixed P = X^-1 no longer enters squared.
+    *Finsler*: for a given Pbar, ``-Q_i Cbar - Cbar^T Q_i^T`` can be restricted to
+    ``Q_i = rho_i Cbar^T / 2`` without losing feasibility (Finsler's lemma), so the observer
+    gains are ``L_i1 = (rho_i / 2) Pbar^-1 Cbar^T``.
+    *N eliminated*: for a given Pbar, ``N = J1^T T^T Pbar Cbar^+`` is the exact minimiser of
+    ``||J1^T T^T Pbar - N Cbar||_2``, the mismatch of (55).
+    *Homogenisation*: ``Pbar = Pt/s`` with ``I <= Pt <= kappa I`` (kappa = 1e4 bounds
+    cond(Pbar)); (55) and (64) in the balanced form ``||E(Pt)|| <= tau`` so that
+    ``theta = (tau/s)^2``; the scale of Pbar is an unknown instead of a grid.
+    *Decay rate*: ``2 alpha Pbar`` in the (3,3) block makes every R_i decay at least as fast as
+    ``exp(-alpha t)``; alpha is a DPP parameter (re-solved without re-canonicalisation).
+    *Objective*: ``min sum_i rho_i + tau`` (observer gain scale and sliding mismatch, both in
+    the normalised units of Pt).
+    *Observer speed*: by default alpha is ``ALPHA_FRACTION`` times the largest alpha for which
+    (46) is feasible with ``I <= Pt <= kappa I`` (found by bisection, each trial one solve of the
+    same problem), lowered when needed so that ``ts_max >= TS_FACTOR * sample_time``.
+
+Margins are per diagonal block and relative to that block's own size (``MARGIN`` of sigma, of
+gamma1^2, of Pt >= I, ...; ``2 MARGIN`` in the conic solve, ``MARGIN`` in the centring, so that
+the solver's point starts the centring strictly inside). After each conic solve,
+:func:`fte_casadi.design.sdp.centre` moves to the unique central-path point with relative gap
+``ETA``: the design is a smooth function of the plant and does not depend on the solver or the
+machine beyond round-off.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InfeasibleDesignError
+from .augment import Augmented
+from .certify import diffusion_coupling, lmi45, lmi46, sliding_mismatch, ts_max
+from .sdp import (
+    AffineLMI,
+    CentringError,
+    ConicProblem,
+    Layout,
+    MarginLMI,
+    SolveResult,
+    Var,
+    centre,
+    margin_lmi,
+    phase1,
+)
+
+__all__ = ["Step3", "Step5", "step3", "step5", "input_scaling", "alpha_max", "MARGIN", "KAPPA", "ETA",
+           "ALPHA_FRACTION", "TS_FACTOR", "SolverFailedError"]  # fmt: skip
+
+#: relative margin of every diagonal block (the conic solve uses twice this)
+MARGIN = 1e-3
+#: bound on cond(X') and cond(Pt) (the normalised X and Pbar)
+KAPPA = 1e4
+#: relative duality gap of the centred point
+ETA = 0.5
+#: default observer decay rate as a fraction of the largest feasible one
+ALPHA_FRACTION = 0.9
+#: the default decay rate keeps ts_max >= TS_FACTOR * sample_time
+TS_FACTOR = 2.0
+#: relative precision of the bisection on alpha
+ALPHA_RTOL = 0.1
+#: phase 1 bounds the gains by rho_i <= RHO_CAP kappa max ||T Abar_i|| / sigma_min(Cbar)^2 (never active in a design)
+RHO_CAP = 1e3
+
+
+class SolverFailedError(InfeasibleDesignError):
+    """The SDP solver failed numerically (twice: as posed and on rescaled data); not an infeasibility."""
+
+
+@dataclass
+class Step3:
+    X: np.ndarray
+    K: np.ndarray
+    status: str
+    solves: int
+    seconds: float
+    notes: list = field(default_factory=list)
+
+
+@dataclass
+class Step5:
+    Pbar: np.ndarray
+    Q: list
+    N: np.ndarray
+    theta: float
+    alpha: float
+    status: str
+    solves: int
+    seconds: float
+    observer: dict
+    notes: list = field(default_factory=list)
+
+
+def input_scaling(aug: Augmented) -> np.ndarray:
+    """``Su``: diagonal, making the largest column norm of the B_i of each input 1 (1 for a zero column)."""
+    norms = np.max([np.linalg.norm(B[: aug.n], axis=0) for B in aug.Bbar], axis=0)
+    return np.diag(np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0))
+
+
+def _diag(sizes, values) -> np.ndarray:
+    return np.diag(np.concatenate([np.full(k, float(v)) for k, v in zip(sizes, values)]))
+
+
+def _normalisation(layout: Layout, name: str, size: int) -> list[MarginLMI]:
+    eye = np.eye(size)
+    return [
+        margin_lmi(f"{name} >= I", layout, lambda **u: eye - u[name], margin=lambda **u: eye),
+        margin_lmi(
+            f"{name} <= {KAPPA:g} I",
+            layout,
+            lambda **u: u[name] - KAPPA * eye,
+            margin=lambda **u: KAPPA * eye,
+        ),
+    ]
+
+
+def _balanced(E: np.ndarray, tau) -> np.ndarray:
+    """``[[-tau I, E^T], [E, -tau I]] <= 0``, i.e. ``||E||_2 <= tau``."""
+    a, b = E.shape[1], E.shape[0]
+    return np.block([[-tau * np.eye(a), E.T], [E, -tau * np.eye(b)]])
+
+
+def _balanced_margin(tau, a: int, b: int) -> np.ndarray:
+    """The relative margin of :func:`_balanced`: ``||E||_2 <= (1 - m) tau``."""
+    return tau * np.eye(a + b)
+
+
+def _accept(res: SolveResult, lmis, p: float) -> bool:
+    """A solver's point counts when it is strictly inside ``lmis`` (the LMIs with the centring's
+    margins, half the conic solve's), checked with numpy, whatever the solver's status says."""
+    if res.v is None or res.status not in ("optimal", "optimal_inaccurate") or not np.all(np.isfinite(res.v)):
+        return False
+    for L in lmis:
+        try:
+            np.linalg.cholesky(-L.value(res.v, p))
+        except np.linalg.LinAlgError:
+            return False
+    return True
+
+
+def _into_normalisation(layout: Layout, v: np.ndarray, name: str) -> np.ndarray:
+    """``v`` with the eigenvalues of the normalised matrix ``name`` clipped into ``[1 + 3 MARGIN, KAPPA (1 - 3 MARGIN)]``.
+
+    A first-order solver's point can miss the normalisation by its tolerance; after this, the
+    normalisation holds strictly and phase 1 can take the point as it is.
+    """
+    u = layout.unpack(v)
+    w, V = np.linalg.eigh(u[name])
+    M = (V * np.clip(w, 1 + 3 * MARGIN, KAPPA * (1 - 3 * MARGIN))) @ V.T
+    out = v.copy()
+    n = M.shape[0]
+    out[layout.index(name)] = M[np.triu_indices(n)]
+    return out
+
+
+def _start(res: SolveResult, layout: Layout, name: str, soft, hard, note: list) -> np.ndarray | None:
+    """A strictly feasible point of ``soft`` and ``hard`` from the solver's answer, or None.
+
+    The solver's point is taken if it is strictly feasible; otherwise (an approximate point, e.g.
+    SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.sdp.phase1`
+    decides, in numpy, from there. A status that is neither a point nor infeasibility is a failure.
+    """
+    if res.v is None or res.status not in ("optimal", "optimal_inaccurate") or not np.all(np.isfinite(res.v)):
+        return None
+    if _accept(res, list(soft) + list(hard), 0.0):
+        return res.v
+    v = _into_normalisation(layout, res.v, name)
+    try:
+        out = phase1(list(soft), list(hard), v)
+    except CentringError:
+        return None
+    if out is not None:
+        note.append(
+            f"the solver's point ({res.status}) missed the LMIs by its tolerance; phase 1 in numpy repaired it"
+        )
+    return out
+
+
+def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError:
+    if res.infeasible:
+        return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
+    other = "SCS" if solver == "CLARABEL" else "CLARABEL"
+    return SolverFailedError(
+        f"{step}: the solver {solver} failed numerically ({res.status}), also on rescaled data; this is a "
+        f"numerical failure, not a proof of infeasibility: try solver='{other}', or {hint}"
+    )
+
+
+# -- step 3 ----------------------------------------------------------------------------------
+def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
+    n, m, p, ld = aug.n, aug.m, aug.p, aug.ld
+    sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
+    layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("s", ()), Var("t", ()))
+    D = _diag([n, n, p, ld], [sg, 0.0, 1.0, g**2 - g1**2])
+    lmis = [
+        margin_lmi(f"(45) rule {i + 1}", layout, lambda X, Y, s, t, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
+                   margin=lambda X, Y, s, t: s * D)
+        for i in range(aug.r)
+    ]  # fmt: skip
+    lmis += _normalisation(layout, "X", n)
+    lmis.append(margin_lmi("||Y'|| <= t", layout, lambda X, Y, s, t: _balanced(Y, t),
+                           margin=lambda X, Y, s, t: _balanced_margin(t, m, n)))  # fmt: skip
+    c = np.zeros(layout.size)
+    c[layout.index("t")] = 1.0
+    return layout, lmis, c
+
+
+def step3(aug: Augmented, params: dict, solver: str) -> Step3:
+    """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
+
+    One feasibility solve gives a strictly feasible point; :func:`~fte_casadi.design.sdp.centre`
+    then minimises ``t`` along the central path to the unique centred point.
+    """
+    Su = input_scaling(aug)
+    layout, family, c = _step3_problem(aug, params, Su)
+    prob = ConicProblem(layout, [L.at(2 * MARGIN) for L in family[:-1]])  # without the epigraph of t
+    res = prob.solve(solver)
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    lmis = [L.at(MARGIN) for L in family]
+    repaired: list[str] = []
+    v0 = _start(res, layout, "X", lmis[: aug.r], lmis[aug.r : aug.r + 2], repaired)
+    if v0 is None:
+        hint = f"see the bounds on gamma and sigma (gamma = {g:g}, gamma1 = {g1:g}, sigma = {sg:g})"
+        raise _fail("LMI (45)", res, solver, hint)
+    v0 = v0.copy()  # t starts well above ||Y'||: the epigraph is then strictly feasible
+    v0[layout.index("t")] = 2.0 * np.linalg.norm(layout.unpack(v0)["Y"], 2) + 1.0
+    res = SolveResult(res.status, v0, res.seconds, res.rescaled, res.warned)
+    floor = 0.01 * max(np.linalg.norm(A[: aug.n, : aug.n], 2) for A in aug.Abar)
+    try:
+        cen = centre(lmis, c, res.v, eta=ETA, floor=floor)
+    except CentringError as exc:
+        raise SolverFailedError(
+            f"step 3: the centring of the solver's point failed ({exc}); try the other solver"
+        ) from None
+    u = layout.unpack(cen.v)
+    X = u["X"] / u["s"]
+    K = Su @ u["Y"] @ np.linalg.inv(u["X"])
+    notes = [
+        f"step 3: one common gain K (K_j = K), inputs scaled by Su = diag({', '.join(f'{v:.4g}' for v in np.diag(Su))}), "
+        f"X = X'/s with I <= X' <= {KAPPA:g} I, min ||Y'||: {prob.solves} feasibility solve ({res.status}"
+        + (", on rescaled data" if res.rescaled else "") + f"), then {cen.newton_steps} Newton steps to the centred "
+        f"point (gap {ETA:g} of the objective)"
+    ]  # fmt: skip
+    notes += [f"step 3: {solver} warned: {w!r}" for w in res.warned] + [f"step 3: {r}" for r in repaired]
+    return Step3(X, K, res.status, prob.solves, prob.seconds, notes)
+
+
+# -- step 5 ----------------------------------------------------------------------------------
+def _step5_problem(aug: Augmented, params: dict, X, K, T):
+    """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule."""
+    n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.lf
+    sg, g1 = params["sigma"], params["gamma1"]
+    g2 = params.get("gamma2", params["gamma"])
+    P = np.linalg.inv(X)
+    Cb = aug.Cbar
+    Cp = np.linalg.pinv(Cb)
+    layout = Layout(Var("Pt", (nbar, nbar), True), Var("s", ()), Var("rho", (r,)), Var("tau", ()))
+    l2 = aug.Mbar[0].shape[1]
+    k46 = n + ld + nbar + l2
+    Dx = np.eye(k46)
+    Dx[:n, :n] = X
+    # The d block of (46)/(79) is decoupled (-gamma1^2 I, zero off its diagonal): it holds iff
+    # s > 0, which the x block already demands; the solve leaves it out (-1e-4 for the
+    # manipulator, it only made the problem badly scaled), the certificate keeps it.
+    keep = np.r_[0:n, n + ld : k46]
+    sub = np.ix_(keep, keep)
+
+    def b46(i):
+        def f(Pt, s, rho, tau):
+            return (Dx @ lmi46(aug, i, K, P, T, Pt, rho[i] * Cb.T / 2, sg, g1, g2, const=s) @ Dx)[sub]
+
+        return f
+
+    def m46(Pt, s, rho, tau):
+        return _diag([n, nbar, l2], [sg * s, 1.0, g2**2 * s])
+
+    def decay(Pt, s, rho, tau):
+        M = np.zeros((n + nbar + l2, n + nbar + l2))
+        M[n : n + nbar, n : n + nbar] = 2 * Pt
+        return M
+
+    feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46) for i in range(r)]
+    feas += _normalisation(layout, "Pt", nbar)
+
+    def N_of(Pt):
+        return aug.J1.T @ T.T @ Pt @ Cp
+
+    rest = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
+                       margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf))]  # fmt: skip
+    rest += [margin_lmi(f"(64) rule {i + 1}", layout,
+                        lambda Pt, s, rho, tau, i=i: _balanced(diffusion_coupling(aug, i, T, Pt), tau),
+                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, n, lf))
+             for i in range(r)]  # fmt: skip
+    c = np.zeros(layout.size)
+    c[layout.index("rho")] = 1.0
+    c[layout.index("tau")] = 1.0
+    return layout, feas, rest, c
+
+
+class _Step5:
+    """Step 5 built once per design: the LMIs, one conic solve, and deterministic decisions in alpha.
+
+    The one conic solve is the feasibility of (46) with the normalisation at ``alpha = 0``. Every
+    further question "is (46) feasible at alpha?" is answered by :func:`~fte_casadi.design.sdp.phase1`
+    (a barrier method in numpy), started from the last point found feasible: its answer does
+    not depend on the solver, so the default alpha (and hence the design) is the same with
+    Clarabel and SCS. (46) is monotone in alpha (``2 alpha Pt >= 0``): a point feasible at some
+    alpha is a strictly feasible start for the centring at every smaller alpha.
+    """
+
+    def __init__(self, aug, params, X, K, T, solver):
+        self.aug, self.T, self.solver = aug, T, solver
+        self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T)
+        r = aug.r
+        self.feas = ConicProblem(self.layout, [L.at(2 * MARGIN) for L in feas])
+        self.soft = [L.at(MARGIN) for L in feas[:r]]  # (46) per rule: depends on alpha
+        self.fixed = [L.at(MARGIN) for L in feas[r:]]  # the normalisation of Pt
+        self.centring = [L.at(MARGIN) for L in feas + rest]
+        # phase 1 needs bounded gains: rho_i <= RHO_CAP (far above any design's; see module docstring)
+        self.rho_cap = RHO_CAP * KAPPA * max(np.linalg.norm(T @ A, 2) for A in aug.Abar) / max(
+            np.linalg.svd(aug.Cbar, compute_uv=False)[-1] ** 2, 1e-300)  # fmt: skip
+        ir = self.layout.index("rho")
+        self.caps = []
+        for i in range(r):
+            F = np.zeros((self.layout.size, 1, 1))
+            F[ir.start + i, 0, 0] = 1.0
+            self.caps.append(AffineLMI(f"rho_{i + 1} <= cap", np.array([[-self.rho_cap]]), F))
+        self.notes: list[str] = []
+        self.points: dict[float, np.ndarray] = {}  # alpha -> a strictly feasible point there
+        self.newton = 0
+        self.decisions = 0
+
+    @property
+    def solves(self) -> int:
+        return self.feas.solves
+
+    @property
+    def seconds(self) -> float:
+        return self.feas.seconds
+
+    def first(self) -> SolveResult:
+        """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else."""
+        res = self.feas.solve(self.solver, 0.0)
+        if res.v is not None and np.all(np.isfinite(res.v)):
+            v = res.v.copy()
+            ir = self.layout.index("rho")
+            v[ir] = np.minimum(v[ir], 0.5 * self.rho_cap)
+            res_c = SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+            start = _start(res_c, self.layout, "Pt", self.soft, self.fixed + self.caps, self.notes)
+            if start is not None:
+                self.points[self.reach(start)] = start
+        return res
+
+    def reach(self, v: np.ndarray) -> float:
+        """The largest alpha at which the point ``v`` itself satisfies every (46): with
+        ``-F(v) = L L^T`` and the decay term ``alpha G(v)``, ``1 / lambda_max(L^-1 G(v) L^-T)`` (exact)."""
+        best = np.inf
+        for Lm in self.soft:
+            Lc = np.linalg.cholesky(-Lm.value(v, 0.0))
+            G = np.tensordot(v, Lm.G, 1)
+            Li = np.linalg.inv(Lc)
+            lam = float(np.linalg.eigvalsh(Li @ G @ Li.T)[-1])
+            if lam > 0:
+                best = min(best, 1.0 / lam)
+        return best * (1 - 1e-9)
+
+    def feasible(self, alpha: float) -> bool:
+        """Is (46) with ``I <= Pt <= kappa I`` strictly feasible at ``alpha``? (phase 1 in numpy)
+
+        A known point whose reach covers ``alpha`` answers without a new phase 1. The answer is a
+        fact about the LMIs, so the sequence of questions the bisection asks, and hence the
+        default alpha, does not depend on which point happened to answer it."""
+        if any(r >= alpha for r in self.points):
+            return True
+        below = [a for a in self.points if a <= alpha]
+        if not below:
+            return False
+        try:
+            v = phase1([L.at(alpha) for L in self.soft], self.fixed + self.caps, self.points[max(below)])
+        except CentringError as exc:
+            self.notes.append(f"step 5: phase 1 at alpha = {alpha:.4g} failed ({exc}); counted as infeasible")
+            return False
+        self.decisions += 1
+        if v is None:
+            return False
+        self.points[max(alpha, self.reach(v))] = v
+        return True
+
+    def start(self, alpha: float) -> np.ndarray | None:
+        """A strictly feasible point for the centring at ``alpha`` (from a feasible alpha' >= alpha)."""
+        above = [a for a in self.points if a >= alpha]
+        if not above:
+            return None
+        v = self.points[min(above)].copy()
+        Pt = self.layout.unpack(v)["Pt"]
+        aug, T, Cp = self.aug, self.T, np.linalg.pinv(self.aug.Cbar)
+        E = [sliding_mismatch(aug, T, Pt, aug.J1.T @ T.T @ Pt @ Cp)] + [
+            diffusion_coupling(aug, i, T, Pt) for i in range(aug.r)
+        ]
+        v[self.layout.index("tau")] = 2.0 * max(np.linalg.norm(e, 2) for e in E) + 1.0
+        return v
+
+    def design(self, alpha: float) -> dict | None:
+        """The centred design at ``alpha``, or None when (46) is not known feasible there."""
+        if self.start(alpha) is None and not self.feasible(alpha):
+            return None
+        v0 = self.start(alpha)
+        try:
+            cen = centre([L.at(alpha) for L in self.centring], self.c, v0, eta=ETA)
+        except CentringError as exc:
+            self.notes.append(f"step 5: centring failed at alpha = {alpha:.4g} ({exc})")
+            return None
+        self.newton += cen.newton_steps
+        u = self.layout.unpack(cen.v)
+        aug, T, s = self.aug, self.T, u["s"]
+        Pbar = u["Pt"] / s
+        Q = [u["rho"][i] * aug.Cbar.T / (2 * s) for i in range(aug.r)]
+        N = aug.J1.T @ T.T @ Pbar @ np.linalg.pinv(aug.Cbar)
+        L1 = [np.linalg.solve(Pbar, Qi) for Qi in Q]
+        R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
+        return dict(Pbar=Pbar, Q=Q, N=N, theta=float((u["tau"] / s) ** 2), R=R, ts_max=ts_max(R))
+
+
+def alpha_max(prob: _Step5, start: float, rtol: float = ALPHA_RTOL) -> tuple[float, float]:
+    """``(lo, hi)``: (46) with ``I <= Pt <= kappa I`` is feasible at ``lo`` and not at ``hi``
+    (``hi / lo <= 1 + rtol``); bracketing by factors of 4 from ``start``, then bisection in log
+    scale, every decision by :meth:`_Step5.feasible`. The trials depend on the answers only, not
+    on the points found. ``hi`` is ``inf`` when every trial up to ``start * 4^12`` was feasible;
+    ``lo = 0`` when no trial down to ``1e-6 start`` was."""
+    lo, a = 0.0, start
+    for _ in range(12):
+        if prob.feasible(a):
+            lo, a = a, 4 * a
+        else:
+            break
+    else:
+        return lo, float("inf")
+    hi = a
+    if lo == 0.0:
+        while hi > 1e-6 * start:
+            a = hi / 8
+            if prob.feasible(a):
+                lo = a
+                break
+            hi = a
+        else:
+            return 0.0, hi
+    while hi / lo > 1 + rtol:
+        mid = float(np.sqrt(lo * hi))
+        if prob.feasible(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo, hi
+
+
+def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | None = None,
+          sample_time: float | None = None) -> Step5:  # fmt: skip
+    """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate."""
+    prob = _Step5(aug, params, X, K, T, solver)
+    res0 = prob.first()
+    if not prob.points:
+        raise _fail(f"LMI (46) with cond(Pbar) <= {KAPPA:g}", res0, solver,
+                    "raise sigma within what (45) allows")  # fmt: skip
+    n = aug.n
+    decays = [
+        -float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ K).real))
+        for i in range(aug.r)
+    ]
+    start = max(min(decays), 1e-6)
+    observer: dict = {"sample_time": sample_time}
+    if alpha is None:
+        lo, hi = alpha_max(prob, start)
+        a = ALPHA_FRACTION * lo if np.isfinite(hi) else lo
+        observer.update(alpha_max=lo, alpha_max_upper=hi)
+        why = (f"{ALPHA_FRACTION:g} x the largest decay rate for which (46) is feasible with cond(Pbar) <= {KAPPA:g} "
+               f"(alpha_max in [{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
+    else:
+        a = float(alpha)
+        why = "set by the user"
+    pt = prob.design(a)
+    if pt is None and alpha is not None:
+        lo, hi = alpha_max(prob, start)
+        raise InfeasibleDesignError(
+            f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which (46) is "
+            f"feasible with cond(Pbar) <= {KAPPA:g} is about {lo:.4g}; lower alpha to <= "
+            f"{_nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
+        )
+    if pt is None:
+        raise SolverFailedError(
+            f"step 5: no centred design found ({'; '.join(prob.notes[-2:])}); try the other solver"
+        )
+    if alpha is None and sample_time is not None and pt["ts_max"] < TS_FACTOR * sample_time:
+        a, pt, why = _cap_for_sample_time(prob, a, pt, why, sample_time)
+    observer.update(alpha=a, why=why, ts_max=pt["ts_max"])
+    notes = [
+        f"step 5: Q_i = rho_i Cbar^T / 2 (Finsler), N = J1^T T^T Pbar Cbar^+, Pbar = Pt/s with I <= Pt <= {KAPPA:g} I, "
+        f"min sum rho_i + tau; observer decay rate alpha = {a:.4g} ({why}); {prob.solves} conic solve "
+        f"({res0.status}" + (", on rescaled data" if res0.rescaled else "") + f") at alpha = 0, then "
+        f"{prob.decisions} phase-1 decisions and {prob.newton} centring steps in numpy"
+    ] + prob.notes + [f"step 5: {solver} warned: {w!r}" for w in res0.warned]  # fmt: skip
+    return Step5(
+        pt["Pbar"], pt["Q"], pt["N"], pt["theta"], a, res0.status, prob.solves, prob.seconds, observer, notes
+    )
+
+
+def _cap_for_sample_time(prob: _Step5, a: float, pt: dict, why: str, sample_time: float):
+    """The largest alpha in [0, a] whose centred design has ``ts_max >= TS_FACTOR * sample_time``."""
+    target = TS_FACTOR * sample_time
+    p0 = prob.design(0.0)
+    if p0 is None or p0["ts_max"] < target:
+        return (
+            a,
+            pt,
+            why
+            + f"; even alpha = 0 gives ts_max below {TS_FACTOR:g} x the sample time {sample_time:g}: kept",
+        )
+    lo, hi, best = 0.0, a, p0
+    for _ in range(8):
+        mid = 0.5 * (lo + hi)
+        pm = prob.design(mid)
+        if pm is not None and pm["ts_max"] >= target:
+            lo, best = mid, pm
+        else:
+            hi = mid
+        if hi - lo <= ALPHA_RTOL * hi:
+            break
+    why += f"; lowered to {lo:.4g} so that ts_max = {best['ts_max']:.3g} >= {TS_FACTOR:g} x the sample time {sample_time:g}"
+    return lo, best, why
+
+
+def _nice_floor(v: float) -> float:
+    """Two significant digits, rounded down."""
+    if not v > 0:
+        return 0.0
+    e = int(np.floor(np.log10(v))) - 1
+    return float(np.floor(v / 10.0**e) * 10.0**e)

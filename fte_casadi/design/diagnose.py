@@ -1,0 +1,118 @@
+"""What is feasible: the bounds an infeasible design names, and the frontier of ``--explore``.
+
+gamma and sigma enter LMI (45) linearly (``(gamma1^2 - gamma^2) I`` in its d block, ``+ sigma I``
+in its first block), so one SDP each gives
+
+- ``gamma_min(sigma, gamma1)``: the smallest gamma for which (45) is feasible (``min g`` with
+  ``g = gamma^2`` as an unknown), and
+- ``sigma_max(gamma, gamma1)``: the largest sigma for which it is (``gamma = inf``: the d block
+  dropped, the supremum over every gamma).
+
+Both are posed with the same per-block margins as the design, so a value slightly inside them
+is feasible with margin. A suggestion is only ever printed after the whole design (both steps
+and the certificate) has been run at the suggested value and certified.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .augment import Augmented
+from .certify import lmi45
+from .conditioned import MARGIN, input_scaling
+from .sdp import ConicProblem, Layout, Var, affine_lmi
+
+__all__ = ["gamma_min", "sigma_max", "nice_ceil", "nice_floor", "FrontierPoint"]
+
+
+def nice_ceil(v: float) -> float:
+    """``v`` rounded up to two significant digits."""
+    e = math.floor(math.log10(v)) - 1
+    return float(math.ceil(v / 10.0**e * (1 - 1e-12)) * 10.0**e)
+
+
+def nice_floor(v: float) -> float:
+    """``v`` rounded down to two significant digits."""
+    e = math.floor(math.log10(v)) - 1
+    return float(math.floor(v / 10.0**e * (1 + 1e-12)) * 10.0**e)
+
+
+def _blocks(aug: Augmented) -> tuple[int, int, int, int]:
+    return aug.n, aug.n, aug.p, aug.ld
+
+
+def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: float):
+    """(45) for every rule with one unknown scalar: ``g = gamma^2`` (sigma given) or ``sigma`` (gamma given).
+
+    ``gamma=None`` with ``sigma=None`` means sigma unknown and gamma infinite (d block dropped).
+    Returns (layout, lmis, objective) of ``min g`` or ``max sigma``.
+    """
+    n, m, p, ld = aug.n, aug.m, aug.p, aug.ld
+    Su = input_scaling(aug)
+    layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("q", ()))
+    k = 2 * n + p + ld
+    keep = np.arange(k) if gamma is not None or sigma is not None else np.arange(2 * n + p)
+    Ex = np.zeros((k, k))
+    Ex[:n, :n] = np.eye(n)
+    Ed = np.zeros((k, k))
+    Ed[2 * n + p :, 2 * n + p :] = np.eye(ld)
+    sub = np.ix_(keep, keep)
+
+    def b(i):
+        def f(X, Y, q):
+            if sigma is not None:  # q = gamma^2
+                M = lmi45(aug, i, X, Su @ Y, sigma, gamma1, gamma1) - q * Ed
+                marg = np.diag(
+                    np.concatenate([np.full(n, sigma), np.zeros(n), np.ones(p), np.full(ld, gamma1**2)])
+                )
+            else:  # q = sigma
+                M = lmi45(aug, i, X, Su @ Y, 0.0, gamma if gamma is not None else gamma1, gamma1) + q * Ex
+                gap = (gamma**2 - gamma1**2) if gamma is not None else 1.0
+                marg = np.diag(np.concatenate([np.zeros(n), np.zeros(n), np.ones(p), np.full(ld, gap)]))
+            return (M + MARGIN * marg)[sub]
+
+        return f
+
+    lmis = [affine_lmi(f"(45) rule {i + 1}", layout, b(i)) for i in range(aug.r)]
+    lmis.append(affine_lmi("X > 0", layout, lambda X, Y, q: MARGIN * np.eye(n) - X))
+    c = np.zeros(layout.size)
+    c[layout.index("q")] = 1.0 if sigma is not None else -1.0
+    return layout, lmis, c
+
+
+def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple[float | None, str]:
+    """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status."""
+    layout, lmis, c = _problem(aug, sigma, None, gamma1)
+    res = ConicProblem(layout, lmis, c).solve(solver)
+    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+        return None, res.status
+    g2 = layout.unpack(res.v)["q"]
+    return float(math.sqrt(max(g2, gamma1**2))), res.status
+
+
+def sigma_max(aug: Augmented, gamma: float | None, gamma1: float, solver: str) -> tuple[float | None, str]:
+    """The largest sigma with (45) feasible at ``gamma`` (None: gamma infinite), and the status.
+
+    None when (45) is infeasible even at sigma -> 0 (then no sigma helps: gamma must rise)."""
+    layout, lmis, c = _problem(aug, None, gamma, gamma1)
+    res = ConicProblem(layout, lmis, c).solve(solver)
+    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+        return None, res.status
+    s = layout.unpack(res.v)["q"]
+    return (float(s) if s > 0 else None), res.status
+
+
+@dataclass(frozen=True)
+class FrontierPoint:
+    """One sigma of the frontier: the smallest feasible gamma, and the design tried just above it."""
+
+    sigma: float
+    gamma_min: float | None
+    gamma_tried: float | None
+    certified: bool
+    alpha: float | None
+    max_abs_L1: float | None
+    note: str = ""

@@ -1,0 +1,494 @@
+"""LMIs as affine maps of one variable vector, their cvxpy form, and the centring Newton method.
+
+Every LMI of the design is written once, as a numpy function of plain matrices (the builders of
+:mod:`fte_casadi.design.certify`, which also compute the certificates). For a solve, the
+unknowns are packed into one vector ``v`` (:class:`Layout`) and the builder is evaluated at
+``v = 0`` and at the unit vectors, which gives the LMI exactly as ``F(v) = F0 + sum_l v_l F_l``
+(the builders are affine in the unknowns; :func:`affine_lmi` checks it at a random point).
+cvxpy then receives one precomputed affine expression per LMI, which it compiles in a few
+milliseconds; a scalar parameter ``p`` (the observer decay rate) may enter as ``p * G(v)``, which
+keeps the problem DPP so that re-solving for another ``p`` does not re-canonicalise it.
+
+:func:`centre` turns the solver's answer into a point that depends on the data only. The conic
+optimum of an LMI problem is in general neither unique nor well conditioned: solvers stop at
+different points of a flat optimal face, and two machines' floating point lands on different
+points (issue #9). The centred point is the minimiser of the strictly convex function
+``c^T v / mu + sum_k -log det(-F_k(v))`` (a point of the central path) with ``mu`` fixed by
+``mu * nu = eta * (c^T v + floor)``, i.e. the point whose duality gap is the fraction ``eta`` of
+its own objective (``nu`` = the barrier's degree, the sum of the LMI sizes). It is unique when
+the map ``v -> (F_k(v))_k`` is injective, it depends smoothly on the data, and it does not depend
+on the solver: the solver's point only serves as a strictly feasible start for damped Newton
+steps, which converge to it quadratically.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import cvxpy as cp
+import numpy as np
+
+__all__ = [
+    "Var",
+    "Layout",
+    "AffineLMI",
+    "affine_lmi",
+    "MarginLMI",
+    "margin_lmi",
+    "ConicProblem",
+    "SolveResult",
+    "Centred",
+    "CentringError",
+    "centre",
+    "phase1",
+    "SOLVER_SETTINGS",
+]
+
+#: settings passed explicitly to every solve. The solves are feasibility problems whose point only
+#: has to lie strictly inside LMIs with half the margins they were posed with (checked with numpy
+#: afterwards), so the first-order SCS is asked for 1e-6, not for an interior-point accuracy.
+SOLVER_SETTINGS = {
+    "CLARABEL": {"max_iter": 200, "tol_feas": 1e-9, "tol_gap_abs": 1e-9, "tol_gap_rel": 1e-9},
+    "SCS": {"max_iters": 100_000, "eps_abs": 1e-6, "eps_rel": 1e-6},
+}
+
+
+@dataclass(frozen=True)
+class Var:
+    """One unknown: a matrix (``symmetric`` or general), a vector or a scalar (``shape == ()``)."""
+
+    name: str
+    shape: tuple[int, ...]
+    symmetric: bool = False
+
+    @property
+    def size(self) -> int:
+        if self.symmetric:
+            n = self.shape[0]
+            return n * (n + 1) // 2
+        return int(np.prod(self.shape, dtype=int))
+
+
+class Layout:
+    """The unknowns of one problem packed into one vector (upper triangles of symmetric ones)."""
+
+    def __init__(self, *variables: Var):
+        self.vars = tuple(variables)
+        self.offsets = np.cumsum([0] + [v.size for v in self.vars])
+        self.size = int(self.offsets[-1])
+
+    def unpack(self, v: np.ndarray) -> dict:
+        out = {}
+        for var, a in zip(self.vars, self.offsets[:-1]):
+            chunk = np.asarray(v[a : a + var.size], dtype=float)
+            if var.symmetric:
+                n = var.shape[0]
+                M = np.zeros((n, n))
+                M[np.triu_indices(n)] = chunk
+                out[var.name] = M + np.triu(M, 1).T
+            elif var.shape == ():
+                out[var.name] = float(chunk[0])
+            else:
+                out[var.name] = chunk.reshape(var.shape)
+        return out
+
+    def index(self, name: str) -> slice:
+        k = [v.name for v in self.vars].index(name)
+        return slice(int(self.offsets[k]), int(self.offsets[k + 1]))
+
+
+def _sym(M: np.ndarray) -> np.ndarray:
+    return 0.5 * (M + M.T)
+
+
+@dataclass(frozen=True)
+class AffineLMI:
+    """``F(v, p) = F0 + sum_l v_l (F_l + p G_l)  <=  0`` (negative semidefinite), named for messages."""
+
+    name: str
+    F0: np.ndarray
+    F: np.ndarray  # (nv, k, k)
+    G: np.ndarray | None = None  # (nv, k, k), the coefficient of the parameter p
+
+    @property
+    def k(self) -> int:
+        return self.F0.shape[0]
+
+    def at(self, p: float) -> AffineLMI:
+        """The LMI with the parameter fixed at ``p``."""
+        if self.G is None or p == 0.0:
+            return AffineLMI(self.name, self.F0, self.F)
+        return AffineLMI(self.name, self.F0, self.F + p * self.G)
+
+    def value(self, v: np.ndarray, p: float = 0.0) -> np.ndarray:
+        M = self.F0 + np.tensordot(v, self.F, 1)
+        if self.G is not None and p:
+            M = M + p * np.tensordot(v, self.G, 1)
+        return M
+
+
+def _basis(layout: Layout, builder: Callable[..., np.ndarray]):
+    zero = builder(**layout.unpack(np.zeros(layout.size)))
+    F0 = _sym(np.asarray(zero, dtype=float))
+    F = np.empty((layout.size, *F0.shape))
+    e = np.zeros(layout.size)
+    for l in range(layout.size):
+        e[l] = 1.0
+        F[l] = _sym(np.asarray(builder(**layout.unpack(e)), dtype=float)) - F0
+        e[l] = 0.0
+    return F0, F
+
+
+def affine_lmi(
+    name: str,
+    layout: Layout,
+    builder: Callable[..., np.ndarray],
+    param: Callable[..., np.ndarray] | None = None,
+) -> AffineLMI:
+    """The affine map of ``builder(**unknowns)`` (and of the parameter's coefficient ``param``).
+
+    The builder must be affine in the unknowns; this is checked at a random point, so a builder
+    that is not (a bug) fails loudly instead of giving a wrong LMI.
+    """
+    F0, F = _basis(layout, builder)
+    v = np.random.default_rng(12345).standard_normal(layout.size)
+    direct = _sym(np.asarray(builder(**layout.unpack(v)), dtype=float))
+    if not np.allclose(direct, F0 + np.tensordot(v, F, 1), rtol=1e-9, atol=1e-9 * (1 + np.abs(direct).max())):
+        raise RuntimeError(f"internal error: the builder of {name} is not affine in its unknowns")
+    G = None
+    if param is not None:
+        G0, G = _basis(layout, param)
+        if np.any(G0):
+            raise RuntimeError(f"internal error: the parameter term of {name} has a constant part")
+    return AffineLMI(name, F0, F, G)
+
+
+@dataclass(frozen=True)
+class MarginLMI:
+    """An LMI whose builder takes a margin ``m`` as well, affine in it: ``base + m * unit``."""
+
+    base: AffineLMI
+    unit: AffineLMI
+
+    def at(self, m: float) -> AffineLMI:
+        G = self.base.G if self.unit.G is None else self.base.G + m * self.unit.G
+        return AffineLMI(self.base.name, self.base.F0 + m * self.unit.F0, self.base.F + m * self.unit.F, G)
+
+
+def margin_lmi(
+    name: str,
+    layout: Layout,
+    builder: Callable[..., np.ndarray],
+    param: Callable[..., np.ndarray] | None = None,
+    margin: Callable[..., np.ndarray] | None = None,
+) -> MarginLMI:
+    """``builder(**unknowns) + m * margin(**unknowns)``: one extraction of each serves every margin ``m``."""
+    base = affine_lmi(name, layout, builder, param)
+    unit = (
+        affine_lmi(name, layout, margin) if margin is not None else AffineLMI(name, 0 * base.F0, 0 * base.F)
+    )
+    return MarginLMI(base, unit)
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    status: str  # cvxpy's status, or "solver_error (...)"
+    v: np.ndarray | None
+    seconds: float
+    rescaled: bool = False
+    warned: tuple[str, ...] = ()
+
+    @property
+    def optimal(self) -> bool:
+        return self.status == "optimal" and self.v is not None
+
+    @property
+    def infeasible(self) -> bool:
+        return self.status in ("infeasible", "infeasible_inaccurate")
+
+    @property
+    def failed(self) -> bool:
+        """Neither a point nor a certificate of infeasibility: a numerical failure of the solver."""
+        return not self.infeasible and (
+            self.v is None or self.status not in ("optimal", "optimal_inaccurate")
+        )
+
+
+class ConicProblem:
+    """``minimise c^T v`` subject to LMIs, built once in cvxpy (a parameter ``p`` where an LMI has ``G``).
+
+    :meth:`solve` counts the solves. A solver failure (an exception or a status that is neither
+    a point nor a certificate of infeasibility) is retried once on rescaled data: every variable
+    scaled to a unit column norm of the stacked LMI data and every LMI divided by its largest
+    constant entry, which changes the numbers the solver sees but not the problem.
+    """
+
+    def __init__(self, layout: Layout, lmis: Sequence[AffineLMI], c: np.ndarray | None = None):
+        self.layout = layout
+        self.lmis = tuple(lmis)
+        self.c = np.zeros(layout.size) if c is None else np.asarray(c, dtype=float)
+        self.solves = 0
+        self.seconds = 0.0
+        self._built: dict[bool, tuple] = {}
+
+    def _build(self, rescale: bool):
+        if rescale in self._built:
+            return self._built[rescale]
+        nv = self.layout.size
+        cols = np.concatenate([L.F.reshape(nv, -1) for L in self.lmis], axis=1)
+        d = 1.0 / np.maximum(np.linalg.norm(cols, axis=1), 1e-300) if rescale else np.ones(nv)
+        w = cp.Variable(nv)
+        p = cp.Parameter(nonneg=True, value=0.0)
+        cons = []
+        for L in self.lmis:
+            k = L.k
+            scale = 1.0 / max(np.abs(L.F0).max(), 1e-300) if rescale and np.any(L.F0) else 1.0
+            Fm = (L.F.reshape(nv, -1).T * d) * scale
+            expr = cp.reshape(Fm @ w, (k, k), order="C") + L.F0 * scale
+            if L.G is not None:
+                Gm = (L.G.reshape(nv, -1).T * d) * scale
+                expr = expr + p * cp.reshape(Gm @ w, (k, k), order="C")
+            cons.append(expr << 0)
+        prob = cp.Problem(cp.Minimize((self.c * d) @ w), cons)
+        self._built[rescale] = (prob, w, p, d)
+        return self._built[rescale]
+
+    def _solve_once(self, solver: str, p: float, rescale: bool) -> SolveResult:
+        prob, w, par, d = self._build(rescale)
+        par.value = float(p)
+        w.value = None
+        t0 = time.perf_counter()
+        self.solves += 1
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                prob.solve(solver=solver, **SOLVER_SETTINGS[solver])
+                status = str(prob.status)
+            except cp.SolverError as exc:
+                status = f"solver_error ({' '.join(str(exc).split())[:120]})"
+        dt = time.perf_counter() - t0
+        self.seconds += dt
+        warned = tuple(sorted({str(wn.message).split(".")[0] for wn in caught}))
+        v = None if w.value is None else np.asarray(w.value, dtype=float) * d
+        return SolveResult(status, v, dt, rescale, warned)
+
+    def solve(self, solver: str, p: float = 0.0) -> SolveResult:
+        res = self._solve_once(solver, p, rescale=False)
+        if res.failed:
+            res2 = self._solve_once(solver, p, rescale=True)
+            return SolveResult(
+                res2.status, res2.v, res.seconds + res2.seconds, True, res.warned + res2.warned
+            )
+        return res
+
+
+class CentringError(ArithmeticError):
+    """The Newton centring could not start (no strictly feasible point) or did not converge."""
+
+
+@dataclass(frozen=True)
+class Centred:
+    v: np.ndarray
+    mu: float
+    newton_steps: int
+    min_slack: float  # smallest eigenvalue of -F_k(v) over all LMIs
+
+
+class _Barrier:
+    """``-sum_k log det(-F_k(v))`` of LMIs given as ``(F0, F)``, with the unknowns it involves.
+
+    LMIs of equal size are stacked, so that one batched Cholesky factorisation, inverse and
+    product serves them all (these problems have a handful of small LMIs; Python overhead per
+    LMI would otherwise dominate a Newton step).
+    """
+
+    def __init__(self, lmis: Sequence[AffineLMI], nv: int):
+        self.nu = float(sum(L.k for L in lmis))
+        self.nv = nv
+        allF = np.concatenate([L.F.reshape(nv, -1) for L in lmis], axis=1)
+        #: unknowns some LMI depends on (the others are left where they are)
+        self.free = np.flatnonzero(np.any(allF, axis=1))
+        self.groups = []
+        for k in sorted({L.k for L in lmis}):
+            members = [L for L in lmis if L.k == k]
+            F0 = np.stack([L.F0 for L in members])  # (g, k, k)
+            Fm = np.stack([L.F.reshape(nv, -1) for L in members], axis=1)  # (nv, g, k*k)
+            Ff = np.stack([L.F[self.free] for L in members])  # (g, nf, k, k)
+            self.groups.append((k, F0, Fm.reshape(nv, -1), Ff))
+
+    def factors(self, v):
+        out = []
+        for _, F0, Fm, _ in self.groups:
+            M = -(F0 + (v @ Fm).reshape(F0.shape))
+            try:
+                out.append(np.linalg.cholesky(M))
+            except np.linalg.LinAlgError:
+                return None
+        return out
+
+    @staticmethod
+    def value(fac) -> float:
+        return -2.0 * sum(float(np.sum(np.log(np.diagonal(Lc, axis1=-2, axis2=-1)))) for Lc in fac)
+
+    def derivatives(self, fac):
+        nf = len(self.free)
+        g = np.zeros(nf)
+        Hm = np.zeros((nf, nf))
+        for Lc, (_, _, _, Ff) in zip(fac, self.groups):
+            Li = np.linalg.inv(Lc)  # (g, k, k)
+            W = Li[:, None] @ Ff @ np.swapaxes(Li, -1, -2)[:, None]  # W_l = L^-1 F_l L^-T
+            g += np.trace(W, axis1=-2, axis2=-1).sum(axis=0)  # grad_l = tr(W_l)
+            W2 = np.swapaxes(W, 0, 1).reshape(nf, -1)
+            Hm += W2 @ W2.T  # Hess_lm = tr(W_l W_m), summed over the group
+        return g, Hm
+
+    def slack(self, v) -> float:
+        return min(
+            float(np.linalg.eigvalsh(-(F0 + (v @ Fm).reshape(F0.shape))).min())
+            for _, F0, Fm, _ in self.groups
+        )
+
+
+def _newton(bar: _Barrier, c: np.ndarray, v: np.ndarray, fac, mu: float, tol: float, budget: list, stop=None):
+    """Minimise ``c^T v / mu + barrier(v)`` from the strictly feasible ``v`` by Newton steps.
+
+    Far from the minimiser (Newton decrement ``lambda >= 1/4``) the steps are damped by a
+    backtracking line search; inside, the full step is taken: for a self-concordant function it
+    stays feasible and converges quadratically, and no line search has to compare values of psi
+    that differ below their round-off. The iteration ends when ``lambda^2 <= tol^2`` or when
+    ``lambda^2`` stops falling (the round-off floor). ``budget = [steps, max_steps]`` counts the
+    steps across calls; ``stop(v)`` (optional) ends it at the first iterate where it is true.
+    """
+    idx = bar.free
+    prev, stalled = np.inf, 0
+    while True:
+        gb, Hm = bar.derivatives(fac)
+        g = c[idx] / mu + gb
+        dscale = 1.0 / np.sqrt(np.maximum(np.diag(Hm), 1e-300))
+        try:
+            d = -dscale * np.linalg.solve(Hm * dscale[:, None] * dscale[None, :], g * dscale)
+        except np.linalg.LinAlgError:
+            raise CentringError(
+                "the Hessian of the barrier is singular: the LMIs do not fix every unknown"
+            ) from None
+        lam2 = float(-g @ d)
+        if not np.isfinite(lam2):
+            raise CentringError("non-finite Newton step")
+        stalled = stalled + 1 if lam2 > 0.25 * prev else 0
+        if lam2 <= tol**2 or (lam2 < 1e-10 and stalled >= 2):
+            return v, fac  # converged, or at the round-off floor (the decrement no longer falls)
+        prev = lam2
+        budget[0] += 1
+        if budget[0] > budget[1]:
+            raise CentringError(f"Newton did not converge in {budget[1]} steps (decrement^2 {lam2:.2g})")
+        dv = np.zeros_like(v)
+        dv[idx] = d
+        if lam2 < 0.0625:  # quadratic region: the full step
+            vn = v + dv
+            fn = bar.factors(vn)
+            if fn is None:
+                raise CentringError(f"a full Newton step left the feasible set (decrement^2 {lam2:.2g})")
+        else:
+            p0 = float(c @ v) / mu + bar.value(fac)
+            t = 1.0
+            while True:
+                vn = v + t * dv
+                fn = bar.factors(vn)
+                if fn is not None and float(c @ vn) / mu + bar.value(fn) <= p0 - 0.25 * t * lam2:
+                    break
+                t *= 0.5
+                if t < 1e-14:
+                    raise CentringError(f"line search failed (decrement^2 {lam2:.2g})")
+        v, fac = vn, fn
+        if stop is not None and stop(v):
+            return v, fac
+
+
+def centre(
+    lmis: Sequence[AffineLMI],
+    c: np.ndarray,
+    v0: np.ndarray,
+    *,
+    eta: float = 0.01,
+    floor: float = 0.0,
+    tol: float = 1e-9,
+    max_steps: int = 400,
+) -> Centred:
+    """The central-path point of ``min c^T v s.t. F_k(v) <= 0`` whose gap is ``eta (c^T v + floor)``.
+
+    Damped Newton steps on ``psi(v) = c^T v / mu - sum_k log det(-F_k(v))`` from the strictly
+    feasible ``v0`` (any point of a feasibility solve: the path is followed from there), with
+    ``mu`` lowered at most eightfold per stage until ``mu = eta (c^T v + floor) / nu`` holds
+    (a fixed point, reached linearly with ratio about ``eta``). Unknowns that no LMI involves
+    keep their value from ``v0``. Raises :class:`CentringError` when ``v0`` is not strictly
+    feasible, when the Hessian is singular or when Newton does not converge.
+    """
+    v = np.asarray(v0, dtype=float).copy()
+    bar = _Barrier(lmis, len(v))
+    fac = bar.factors(v)
+    if fac is None:
+        raise CentringError("the starting point is not strictly feasible")
+    mu = eta * (float(c @ v) + floor) / bar.nu
+    if not mu > 0:
+        raise CentringError(
+            f"the objective plus floor must be positive at the start (got {float(c @ v) + floor:g})"
+        )
+    budget = [0, max_steps]
+    prev = None  # (mu, h(mu)) of the stage before, for the secant step
+    for _stage in range(200):
+        v, fac = _newton(bar, c, v, fac, mu, tol, budget)
+        target = eta * (float(c @ v) + floor) / bar.nu
+        h = target - mu  # the fixed point is h(mu) = 0
+        if abs(h) <= 1e-13 * abs(mu):
+            break
+        nxt = target
+        if prev is not None and h != prev[1]:
+            sec = mu - h * (mu - prev[0]) / (h - prev[1])  # secant on h: superlinear near the fixed point
+            if sec > 0:
+                nxt = sec
+        prev = (mu, h)
+        # follow the central path at most eightfold per stage (a far start converges in a few damped
+        # steps per stage), and never further than halfway to zero
+        mu = min(max(nxt, mu / 8.0), 8.0 * mu)
+    return Centred(v, mu, budget[0], bar.slack(v))
+
+
+def phase1(
+    soft: Sequence[AffineLMI], hard: Sequence[AffineLMI], v0: np.ndarray, *, max_steps: int = 400
+) -> np.ndarray | None:
+    """Decide whether ``F_k(v) < 0`` for all ``soft`` and ``hard`` LMIs has a solution, deterministically.
+
+    The barrier method on ``min t s.t. F_k(v) <= t I`` (soft) and ``F_k(v) < 0`` (hard, which
+    ``v0`` must satisfy strictly), from ``v0``: after each centring, ``t < 0`` gives a strictly
+    feasible point (returned), ``t - nu mu > 0`` proves that none exists (the duality bound;
+    returns None). Unlike a conic solver's status, the answer does not depend on the solver.
+    """
+    nv = len(v0)
+    soft_t = [AffineLMI(L.name, L.F0, np.concatenate([L.F, -np.eye(L.k)[None]], axis=0)) for L in soft]
+    hard_t = [AffineLMI(L.name, L.F0, np.concatenate([L.F, np.zeros((1, L.k, L.k))], axis=0)) for L in hard]
+    t0 = max(float(np.linalg.eigvalsh(L.value(v0))[-1]) for L in soft)
+    if t0 < 0:
+        return np.asarray(v0, dtype=float).copy()
+    scale = max(1.0, max(float(np.abs(L.value(v0)).max()) for L in soft))
+    v = np.concatenate([np.asarray(v0, dtype=float), [t0 + 1e-3 * scale]])
+    bar = _Barrier(soft_t + hard_t, nv + 1)
+    fac = bar.factors(v)
+    if fac is None:
+        raise CentringError("phase 1: the starting point does not satisfy the fixed LMIs strictly")
+    c = np.zeros(nv + 1)
+    c[-1] = 1.0
+    mu = (v[-1] + 1e-2 * scale) / bar.nu
+    budget = [0, max_steps]
+    for _stage in range(60):
+        v, fac = _newton(bar, c, v, fac, mu, 5e-2, budget, stop=lambda w: w[-1] < 0)
+        if v[-1] < 0:
+            return v[:nv]
+        # t* >= t(v_mu) - nu mu at a central point; Newton stops at decrement <= 0.05, where the
+        # bound holds within a few per cent: 1.5 nu mu is a safe margin
+        if v[-1] - 1.5 * bar.nu * mu > 0:
+            return None
+        mu /= 100.0
+    return None

@@ -1,0 +1,139 @@
+"""Tests of fte_casadi.design.sdp: affine LMIs, the cvxpy assembly, the centring and phase 1."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+
+from fte_casadi.design.sdp import (
+    AffineLMI,
+    CentringError,
+    ConicProblem,
+    Layout,
+    Var,
+    affine_lmi,
+    centre,
+    margin_lmi,
+    phase1,
+)
+
+
+def _layout():
+    return Layout(Var("P", (2, 2), True), Var("y", (2,)), Var("t", ()))
+
+
+A = np.array([[0.0, 1.0], [-2.0, -3.0]])
+
+
+def _lyapunov(P, y, t):
+    """``A^T P + P A + diag(y) <= 0``: affine in P, y."""
+    return A.T @ P + P @ A + np.diag(y)
+
+
+def test_layout_round_trip_and_symmetry():
+    lay = _layout()
+    assert lay.size == 3 + 2 + 1
+    u = lay.unpack(np.arange(6.0))
+    assert (
+        np.array_equal(u["P"], [[0.0, 1.0], [1.0, 2.0]])
+        and np.array_equal(u["y"], [3.0, 4.0])
+        and u["t"] == 5.0
+    )
+    assert lay.index("y") == slice(3, 5)
+
+
+def test_affine_extraction_equals_the_builder_everywhere():
+    lay = _layout()
+    L = affine_lmi("lyap", lay, _lyapunov)
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        v = rng.standard_normal(lay.size)
+        assert np.allclose(L.value(v), _lyapunov(**lay.unpack(v)), atol=1e-13)
+
+
+def test_a_builder_that_is_not_affine_is_refused():
+    with pytest.raises(RuntimeError, match="not affine"):
+        affine_lmi("bad", _layout(), lambda P, y, t: P @ P)
+
+
+def test_margin_lmi_is_base_plus_margin_term():
+    lay = _layout()
+    M = margin_lmi("m", lay, _lyapunov, margin=lambda P, y, t: np.eye(2) * (1 + t))
+    v = np.random.default_rng(2).standard_normal(lay.size)
+    u = lay.unpack(v)
+    assert np.allclose(M.at(0.3).value(v), _lyapunov(**u) + 0.3 * np.eye(2) * (1 + u["t"]))
+
+
+def _problem(margin=0.0):
+    """``A^T P + P A + I <= 0``, ``I <= P <= 100 I``; objective trace(P) (y, t unused: a 3-unknown layout)."""
+    lay = Layout(Var("P", (2, 2), True))
+    lmis = [
+        affine_lmi("lyap", lay, lambda P: A.T @ P + P @ A + (1 + margin) * np.eye(2)),
+        affine_lmi("P >= I", lay, lambda P: (1 + margin) * np.eye(2) - P),
+        affine_lmi("P <= 100 I", lay, lambda P: P - 100 * (1 - margin) * np.eye(2)),
+    ]
+    c = np.array([1.0, 0.0, 1.0])  # trace P (upper-triangle packing: P00, P01, P11)
+    return lay, lmis, c
+
+
+@pytest.mark.parametrize("solver", ["CLARABEL", "SCS"])
+def test_conic_solve_counts_and_finds_a_feasible_point(solver):
+    lay, lmis, c = _problem(margin=2e-3)
+    prob = ConicProblem(lay, lmis, c)
+    res = prob.solve(solver)
+    assert res.status == "optimal" and prob.solves == 1
+    assert all(np.linalg.eigvalsh(L.value(res.v))[-1] <= 1e-6 for L in lmis)
+
+
+def test_infeasible_problem_is_reported_infeasible_not_failed():
+    lay = Layout(Var("x", ()))
+    lmis = [affine_lmi("x <= -1", lay, lambda x: np.array([[x + 1.0]])),
+            affine_lmi("x >= 1", lay, lambda x: np.array([[1.0 - x]]))]  # fmt: skip
+    res = ConicProblem(lay, lmis).solve("CLARABEL")
+    assert res.infeasible and not res.failed
+
+
+def test_centred_point_does_not_depend_on_the_start():
+    """The centred point is a function of the LMIs alone: two different feasible starts give it to 1e-9."""
+    lay, lmis, c = _problem(margin=1e-3)
+    Pl = sla.solve_continuous_lyapunov(A.T, -np.eye(2))  # A^T Pl + Pl A = -I
+    starts = [k * Pl[np.triu_indices(2)] for k in (10.0, 60.0)]
+    for v in starts:
+        assert all(np.linalg.eigvalsh(L.value(v))[-1] < 0 for L in lmis)
+    a, b = (centre(lmis, c, v, eta=0.5).v for v in starts)
+    assert np.max(np.abs(a - b)) <= 1e-9 * np.max(np.abs(a))
+    # the gap equals eta times the objective: the point lies on the central path at mu = eta f / nu
+    cen = centre(lmis, c, starts[0], eta=0.5)
+    assert cen.mu * 6 == pytest.approx(0.5 * float(c @ cen.v), rel=1e-10)
+    assert cen.min_slack > 0
+
+
+def test_centring_refuses_an_infeasible_start():
+    lay, lmis, c = _problem(margin=1e-3)
+    with pytest.raises(CentringError, match="not strictly feasible"):
+        centre(lmis, c, np.array([0.5, 0.0, 0.5]), eta=0.5)  # P < I
+
+
+def test_phase1_decides_feasibility_both_ways():
+    """x in [lo, hi] with x >= 1 (hard, satisfied at the start): feasible iff hi > 1."""
+    lay = Layout(Var("x", ()))
+    hard = [affine_lmi("x >= 1", lay, lambda x: np.array([[1.0 - x]]))]
+
+    def soft(hi):
+        return [affine_lmi("x <= hi", lay, lambda x: np.array([[x - hi]]))]
+
+    v0 = np.array([5.0])
+    ok = phase1(soft(2.0), hard, v0)
+    assert ok is not None and 1.0 < ok[0] < 2.0
+    assert phase1(soft(0.9), hard, v0) is None  # infeasible: proved by the duality bound
+    assert phase1(soft(7.0), hard, v0) is not None  # the start itself is feasible
+
+
+def test_affine_lmi_parameter_term():
+    lay = Layout(Var("P", (2, 2), True))
+    L = affine_lmi("decay", lay, lambda P: A.T @ P + P @ A, param=lambda P: 2 * P)
+    v = np.array([2.0, 0.3, 1.0])
+    P = lay.unpack(v)["P"]
+    assert np.allclose(L.at(0.7).value(v), A.T @ P + P @ A + 1.4 * P)
+    assert isinstance(L.at(0.0), AffineLMI)
