@@ -50,3 +50,7 @@ class CodegenError(FteError, ValueError):
 
 class ParameterError(FteError, ValueError):
     """A numeric setting (gamma, sigma, dt, Ts, paths...) is out of range."""
+
+
+class MissingDependencyError(FteError, ImportError):
+    """An optional dependency (python-control, dask.distributed) is needed and not installed."""

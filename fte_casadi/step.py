@@ -7,7 +7,8 @@ measurement ``y`` and observer state ``z``::
     xbarhat = z + H y                                   = [xhat; fdothat; fhat]
     h       = h(y, xhat)                                memberships from measured signals
     s       = N (y - Cbar xbarhat),  us = (delta + eps) sgn(s)   (or a boundary layer)
-    u       = u_ref + sum_j h_j (K_j xhat + Kf fhat)    (no Kf term without tolerant control)
+    u       = sat(u_ref + sum_j h_j (K_j xhat + Kf fhat))   (no Kf term without tolerant control;
+                                                         sat: the actuator limits, if any)
     yc      = y - Df fhat                               (y itself without tolerant control)
     z+      = z + Ts sum_i h_i (R_i z + T Bbar_i u + (L_i1 + L_i2) y + Ls us + T abar_i)
 
@@ -25,7 +26,7 @@ import numpy as np
 from .design.record import Design
 from .errors import ParameterError
 
-__all__ = ["step_function", "STEP_INPUTS", "STEP_OUTPUTS"]
+__all__ = ["step_function", "saturate", "STEP_INPUTS", "STEP_OUTPUTS"]
 
 STEP_INPUTS = ("z", "y")
 STEP_OUTPUTS = ("z_next", "u", "xbarhat", "yc", "s")
@@ -33,6 +34,26 @@ STEP_OUTPUTS = ("z_next", "u", "xbarhat", "yc", "s")
 
 def _dm(a: np.ndarray) -> ca.DM:
     return ca.DM(np.asarray(a, dtype=float))
+
+
+def saturate(u: ca.SX, limits) -> ca.SX:
+    """``u`` clipped into the actuator limits (rows [lo, hi]; infinite sides left open).
+
+    The clipped input is what the step returns, what the plant receives and what the observer
+    update uses (``T Bbar_i u``): the observer is fed the input actually applied.
+    """
+    if limits is None:
+        return u
+    lim = np.asarray(limits, dtype=float)
+    out = []
+    for k in range(u.numel()):
+        uk = u[k]
+        if np.isfinite(lim[k, 0]):
+            uk = ca.fmax(uk, float(lim[k, 0]))
+        if np.isfinite(lim[k, 1]):
+            uk = ca.fmin(uk, float(lim[k, 1]))
+        out.append(uk)
+    return ca.vertcat(*out)
 
 
 def step_function(
@@ -88,6 +109,7 @@ def step_function(
         yc = y - ca.mtimes(_dm(design.Df), fhat)
     else:
         yc = y
+    u = saturate(u, design.input_limits)
 
     T = np.asarray(design.T)
     rhs = ca.mtimes(_dm(design.Ls), us)  # Ls = T J1 for every rule, and sum_i h_i = 1

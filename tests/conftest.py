@@ -150,4 +150,8 @@ def lqr_designs(ts_models):
 @pytest.fixture(scope="session")
 def real_designs(ts_models):
     """The LMI designs (conditioned variant) of the built-in plants, made once per session."""
-    return {k: design(ts, variant="conditioned") for k, ts in ts_models.items()}
+    from fte_casadi.plants import SCENARIOS
+
+    return {
+        k: design(ts, variant="conditioned", sample_time=SCENARIOS[k]().dt) for k, ts in ts_models.items()
+    }

@@ -119,6 +119,25 @@ def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
 
 
 @needs_cc
+def test_saturating_closed_loop_matches_casadi(designs, libs):
+    """Issue #12: the C step clips u into the pumps' limits exactly as the Python step does, over a
+    closed loop that does saturate (the observer starts at z = 0, far from the plant)."""
+    d = designs["three-tank"]
+    lim = np.asarray(d.input_limits)
+    assert np.array_equal(lim, [[0.0, 100.0], [0.0, 100.0]])
+    ts = default_ts(d)
+    c = CStep(libs["three-tank", "double"][1], d, "double")
+    err, traj = closed_loop_compare(d, c, ts, 2000, fault=_fault("three-tank"))
+    u = traj["u"]
+    assert np.all(u >= lim[:, 0]) and np.all(u <= lim[:, 1])
+    assert np.any(u == lim[:, 0]) and np.any(u == lim[:, 1])  # both limits were hit
+    scale = max(1.0, float(np.max(np.abs(traj["y"]))), float(np.max(np.abs(u))))
+    assert max(err.values()) <= C_DOUBLE * scale, err
+    header = (libs["three-tank", "double"][0] / "fte_three_tank.h").read_text()
+    assert "u is clipped to Q1 in [0, 100], Q2 in [0, 100]" in header
+
+
+@needs_cc
 @pytest.mark.parametrize("real", ["double", "float"])
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
 def test_non_finite_measurement_refused_state_unchanged(bad, real, designs, libs):

@@ -93,6 +93,12 @@ void hand_step(fte_real *z, const fte_real *y, fte_real *u, fte_real *xb, fte_re
 """
     for i in range(r):
         body += f"  for (i = 0; i < {m}; ++i) {{ fte_real acc = 0; for (j = 0; j < {n}; ++j) acc += K{i}[i*{n}+j]*xb[j]; u[i] += h[{i}]*acc; }}\n"
+    if design.input_limits is not None:  # the same clipping as the generated step
+        for k, (lo, hi) in enumerate(np.asarray(design.input_limits, float)):
+            if np.isfinite(lo):
+                body += f"  if (u[{k}] < (fte_real){float(lo)!r}) u[{k}] = (fte_real){float(lo)!r};\n"
+            if np.isfinite(hi):
+                body += f"  if (u[{k}] > (fte_real){float(hi)!r}) u[{k}] = (fte_real){float(hi)!r};\n"
     body += f"""  for (i = 0; i < {p}; ++i) {{ yc[i] = y[i]; for (j = 0; j < {lf}; ++j) yc[i] -= DF[i*{lf}+j]*xb[{n + lf}+j]; }}
   for (i = 0; i < {nbar}; ++i) {{ rhs[i] = 0; for (j = 0; j < {lf}; ++j) rhs[i] += LS[i*{lf}+j]*us[j]; }}
 """

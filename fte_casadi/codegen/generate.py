@@ -293,6 +293,7 @@ def _wrapper(
         "sliding": "sgn(s)" if boundary_layer is None else f"sat(s / {_fmt(boundary_layer)})",
         "affine": " + T abar_i" if affine else "",
         "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
+        "saturation_text": _saturation_text(design),
         **mem,
     }
     files = output_files(design.plant)
@@ -309,6 +310,22 @@ def _wrapper(
         files[1]: template.SOURCE.substitute(sub),
         files[4]: template.README.substitute(sub),
     }, mem
+
+
+def _saturation_text(design: Design) -> str:
+    """One line saying how u is clipped (the step applies it, and feeds the observer the clipped u)."""
+    if design.input_limits is None:
+        return "none (u is not clipped)."
+    names = (design.names or {}).get("inputs") or [f"u{k}" for k in range(int(design.dims["m"]))]
+    parts = [
+        f"{nm} in [{lo:.17g}, {hi:.17g}]"
+        for nm, (lo, hi) in zip(names, np.asarray(design.input_limits, float))
+    ]
+    return (
+        "u is clipped to "
+        + ", ".join(parts).replace("inf", "infinity")
+        + "; the observer is fed the clipped u."
+    )
 
 
 def _prepare_dir(out_dir: Path) -> None:

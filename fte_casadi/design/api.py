@@ -258,6 +258,7 @@ def design(
         status=status,
         solves={"step3": int(s3.solves), "step5": int(s5.solves), "total": int(s3.solves + s5.solves)},
         observer=observer,
+        input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
     )
 
 

@@ -120,6 +120,8 @@ class Design:
     solves: dict = field(default_factory=dict)
     #: the observer decay rate alpha, the largest feasible one, and why alpha is what it is
     observer: dict = field(default_factory=dict)
+    #: actuator limits, (m, 2) rows [lo, hi] with -inf/inf for an open side; None: no limits
+    input_limits: np.ndarray | None = None
 
     # -- convenience ---------------------------------------------------------------------
     @property
@@ -135,6 +137,21 @@ class Design:
         import casadi as ca
 
         return ca.Function.deserialize(self.scheduling)
+
+    def to_control(self, i: int = 0, j: int = 0, dt: float | None = None):
+        """The closed loop of plant rule ``i``, observer rule ``i`` and gain ``K_j`` as a ``control.StateSpace``.
+
+        States ``[x; z]``; inputs ``[u_ref; d; f]`` (the reference input, unknown inputs, faults);
+        outputs ``[y; u; xbarhat]``. The controller is the tolerant one, ``u = u_ref + K_j xhat +
+        Kf fhat`` with ``xbarhat = z + H y``. Left out: the sliding term ``Ls us`` (discontinuous),
+        the affine offsets of linearised models and the actuator limits (the model is linear). Its
+        poles are ``eig(A_i + B_i K_j)`` and ``eig(R_i)`` (the observer error decouples). With
+        ``dt``: the loop as the generated C runs it, the plant by zero-order hold and the observer
+        by the explicit Euler step of SPEC.md. Needs python-control (``fte_casadi[control]``).
+        """
+        from ..interop import closed_loop_ss
+
+        return closed_loop_ss(self, i, j, dt)
 
     def affine(self, i: int) -> np.ndarray:
         """Affine offset ``a_i`` of rule ``i`` (zeros for sector models)."""
@@ -170,6 +187,9 @@ class Design:
         out["status"] = list(self.status)
         out["solves"] = {k: int(v) for k, v in self.solves.items()}
         out["observer"] = _jsonable(self.observer)
+        out["input_limits"] = None if self.input_limits is None else [
+            [None if not np.isfinite(v) else float(v) for v in row] for row in np.asarray(self.input_limits, float)
+        ]  # fmt: skip
         return out
 
     def to_json(self) -> str:
@@ -241,6 +261,7 @@ class Design:
             status=list(doc.get("status", [])),
             solves=dict(doc.get("solves", {})),
             observer=dict(doc.get("observer", {})),
+            input_limits=_limits(source, doc.get("input_limits"), int(doc["dims"]["m"])),
             **kw,
         )
 
@@ -262,6 +283,24 @@ class Design:
         except UnicodeDecodeError:
             raise DesignFileError(f"design file {str(p)!r} is not a text file") from None
         return cls.from_dict(doc, source=f"design file {str(p)!r}")
+
+
+def _limits(source: str, value, m: int) -> np.ndarray | None:
+    """``input_limits`` of a document: None, or m rows [lo, hi] with null for an open side."""
+    if value is None:
+        return None
+    try:
+        a = np.array([[(-np.inf if k == 0 else np.inf) if v is None else float(v) for k, v in enumerate(row)]
+                      for row in value], dtype=float)  # fmt: skip
+    except (TypeError, ValueError):
+        raise DesignFileError(
+            f"{source}: 'input_limits' must be a list of [lower, upper] pairs (null: open)"
+        ) from None
+    if a.shape != (m, 2) or np.any(np.isnan(a)) or not np.all(a[:, 0] < a[:, 1]):
+        raise DesignFileError(
+            f"{source}: 'input_limits' must hold {m} pairs [lower, upper] with lower < upper"
+        )
+    return a
 
 
 def _reject_constant(name: str):

@@ -65,6 +65,8 @@ class Plant:
     time_unit: str = "s"
     #: default design parameters (gamma, gamma1, sigma, delta, epsilon) for this plant
     design_defaults: Mapping[str, float] = field(default_factory=dict)
+    #: actuator limits, (m, 2) rows [lo, hi] with -inf/inf for an open side; None: no limits
+    input_limits: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -214,6 +216,7 @@ class PlantBuilder:
         self._params: dict[str, float] = {}
         self._time_unit = "s"
         self._design: dict[str, float] = {}
+        self._ulim: dict[str, object] = {}
 
     # -- symbols -------------------------------------------------------------------------
     def _new(self, kind: str, names) -> tuple[list[ca.SX], tuple[str, ...]]:
@@ -346,6 +349,15 @@ class PlantBuilder:
             raise PlantError("reference: give exactly one of u= (reference input) or x= (reference state)")
         self._uref = None if u is None else np.atleast_1d(np.asarray(u, dtype=float))
         self._xref = None if x is None else np.atleast_1d(np.asarray(x, dtype=float))
+
+    def input_limits(self, **limits) -> None:
+        """Actuator limits per input name, e.g. ``b.input_limits(Q1=(0, 100), Q2=(0, 100))``.
+
+        Either side may be infinite (``-inf``/``inf`` or ``None``). The simulation applies the
+        saturated input to the plant and feeds the observer the input actually applied (so a
+        saturating actuator does not corrupt the estimates); the generated C saturates the same way.
+        """
+        self._ulim.update(limits)
 
     def initial_state(self, x0) -> None:
         self._x0 = np.atleast_1d(np.asarray(x0, dtype=float))

@@ -187,6 +187,8 @@ def validate(b: PlantBuilder) -> Plant:
     if xref is not None and (xref.shape != (n,) or not np.all(np.isfinite(xref))):
         raise PlantError(f"reference state must hold {n} finite numbers; got {xref.tolist()}")
 
+    ulim = _input_limits(b, m, uref)
+
     if method == "linearisation":
         r = ops.shape[0]
         if b._opu is not None:
@@ -240,4 +242,33 @@ def validate(b: PlantBuilder) -> Plant:
         params=dict(b._params),
         time_unit=b._time_unit,
         design_defaults=dict(b._design),
+        input_limits=ulim,
     )
+
+
+def _input_limits(b: PlantBuilder, m: int, uref) -> np.ndarray | None:
+    """The (m, 2) limits ``[lo, hi]`` per input (-inf/inf where open), or None when none are given."""
+    if not b._ulim:
+        return None
+    names = list(b._un)
+    out = np.tile([-np.inf, np.inf], (m, 1))
+    for key, pair in b._ulim.items():
+        if key not in names:
+            raise PlantError(f"input_limits: {key!r} is not an input of this plant; inputs are {names}")
+        try:
+            lo, hi = pair
+            lo = -np.inf if lo is None else float(lo)
+            hi = np.inf if hi is None else float(hi)
+        except (TypeError, ValueError):
+            raise PlantError(
+                f"input_limits: the limits of {key!r} must be a pair (lower, upper), None for an open side; got {pair!r}"
+            ) from None
+        if np.isnan(lo) or np.isnan(hi) or not lo < hi:
+            raise PlantError(f"input_limits: {key!r} needs lower < upper; got ({lo}, {hi})")
+        out[names.index(key)] = (lo, hi)
+    if uref is not None and np.any((uref < out[:, 0]) | (uref > out[:, 1])):
+        bad = [f"{names[k]} = {uref[k]:g} not in [{out[k, 0]:g}, {out[k, 1]:g}]" for k in range(m)
+               if not out[k, 0] <= uref[k] <= out[k, 1]]  # fmt: skip
+        raise PlantError(f"the reference input lies outside the input limits ({'; '.join(bad)}); the loop would "
+                         "saturate at rest: move the reference or widen the limits")  # fmt: skip
+    return out

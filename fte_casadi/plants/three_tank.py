@@ -53,6 +53,9 @@ def three_tank() -> Plant:
     b.outputs([h1, h2], names=["h1", "h2"])
     b.region(h1=(15.0, 25.0), h2=(5.0, 15.0), h3=(10.0, 20.0))
     b.reference(x=list(POINTS[1]))
+    b.input_limits(
+        Q1=(0.0, 100.0), Q2=(0.0, 100.0)
+    )  # the DTS200's pumps: no reverse flow, at most ~100 cm^3/s
     b.initial_state([20.0, 10.0, 15.0])
     # Section 6.2: gamma = 1, gamma1 = 0.9, sigma = 5, rho0 = eps = 1e-4; delta not given: = eps
     b.design_defaults(gamma=1.0, gamma1=0.9, sigma=5.0, delta=1e-4, epsilon=1e-4)

@@ -127,6 +127,23 @@ class TSModel:
         h = np.array(self.membership_fn(self.premise_fn(x)))
         return h.ravel() if x.ndim == 1 else h
 
+    def to_control(self) -> list:
+        """One ``control.StateSpace`` per rule: ``dx = A_i x + B_i u + Bd_i d + Bf_i f``, ``y = C x + Df f``.
+
+        Inputs ``[u; d; f]`` and outputs ``y`` carry the plant's signal names, so that
+        ``control.poles``, ``step_response`` or ``bode_plot`` work on each rule. The affine offset
+        of a linearised rule and the diffusion are left out. Needs python-control
+        (``pip install 'fte_casadi[control]'``).
+        """
+        from ..interop import local_model_ss
+
+        pl = self.plant
+        names = {"inputs": list(pl.input_names), "unknown_inputs": list(pl.unknown_input_names),
+                 "faults": list(pl.fault_names), "outputs": list(pl.output_names), "states": list(pl.state_names)}  # fmt: skip
+        return [
+            local_model_ss(lm, self.C, self.Df, names, i, pl.name) for i, lm in enumerate(self.local_models)
+        ]
+
     def to_dict(self) -> dict:
         """The derive document of CONTRACT.md (plus a few extra keys)."""
         return {
