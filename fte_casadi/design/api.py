@@ -69,6 +69,10 @@ def _u_reference(ts: TSModel, K, status: list):
         if np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(ue)):
             break
     res = float(np.linalg.norm(np.array(J(ue)[0])))
+    lim = plant.input_limits
+    if lim is not None and np.any((ue < lim[:, 0]) | (ue > lim[:, 1])):
+        status.append(f"warning: the input holding x_ref, u_eq = {np.round(ue, 6).tolist()}, lies outside the input "
+                      f"limits {np.asarray(lim).tolist()}: the loop saturates at rest")  # fmt: skip
     h = ts.memberships(xr)
     Kx = sum(h[j] * K[j] for j in range(len(K)))
     status.append(f"u_ref = u_eq - (sum_j h_j(x_ref) K_j) x_ref with u_eq = {np.round(ue, 6).tolist()} holding the "
