@@ -326,6 +326,33 @@ def _fmt_list(v) -> str:
     return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
 
 
+def _window_lines(m: dict, inputs) -> list[str]:
+    """Per fault window: its two numbers; warnings where tolerant control is worse than none (ratio > 1)
+    and where an input sits at a limit for more than 5 % of the window."""
+    out = []
+    for w in m.get("windows", []):
+        out.append(
+            f"  window {w['fault']} [{w['start']:g}, {w['stop']:g}): fault relative RMS error "
+            f"{'n/a' if w['fault_rel_rms_error'] is None else format(w['fault_rel_rms_error'], '.3g')}, FTC deviation "
+            f"ratio {'n/a' if w['ftc_deviation_ratio'] is None else format(w['ftc_deviation_ratio'], '.3g')}"
+        )
+    return out
+
+
+def _warnings(m: dict, inputs) -> list[str]:
+    out = []
+    for w in m.get("windows", []):
+        r = w.get("ftc_deviation_ratio")
+        if r is not None and r > 1:
+            out.append(f"warning: in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) tolerant control makes "
+                       f"the outputs worse than none (FTC deviation ratio {r:.3g} > 1)")  # fmt: skip
+        for i, frac in enumerate(w.get("input_saturation", [])):
+            if frac > 0.05:
+                out.append(f"warning: input {inputs[i]} is at a limit for {100 * frac:.0f} % of the window of "
+                           f"{w['fault']} [{w['start']:g}, {w['stop']:g}): tolerance is that of a saturated actuator")  # fmt: skip
+    return out
+
+
 @main.command()
 @click.argument("target", metavar="DESIGN.json|PLANT")
 @click.option(
@@ -339,16 +366,17 @@ def _fmt_list(v) -> str:
     "--plots", "plots", type=click.Path(file_okay=False), help="Write the figures (PNG) into this directory."
 )
 @click.option(
-    "--save", "save", type=click.Path(dir_okay=False), help="Save per-path arrays (.npz) to remake figures."
-)
+    "--save", "save", type=click.Path(dir_okay=False),
+    help="Save per-path arrays of ALL paths (.npz; memory grows with --paths).",
+)  # fmt: skip
+@click.option("--scheduler", help="Address of a dask.distributed scheduler: run the paths on its workers.")
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics document (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @_guard
-def simulate(target, paths, seed, dt, plots, save, as_json, quiet):
+def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .plants.loader import load_plant, load_scenario
-    from .sim import metrics as sim_metrics
     from .sim import save_result
     from .sim import simulate as run_sim
 
@@ -361,8 +389,9 @@ def simulate(target, paths, seed, dt, plots, save, as_json, quiet):
     d = _design_or_plant(target, progress=not quiet)
     plant = load_plant(d.plant_spec)
     scenario = load_scenario(d.plant_spec)
-    res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet)
-    m = sim_metrics(res)
+    res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
+                  record_all=bool(save), scheduler=scheduler)  # fmt: skip
+    m = res.metrics
     if save:
         save_result(res, save)
     figs = []
@@ -370,6 +399,7 @@ def simulate(target, paths, seed, dt, plots, save, as_json, quiet):
         from .plot import write_figures
 
         figs = write_figures(res, plots)
+    warn = _warnings(m, list(plant.input_names))
     if as_json:
         click.echo(json.dumps(m, indent=1))
     else:
@@ -379,14 +409,74 @@ def simulate(target, paths, seed, dt, plots, save, as_json, quiet):
             f"  state RMS error (t >= 1 s, FTC run): {_fmt_list(m['state_rms_error'])}\n"
             f"  fault relative RMS error: {_fmt_list(m['fault_rel_rms_error'])}\n"
             f"  FTC deviation ratio (smaller is better): "
-            f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}"
+            f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}\n"
+            f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}"
         )
+        for line in _window_lines(m, plant.input_names):
+            click.echo(line)
         for note in getattr(res, "notes", ()) or ():
             click.echo(f"  note: {note}")
+    for w in warn:
+        click.echo(textwrap.fill("fte: " + w, width=100), err=True)
     if save:
-        click.echo(f"per-path arrays written to {save}", err=True)
+        click.echo(f"per-path arrays of all {res.paths} paths written to {save}", err=True)
     if figs:
-        click.echo(f"{len(figs)} figures written to {plots}", err=True)
+        click.echo(
+            f"{len(figs)} figures written to {plots} (over the first {res.recorded_paths} paths)", err=True
+        )
+
+
+# -- sweep --------------------------------------------------------------------------------
+@main.command()
+@click.argument("target", metavar="DESIGN.json|PLANT")
+@click.option("--vary", "vary", multiple=True, required=True,
+              help="NAME=V1,V2,... with NAME one of fault_scale, noise_scale, d_scale; repeat for a grid.")  # fmt: skip
+@click.option("--paths", type=int, help="Brownian paths per point (default: the scenario's).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random generator.")
+@click.option("--scheduler", help="Address of a dask.distributed scheduler: run the paths on its workers.")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False),
+    help="Write sweep.json, sweep.csv and sweep.png here.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the list of points (JSON) on stdout.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@_guard
+def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
+    """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
+    from .design.record import atomic_write_text
+    from .plants.loader import load_plant, load_scenario
+    from .sim.sweep import parse_vary, to_csv, to_json
+    from .sim.sweep import sweep as run_sweep
+
+    grid = parse_vary(vary)
+    if paths is not None and paths < 1:
+        raise ParameterError(f"--paths must be a positive integer; got {paths}")
+    if seed < 0:
+        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    d = _design_or_plant(target, progress=not quiet)
+    plant = load_plant(d.plant_spec)
+    scenario = load_scenario(d.plant_spec)
+    points = run_sweep(d, plant, scenario, grid, paths=paths or scenario.paths, seed=seed, scheduler=scheduler,
+                       progress=not quiet)  # fmt: skip
+    if out_dir:
+        from .plot import sweep_figure
+
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / "sweep.json", to_json(points))
+        atomic_write_text(out / "sweep.csv", to_csv(points))
+        fig = sweep_figure(points, d.plant, out, list(plant.fault_names))
+        click.echo(f"sweep.json, sweep.csv and {fig.name} written to {out_dir}", err=True)
+    if as_json:
+        click.echo(to_json(points))
+    else:
+        for p in points:
+            m = p["metrics"]
+            click.echo(", ".join(f"{k} = {v:g}" for k, v in p["point"].items()) + ": fault relative RMS error "
+                       f"{_fmt_list(m['fault_rel_rms_error'])}, FTC deviation ratio "
+                       f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}")  # fmt: skip
 
 
 # -- reproduce ----------------------------------------------------------------------------
@@ -422,39 +512,11 @@ def reproduce(which, out_dir, seed, paths):
 @_guard
 def bench(as_json, paths):
     """Speed of design, Monte Carlo and the C step, against baselines run in the same process."""
-    from .design import design as run_design
-    from .plants import BUILTIN
-    from .ts import derive as derive_ts
-
     if paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    out: dict = {"design": {}}
+    from .bench import run_all
 
-    def log(msg):
-        click.echo(msg, err=True)
-
-    from .design.bench import bench_design
-    from .plants import SCENARIOS
-
-    designs = {}
-    for name in BUILTIN:
-        ts = derive_ts(BUILTIN[name]())
-        dt = SCENARIOS[name]().dt
-        log(f"bench: design {name} (Clarabel, SCS, and the 0.1 formulation as baseline)")
-        out["design"][name] = bench_design(ts, sample_time=dt)
-        designs[name] = run_design(ts, variant="conditioned", plant_spec=name, sample_time=dt)
-
-    from .sim import bench as sim_bench
-
-    log(f"bench: Monte Carlo, manipulator, {paths} paths x 3 runs, T = 10 s, dt = 1 ms (and baselines)")
-    out["monte_carlo"] = sim_bench(designs.get("manipulator"), paths=paths)
-
-    from .codegen.bench import bench_design
-
-    out["c_step"] = {}
-    for name, d in designs.items():
-        log(f"bench: generated C step of {name}")
-        out["c_step"][name] = bench_design(d)
+    out = run_all(paths, log=lambda msg: click.echo(msg, err=True))
     if as_json:
         click.echo(json.dumps(out, indent=1, default=str))
         return
@@ -471,10 +533,15 @@ def bench(as_json, paths):
             extra += f", Clarabel and SCS designs equal to {row['max_rel_diff_clarabel_scs']:.1e}"
         click.echo(f"  {name:12s} " + ", ".join(cells) + extra)
     mc = out["monte_carlo"]
-    e = mc["engine"]
+    e, pp = mc["engine"], mc["per_path_engine"]
     click.echo(
         f"Monte Carlo ({mc['scenario']}): {e['paths']} paths in {e['wall_s']:.2f} s "
         f"({e['path_steps_per_s'] / 1e6:.2f} M path-steps/s; first call incl. compile {e['first_call_wall_s']:.2f} s)\n"
+        f"  per-path engine of 0.1: {pp['wall_s']:.2f} s ({pp['path_steps_per_s'] / 1e6:.2f} M path-steps/s) -> "
+        f"vectorised engine is {mc['speedup_vs_per_path']:.1f}x faster\n"
+        f"  {e['flops_per_path_step']} flops per path-step: {100 * e['fraction_of_peak']:.1f} % of the assumed peak "
+        f"({e['peak_assumed']['cores']} cores x {e['peak_assumed']['ghz']:.2f} GHz x {e['peak_assumed']['doubles_per_vector']} "
+        f"doubles x 2 FMA x 2)\n"
         f"  sdeint itoEuler: {mc['sdeint_itoEuler']['path_steps_per_s']:.3g} path-steps/s -> engine is {mc['speedup_vs_sdeint']:.0f}x faster\n"
         f"  plain Python loop: {mc['python_loop']['path_steps_per_s']:.3g} path-steps/s -> engine is "
         f"{mc['speedup_vs_python_loop']:.0f}x faster (same trajectories to {mc['max_abs_diff_engine_vs_sdeint']:.1g})"

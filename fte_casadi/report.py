@@ -126,8 +126,8 @@ def _design_rows(designs: dict, printed: dict) -> list[str]:
 
 
 def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
+    from .bench.cstep import bench_c_step
     from .codegen import compile_shared, find_compiler, generate_c
-    from .codegen.bench import bench_design
     from .codegen.ctypes_step import CStep, closed_loop_compare
     from .codegen.generate import default_ts
 
@@ -149,10 +149,10 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
                 f[0] = -10.0
             return f
 
-        err, _ = closed_loop_compare(d, CStep(lib, d), ts, steps, fault=fault)
+        err, _ = closed_loop_compare(d, CStep(lib, d), ts, steps, plant=BUILTIN[d.plant](), fault=fault)
     info["max_diff"] = max(err.values())
     info["steps"] = steps
-    b = bench_design(d, ts=ts, iters=100_000, reps=3)
+    b = bench_c_step(d, ts=ts, iters=100_000, reps=3)
     info["bench"] = b
     out += [
         f"Compiled with `cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic`; over a {steps}-sample closed loop on the "

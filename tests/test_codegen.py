@@ -22,6 +22,7 @@ from fte_casadi.codegen import build
 from fte_casadi.codegen.ctypes_step import CStep, closed_loop_compare
 from fte_casadi.codegen.generate import _nice_floor, c_name, default_ts, generate_c, output_files
 from fte_casadi.errors import CodegenError, DesignFileError, ParameterError
+from fte_casadi.plants.loader import load_plant
 from fte_casadi.step import step_function
 
 PLANTS = ("manipulator", "three-tank")
@@ -111,7 +112,7 @@ def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
     ts = default_ts(d)
     steps = int(round((1.5 if plant == "manipulator" else 20.0) / ts))
     c = CStep(libs[plant, "double"][1], d, "double")
-    err, traj = closed_loop_compare(d, c, ts, min(steps, 2000), fault=_fault(plant))
+    err, traj = closed_loop_compare(d, c, ts, min(steps, 2000), plant=load_plant(plant), fault=_fault(plant))
     scale = max(1.0, float(np.max(np.abs(traj["y"]))), float(np.max(np.abs(traj["u"]))))
     assert max(err.values()) <= C_DOUBLE * scale, err  # same operations in the same order: round-off only
     assert np.all(np.isfinite(traj["u"]))
@@ -127,7 +128,9 @@ def test_saturating_closed_loop_matches_casadi(designs, libs):
     assert np.array_equal(lim, [[0.0, 100.0], [0.0, 100.0]])
     ts = default_ts(d)
     c = CStep(libs["three-tank", "double"][1], d, "double")
-    err, traj = closed_loop_compare(d, c, ts, 2000, fault=_fault("three-tank"))
+    err, traj = closed_loop_compare(
+        d, c, ts, 2000, plant=load_plant("three-tank"), fault=_fault("three-tank")
+    )
     u = traj["u"]
     assert np.all(u >= lim[:, 0]) and np.all(u <= lim[:, 1])
     assert np.any(u == lim[:, 0]) and np.any(u == lim[:, 1])  # both limits were hit
@@ -350,9 +353,9 @@ def test_no_compiler_is_reported(monkeypatch, tmp_path):
 @needs_cc
 def test_bench_measures_and_baseline_agrees(designs):
     """The benchmark runs; its hand-written baseline computes the same step; no mutable globals."""
-    from fte_casadi.codegen.bench import bench_design
+    from fte_casadi.bench.cstep import bench_c_step
 
-    res = bench_design(designs["three-tank"], iters=2000, reps=1)
+    res = bench_c_step(designs["three-tank"], iters=2000, reps=1)
     assert res["c_ns"] > 0 and res["hand_ns"] > 0 and res["casadi_us"] > 0
     assert res["hand_max_diff"] <= 1e-9  # same maths up to summation order, values of O(10)
     assert res["sizeof_state"] == res["state_bytes"]

@@ -3,7 +3,7 @@
 Each ``generated/<plant>/`` holds ``design.json``, the design its code was made from; the code
 is regenerated from it into a temporary folder and must be identical byte for byte (the output
 is deterministic: no timestamps, constants printed with 17 significant digits). On a failure,
-run ``python -c "from fte_casadi.codegen import regenerate_builtin; regenerate_builtin('generated')"``
+run ``python -c "from fte_casadi.generated import regenerate_builtin; regenerate_builtin('generated')"``
 (or ``fte codegen --builtin``) and commit the result.
 """
 

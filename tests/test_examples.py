@@ -59,7 +59,7 @@ def test_example_generated_c_equals_python(pendulum_design, tmp_path):
     def fault(t, u):
         return np.array([-0.3 * u[0] if t > 0.5 else 0.0, 0.05 if t > 1.0 else 0.0])
 
-    err, traj = closed_loop_compare(d, CStep(lib, d), ts, 1500, fault=fault)
+    err, traj = closed_loop_compare(d, CStep(lib, d), ts, 1500, plant=load_plant(d.plant_spec), fault=fault)
     assert max(err.values()) <= C_DOUBLE
     assert np.max(np.abs(traj["fhat"][-1])) > 0.01  # the observer saw the faults
 

@@ -1,5 +1,7 @@
 """Monte Carlo engine: Euler-Maruyama statistics, equality with a reference loop, faults, errors."""
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -7,7 +9,9 @@ import pytest
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.plants import SCENARIOS
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate
-from fte_casadi.sim.engine import closed_loop_sample, monte_carlo
+from fte_casadi.sim import rng as frng
+from fte_casadi.sim.engine import closed_loop_sample
+from fte_casadi.sim.perpath import monte_carlo
 from fte_casadi.sim.scenario import fault_schedule
 
 GBM_A, GBM_B = 0.5, 0.8  # dX = a X dt + b X dW
@@ -84,7 +88,7 @@ def _short_manip(T=1.0):
 
 
 def test_engine_equals_reference_loop(plants, lqr_designs):
-    """Compiled, mapped engine == the uninterpreted sample Function stepped by hand with the same noise."""
+    """Vectorised engine == the uninterpreted sample Function stepped by hand with the same noise."""
     plant, design = plants["manipulator"], lqr_designs["manipulator"]
     sc = _short_manip(0.3)
     sc = Scenario(
@@ -112,11 +116,11 @@ def test_engine_equals_reference_loop(plants, lqr_designs):
     )
     fn, lay = closed_loop_sample(design, plant, 1e-3, sched)
     FP = sched.stacked()
-    q = 2
-    g = np.random.default_rng(5).spawn(3)[q].spawn(3)
-    x0 = np.asarray(sc.x0) + sc.x0_noise * g[0].standard_normal(4)
-    dW = np.sqrt(1e-3) * g[1].standard_normal(n + 1000)
-    d = g[2].uniform(-0.1, 0.1, (n + 1000, 1))
+    q = 2  # path 2 of seed 5: its numbers from the numpy twin of the engine's generator
+    x0 = np.asarray(sc.x0) + sc.x0_noise * frng.x0_normals(5, [q], 4)[0]
+    nn, uu = frng.step_numbers(5, [q], 0, n + 1, 1)
+    dW = np.sqrt(1e-3) * nn[0]
+    d = 0.1 * uu[0]
     s = np.zeros(lay.ns)
     z0 = np.concatenate([sc.x0, np.zeros(4)]) - design.H @ (plant.C @ x0)
     for r in range(3):
@@ -220,3 +224,83 @@ def test_builtin_scenarios():
     assert m.windows("fa") == [(2.5, 5.0)] and m.windows("fs") == [(7.0, 10.0)]
     assert (t.T, t.paths) == (600.0, 10) and t.windows("fa") == [(200.0, 400.0)]
     assert Scenario.from_dict(m.to_dict()) == m
+
+
+def test_vectorised_engine_equals_the_per_path_engine(plants, lqr_designs):
+    """Issue #11: the same trajectories as today's per-path engine (compiled blocks mapped over paths)
+    when both get the same random numbers (the numpy twin of the generator the C draws from)."""
+    from fte_casadi.sim.engine import SCALES, Prepared, resolve_dt
+
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = _short_manip(0.5)
+    res = simulate(design, plant, sc, paths=3, seed=11, progress=False, record_all=True, record_every=1)
+    dt, nsteps, _ = resolve_dt(design, sc, None)
+    prep = Prepared(design, plant, sc, dt, nsteps, dict(SCALES))
+    paths = np.arange(3)
+    nn, uu = frng.step_numbers(11, paths, 0, nsteps + 1, plant.ld)
+    amp = sc.unknown_input.amplitude
+
+    def fill(W, k0):
+        L = W.shape[1]
+        k1 = min(k0 + L, nsteps + 1)
+        W[:] = 0.0
+        W[:, : k1 - k0, 0] = np.sqrt(dt) * nn[:, k0:k1]
+        W[:, : k1 - k0, 1:] = amp * uu[:, k0:k1]
+
+    sample, lay = closed_loop_sample(design, plant, dt, plant_schedule_for(design, plant, sc, dt, nsteps))
+    FP = plant_schedule_for(design, plant, sc, dt, nsteps).stacked()
+    rec, _ = monte_carlo(sample.expand(), prep.initial_states(paths, 11), FP, nsteps, 1, fill, dt=dt)
+    got = np.concatenate([getattr(res, run).__dict__[k] for run in ("free", "no_ftc", "ftc")
+                          for k in ("x", "xbarhat", "f", "u", "y", "yc")], axis=2)  # fmt: skip
+    np.testing.assert_allclose(got, rec, rtol=0, atol=1e-12 * max(1.0, np.abs(rec).max()))
+
+
+def plant_schedule_for(design, plant, sc, dt, nsteps):
+    from fte_casadi.sim.engine import plant_schedule
+
+    return plant_schedule(design, plant, sc, np.arange(nsteps + 2000) * dt, dt)
+
+
+def test_metrics_do_not_depend_on_chunks_or_threads(plants, lqr_designs):
+    """Issue #11: path i's numbers depend on (seed, i) only and the sums are combined exactly."""
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = _short_manip(0.5)
+    a = simulate(design, plant, sc, paths=37, seed=4, progress=False, chunk=256, threads=2).metrics
+    b = simulate(design, plant, sc, paths=37, seed=4, progress=False, chunk=5, threads=1).metrics
+    a.pop("wall_s"), b.pop("wall_s")
+    assert a == b
+
+
+def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs):
+    """The metrics reduced in the compiled loop equal those recomputed from every recorded sample."""
+    from fte_casadi.plants import SCENARIOS
+    from fte_casadi.sim.metrics import metrics_from_arrays
+
+    for name in ("manipulator", "three-tank"):
+        sc = SCENARIOS[name]()
+        sc = dataclasses.replace(sc, T=sc.T / 2 if name == "manipulator" else 300.0)
+        res = simulate(real_designs[name], plants[name], sc, paths=6, seed=2, progress=False, record_all=True,
+                       record_every=1)  # fmt: skip
+        ref, got = metrics_from_arrays(res), res.metrics
+        for key in ("state_rms_error", "fault_rel_rms_error", "input_saturation"):
+            assert [v is None for v in got[key]] == [v is None for v in ref[key]]
+            np.testing.assert_allclose([v for v in got[key] if v is not None], [v for v in ref[key] if v is not None],
+                                       rtol=1e-12, atol=1e-15)  # fmt: skip
+        assert got["ftc_deviation_ratio"] == pytest.approx(ref["ftc_deviation_ratio"], rel=1e-12)
+        assert len(got["windows"]) == len(sc.faults) == len(ref["windows"])
+        for w, v in zip(got["windows"], ref["windows"]):
+            assert (w["fault"], w["start"], w["stop"]) == (v["fault"], v["start"], v["stop"])
+            for k in ("fault_rel_rms_error", "ftc_deviation_ratio"):
+                assert (w[k] is None and v[k] is None) or w[k] == pytest.approx(v[k], rel=1e-12)
+            np.testing.assert_allclose(w["input_saturation"], v["input_saturation"], rtol=1e-12, atol=0)
+
+
+def test_memory_does_not_grow_with_paths(plants, lqr_designs):
+    """Only the example paths keep trajectories: 50 or 500 paths retain the same arrays."""
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = _short_manip(0.3)
+    a = simulate(design, plant, sc, paths=50, seed=1, progress=False)
+    b = simulate(design, plant, sc, paths=500, seed=1, progress=False)
+    assert a.recorded_paths == b.recorded_paths == sc.paths
+    assert a.ftc.x.nbytes == b.ftc.x.nbytes and b.metrics["paths"] == 500
+    np.testing.assert_array_equal(a.ftc.x, b.ftc.x)  # the example paths are the same paths

@@ -72,9 +72,17 @@ def test_metrics_hand_made(lqr_designs):
         "state_rms_error",
         "fault_rel_rms_error",
         "ftc_deviation_ratio",
+        "windows",
+        "input_saturation",
         "wall_s",
     }
     assert (m["paths"], m["dt"], m["T"], m["seed"], m["wall_s"]) == (2, 0.5, 10.0, 3, 1.5)
+    # one window per fault profile, with the same numbers as the pooled ones here (one window)
+    (w,) = m["windows"]
+    assert (w["fault"], w["start"], w["stop"]) == ("fa", 4.0, 9.0)
+    assert w["fault_rel_rms_error"] == pytest.approx(0.25, abs=1e-12)
+    assert w["ftc_deviation_ratio"] == pytest.approx(0.25, abs=1e-12)
+    assert m["input_saturation"] == [0.0] and w["input_saturation"] == [0.0]  # the fixture has no limits
     # state error: RMS 0.1 on path 0, 0.3 on path 1 -> mean 0.2
     assert m["state_rms_error"] == pytest.approx([0.2], abs=1e-12)
     # fault: window [4, 9) minus its first 20 % -> [5, 9): fhat - f = 0.5, f = 2 -> 0.25

@@ -6,13 +6,11 @@ from .build import find_compiler as find_compiler
 from .generate import default_ts as default_ts
 from .generate import generate_c as generate_c
 from .generate import output_files as output_files
-from .generate import regenerate_builtin as regenerate_builtin
 
 __all__ = [
     "generate_c",
     "default_ts",
     "output_files",
-    "regenerate_builtin",
     "find_compiler",
     "compile_shared",
     "compile_program",

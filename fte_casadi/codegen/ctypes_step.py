@@ -66,16 +66,13 @@ class CStep:
 
 
 def closed_loop_compare(
-    design: Design, cstep: CStep, ts: float, steps: int, *, fault=None, boundary_layer=None
+    design: Design, cstep: CStep, ts: float, steps: int, *, plant, fault=None, boundary_layer=None
 ):
     """Euler closed loop of the nonlinear plant driven by the CasADi step; the C step gets the same y.
 
-    Returns a dict of the largest absolute differences (z, u, xbarhat, yc) over the run, plus
+    ``plant``: the nonlinear plant the design is for. Returns a dict of the largest absolute differences (z, u, xbarhat, yc) over the run, plus
     the trajectories. ``fault(t, u) -> f`` gives the fault signal (default none).
     """
-    from ..plants.loader import load_plant
-
-    plant = load_plant(design.plant_spec)
     F = plant.drift_function()
     fn = step_function(design, ts, boundary_layer=boundary_layer)
     n, m, ld, lf = plant.n, plant.m, plant.ld, plant.lf

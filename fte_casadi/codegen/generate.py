@@ -38,7 +38,7 @@ from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import template
 
-__all__ = ["generate_c", "default_ts", "c_name", "output_files", "regenerate_builtin", "BUILTIN_DIRS"]
+__all__ = ["generate_c", "default_ts", "c_name", "output_files", "BUILTIN_DIRS", "write_files", "file_mode"]
 
 #: directory name under ``generated/`` of each built-in plant
 BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank"}
@@ -328,7 +328,7 @@ def _saturation_text(design: Design) -> str:
     )
 
 
-def _prepare_dir(out_dir: Path) -> None:
+def prepare_dir(out_dir: Path) -> None:
     if out_dir.exists() and not out_dir.is_dir():
         raise CodegenError(
             f"output directory {str(out_dir)!r} exists and is not a directory; choose another --out"
@@ -343,17 +343,17 @@ def _prepare_dir(out_dir: Path) -> None:
         raise CodegenError(f"output directory {str(out_dir)!r} is not writable; choose a writable --out")
 
 
-def _file_mode() -> int:
+def file_mode() -> int:
     """``0o666`` less the process umask (what ``open`` would give; mkstemp gives 0o600)."""
     mask = os.umask(0o022)
     os.umask(mask)
     return 0o666 & ~mask
 
 
-def _write_all(out_dir: Path, texts: dict[str, str]) -> list[Path]:
+def write_files(out_dir: Path, texts: dict[str, str]) -> list[Path]:
     """Write every file to a temporary name first, then rename them all; a failure removes the temporaries."""
     temps: list[tuple[str, Path]] = []
-    mode = _file_mode()
+    mode = file_mode()
     try:
         for fname, text in texts.items():
             fd, tmp = tempfile.mkstemp(prefix=f".{fname}.", suffix=".tmp", dir=out_dir)
@@ -428,7 +428,7 @@ def generate_c(
     tsm = _ts_max(design)
     name = c_name(design.plant)
     out = Path(out_dir)
-    _prepare_dir(out)
+    prepare_dir(out)
     try:
         fn = step_function(
             design, tsf, tolerant=True, boundary_layer=boundary_layer, name=f"fte_{name}_casadi_step"
@@ -449,7 +449,7 @@ def generate_c(
         files[3]: c_src,
         files[4]: texts[files[4]],
     }
-    return _write_all(out, ordered)
+    return write_files(out, ordered)
 
 
 def memory_report(design: Design, *, ts: float | None = None, real: str = "double") -> dict:
@@ -459,31 +459,3 @@ def memory_report(design: Design, *, ts: float | None = None, real: str = "doubl
     fn = step_function(design, tsf, tolerant=True, name=f"fte_{name}_casadi_step")
     c_src, h_src = _casadi_sources(fn, name, real)
     return _memory(c_src, real, int(design.dims["nbar"]), _sizes(h_src, f"fte_{name}_casadi_step"))
-
-
-def builtin_design(plant_name: str) -> Design:
-    """The design used for ``generated/``: the conditioned LMI design of the built-in plant."""
-    from ..design import design as lmi_design
-    from ..plants import BUILTIN, SCENARIOS
-    from ..ts import derive
-
-    return lmi_design(derive(BUILTIN[plant_name]()), variant="conditioned", plant_spec=plant_name,
-                      sample_time=SCENARIOS[plant_name]().dt)  # fmt: skip
-
-
-def regenerate_builtin(root: str | os.PathLike) -> dict[str, list[Path]]:
-    """Regenerate ``root/manipulator`` and ``root/three_tank`` (``root`` is the ``generated/`` folder).
-
-    Each folder gets ``design.json`` (the design the code was made from, so that the code can
-    be regenerated bit for bit) and the files of :func:`generate_c` with the default sample
-    time and ``double``.
-    """
-    out = {}
-    for plant_name, sub in BUILTIN_DIRS.items():
-        d = builtin_design(plant_name)
-        folder = Path(root) / sub
-        _prepare_dir(folder)
-        d.save(folder / "design.json")
-        os.chmod(folder / "design.json", _file_mode())
-        out[plant_name] = [folder / "design.json", *generate_c(Design.load(folder / "design.json"), folder)]
-    return out

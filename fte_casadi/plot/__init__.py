@@ -9,3 +9,5 @@ from .figures import state_figure as state_figure
 from .figures import write_figures as write_figures
 from .frontier import frontier_figure as frontier_figure
 from .frontier import frontier_plot as frontier_plot
+from .sweep import sweep_figure as sweep_figure
+from .sweep import sweep_plot as sweep_plot

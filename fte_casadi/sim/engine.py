@@ -1,4 +1,4 @@
-"""Euler-Maruyama Monte Carlo of the closed loop on the *nonlinear* plant, compiled and vectorised.
+"""Euler-Maruyama Monte Carlo of the closed loop on the *nonlinear* plant, vectorised across paths.
 
 One CasADi Function computes one sample of the closed loop for one path and all three runs
 (fault-free, faulty without tolerant control, faulty with it), which share the Brownian
@@ -6,18 +6,19 @@ increment, the unknown input and the initial state. Within a sample, for each ru
 
     y_k     = C x_k + Df f_k^sensor             (sensor faults depend on x and t only)
     (z_{k+1}, u_k, xbarhat_k, yc_k, s_k) = step(z_k, y_k)     -- fte_casadi.step, the single source of truth
-    f_k     = f_k^sensor + f_k^actuator(u_k)    (loss of effectiveness needs u_k)
+    f_k     = f_k^sensor + f_k^actuator(u_k)    (loss of effectiveness needs u_k; u_k is the clipped input)
     x_{k+1} = x_k + drift(x_k, u_k, d_k, f_k) dt + g(x_k, u_k, f_k, 0) dW_k
 
 The fault-free run uses the tolerant step too (the deployed controller, never faulted); the
 faulty run without tolerant control uses ``step_function(..., tolerant=False)``.
 
-Speed: the sample is accumulated over ``record_every`` steps (only the first is recorded),
-then over a block of records (``mapaccum``); that block is generated as C, compiled once
-(cached on disk, see :mod:`.compile`) and mapped over paths with CasADi's thread map. Python
-only touches the arrays once per block of ~1000 steps. Random numbers come from child
-generators per path (``rng.spawn``: x0 noise, dW, d), so path i sees the same noise whatever
-the block size or the number of paths.
+:func:`simulate` appends the metric summands of :mod:`.reduce` to that Function and runs it in the
+lane engine of :mod:`.vector` (C over chunks of paths, random numbers drawn in the loop by the
+counter-based generator of :mod:`.rng`, so path i's noise depends only on (seed, i)). Memory is
+bounded: each path keeps its state and its metric sums; full trajectories are recorded only for
+the example paths the figures use (all paths with ``record_all``). Chunks of paths run on threads
+or, with ``scheduler``, on the workers of a dask.distributed cluster (:mod:`.cluster`); the metrics
+are the same either way. The per-path engine of fte_casadi 0.1 is :mod:`.perpath`.
 """
 
 from __future__ import annotations
@@ -35,16 +36,18 @@ from ..design.record import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
 from ..step import step_function
-from .compile import compiled
+from .reduce import finalize, increments, masks
 from .result import RUNS, RunData, SimulationResult
 from .scenario import FaultSchedule, Scenario, Sinusoid, UniformNoise, fault_schedule
 
-__all__ = ["simulate", "closed_loop_sample", "monte_carlo", "Layout"]
+__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "SCALES"]
 
-#: recorded path-samples kept in memory by default (per run); more paths -> coarser recording
-_RECORD_BUDGET = 500_000
-#: ... and at most about this many samples per path
+#: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
+#: paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
+CHUNK = 256
+#: the factors a sweep may vary, and their defaults
+SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0}
 
 
 class Layout:
@@ -137,29 +140,6 @@ def closed_loop_sample(
     return fn, lay
 
 
-def _block_function(sample: ca.Function, every: int, records: int) -> ca.Function:
-    """``(state, W, FP) -> (state_end, REC)`` over ``records`` records of ``every`` steps each."""
-    ns, nw = sample.size1_in(0), sample.size1_in(1)
-    acc = sample.mapaccum("fte_cl_acc", every)
-    S = ca.MX.sym("state", ns)
-    W = ca.MX.sym("w", nw, every)
-    FP = ca.MX.sym("fp", sample.size1_in(2), every)
-    nxt, rec = acc(S, W, FP)
-    one = ca.Function("fte_cl_rec", [S, W, FP], [nxt[:, -1], rec[:, 0]])
-    blk = one.mapaccum("fte_cl_blk", records)
-    S2 = ca.MX.sym("state", ns)
-    W2 = ca.MX.sym("w", nw, every * records)
-    FP2 = ca.MX.sym("fp", sample.size1_in(2), every * records)
-    nxt2, rec2 = blk(S2, W2, FP2)
-    return ca.Function(
-        f"fte_cl_block_{every}x{records}",
-        [S2, W2, FP2],
-        [nxt2[:, -1], rec2],
-        ["state", "w", "fp"],
-        ["state_end", "rec"],
-    )
-
-
 def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, seed, dt):
     if not isinstance(paths, (int, np.integer)) or isinstance(paths, bool) or paths < 1:
         raise ParameterError(f"paths must be a positive integer; got {paths!r}")
@@ -190,50 +170,23 @@ def _nice_below(v: float) -> float:
     return 10.0 ** (e - 1) * 5.0
 
 
-def simulate(
-    design: Design,
-    plant: Plant,
-    scenario: Scenario,
-    *,
-    paths: int,
-    seed: int,
-    dt: float | None = None,
-    progress: bool = True,
-    record_every: int | None = None,
-    threads: int | None = None,
-    rng: np.random.Generator | None = None,
-) -> SimulationResult:
-    """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
+def _lm(design: Design, key: str) -> np.ndarray:
+    return np.asarray(design.local_models[0][key], dtype=float)
 
-    Parameters
-    ----------
-    design, plant, scenario
-        The observer/controller, the nonlinear plant it was designed for, the experiment.
-    paths : int
-        Number of Brownian paths.
-    seed : int
-        Seed of the ``numpy.random.Generator`` (recorded in the result and the metrics);
-        path ``i`` uses child generator ``i`` of ``numpy.random.default_rng(seed)``.
-    dt : float, optional
-        Euler-Maruyama step and controller sample time; default the scenario's, lowered to a
-        round value below ``ts_max / 2`` when the design cannot run at it (said in ``notes``).
-        An explicit ``dt`` above the design's ``checks["ts_max"]`` is refused.
-    progress : bool
-        Show a progress bar on stderr when the run lasts more than about a second.
-    record_every : int, optional
-        Keep every k-th sample; default 1 unless paths x samples exceeds ~5e5 or a path ~2e4 samples.
-    threads : int, optional
-        Threads of the path map (default: the CPU count, at most 8).
-    rng : numpy.random.Generator, optional
-        Use this generator instead of ``default_rng(seed)`` (``seed`` is then only recorded).
 
-    Returns
-    -------
-    SimulationResult
-    """
-    t_wall = time.perf_counter()
-    _check_settings(design, plant, scenario, paths, seed, dt)
-    paths, seed = int(paths), int(seed)
+def plant_schedule(
+    design: Design, plant: Plant, scenario: Scenario, t: np.ndarray, dt: float
+) -> FaultSchedule:
+    """The scenario's fault profiles resolved against this plant and design, sampled at ``t``."""
+    return fault_schedule(
+        scenario, plant.fault_names, plant.fault_kinds, _lm(design, "B"), _lm(design, "Bf"),
+        np.asarray(plant.Df), plant.input_names, t, dt,
+    )  # fmt: skip
+
+
+def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[float, int, list[str]]:
+    """The step (the scenario's, lowered below the design's ts_max when it must be), the number of
+    steps, and notes. An explicit ``dt`` above ts_max is refused."""
     notes = []
     ts_max = float(design.checks.get("ts_max", math.inf) or math.inf)
     if dt is None:
@@ -257,67 +210,227 @@ def simulate(
         raise SimulationError(
             f"the horizon T = {scenario.T:g} is not a whole number of steps dt = {dt:g}; choose dt dividing T"
         )
-    if record_every is None:
-        record_every = max(
-            1, math.ceil(paths * (nsteps + 1) / _RECORD_BUDGET), math.ceil((nsteps + 1) / _RECORD_PER_PATH)
+    return dt, nsteps, notes
+
+
+def _scales(scales: dict | None) -> dict:
+    out = dict(SCALES)
+    for k, v in (scales or {}).items():
+        if k not in SCALES:
+            raise ParameterError(f"unknown factor {k!r}; the factors are {sorted(SCALES)}")
+        try:
+            fv = float(v)
+        except (TypeError, ValueError):
+            raise ParameterError(f"{k} must be a number; got {v!r}") from None
+        if not (math.isfinite(fv) and fv >= 0):
+            raise ParameterError(f"{k} must be a non-negative finite number; got {v!r}")
+        out[k] = fv
+    return out
+
+
+class Prepared:
+    """Everything a run needs that does not depend on the paths: built once per (design, scenario, dt),
+    the same in-process and on a cluster worker (which rebuilds it from the documents)."""
+
+    def __init__(
+        self, design: Design, plant: Plant, scenario: Scenario, dt: float, nsteps: int, scales: dict
+    ):
+        from .vector import VectorEngine
+
+        self.design, self.plant, self.scenario, self.dt, self.nsteps = design, plant, scenario, dt, nsteps
+        self.scales = scales
+        nsamp = nsteps + 1
+        self.t = np.arange(nsamp) * dt
+        sched = plant_schedule(design, plant, scenario, self.t, dt)
+        sample, lay = closed_loop_sample(design, plant, dt, sched)
+        self.lay = lay
+        FP = sched.stacked()  # (4 lf, samples): rows a, lu, st, la
+        lf = plant.lf
+        FP[: 3 * lf] *= scales["fault_scale"]  # bias/drift, loss, stuck deviation; not the latch
+        self.masks = masks(self.t, scenario, plant.fault_names)
+        ui = scenario.unknown_input
+        ld = plant.ld
+        ddet = np.zeros((ld, nsamp))
+        self.damp = 0.0
+        if ld and isinstance(ui, UniformNoise):
+            self.damp = float(ui.amplitude) * scales["d_scale"]
+        elif ld and isinstance(ui, Sinusoid):
+            ddet[:] = scales["d_scale"] * ui.amplitude * np.sin(2 * np.pi * ui.frequency * self.t + ui.phase)
+        self.sqdt = math.sqrt(dt) * scales["noise_scale"]
+        self.SH = np.ascontiguousarray(np.vstack([FP, self.masks.M, ddet]).T)
+        inc, self.names = increments(lay, self.masks, design.input_limits)
+        nfp, nm = FP.shape[0], self.masks.M.shape[0]
+        S = ca.SX.sym("state", lay.ns)
+        w = ca.SX.sym("w", lay.nw)
+        sh = ca.SX.sym("sh", nfp + nm + ld)
+        wd = ca.vertcat(w[0], w[1:] + sh[nfp + nm :]) if ld else w
+        nxt, rec = sample(S, wd, sh[:nfp])
+        F = ca.Function("fte_cl", [S, w, sh], [nxt, rec, inc(rec, sh[nfp : nfp + nm])]).expand()
+        self.engine_function = F
+        xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
+        self.engine = VectorEngine(F, xs, name="fte_mc")
+
+    def rescaled(self, scales: dict) -> Prepared:
+        """The same compiled engine with other factors: only the shared inputs change (no recompilation)."""
+        import copy
+
+        out = copy.copy(self)
+        out.scales = scales
+        nf = 4 * self.plant.lf
+        FP = self.SH[:, :nf].T.copy()
+        FP[: 3 * self.plant.lf] *= (
+            scales["fault_scale"] / self.scales["fault_scale"] if self.scales["fault_scale"] else 0.0
         )
+        out.SH = self.SH.copy()
+        out.SH[:, :nf] = FP.T
+        nm = self.masks.M.shape[0]
+        r = scales["d_scale"] / self.scales["d_scale"] if self.scales["d_scale"] else 0.0
+        out.SH[:, nf + nm :] *= r
+        out.damp = self.damp * r
+        out.sqdt = math.sqrt(self.dt) * scales["noise_scale"]
+        return out
+
+    def initial_states(self, paths: np.ndarray, seed: int) -> np.ndarray:
+        """(len(paths), ns): x0 plus its noise (drawn from (seed, path)), observer initialised per scenario."""
+        from .rng import x0_normals
+
+        plant, sc, lay = self.plant, self.scenario, self.lay
+        x0n = np.asarray(plant.x0 if sc.x0 is None else sc.x0, dtype=float)
+        if x0n.shape != (plant.n,):
+            raise SimulationError(f"scenario x0 has {x0n.size} entries; the plant has {plant.n} states")
+        x0 = x0n + sc.x0_noise * x0_normals(seed, paths, plant.n)
+        state = np.zeros((len(paths), lay.ns))
+        H = np.asarray(self.design.H)
+        xb_nom = np.concatenate([x0n, np.zeros(lay.nbar - plant.n)])
+        for r in range(3):
+            o = r * lay.run_state
+            state[:, o : o + plant.n] = x0
+            if sc.observer_init == "nominal":
+                state[:, o + plant.n : o + plant.n + lay.nbar] = xb_nom - (x0 @ np.asarray(plant.C).T) @ H.T
+        return state
+
+
+def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
+    """Paths ``path0 .. path0 + count - 1``: ``(ACC, DIV, REC)`` (REC only when ``every > 0``)."""
+    paths = np.arange(path0, path0 + count)
+    S0 = prep.initial_states(paths, seed)
+    _, acc, div, rec = prep.engine.run(path0, S0, seed, prep.SH, prep.sqdt, prep.damp,
+                                       prep.scenario.divergence_bound, every)  # fmt: skip
+    return acc, div, rec
+
+
+def simulate(
+    design: Design,
+    plant: Plant,
+    scenario: Scenario,
+    *,
+    paths: int,
+    seed: int,
+    dt: float | None = None,
+    progress: bool = True,
+    record_paths: int | None = None,
+    record_all: bool = False,
+    record_every: int | None = None,
+    threads: int | None = None,
+    chunk: int = CHUNK,
+    scheduler: str | None = None,
+    scales: dict | None = None,
+    prepared: Prepared | None = None,
+) -> SimulationResult:
+    """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
+
+    Parameters
+    ----------
+    design, plant, scenario
+        The observer/controller, the nonlinear plant it was designed for, the experiment.
+    paths : int
+        Number of Brownian paths.
+    seed : int
+        Seed of the counter-based generator (:mod:`.rng`): path i's noise depends on (seed, i) only.
+    dt : float, optional
+        Euler-Maruyama step and controller sample time; default the scenario's, lowered to a round
+        value below ``ts_max / 2`` when the design cannot run at it (said in ``notes``). An explicit
+        ``dt`` above the design's ``checks["ts_max"]`` is refused.
+    progress : bool
+        A progress bar on stderr when the run lasts more than about a second.
+    record_paths, record_all
+        Full trajectories are kept for the first ``record_paths`` paths (default: the scenario's
+        path count, the paper's figures), or for all with ``record_all`` (memory grows with paths).
+    record_every : int, optional
+        Keep every k-th sample of the recorded paths (default: at most ~2e4 samples per path).
+    threads : int, optional
+        Threads running chunks of ``chunk`` paths (default: the CPU count, at most 8).
+    scheduler : str, optional
+        Address of a dask.distributed scheduler: the chunks run on its workers (:mod:`.cluster`).
+    scales : dict, optional
+        ``fault_scale``, ``noise_scale``, ``d_scale`` (default 1): multiply every fault's magnitude,
+        the diffusion, the unknown input.
+
+    Returns
+    -------
+    SimulationResult
+        With ``metrics`` (the metrics document over all paths, streamed) and the recorded paths.
+    """
+    t_wall = time.perf_counter()
+    _check_settings(design, plant, scenario, paths, seed, dt)
+    paths, seed = int(paths), int(seed)
+    if not isinstance(chunk, int) or chunk < 1:
+        raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
+    sc = _scales(scales)
+    dt, nsteps, notes = resolve_dt(design, scenario, dt)
+    nsamp = nsteps + 1
+    if record_every is None:
+        record_every = max(1, math.ceil(nsamp / _RECORD_PER_PATH))
     if not isinstance(record_every, int) or record_every < 1:
         raise ParameterError(f"record_every must be a positive integer; got {record_every!r}")
-    nrec = nsteps // record_every + 1
-    t_all = np.arange(nsteps + record_every * 1000 + 1) * dt  # covers the padded last block
-    sched = plant_schedule(design, plant, scenario, t_all, dt)
-    sample, lay = closed_loop_sample(design, plant, dt, sched)
-
-    # initial states; per path three child generators (x0 noise, dW, d): a path's noise does not
-    # depend on the block size nor on how many paths run
-    root = np.random.default_rng(seed) if rng is None else rng
-    gens = [g.spawn(3) for g in root.spawn(paths)]
-    x0n = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
-    if x0n.shape != (plant.n,):
-        raise SimulationError(f"scenario x0 has {x0n.size} entries; the plant has {plant.n} states")
-    x0 = np.stack([x0n + scenario.x0_noise * g[0].standard_normal(plant.n) for g in gens])
-    H = np.asarray(design.H)
-    xb_nom = np.concatenate([x0n, np.zeros(lay.nbar - plant.n)])
-    state = np.zeros((paths, lay.ns))
-    for r in range(3):
-        o = r * lay.run_state
-        state[:, o : o + plant.n] = x0
-        if scenario.observer_init == "nominal":
-            y0 = x0 @ np.asarray(plant.C).T
-            state[:, o + plant.n : o + plant.n + lay.nbar] = xb_nom - y0 @ H.T
-    ui = scenario.unknown_input
-    sq = math.sqrt(dt)
-
-    def fill(W: np.ndarray, k0: int) -> None:
-        L = W.shape[1]
-        for q, g in enumerate(gens):
-            W[q, :, 0] = sq * g[1].standard_normal(L)
-            if lay.ld and isinstance(ui, UniformNoise):
-                W[q, :, 1:] = g[2].uniform(-ui.amplitude, ui.amplitude, (L, lay.ld))
-        if lay.ld and isinstance(ui, Sinusoid):
-            tt = t_all[k0 : k0 + L]
-            W[:, :, 1:] = (ui.amplitude * np.sin(2 * np.pi * ui.frequency * tt + ui.phase))[None, :, None]
-
-    def check(rec: np.ndarray, t: np.ndarray) -> None:
-        _check_divergence(rec, lay, scenario.divergence_bound, t, plant.name)
-
-    rec_all, is_compiled = monte_carlo(
-        sample.expand(),
-        state,
-        sched.stacked(),
-        nsteps,
-        record_every,
-        fill,
-        dt=dt,
-        threads=threads,
-        progress=progress,
-        desc=f"simulate {plant.name}",
-        check=check,
+    nrec_paths = (
+        paths if record_all else min(paths, scenario.paths if record_paths is None else int(record_paths))
     )
-    if not is_compiled:
-        notes.append("no C compiler: the closed loop ran interpreted")
-    every = record_every
-    runs = lay.split_record(rec_all)
+    prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc)
+    starts = list(range(0, paths, chunk))
+    acc = np.empty((paths, len(prep.names)))
+    div = np.empty(paths, dtype=np.int_)
+    bar = tqdm(
+        total=paths,
+        disable=not progress,
+        delay=1.0,
+        file=sys.stderr,
+        unit=" paths",
+        desc=f"simulate {plant.name}",
+    )
+    try:
+        if scheduler is not None:
+            from .cluster import run_on_cluster
+
+            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk,
+                                               on_done=lambda k: bar.update(k)):  # fmt: skip
+                acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
+        else:
+            from concurrent.futures import ThreadPoolExecutor
+
+            nthreads = threads or min(8, os.cpu_count() or 1)
+            with ThreadPoolExecutor(max_workers=nthreads) as pool:
+                futs = {a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed) for a in starts}
+                for a in starts:
+                    ca_, dv, _ = futs[a].result()
+                    acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
+                    bar.update(len(dv))
+    finally:
+        bar.close()
+    bad = np.flatnonzero(div >= 0)
+    if len(bad):
+        p0 = int(bad[np.argmin(div[bad])])
+        raise SimulationError(
+            f"{plant.name}: path {p0} diverged at t = {div[p0] * dt:.6g} (a state NaN/Inf or |x| > "
+            f"{scenario.divergence_bound:g}); the closed loop is unstable for this design and step: check the "
+            "design's certificates, lower dt, or shorten the fault"
+        )
+    rec = None
+    if nrec_paths:
+        _, _, rec = run_paths(prep, 0, nrec_paths, seed, record_every)
+    wall = time.perf_counter() - t_wall
+    doc = finalize(acc, prep.names, prep.masks, {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed,
+                                                 "wall_s": wall, "m": plant.m})  # fmt: skip
     names = {
         "states": list(plant.state_names),
         "state_units": list(plant.state_units),
@@ -328,126 +441,24 @@ def simulate(
         "fault_kinds": list(plant.fault_kinds),
         "time_unit": plant.time_unit,
     }
+    if rec is None:
+        rec = np.zeros((0, (nsamp - 1) // record_every + 1, prep.lay.nrec))
+    runs = prep.lay.split_record(rec)
     return SimulationResult(
         plant=plant.name,
-        t=np.arange(nrec) * every * dt,
+        t=np.arange(rec.shape[1]) * record_every * dt,
         dt=dt,
         T=float(scenario.T),
         seed=seed,
         paths=paths,
-        record_every=every,
+        record_every=record_every,
         scenario=scenario,
         design=design,
         names=names,
-        wall_s=time.perf_counter() - t_wall,
-        compiled=is_compiled,
+        wall_s=wall,
+        compiled=True,
         notes=tuple(notes),
+        metrics=doc,
+        scales=sc,
         **runs,
     )
-
-
-def monte_carlo(
-    sample: ca.Function,
-    state0: np.ndarray,
-    FP: np.ndarray,
-    nsteps: int,
-    every: int,
-    fill,
-    *,
-    dt: float,
-    threads: int | None = None,
-    progress: bool = False,
-    desc: str = "simulate",
-    check=None,
-) -> tuple[np.ndarray, bool]:
-    """Run ``sample: (state, w, fp) -> (state_next, rec)`` for ``nsteps`` steps on every path.
-
-    ``state0``: (paths, ns). ``FP``: (nfp, >= padded steps) per-step inputs shared by all paths.
-    ``fill(W, k0)`` writes the per-path inputs ``W`` (paths, L, nw) of steps ``k0 .. k0+L-1``.
-    Records the ``rec`` output at samples 0, every, 2 every, ... <= nsteps; returns
-    ``(rec (paths, samples, nrec), compiled)``. ``check(rec_block, t_block)`` may raise.
-    This is the whole Euler-Maruyama engine: compiled block, path map, zero-copy buffers.
-    """
-    paths = state0.shape[0]
-    nrec = nsteps // every + 1
-    records = max(1, min(nrec, 1000 // every if every < 1000 else 1))
-    nblocks = math.ceil(nrec / records)
-    L = records * every
-    if FP.shape[1] < nblocks * L:
-        FP = np.concatenate([FP, np.repeat(FP[:, -1:], nblocks * L - FP.shape[1], axis=1)], axis=1)
-    block, is_compiled = compiled(_block_function(sample, every, records))
-    nthreads = threads or min(8, os.cpu_count() or 1)
-    par = "thread" if nthreads > 1 and paths > 1 else "serial"
-    opts = {"max_num_threads": nthreads} if par == "thread" else {}
-    mapped = block.map("fte_cl_paths", par, paths, [2], [], opts)  # FP shared by all paths
-    # Zero-copy calls (Function.buffer): a CasADi (rows x cols) dense matrix is column-major,
-    # i.e. a C-contiguous numpy array of shape (cols, rows).
-    nrv = sample.size1_out(1)
-    rec_all = np.empty((paths, nblocks * records, nrv))
-    FPt = np.ascontiguousarray(FP.T)
-    S_in = np.ascontiguousarray(state0, dtype=float)
-    S_out = np.empty_like(S_in)
-    W = np.zeros((paths, L, sample.size1_in(1)))
-    REC = np.empty((paths, records, nrv))
-    buf, run_block = mapped.buffer()
-    buf.set_arg(0, memoryview(S_in))
-    buf.set_arg(1, memoryview(W))
-    buf.set_res(0, memoryview(S_out))
-    buf.set_res(1, memoryview(REC))
-    bar = tqdm(
-        total=nblocks * L * paths,
-        disable=not progress,
-        delay=1.0,
-        file=sys.stderr,
-        unit=" path-steps",
-        unit_scale=True,
-        desc=desc,
-    )
-    try:
-        for b in range(nblocks):
-            k0 = b * L
-            fill(W, k0)
-            fp_blk = np.ascontiguousarray(FPt[k0 : k0 + L])
-            buf.set_arg(2, memoryview(fp_blk))
-            run_block()
-            rec_all[:, b * records : (b + 1) * records, :] = REC
-            if check is not None:
-                check(REC, (k0 + every * np.arange(records)) * dt)
-            S_in[...] = S_out
-            bar.update(L * paths)
-    finally:
-        bar.close()
-    return rec_all[:, :nrec, :], is_compiled
-
-
-def _lm(design: Design, key: str) -> np.ndarray:
-    return np.asarray(design.local_models[0][key], dtype=float)
-
-
-def plant_schedule(
-    design: Design, plant: Plant, scenario: Scenario, t: np.ndarray, dt: float
-) -> FaultSchedule:
-    """The scenario's fault profiles resolved against this plant and design, sampled at ``t``."""
-    return fault_schedule(
-        scenario, plant.fault_names, plant.fault_kinds, _lm(design, "B"), _lm(design, "Bf"),
-        np.asarray(plant.Df), plant.input_names, t, dt,
-    )  # fmt: skip
-
-
-def _check_divergence(rec: np.ndarray, lay: Layout, bound: float, t: np.ndarray, plant: str) -> None:
-    """Stop with a message naming the first diverging path and time (rec: (paths, samples, nrec))."""
-    bad_run = []
-    for r in range(3):
-        blk = rec[:, :, r * lay.run_rec : (r + 1) * lay.run_rec]
-        xs = blk[:, :, : lay.n]
-        bad_run.append(~np.isfinite(blk).all(axis=2) | ~(np.abs(xs) <= bound).all(axis=2))
-    bad = bad_run[0] | bad_run[1] | bad_run[2]
-    if bad.any():
-        where = np.argwhere(bad)
-        path, k = where[np.argmin(where[:, 1])]
-        runs = ", ".join(RUNS[r] for r in range(3) if bad_run[r][path, k])
-        raise SimulationError(
-            f"{plant}: path {int(path)} diverged at t = {t[k]:.6g} (run {runs}: state NaN/Inf or |x| > {bound:g}); "
-            "the closed loop is unstable for this design and step: check the design's certificates, lower dt, "
-            "or shorten the fault"
-        )

@@ -6,24 +6,15 @@ import numpy as np
 
 from .result import SimulationResult
 
-__all__ = ["metrics", "fault_windows", "state_rms_error", "fault_rel_rms_error", "ftc_deviation_ratio"]
+__all__ = ["metrics", "metrics_from_arrays", "windows", "input_saturation", "fault_windows", "state_rms_error",
+           "fault_rel_rms_error", "ftc_deviation_ratio"]  # fmt: skip
 
-#: state errors are measured after this time (the observer's start-up transient)
-SETTLE_T = 1.0
-#: fraction of each fault window left out of the fault error (the estimator's settling)
-SETTLE_FRACTION = 0.2
+from .reduce import SETTLE_FRACTION, SETTLE_T, _mask
 
 
 def fault_windows(result: SimulationResult) -> list[list[tuple[float, float]]]:
     """Per fault (in the plant's order): the scenario's (start, stop) windows."""
     return [result.scenario.windows(name) for name in result.names["faults"]]
-
-
-def _mask(t: np.ndarray, windows, settle: float = 0.0) -> np.ndarray:
-    m = np.zeros(t.shape, bool)
-    for a, b in windows:
-        m |= (t >= a + settle * (b - a)) & (t < b)
-    return m
 
 
 def state_rms_error(x: np.ndarray, xhat: np.ndarray, t: np.ndarray, t_from: float = SETTLE_T) -> list[float]:
@@ -59,19 +50,62 @@ def ftc_deviation_ratio(y_free, y_noftc, yc_ftc, t, windows) -> float | None:
     return float(np.linalg.norm(yc_ftc[:, keep, :] - y_free[:, keep, :]) / den)
 
 
-def metrics(result: SimulationResult) -> dict:
-    """CONTRACT.md's metrics document: paths, dt, T, seed, state_rms_error, fault_rel_rms_error,
-    ftc_deviation_ratio, wall_s. Errors use the tolerant-control run; undefined ratios are ``None``."""
+def input_saturation(u: np.ndarray, limits, mask: np.ndarray | None = None) -> list[float]:
+    """Per input: the fraction of (path, sample) pairs with ``u`` at a limit (under ``mask`` over samples)."""
+    m = u.shape[2]
+    if limits is None:
+        return [0.0] * m
+    lim = np.asarray(limits, dtype=float)
+    keep = np.ones(u.shape[1], bool) if mask is None else mask
+    if not keep.any():
+        return [0.0] * m
+    at = (u[:, keep, :] <= lim[:, 0]) | (u[:, keep, :] >= lim[:, 1])
+    return [float(v) for v in at.mean(axis=(0, 1))]
+
+
+def windows(result: SimulationResult) -> list[dict]:
+    """One entry per fault profile of the scenario (in its order): the fault's relative RMS error over
+    the window minus its first 20 % and the FTC deviation ratio over the window, FTC run, paths pooled;
+    and per input the fraction of the window's samples at a limit."""
+    t, ftc = result.t, result.ftc
+    names = list(result.names["faults"])
+    out = []
+    for fp in result.scenario.faults:
+        j = names.index(fp.fault)
+        err = fault_rel_rms_error(
+            ftc.f[:, :, j : j + 1], ftc.fhat[:, :, j : j + 1], t, [[(fp.start, fp.stop)]]
+        )[0]
+        ratio = ftc_deviation_ratio(result.free.y, result.no_ftc.y, ftc.yc, t, [[(fp.start, fp.stop)]])
+        m = _mask(t, [(fp.start, fp.stop)])
+        out.append({"fault": fp.fault, "start": float(fp.start), "stop": float(fp.stop), "fault_rel_rms_error": err,
+                    "ftc_deviation_ratio": ratio,
+                    "input_saturation": input_saturation(ftc.u, result.design.input_limits, m)})  # fmt: skip
+    return out
+
+
+def metrics_from_arrays(result: SimulationResult) -> dict:
+    """CONTRACT.md's metrics document recomputed from the recorded arrays (the reference).
+
+    Over the recorded paths and samples only: equal to the streamed document of the run when every
+    path and every sample was recorded (``record_all=True, record_every=1``)."""
     t = result.t
     wins = fault_windows(result)
     ftc = result.ftc
     return {
-        "paths": int(result.paths),
+        "paths": int(ftc.x.shape[0]),
         "dt": float(result.dt),
         "T": float(result.T),
         "seed": int(result.seed),
         "state_rms_error": state_rms_error(ftc.x, ftc.xhat, t),
         "fault_rel_rms_error": fault_rel_rms_error(ftc.f, ftc.fhat, t, wins),
         "ftc_deviation_ratio": ftc_deviation_ratio(result.free.y, result.no_ftc.y, ftc.yc, t, wins),
+        "windows": windows(result),
+        "input_saturation": input_saturation(ftc.u, result.design.input_limits),
         "wall_s": float(result.wall_s),
     }
+
+
+def metrics(result: SimulationResult) -> dict:
+    """CONTRACT.md's metrics document of a run: the one the engine streamed over all its paths, or,
+    for a result without it (the per-path engine), :func:`metrics_from_arrays`."""
+    return dict(result.metrics) if result.metrics is not None else metrics_from_arrays(result)

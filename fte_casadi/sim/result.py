@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +78,15 @@ class SimulationResult:
     wall_s: float
     compiled: bool
     notes: tuple = ()
+    #: the metrics document over all paths (streamed by the engine); None for a per-path run
+    metrics: dict | None = None
+    #: fault_scale, noise_scale, d_scale of the run
+    scales: dict = field(default_factory=dict)
+
+    @property
+    def recorded_paths(self) -> int:
+        """Paths whose trajectories are kept (the first ones); ``paths`` may be many more."""
+        return int(self.free.x.shape[0])
 
     def run(self, name: str) -> RunData:
         if name not in RUNS:
@@ -105,6 +114,8 @@ def save_result(result: SimulationResult, path: str | os.PathLike) -> Path:
         "wall_s": result.wall_s,
         "compiled": result.compiled,
         "notes": list(result.notes),
+        "metrics": result.metrics,
+        "scales": result.scales,
     }
     arrays["meta"] = np.array(json.dumps(meta))
     arrays["scenario"] = np.array(result.scenario.to_json())
@@ -135,8 +146,11 @@ def load_result(path: str | os.PathLike) -> SimulationResult:
     except (KeyError, ValueError, TypeError) as exc:
         raise SimulationError(f"result file {str(path)!r} is not an fte simulation result ({exc})") from None
     kw = {
-        f.name: meta[f.name] for f in fields(SimulationResult) if f.name in meta and f.name not in ("notes",)
+        f.name: meta[f.name]
+        for f in fields(SimulationResult)
+        if f.name in meta and f.name not in ("notes", "scales")
     }
+    kw["scales"] = dict(meta.get("scales") or {})
     kw.pop("format", None)
     return SimulationResult(
         t=data["t"], scenario=scenario, design=design, notes=tuple(meta.get("notes", ())), **kw, **runs

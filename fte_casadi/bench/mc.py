@@ -1,4 +1,5 @@
-"""Speed of the Monte Carlo engine against sdeint and a plain Python loop, measured in one process.
+"""Speed of the Monte Carlo engine against today's per-path engine, sdeint and a plain Python loop,
+all measured in one process.
 
 A *path-step* is one sample of the closed loop for one path, all three runs (fault-free,
 faulty without and with tolerant control). The baselines integrate the very same closed-loop
@@ -17,8 +18,9 @@ import numpy as np
 
 from ..design.record import Design
 from ..errors import SimulationError
-from .engine import closed_loop_sample, monte_carlo, plant_schedule, simulate
-from .scenario import UniformNoise
+from ..sim.engine import Prepared, closed_loop_sample, plant_schedule, resolve_dt, simulate
+from ..sim.perpath import monte_carlo, simulate_per_path
+from ..sim.scenario import UniformNoise
 
 __all__ = ["bench", "baseline_functions"]
 
@@ -69,8 +71,41 @@ def baseline_functions(design: Design, plant, scenario, dt: float):
     return fn, a, b, s0, D, FP, lay
 
 
+def flops_per_path_step(prep: Prepared) -> int:
+    """Arithmetic operations of one path-step of the emitted engine (everything but inputs, outputs,
+    constants and copies), counted from the CasADi instruction list."""
+    import casadi as ca
+
+    F = prep.engine_function
+    skip = {ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_ASSIGN}
+    return sum(1 for k in range(F.n_instructions()) if F.instruction_id(k) not in skip)
+
+
+def peak_flops() -> dict:
+    """The machine's double-precision peak as assumed here: cores x clock x (vector doubles x 2 FMA
+    units x 2 flops); vector width 8 with avx512f, 4 with avx2, else 2 (read from /proc/cpuinfo)."""
+    info = ""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            info = fh.read()
+    except OSError:
+        pass
+    mhz = [float(ln.split(":")[1]) for ln in info.splitlines() if ln.startswith("cpu MHz")]
+    ghz = (max(mhz) / 1000.0) if mhz else float("nan")
+    width = 8 if " avx512f" in info else 4 if " avx2" in info else 2
+    cores = os.cpu_count() or 1
+    return {
+        "cores": cores,
+        "ghz": ghz,
+        "doubles_per_vector": width,
+        "flops_per_s": cores * ghz * 1e9 * width * 4,
+    }
+
+
 def bench(
     design: Design | None = None,
+    plant=None,
+    scenario=None,
     *,
     paths: int = 1000,
     baseline_paths: int = 2,
@@ -78,47 +113,32 @@ def bench(
     threads: int | None = None,
     horizon: float | None = None,
 ) -> dict:
-    """Manipulator scenario (T = 10 s, dt = 1 ms, three runs): engine at ``paths`` paths vs baselines.
-
-    Returns a dict with absolute rates (path-steps per second), wall times and the ratios, and
-    ``max_abs_diff_engine_vs_sdeint``: the compiled engine and sdeint driven by the same noise
-    give the same trajectory (the baselines compute the same thing, only slower).
-    ``design`` defaults to the conditioned LMI design of the built-in manipulator;
-    ``horizon`` shortens T (for tests).
+    """The manipulator scenario (T = 10 s, dt = 1 ms, three runs; ``horizon`` shortens T for tests):
+    the vectorised engine against today's per-path engine on ``paths`` paths (whole ``simulate``
+    calls, random numbers included, compilation excluded: each engine runs once first), and the
+    sdeint and plain-Python baselines on ``baseline_paths`` paths, scaled to path-steps per second.
+    ``design``, ``plant``, ``scenario``: the caller's (this module does not import the plants).
     """
-    from ..plants import manipulator
-    from ..plants.manipulator import scenario as manipulator_scenario
-
-    plant = manipulator()
-    scen = manipulator_scenario()
+    scen = scenario
     if horizon is not None:
         scen = dataclasses.replace(scen, T=float(horizon))
-    if design is None:
-        from ..design import design as make_design
-        from ..ts import derive
+    dt, nsteps, _ = resolve_dt(design, scen, None)
+    kw = dict(paths=paths, seed=seed, progress=False, threads=threads)
 
-        design = make_design(derive(plant), variant="conditioned")
-    dt = scen.dt
-    nsteps = int(round(scen.T / dt))
+    def timed(fn):
+        t0 = time.perf_counter()
+        out = fn()
+        return time.perf_counter() - t0, out
 
-    # engine; a first short call compiles (or loads) the same block so compile time is reported apart
-    t0 = time.perf_counter()
-    probe = simulate(design, plant, scen, paths=paths, seed=seed, progress=False, threads=threads)
-    first_wall = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    res = simulate(
-        design,
-        plant,
-        scen,
-        paths=paths,
-        seed=seed,
-        progress=False,
-        threads=threads,
-        record_every=probe.record_every,
-    )
-    wall = time.perf_counter() - t0
-    engine_rate = paths * nsteps / wall
-
+    first_vec, _ = timed(lambda: simulate(design, plant, scen, **kw))
+    vec_wall, _ = timed(lambda: simulate(design, plant, scen, **kw))
+    first_pp, _ = timed(lambda: simulate_per_path(design, plant, scen, **kw))
+    pp_wall, _ = timed(lambda: simulate_per_path(design, plant, scen, **kw))
+    prep = Prepared(design, plant, scen, dt, nsteps, {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0})
+    flops = flops_per_path_step(prep)
+    vec_rate = paths * (nsteps + 1) / vec_wall
+    peak = peak_flops()
+    engine_rate = vec_rate
     fn, a, b, s0, D, FP, lay = baseline_functions(design, plant, scen, dt)
     rng = np.random.default_rng(seed)
     tspan = np.arange(nsteps + 1) * dt
@@ -171,17 +191,25 @@ def bench(
     loop_rate = baseline_paths * nsteps / loop_wall
 
     return {
-        "scenario": "manipulator, T = 10 s, dt = 1 ms, three runs per path",
+        "scenario": f"{plant.name}, T = {scen.T:g}, dt = {dt:g}, three runs per path",
         "engine": {
             "paths": paths,
             "steps": nsteps,
-            "wall_s": wall,
-            "first_call_wall_s": first_wall,
-            "path_steps_per_s": engine_rate,
-            "compiled": res.compiled,
+            "wall_s": vec_wall,
+            "first_call_wall_s": first_vec,
+            "path_steps_per_s": vec_rate,
             "threads": threads or min(8, os.cpu_count() or 1),
-            "record_every": res.record_every,
+            "flops_per_path_step": flops,
+            "fraction_of_peak": vec_rate * flops / peak["flops_per_s"],
+            "peak_assumed": peak,
         },
+        "per_path_engine": {
+            "paths": paths,
+            "wall_s": pp_wall,
+            "first_call_wall_s": first_pp,
+            "path_steps_per_s": paths * nsteps / pp_wall,
+        },
+        "speedup_vs_per_path": pp_wall / vec_wall,
         "sdeint_itoEuler": {
             "paths": baseline_paths,
             "wall_s": sde_wall,

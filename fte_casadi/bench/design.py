@@ -1,6 +1,6 @@
 """Speed of the design against the 0.1 formulation (:mod:`.legacy`), measured in the same process.
 
-Takes T-S models (the caller derives them), so the design layer never imports the plants.
+Takes T-S models (the caller derives them).
 """
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ import time
 
 import numpy as np
 
+from ..design.api import design
+from ..design.legacy import legacy_design
 from ..errors import FteError
-from .api import design
-from .legacy import legacy_design
 
 __all__ = ["bench_design"]
 

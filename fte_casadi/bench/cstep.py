@@ -1,6 +1,6 @@
 """Speed and size of the generated step, measured.
 
-For each design :func:`bench_design` reports
+For each design :func:`bench_c_step` reports
 
 - ``c_ns``: nanoseconds per ``fte_NAME_step`` call, from a C timing loop (``clock_gettime``,
   ``-O2``, the strict flags) over varying measurements; best of several repetitions;
@@ -27,12 +27,12 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..codegen import build
+from ..codegen.generate import _void_unused, c_name, default_ts, generate_c, memory_report
 from ..design.record import Design
 from ..step import step_function
-from . import build
-from .generate import _void_unused, c_name, default_ts, generate_c, memory_report
 
-__all__ = ["bench_design", "bench_builtin", "hand_written_c"]
+__all__ = ["bench_c_step", "bench_builtin", "hand_written_c"]
 
 
 def _arr(name: str, a) -> str:
@@ -184,7 +184,7 @@ def _object_sizes(folder: Path, cc: str) -> dict | None:
     return out
 
 
-def bench_design(
+def bench_c_step(
     design: Design, *, ts: float | None = None, real: str = "double", iters: int = 200_000, reps: int = 5
 ) -> dict:
     """Measure one design's generated step (see the module docstring for the fields)."""
@@ -269,7 +269,7 @@ def bench_design(
 
 
 def bench_builtin(*, iters: int = 200_000, reps: int = 5) -> list[dict]:
-    """:func:`bench_design` for each built-in plant, from the committed ``generated/*/design.json``
+    """:func:`bench_c_step` for each built-in plant, from the committed ``generated/*/design.json``
     when found (else a fresh design)."""
     from .generate import BUILTIN_DIRS, builtin_design
 
@@ -278,5 +278,5 @@ def bench_builtin(*, iters: int = 200_000, reps: int = 5) -> list[dict]:
     for plant, sub in BUILTIN_DIRS.items():
         path = root / sub / "design.json"
         d = Design.load(path) if path.is_file() else builtin_design(plant)
-        out.append(bench_design(d, iters=iters, reps=reps))
+        out.append(bench_c_step(d, iters=iters, reps=reps))
     return out

@@ -1,0 +1,307 @@
+"""Today's per-path engine (fte_casadi 0.1): one compiled block per path, mapped over paths.
+
+Kept as the reference the vectorised engine (:mod:`.engine`) is tested against — the same
+trajectories for the same random numbers — and as the baseline ``fte bench`` measures it against
+in the same process. One CasADi Function computes a sample of the closed loop for one path and
+all three runs; it is accumulated over blocks of records (``mapaccum``), compiled once (cached)
+and mapped over paths with CasADi's thread map; Python fills the random numbers path by path
+(child generators ``rng.spawn``) and keeps every recorded sample of every path in memory.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time
+
+import casadi as ca
+import numpy as np
+from tqdm import tqdm
+
+from ..design.record import Design
+from ..errors import ParameterError, SimulationError
+from ..model import Plant
+from .compile import compiled
+from .engine import Layout, _check_settings, _nice_below, closed_loop_sample, plant_schedule
+from .result import RUNS, SimulationResult
+from .scenario import Scenario, Sinusoid, UniformNoise
+
+__all__ = ["simulate_per_path", "monte_carlo"]
+
+#: recorded path-samples kept in memory by default (per run); more paths -> coarser recording
+_RECORD_BUDGET = 500_000
+#: ... and at most about this many samples per path
+_RECORD_PER_PATH = 20_001
+
+
+def _block_function(sample: ca.Function, every: int, records: int) -> ca.Function:
+    """``(state, W, FP) -> (state_end, REC)`` over ``records`` records of ``every`` steps each."""
+    ns, nw = sample.size1_in(0), sample.size1_in(1)
+    acc = sample.mapaccum("fte_cl_acc", every)
+    S = ca.MX.sym("state", ns)
+    W = ca.MX.sym("w", nw, every)
+    FP = ca.MX.sym("fp", sample.size1_in(2), every)
+    nxt, rec = acc(S, W, FP)
+    one = ca.Function("fte_cl_rec", [S, W, FP], [nxt[:, -1], rec[:, 0]])
+    blk = one.mapaccum("fte_cl_blk", records)
+    S2 = ca.MX.sym("state", ns)
+    W2 = ca.MX.sym("w", nw, every * records)
+    FP2 = ca.MX.sym("fp", sample.size1_in(2), every * records)
+    nxt2, rec2 = blk(S2, W2, FP2)
+    return ca.Function(
+        f"fte_cl_block_{every}x{records}",
+        [S2, W2, FP2],
+        [nxt2[:, -1], rec2],
+        ["state", "w", "fp"],
+        ["state_end", "rec"],
+    )
+
+
+def simulate_per_path(
+    design: Design,
+    plant: Plant,
+    scenario: Scenario,
+    *,
+    paths: int,
+    seed: int,
+    dt: float | None = None,
+    progress: bool = True,
+    record_every: int | None = None,
+    threads: int | None = None,
+    rng: np.random.Generator | None = None,
+) -> SimulationResult:
+    """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
+
+    Parameters
+    ----------
+    design, plant, scenario
+        The observer/controller, the nonlinear plant it was designed for, the experiment.
+    paths : int
+        Number of Brownian paths.
+    seed : int
+        Seed of the ``numpy.random.Generator`` (recorded in the result and the metrics);
+        path ``i`` uses child generator ``i`` of ``numpy.random.default_rng(seed)``.
+    dt : float, optional
+        Euler-Maruyama step and controller sample time; default the scenario's, lowered to a
+        round value below ``ts_max / 2`` when the design cannot run at it (said in ``notes``).
+        An explicit ``dt`` above the design's ``checks["ts_max"]`` is refused.
+    progress : bool
+        Show a progress bar on stderr when the run lasts more than about a second.
+    record_every : int, optional
+        Keep every k-th sample; default 1 unless paths x samples exceeds ~5e5 or a path ~2e4 samples.
+    threads : int, optional
+        Threads of the path map (default: the CPU count, at most 8).
+    rng : numpy.random.Generator, optional
+        Use this generator instead of ``default_rng(seed)`` (``seed`` is then only recorded).
+
+    Returns
+    -------
+    SimulationResult
+    """
+    t_wall = time.perf_counter()
+    _check_settings(design, plant, scenario, paths, seed, dt)
+    paths, seed = int(paths), int(seed)
+    notes = []
+    ts_max = float(design.checks.get("ts_max", math.inf) or math.inf)
+    if dt is None:
+        dt = float(scenario.dt)
+        if dt > ts_max:
+            new = _nice_below(ts_max / 2)
+            while abs(scenario.T / new - round(scenario.T / new)) > 1e-9 * scenario.T / new:
+                new = _nice_below(new * 0.999)
+            notes.append(
+                f"scenario dt = {dt:g} exceeds the design's ts_max = {ts_max:.4g}; using dt = {new:g}"
+            )
+            dt = new
+    elif dt > ts_max:
+        raise SimulationError(
+            f"time step dt = {dt:g} exceeds the largest sample time for which the design's discrete observer is "
+            f"stable (checks.ts_max = {ts_max:.4g}); choose --dt below {ts_max:.4g}"
+        )
+    dt = float(dt)
+    nsteps = int(round(scenario.T / dt))
+    if nsteps < 1 or abs(nsteps * dt - scenario.T) > 1e-6 * scenario.T + 1e-9:
+        raise SimulationError(
+            f"the horizon T = {scenario.T:g} is not a whole number of steps dt = {dt:g}; choose dt dividing T"
+        )
+    if record_every is None:
+        record_every = max(
+            1, math.ceil(paths * (nsteps + 1) / _RECORD_BUDGET), math.ceil((nsteps + 1) / _RECORD_PER_PATH)
+        )
+    if not isinstance(record_every, int) or record_every < 1:
+        raise ParameterError(f"record_every must be a positive integer; got {record_every!r}")
+    nrec = nsteps // record_every + 1
+    t_all = np.arange(nsteps + record_every * 1000 + 1) * dt  # covers the padded last block
+    sched = plant_schedule(design, plant, scenario, t_all, dt)
+    sample, lay = closed_loop_sample(design, plant, dt, sched)
+
+    # initial states; per path three child generators (x0 noise, dW, d): a path's noise does not
+    # depend on the block size nor on how many paths run
+    root = np.random.default_rng(seed) if rng is None else rng
+    gens = [g.spawn(3) for g in root.spawn(paths)]
+    x0n = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
+    if x0n.shape != (plant.n,):
+        raise SimulationError(f"scenario x0 has {x0n.size} entries; the plant has {plant.n} states")
+    x0 = np.stack([x0n + scenario.x0_noise * g[0].standard_normal(plant.n) for g in gens])
+    H = np.asarray(design.H)
+    xb_nom = np.concatenate([x0n, np.zeros(lay.nbar - plant.n)])
+    state = np.zeros((paths, lay.ns))
+    for r in range(3):
+        o = r * lay.run_state
+        state[:, o : o + plant.n] = x0
+        if scenario.observer_init == "nominal":
+            y0 = x0 @ np.asarray(plant.C).T
+            state[:, o + plant.n : o + plant.n + lay.nbar] = xb_nom - y0 @ H.T
+    ui = scenario.unknown_input
+    sq = math.sqrt(dt)
+
+    def fill(W: np.ndarray, k0: int) -> None:
+        L = W.shape[1]
+        for q, g in enumerate(gens):
+            W[q, :, 0] = sq * g[1].standard_normal(L)
+            if lay.ld and isinstance(ui, UniformNoise):
+                W[q, :, 1:] = g[2].uniform(-ui.amplitude, ui.amplitude, (L, lay.ld))
+        if lay.ld and isinstance(ui, Sinusoid):
+            tt = t_all[k0 : k0 + L]
+            W[:, :, 1:] = (ui.amplitude * np.sin(2 * np.pi * ui.frequency * tt + ui.phase))[None, :, None]
+
+    def check(rec: np.ndarray, t: np.ndarray) -> None:
+        _check_divergence(rec, lay, scenario.divergence_bound, t, plant.name)
+
+    rec_all, is_compiled = monte_carlo(
+        sample.expand(),
+        state,
+        sched.stacked(),
+        nsteps,
+        record_every,
+        fill,
+        dt=dt,
+        threads=threads,
+        progress=progress,
+        desc=f"simulate {plant.name}",
+        check=check,
+    )
+    if not is_compiled:
+        notes.append("no C compiler: the closed loop ran interpreted")
+    every = record_every
+    runs = lay.split_record(rec_all)
+    names = {
+        "states": list(plant.state_names),
+        "state_units": list(plant.state_units),
+        "inputs": list(plant.input_names),
+        "outputs": list(plant.output_names),
+        "output_units": list(plant.output_units),
+        "faults": list(plant.fault_names),
+        "fault_kinds": list(plant.fault_kinds),
+        "time_unit": plant.time_unit,
+    }
+    return SimulationResult(
+        plant=plant.name,
+        t=np.arange(nrec) * every * dt,
+        dt=dt,
+        T=float(scenario.T),
+        seed=seed,
+        paths=paths,
+        record_every=every,
+        scenario=scenario,
+        design=design,
+        names=names,
+        wall_s=time.perf_counter() - t_wall,
+        compiled=is_compiled,
+        notes=tuple(notes),
+        **runs,
+    )
+
+
+def monte_carlo(
+    sample: ca.Function,
+    state0: np.ndarray,
+    FP: np.ndarray,
+    nsteps: int,
+    every: int,
+    fill,
+    *,
+    dt: float,
+    threads: int | None = None,
+    progress: bool = False,
+    desc: str = "simulate",
+    check=None,
+) -> tuple[np.ndarray, bool]:
+    """Run ``sample: (state, w, fp) -> (state_next, rec)`` for ``nsteps`` steps on every path.
+
+    ``state0``: (paths, ns). ``FP``: (nfp, >= padded steps) per-step inputs shared by all paths.
+    ``fill(W, k0)`` writes the per-path inputs ``W`` (paths, L, nw) of steps ``k0 .. k0+L-1``.
+    Records the ``rec`` output at samples 0, every, 2 every, ... <= nsteps; returns
+    ``(rec (paths, samples, nrec), compiled)``. ``check(rec_block, t_block)`` may raise.
+    This is the whole Euler-Maruyama engine: compiled block, path map, zero-copy buffers.
+    """
+    paths = state0.shape[0]
+    nrec = nsteps // every + 1
+    records = max(1, min(nrec, 1000 // every if every < 1000 else 1))
+    nblocks = math.ceil(nrec / records)
+    L = records * every
+    if FP.shape[1] < nblocks * L:
+        FP = np.concatenate([FP, np.repeat(FP[:, -1:], nblocks * L - FP.shape[1], axis=1)], axis=1)
+    block, is_compiled = compiled(_block_function(sample, every, records))
+    nthreads = threads or min(8, os.cpu_count() or 1)
+    par = "thread" if nthreads > 1 and paths > 1 else "serial"
+    opts = {"max_num_threads": nthreads} if par == "thread" else {}
+    mapped = block.map("fte_cl_paths", par, paths, [2], [], opts)  # FP shared by all paths
+    # Zero-copy calls (Function.buffer): a CasADi (rows x cols) dense matrix is column-major,
+    # i.e. a C-contiguous numpy array of shape (cols, rows).
+    nrv = sample.size1_out(1)
+    rec_all = np.empty((paths, nblocks * records, nrv))
+    FPt = np.ascontiguousarray(FP.T)
+    S_in = np.ascontiguousarray(state0, dtype=float)
+    S_out = np.empty_like(S_in)
+    W = np.zeros((paths, L, sample.size1_in(1)))
+    REC = np.empty((paths, records, nrv))
+    buf, run_block = mapped.buffer()
+    buf.set_arg(0, memoryview(S_in))
+    buf.set_arg(1, memoryview(W))
+    buf.set_res(0, memoryview(S_out))
+    buf.set_res(1, memoryview(REC))
+    bar = tqdm(
+        total=nblocks * L * paths,
+        disable=not progress,
+        delay=1.0,
+        file=sys.stderr,
+        unit=" path-steps",
+        unit_scale=True,
+        desc=desc,
+    )
+    try:
+        for b in range(nblocks):
+            k0 = b * L
+            fill(W, k0)
+            fp_blk = np.ascontiguousarray(FPt[k0 : k0 + L])
+            buf.set_arg(2, memoryview(fp_blk))
+            run_block()
+            rec_all[:, b * records : (b + 1) * records, :] = REC
+            if check is not None:
+                check(REC, (k0 + every * np.arange(records)) * dt)
+            S_in[...] = S_out
+            bar.update(L * paths)
+    finally:
+        bar.close()
+    return rec_all[:, :nrec, :], is_compiled
+
+
+def _check_divergence(rec: np.ndarray, lay: Layout, bound: float, t: np.ndarray, plant: str) -> None:
+    """Stop with a message naming the first diverging path and time (rec: (paths, samples, nrec))."""
+    bad_run = []
+    for r in range(3):
+        blk = rec[:, :, r * lay.run_rec : (r + 1) * lay.run_rec]
+        xs = blk[:, :, : lay.n]
+        bad_run.append(~np.isfinite(blk).all(axis=2) | ~(np.abs(xs) <= bound).all(axis=2))
+    bad = bad_run[0] | bad_run[1] | bad_run[2]
+    if bad.any():
+        where = np.argwhere(bad)
+        path, k = where[np.argmin(where[:, 1])]
+        runs = ", ".join(RUNS[r] for r in range(3) if bad_run[r][path, k])
+        raise SimulationError(
+            f"{plant}: path {int(path)} diverged at t = {t[k]:.6g} (run {runs}: state NaN/Inf or |x| > {bound:g}); "
+            "the closed loop is unstable for this design and step: check the design's certificates, lower dt, "
+            "or shorten the fault"
+        )

@@ -1,0 +1,29 @@
+"""The benchmarks run end to end (speed itself is reported by `fte bench`, not asserted here)."""
+
+from fte_casadi.bench.mc import bench
+from fte_casadi.plants import manipulator
+from fte_casadi.plants.manipulator import scenario
+
+
+def test_monte_carlo_bench_smoke(lqr_designs):
+    out = bench(
+        lqr_designs["manipulator"], manipulator(), scenario(), paths=16, baseline_paths=1, horizon=0.5
+    )
+    e = out["engine"]
+    assert e["steps"] == 500 and e["flops_per_path_step"] > 100
+    assert 0 < e["fraction_of_peak"] < 1
+    assert out["per_path_engine"]["path_steps_per_s"] > 0 and out["speedup_vs_per_path"] > 0
+    assert out["max_abs_diff_engine_vs_sdeint"] < 1e-9  # the baselines integrate the same SDE
+    for key in ("speedup_vs_sdeint", "speedup_vs_python_loop"):
+        assert out[key] > 0
+
+
+def test_layers_do_not_import_the_plants():
+    """sim/ and codegen/ sit below the plants: only bench/, report.py and cli.py may import them."""
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parents[1] / "fte_casadi"
+    bad = [str(p.relative_to(root)) for sub in ("sim", "codegen", "design", "ts", "model") for p in (root / sub).glob("*.py")
+           if re.search(r"^\s*(from \.\.plants|from fte_casadi\.plants|import fte_casadi\.plants)", p.read_text(), re.M)]  # fmt: skip
+    assert not bad, bad

@@ -1,0 +1,68 @@
+"""Robustness sweeps (issue #11): a grid of factors, one metrics document per point, a figure."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from fte_casadi.cli import main
+from fte_casadi.errors import ParameterError
+from fte_casadi.sim import simulate
+from fte_casadi.sim.sweep import parse_vary, sweep, to_csv
+
+
+def test_parse_vary_validates():
+    assert parse_vary(["fault_scale=0.5,1,2", "noise_scale=0,3"]) == {
+        "fault_scale": [0.5, 1, 2],
+        "noise_scale": [0, 3],
+    }
+    for bad, match in ((["speed=1"], "unknown factor"), (["fault_scale"], "NAME=V1"), (["d_scale=a"], "numbers"),
+                       (["d_scale=-1"], "non-negative"), ([], "at least one"), (["d_scale=1", "d_scale=2"], "twice")):  # fmt: skip
+        with pytest.raises(ParameterError, match=match):
+            parse_vary(bad)
+
+
+def test_sweep_over_two_factors(plants, real_designs, tmp_path):
+    import dataclasses
+
+    from fte_casadi.plants import SCENARIOS
+
+    d, p = real_designs["manipulator"], plants["manipulator"]
+    sc = dataclasses.replace(SCENARIOS["manipulator"](), T=6.0)  # the actuator window only
+    pts = sweep(
+        d, p, sc, {"fault_scale": [0.5, 2.0], "noise_scale": [0.0, 1.0]}, paths=8, seed=2, progress=False
+    )
+    assert [pt["point"] for pt in pts] == [
+        {"fault_scale": a, "noise_scale": b} for a in (0.5, 2.0) for b in (0.0, 1.0)
+    ]
+    # each point is the metrics document of a run with those factors
+    one = simulate(
+        d, p, sc, paths=8, seed=2, progress=False, scales={"fault_scale": 2.0, "noise_scale": 0.0}
+    ).metrics
+    got = dict(pts[2]["metrics"])
+    got.pop("wall_s"), one.pop("wall_s")
+    assert got == one
+    # a larger fault moves the estimate further, and noise changes the error
+    e = {tuple(pt["point"].values()): pt["metrics"]["fault_rel_rms_error"][0] for pt in pts}
+    assert e[(0.5, 0.0)] != e[(0.5, 1.0)]
+    rows = to_csv(pts).strip().splitlines()
+    assert len(rows) == 5 and rows[0].startswith("fault_scale,noise_scale,fault_rel_rms_error_0")
+
+
+def test_cli_sweep_prints_points_and_writes_figure(tmp_path):
+    r = CliRunner().invoke(main, ["sweep", "manipulator", "--vary", "fault_scale=0.5,1,2", "--paths", "16", "--seed", "1",
+                                  "--json", "--quiet", "--out", str(tmp_path)])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    pts = json.loads(r.stdout)
+    assert [p["point"] for p in pts] == [{"fault_scale": 0.5}, {"fault_scale": 1.0}, {"fault_scale": 2.0}]
+    assert all({"windows", "input_saturation", "ftc_deviation_ratio"} <= set(p["metrics"]) for p in pts)
+    assert (tmp_path / "sweep.png").stat().st_size > 10_000
+    assert json.loads((tmp_path / "sweep.json").read_text()) == pts
+    assert (tmp_path / "sweep.csv").read_text().count("\n") == 4
+
+
+def test_cli_sweep_bad_factor_is_one_paragraph():
+    r = CliRunner().invoke(main, ["sweep", "manipulator", "--vary", "gain=1,2"])
+    assert r.exit_code == 2 and "unknown factor 'gain'" in r.output and "Traceback" not in r.output
