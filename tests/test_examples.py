@@ -17,15 +17,23 @@ from fte_casadi.plants.loader import load_plant, load_scenario
 from fte_casadi.sim import metrics, simulate
 from fte_casadi.ts import derive
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "pendulum_plant.py"
-SPEC = f"{EXAMPLE}:pendulum"
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+#: every example plant: (spec, faults it estimates)
+SPECS = [f"{EXAMPLES / 'pendulum_plant.py'}:pendulum", f"{EXAMPLES / 'pendulum_plain.py'}:pendulum",
+         f"{EXAMPLES / 'bilinear_plant.py'}:bilinear"]  # fmt: skip
+SPEC = SPECS[0]
 
 
-@pytest.fixture(scope="module")
-def pendulum_design():
-    ts = derive(load_plant(SPEC))
+@pytest.fixture(scope="module", params=SPECS, ids=["premise-form", "plain-sin", "bilinear-tanh"])
+def pendulum_design(request):
+    ts = derive(load_plant(request.param))
     assert ts.fidelity.max_abs_error <= ROUNDOFF
-    return design(ts, plant_spec=SPEC)
+    return design(ts, plant_spec=request.param, sample_time=load_scenario(request.param).dt)
+
+
+def test_every_example_is_tested():
+    """Each plant file in examples/ is in SPECS (examples/embedded/ has its own test module)."""
+    assert {p.name for p in EXAMPLES.glob("*.py")} == {Path(s.split(":")[0]).name for s in SPECS}
 
 
 def test_example_design_is_certified(pendulum_design):
@@ -36,15 +44,16 @@ def test_example_design_is_certified(pendulum_design):
 
 
 def test_example_simulates_and_estimates_its_faults(pendulum_design):
-    sc = load_scenario(SPEC)
-    res = simulate(pendulum_design, load_plant(SPEC), sc, paths=4, seed=3, progress=False)
+    spec = pendulum_design.plant_spec
+    sc = load_scenario(spec)
+    res = simulate(pendulum_design, load_plant(spec), sc, paths=4, seed=3, progress=False)
     m = metrics(res)
     assert m["paths"] == 4
     # both faults are estimated and tolerant control reduces the output deviation
     assert all(e is not None and e < 0.5 for e in m["fault_rel_rms_error"])
     assert m["ftc_deviation_ratio"] < 0.8
     short = dataclasses.replace(sc, T=1.0)
-    assert simulate(pendulum_design, load_plant(SPEC), short, paths=2, seed=0, progress=False).t[
+    assert simulate(pendulum_design, load_plant(spec), short, paths=2, seed=0, progress=False).t[
         -1
     ] == pytest.approx(1.0)
 
@@ -57,7 +66,8 @@ def test_example_generated_c_equals_python(pendulum_design, tmp_path):
     lib = build.compile_shared(tmp_path / "c", tmp_path / "libpendulum.so")
 
     def fault(t, u):
-        return np.array([-0.3 * u[0] if t > 0.5 else 0.0, 0.05 if t > 1.0 else 0.0])
+        f = np.array([-0.3 * u[0] if t > 0.5 else 0.0, 0.05 if t > 1.0 else 0.0])
+        return f[: int(d.dims["lf"])]
 
     err, traj = closed_loop_compare(d, CStep(lib, d), ts, 1500, plant=load_plant(d.plant_spec), fault=fault)
     assert max(err.values()) <= C_DOUBLE

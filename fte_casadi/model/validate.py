@@ -31,9 +31,15 @@ def _free_check(kind: str, expr: ca.SX, allowed: ca.SX, allowed_text: str) -> No
 
 
 def _linearity(
-    kind: str, rows: tuple[str, ...], expr: ca.SX, var: ca.SX, var_names: list[str], z: ca.SX
+    kind: str,
+    rows: tuple[str, ...],
+    expr: ca.SX,
+    var: ca.SX,
+    var_names: list[str],
+    z: ca.SX,
+    auto: bool = False,
 ) -> None:
-    """``expr`` must be affine in ``var`` with coefficients that depend on ``z`` only."""
+    """``expr`` must be affine in ``var`` with coefficients that depend on ``z`` only (``auto``: on x too)."""
     if var.numel() == 0:
         return
     jac = ca.jacobian(expr, var)
@@ -42,11 +48,18 @@ def _linearity(
             e = jac[i, j]
             if _depends(e, var):
                 bad = [var_names[k] for k in range(var.numel()) if ca.depends_on(e, var[k])]
+                if auto:
+                    raise PlantError(
+                        f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {str(e)[:120]} "
+                        f"depends on {bad}. Inputs, unknown inputs and faults must enter affinely (their coefficients "
+                        "may depend on the states); rewrite that term"
+                    )
                 raise PlantError(
                     f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {str(e)[:120]} "
                     f"depends on {bad}. This term is not covered by any premise: declare a premise "
                     "variable for it (b.premise(name, expr)) and write the equation with its symbol, "
-                    "so that for fixed premises the plant is linear in states, inputs, unknown inputs and faults"
+                    "so that for fixed premises the plant is linear in states, inputs, unknown inputs and faults, "
+                    "or declare no premise at all: the premises are then found in the plain equations"
                 )
 
 
@@ -94,7 +107,13 @@ def validate(b: PlantBuilder) -> Plant:
     _free_check("outputs", y, ca.vertcat(x, f), "states or faults (y = C x + Df f)")
 
     xn = list(b._xn)
-    if b._ops is None:
+    auto = b._ops is None and not b._z
+    if auto:
+        # no premise declared: the states may enter nonlinearly (the premises are found at derive
+        # time, fte_casadi.ts.auto); inputs, unknown inputs and faults must enter affinely
+        v, vn = ca.vertcat(u, d, f), list(b._un) + list(b._dn) + list(b._fn)
+        w, wn = ca.vertcat(u, f, d2), list(b._un) + list(b._fn) + list(b._d2n)
+    elif b._ops is None:
         # sector nonlinearity: for fixed premises the plant must be linear in everything
         v, vn = ca.vertcat(x, u, d, f), xn + list(b._un) + list(b._dn) + list(b._fn)
         w, wn = ca.vertcat(x, u, f, d2), xn + list(b._un) + list(b._fn) + list(b._d2n)
@@ -102,8 +121,8 @@ def validate(b: PlantBuilder) -> Plant:
         # local linearisation: x and u may enter nonlinearly; d and f must enter affinely
         v, vn = ca.vertcat(d, f), list(b._dn) + list(b._fn)
         w, wn = ca.vertcat(f, d2), list(b._fn) + list(b._d2n)
-    _linearity("drift", b._xn, drift, v, vn, z)
-    _linearity("diffusion", b._xn, diff, w, wn, z)
+    _linearity("drift", b._xn, drift, v, vn, z, auto)
+    _linearity("diffusion", b._xn, diff, w, wn, z, auto)
 
     # outputs: y = C x + Df f exactly
     yf = ca.Function("y", [x, f], [y, ca.jacobian(y, x), ca.jacobian(y, f)])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model import Plant
+from .auto import premise_form
 from .fidelity import fidelity as fidelity
 from .linearise import linearised_local_models
 from .memberships import scheduling_from_measurements as scheduling_from_measurements
@@ -18,8 +19,9 @@ from .sector import sector_local_models
 def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TSModel:
     """Derive the T-S fuzzy model of ``plant`` and check its fidelity.
 
-    Sector nonlinearity when the plant declares premises, local linearisation when it
-    declares operating points.
+    Sector nonlinearity when the plant declares premises, or when it declares neither premises nor
+    operating points (the premises are then found in its plain equations, :mod:`.auto`; a plant
+    without nonlinear term gets one rule); local linearisation when it declares operating points.
 
     Examples
     --------
@@ -28,13 +30,18 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     >>> ts.r, round(ts.premises[0].min, 4)
     (2, -0.2172)
     """
+    method = plant.method
     if plant.method == "sector":
-        premises, models, premise_fn, membership_fn = sector_local_models(plant)
+        auto = plant.z.numel() == 0  # no premise declared: find them in the plain equations
+        work = premise_form(plant)[0] if auto else plant
+        premises, models, premise_fn, membership_fn = sector_local_models(work)
+        if auto:
+            method = "sector (premises found automatically)" if premises else "linear (one rule)"
     else:
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
     tmp = TSModel(
         plant,
-        plant.method,
+        method,
         premises,
         models,
         plant.C,
@@ -44,7 +51,7 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
         Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
     )
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
-    return TSModel(plant, plant.method, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid)
+    return TSModel(plant, method, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid)
 
 
 __all__ = [

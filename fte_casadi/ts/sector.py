@@ -42,11 +42,6 @@ def sector_local_models(
     mats, c = _coefficients(plant)
     z = plant.z
     q = z.numel()
-    if q == 0:
-        raise DerivationError(
-            "the plant declares no premise: a linear plant needs no T-S model, and a nonlinear one needs "
-            "premises (b.premise(name, expr)) for its nonlinear terms"
-        )
     if np.any(np.array(ca.Function("c", [z], [c])(np.zeros(q)))) or ca.depends_on(c, z):
         raise DerivationError(
             "the diffusion has a term that is not proportional to x, u, f or d2 (additive noise): the paper's model has none"
