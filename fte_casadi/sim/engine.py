@@ -184,6 +184,20 @@ def plant_schedule(
     )  # fmt: skip
 
 
+def result_names(plant: Plant) -> dict:
+    """The signal names and units a SimulationResult carries (figures, reports)."""
+    return {
+        "states": list(plant.state_names),
+        "state_units": list(plant.state_units),
+        "inputs": list(plant.input_names),
+        "outputs": list(plant.output_names),
+        "output_units": list(plant.output_units),
+        "faults": list(plant.fault_names),
+        "fault_kinds": list(plant.fault_kinds),
+        "time_unit": plant.time_unit,
+    }
+
+
 def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[float, int, list[str]]:
     """The step (the scenario's, lowered below the design's ts_max when it must be), the number of
     steps, and notes. An explicit ``dt`` above ts_max is refused."""
@@ -431,16 +445,7 @@ def simulate(
     wall = time.perf_counter() - t_wall
     doc = finalize(acc, prep.names, prep.masks, {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed,
                                                  "wall_s": wall, "m": plant.m})  # fmt: skip
-    names = {
-        "states": list(plant.state_names),
-        "state_units": list(plant.state_units),
-        "inputs": list(plant.input_names),
-        "outputs": list(plant.output_names),
-        "output_units": list(plant.output_units),
-        "faults": list(plant.fault_names),
-        "fault_kinds": list(plant.fault_kinds),
-        "time_unit": plant.time_unit,
-    }
+    names = result_names(plant)
     if rec is None:
         rec = np.zeros((0, (nsamp - 1) // record_every + 1, prep.lay.nrec))
     runs = prep.lay.split_record(rec)

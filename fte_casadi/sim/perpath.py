@@ -23,7 +23,7 @@ from ..design.record import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
 from .compile import compiled
-from .engine import Layout, _check_settings, _nice_below, closed_loop_sample, plant_schedule
+from .engine import Layout, _check_settings, closed_loop_sample, plant_schedule, resolve_dt, result_names
 from .result import RUNS, SimulationResult
 from .scenario import Scenario, Sinusoid, UniformNoise
 
@@ -102,29 +102,7 @@ def simulate_per_path(
     t_wall = time.perf_counter()
     _check_settings(design, plant, scenario, paths, seed, dt)
     paths, seed = int(paths), int(seed)
-    notes = []
-    ts_max = float(design.checks.get("ts_max", math.inf) or math.inf)
-    if dt is None:
-        dt = float(scenario.dt)
-        if dt > ts_max:
-            new = _nice_below(ts_max / 2)
-            while abs(scenario.T / new - round(scenario.T / new)) > 1e-9 * scenario.T / new:
-                new = _nice_below(new * 0.999)
-            notes.append(
-                f"scenario dt = {dt:g} exceeds the design's ts_max = {ts_max:.4g}; using dt = {new:g}"
-            )
-            dt = new
-    elif dt > ts_max:
-        raise SimulationError(
-            f"time step dt = {dt:g} exceeds the largest sample time for which the design's discrete observer is "
-            f"stable (checks.ts_max = {ts_max:.4g}); choose --dt below {ts_max:.4g}"
-        )
-    dt = float(dt)
-    nsteps = int(round(scenario.T / dt))
-    if nsteps < 1 or abs(nsteps * dt - scenario.T) > 1e-6 * scenario.T + 1e-9:
-        raise SimulationError(
-            f"the horizon T = {scenario.T:g} is not a whole number of steps dt = {dt:g}; choose dt dividing T"
-        )
+    dt, nsteps, notes = resolve_dt(design, scenario, dt)
     if record_every is None:
         record_every = max(
             1, math.ceil(paths * (nsteps + 1) / _RECORD_BUDGET), math.ceil((nsteps + 1) / _RECORD_PER_PATH)
@@ -186,16 +164,7 @@ def simulate_per_path(
         notes.append("no C compiler: the closed loop ran interpreted")
     every = record_every
     runs = lay.split_record(rec_all)
-    names = {
-        "states": list(plant.state_names),
-        "state_units": list(plant.state_units),
-        "inputs": list(plant.input_names),
-        "outputs": list(plant.output_names),
-        "output_units": list(plant.output_units),
-        "faults": list(plant.fault_names),
-        "fault_kinds": list(plant.fault_kinds),
-        "time_unit": plant.time_unit,
-    }
+    names = result_names(plant)
     return SimulationResult(
         plant=plant.name,
         t=np.arange(nrec) * every * dt,
