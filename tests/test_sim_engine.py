@@ -271,9 +271,10 @@ def test_metrics_do_not_depend_on_chunks_or_threads(plants, lqr_designs):
     assert a == b
 
 
-def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs):
+def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, tmp_path):
     """The metrics reduced in the compiled loop equal those recomputed from every recorded sample."""
     from fte_casadi.plants import SCENARIOS
+    from fte_casadi.sim import load_result, save_result
     from fte_casadi.sim.metrics import metrics_from_arrays
 
     for name in ("manipulator", "three-tank"):
@@ -281,6 +282,8 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs):
         sc = dataclasses.replace(sc, T=sc.T / 2 if name == "manipulator" else 300.0)
         res = simulate(real_designs[name], plants[name], sc, paths=6, seed=2, progress=False, record_all=True,
                        record_every=1)  # fmt: skip
+        save_result(res, tmp_path / f"{name}.npz")  # recompute from the saved per-path arrays
+        res = load_result(tmp_path / f"{name}.npz")
         ref, got = metrics_from_arrays(res), res.metrics
         for key in ("state_rms_error", "fault_rel_rms_error", "input_saturation"):
             assert [v is None for v in got[key]] == [v is None for v in ref[key]]
