@@ -1,6 +1,7 @@
 """`fte derive`: the contract's document, file plants, and clear errors without tracebacks."""
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -15,8 +16,19 @@ EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[1] / "examples
 
 
 def fte(*args, cwd=None):
+    # the checkout under test first on the path, also when cwd is elsewhere (an installed copy may differ)
+    root = str(EXAMPLES.parent)
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+    }
     return subprocess.run(
-        [sys.executable, "-m", "fte_casadi", *args], capture_output=True, text=True, cwd=cwd, timeout=300
+        [sys.executable, "-m", "fte_casadi", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
+        env=env,
     )
 
 
@@ -114,3 +126,52 @@ def test_click_runner_in_process(tmp_path):
 
     r = CliRunner().invoke(main, ["derive", "manipulator"])
     assert r.exit_code == 0 and "[-0.217234, 1]" in r.output
+
+
+PLANT_AUTO = __import__("pathlib").Path(__file__).resolve().parent / "plant_auto.py"
+
+
+def test_derive_finds_the_premises_of_the_plain_manipulator(manip_doc):
+    """`fte derive` on (82) as printed: the premise it chose, its bounds, the rules, and that it was automatic."""
+    p = fte("derive", f"{PLANT_AUTO}:manipulator_plain", "--json")
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert set(d) >= set(manip_doc) - {"method"} and d["rules"] == 2 and d["premises_found_automatically"]
+    assert [(q["expr"], q["min"], q["max"]) for q in d["premises"]] == [
+        (q["expr"], q["min"], q["max"]) for q in manip_doc["premises"]
+    ]
+    np.testing.assert_allclose(np.array([lm["A"] for lm in d["local_models"]]),
+                               np.array([lm["A"] for lm in manip_doc["local_models"]]), rtol=0, atol=1e-12)  # fmt: skip
+    assert d["fidelity"]["max_abs_error"] <= ROUNDOFF
+    t = fte("derive", f"{PLANT_AUTO}:manipulator_plain")
+    assert t.returncode == 0, t.stderr
+    assert "2 rules by sector (premises found automatically)" in t.stdout
+    assert "z1 = sin(theta_l)/theta_l: [-0.217234, 1]" in t.stdout
+    assert "1 premise, 2 rules" in t.stdout and "z1 schedules A[w_l, theta_l], W[w_l, theta_l]" in t.stdout
+
+
+def test_derive_linear_plant_is_one_rule():
+    p = fte("derive", f"{PLANT_AUTO}:linear")
+    assert p.returncode == 0, p.stderr
+    assert "1 rules by linear (one rule)" in p.stdout and "no nonlinear term in the states" in p.stdout
+    assert "rule 2:" not in p.stdout
+
+
+def test_derive_refuses_an_unbounded_term_by_name(tmp_path):
+    (tmp_path / "pole.py").write_text(
+        textwrap.dedent(
+            """
+            from fte_casadi import PlantBuilder
+            def f():
+                b = PlantBuilder("pole")
+                x1, x2 = b.states("x1", "x2")
+                (u,) = b.inputs("u")
+                (fa,) = b.faults("fa")
+                b.drift([x2, -x1 - 1 / x1 + u + fa])
+                b.outputs([x1, x2])
+                b.region(x1=(-1, 1), x2=(-1, 1))
+                return b.build()
+            """
+        )
+    )
+    _bad(tmp_path, ["derive", "pole.py:f"], "drift row 'x2': the term -(1/x1) is unbounded on the region")

@@ -52,7 +52,9 @@ def _linearity(
                     raise PlantError(
                         f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {str(e)[:120]} "
                         f"depends on {bad}. Inputs, unknown inputs and faults must enter affinely (their coefficients "
-                        "may depend on the states); rewrite that term"
+                        "may depend on the states, which gives premises of their own). Rewrite that term: e.g. take "
+                        "the nonlinear function of the input (v = sin(u)) as the input and invert it in the controller, "
+                        "or model the actuator as a state"
                     )
                 raise PlantError(
                     f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {str(e)[:120]} "

@@ -6,6 +6,7 @@ import numpy as np
 
 from ..model import Plant
 from .auto import premise_form
+from .auto_checks import check_exact
 from .fidelity import fidelity as fidelity
 from .linearise import linearised_local_models
 from .memberships import scheduling_from_measurements as scheduling_from_measurements
@@ -20,8 +21,9 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     """Derive the T-S fuzzy model of ``plant`` and check its fidelity.
 
     Sector nonlinearity when the plant declares premises, or when it declares neither premises nor
-    operating points (the premises are then found in its plain equations, :mod:`.auto`; a plant
-    without nonlinear term gets one rule); local linearisation when it declares operating points.
+    operating points: the premises are then found in its plain equations (:mod:`.auto`), the
+    model is checked to equal them to round-off (:func:`.auto_checks.check_exact`), and a plant
+    without nonlinear term gets one rule. Local linearisation when it declares operating points.
 
     Examples
     --------
@@ -31,12 +33,15 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     (2, -0.2172)
     """
     method = plant.method
-    if plant.method == "sector":
-        auto = plant.z.numel() == 0  # no premise declared: find them in the plain equations
-        work = premise_form(plant)[0] if auto else plant
-        premises, models, premise_fn, membership_fn = sector_local_models(work)
-        if auto:
-            method = "sector (premises found automatically)" if premises else "linear (one rule)"
+    auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
+    notes: tuple[str, ...] = ()
+    if auto:
+        form = premise_form(plant, seed=seed)
+        premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
+        method = "sector (premises found automatically)" if premises else "linear (one rule)"
+        notes = form.notes
+    elif plant.method == "sector":
+        premises, models, premise_fn, membership_fn = sector_local_models(plant)
     else:
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
     tmp = TSModel(
@@ -51,7 +56,10 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
         Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
     )
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
-    return TSModel(plant, method, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid)
+    ts = TSModel(plant, method, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid, notes)
+    if auto:
+        check_exact(ts, seed=seed)  # the proof: exact to round-off, or refused with the row and the point
+    return ts
 
 
 __all__ = [

@@ -1,27 +1,46 @@
-"""Automatic sector nonlinearity: premises found from the plain nonlinear equations.
+"""Automatic sector nonlinearity: premises found in the plain nonlinear equations.
 
-A plant that declares no premise (and no operating points) is written by the user with its plain
+A plant that declares no premise (and no operating points) is written with its plain
 nonlinearities (``-3.33 * sin(theta_l)``, ``x1 * x2``, ``tanh(x1)``). This module rewrites it
 exactly in the form the sector method needs, ``f = A(z) x + B(z) u + Bd(z) d + Bf(z) f + a`` and
 ``g = W(z) x + G(z) u + Gf(z) f + M(z) d2``, with premises ``z(x)``:
 
-1. Each row is split into additive terms (through sums, differences, negations and constant factors
-   of CasADi's expression tree). A term must be affine in u, d, f (d2 for the diffusion); its
-   coefficients of those may depend on x.
-2. The x-part ``h(x)`` of a nonlinear term is telescoped along the states it uses, in state order:
-   ``h(x) = h(0) + sum_j c_j(x) x_j``, ``c_j = [h(x1..xj, 0..) - h(x1..x(j-1), 0..)] / xj``, an
-   exact identity. Where ``|xj| < 1e-4`` the quotient is replaced by its Taylor expansion to third
-   order (exact at ``xj = 0``, where it is the partial derivative, and without the cancellation
-   of the quotient near 0). Built symbolically: nothing is sampled.
+1. Each row is split into additive terms (through sums, differences, negations and constant
+   factors of CasADi's expression tree). A term must be affine in u, d, f (d2 in the diffusion);
+   their coefficients may depend on x. A term that is singular on the region (a denominator,
+   ``tan``, ``log``... reaching its pole there) is refused by name (:mod:`.auto_checks`).
+2. The x-part ``h(x)`` of a term is telescoped along the states it uses, in state order:
+   ``h(x) = h(0) + sum_j c_j(x) x_j`` with ``c_j = [h(x1..xj, 0..) - h(x1..x(j-1), 0..)] / xj``,
+   an exact identity, built symbolically (nothing is sampled). When the difference has ``xj`` as
+   a factor (``x1 * x2``, ``x1**3``) the factor is divided out and there is no singularity.
+   Otherwise ``c_j`` has a removable singularity at ``xj = 0``, where its value is the partial
+   derivative ``dh/dxj``. For a smooth term the quotient is replaced, where ``|xj| <``
+   :data:`TAYLOR_BAND`, by its Taylor expansion ``d1 + d2 xj/2 + d3 xj^2/6`` (exact at 0): the
+   quotient itself loses ``eps |h| / |xj|`` to cancellation near 0 (measured: ``(exp(x) - 1)/x``
+   is wrong by 1.0 at ``x = 1e-17`` with a fill at 0 only; with the band the coefficient of a
+   unit-scale term is within 7e-13 of its exact value everywhere, of ``sin(100 x)`` within 8e-11,
+   and the product ``c_j xj`` always at round-off). A term with a kink (``fabs``, ``fmin``,
+   ``if_else``...) may have a different slope on each side of 0: it keeps the exact quotient and
+   is filled at ``xj = 0`` only.
 3. Every coefficient that is not constant is a premise candidate. Candidates that are affine
-   functions of one another (``c = alpha + beta g(x)``, tested at 64 random points of the region)
-   share one premise ``g``: the manipulator's ``sin(theta_l)`` in drift and diffusion gives one
-   premise and the paper's two rules. A premise is the expression of the first candidate of its
-   group as written (``sin(theta_l)/theta_l``), not negated or rescaled, so its rule 1 (the premise
-   at its maximum, CONTRACT.md's order) is where that expression is largest.
+   functions of one another (``c = alpha + beta g(x)``, tested at 64 random points of the
+   region, then used symbolically) share one premise ``g``: the manipulator's ``sin(theta_l)``
+   in drift and diffusion gives one premise and the paper's two rules.
+4. Normalisation and orientation. A premise is the coefficient of the first candidate of its
+   group, in row order (drift before diffusion) and then column order, neither shifted nor
+   scaled (memberships do not change under a positive affine change of the premise, so the
+   coefficient itself is the most readable choice). Its sign is chosen so that its value at the
+   anchor of the decomposition, the origin (projected onto the region), lies in the upper half
+   of its range; when it lies exactly at the middle the written sign is kept. With CONTRACT.md's
+   rule order (rule 1 at each premise's max) rule 1 is then the rule closest to the origin, the
+   point about which the sector model is built, and the order does not depend on how a sign was
+   written (``3.33 * sin(-theta)`` gives the same rules as ``-3.33 * sin(theta)``). For the
+   manipulator the premise is ``sin(theta_l)/theta_l``, 1 at the origin: rule 1 at 1, rule 2 at
+   its minimum -0.2172, as in the paper.
 
-The result is a plant written with premise symbols, which the ordinary sector method derives;
-its fidelity is checked against the plain equations, as for any plant.
+The result is a plant written with premise symbols, which the ordinary sector method derives
+with the bounds found here; :func:`~fte_casadi.ts.derive` then checks it against the plain
+equations and refuses it unless it is exact to round-off (:func:`.auto_checks.check_exact`).
 """
 
 from __future__ import annotations
@@ -34,14 +53,43 @@ import numpy as np
 
 from ..errors import DerivationError
 from ..model import Plant
+from .auto_checks import check_term, expr_text
+from .bounds import BoundsError, premise_bounds
 
-__all__ = ["premise_form", "WARN_PREMISES", "MAX_PREMISES", "TAYLOR_BAND"]
+__all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYLOR_BAND"]
 
 #: above this many premises (64 rules) derive warns; above MAX_PREMISES it refuses
 WARN_PREMISES = 6
 MAX_PREMISES = 10
-#: the quotient is replaced by its Taylor expansion where |x_j| < TAYLOR_BAND
+#: the quotient of a smooth term is replaced by its Taylor expansion where |x_j| < TAYLOR_BAND
 TAYLOR_BAND = 1e-4
+#: operations with a kink or a jump: such a term keeps its exact quotient (filled at 0 only)
+_NONSMOOTH = {getattr(ca, k) for k in ("OP_FABS", "OP_SIGN", "OP_FLOOR", "OP_CEIL", "OP_FMOD", "OP_FMIN",
+              "OP_FMAX", "OP_IF_ELSE_ZERO", "OP_LT", "OP_LE", "OP_EQ", "OP_NE", "OP_NOT", "OP_AND", "OP_OR",
+              "OP_COPYSIGN", "OP_REMAINDER") if hasattr(ca, k)}  # fmt: skip
+
+
+@dataclasses.dataclass(frozen=True)
+class PremiseForm:
+    """The plant rewritten with automatic premises ``z1..zq``, their bounds, and notes for reports."""
+
+    plant: Plant
+    #: per premise ``(min, max, states, gap)``, as :func:`~fte_casadi.ts.bounds.premise_bounds` returns
+    bounds: tuple[tuple[float, float, tuple[int, ...], float], ...]
+    notes: tuple[str, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class _Piece:
+    """One coefficient contributed by one term: ``factor * expr`` enters ``matrix[row, col]``."""
+
+    matrix: str
+    row: int
+    col: int
+    factor: float
+    expr: ca.SX
+    text: str  # "" when the coefficient is a constant
+    where: str  # e.g. "drift row 'w_l', the coefficient of 'theta_l' in the term -3.33*sin(theta_l)"
 
 
 def _terms(e: ca.SX, scale: float = 1.0) -> list[tuple[float, ca.SX]]:
@@ -67,106 +115,141 @@ def _terms(e: ca.SX, scale: float = 1.0) -> list[tuple[float, ca.SX]]:
     return [(scale, e)]
 
 
-def _quotient(h: ca.SX, x: ca.SX, j: int) -> tuple[ca.SX, ca.SX]:
-    """``(c_j, text)``: ``[h(.., xj, 0..) - h(.., 0, 0..)] / xj`` with the Taylor fill near ``xj = 0``."""
+def _smooth(e: ca.SX) -> bool:
+    """True when no operation of ``e`` has a kink or a jump."""
+    seen, stack = set(), [e]
+    while stack:
+        v = stack.pop()
+        if v.element_hash() in seen or v.is_leaf():
+            continue
+        seen.add(v.element_hash())
+        if v.op() in _NONSMOOTH:
+            return False
+        stack += [v.dep(i) for i in range(v.n_dep())]
+    return True
+
+
+def _divide(h: ca.SX, xj: ca.SX) -> ca.SX | None:
+    """``h / xj`` when ``xj`` is a factor of ``h`` (products, squares, integer powers), else None."""
+    if ca.is_equal(h, xj):
+        return ca.SX(1.0)
+    if h.is_op(ca.OP_SQ) and ca.is_equal(h.dep(0), xj):
+        return xj
+    if h.is_op(ca.OP_NEG):
+        q = _divide(h.dep(0), xj)
+        return None if q is None else -q
+    if h.is_op(ca.OP_MUL):
+        a, b = h.dep(0), h.dep(1)
+        q = _divide(a, xj)
+        if q is not None:
+            return q * b
+        q = _divide(b, xj)
+        return None if q is None else a * q
+    if h.is_op(ca.OP_DIV):
+        q = _divide(h.dep(0), xj)
+        return None if q is None else q / h.dep(1)
+    if h.is_op(ca.OP_CONSTPOW) and ca.is_equal(h.dep(0), xj) and h.dep(1).is_constant():
+        k = float(ca.DM(h.dep(1)))
+        return xj ** (k - 1) if k >= 1 and k == int(k) else None
+    return None
+
+
+def _coefficient(h: ca.SX, x: ca.SX, j: int, smooth: bool) -> tuple[ca.SX, str]:
+    """``(c_j, text)``: ``[h(.., xj, 0..) - h(.., 0, 0..)] / xj``, its singularity at ``xj = 0`` filled."""
     n = x.numel()
     xj = x[j]
-    upto = (
-        ca.substitute(h, ca.vertcat(*[x[k] for k in range(j + 1, n)]), ca.DM.zeros(n - j - 1))
-        if j < n - 1
-        else h
-    )
+    later = ca.vertcat(*[x[k] for k in range(j + 1, n)]) if j < n - 1 else None
+    upto = ca.substitute(h, later, ca.DM.zeros(n - j - 1)) if later is not None else h
+    if not ca.depends_on(upto, xj):
+        return ca.SX(0.0), ""
     below = ca.substitute(upto, xj, ca.DM(0.0))
-    q = ca.simplify((upto - below) / xj)
-    if not ca.depends_on(q, xj):  # xj cancels (e.g. (x1 x2)/x2 = x1): no singularity to fill
-        return q, q
+    exact = _divide(upto, xj) if below.is_zero() else None
+    q = exact if exact is not None else ca.simplify((upto - below) / xj)
+    if exact is not None or not ca.depends_on(q, xj):  # no singularity left (x1 x2 / x2 = x1)
+        return q, expr_text(q)
     d1 = ca.jacobian(upto, xj)
+    if not smooth:
+        return ca.if_else(xj == 0, ca.substitute(d1, xj, ca.DM(0.0)), q), expr_text(q)
     d2 = ca.jacobian(d1, xj)
     d3 = ca.jacobian(d2, xj)
-    at0 = [ca.substitute(v, xj, ca.DM(0.0)) for v in (d1, d2, d3)]
-    taylor = at0[0] + at0[1] * xj / 2 + at0[2] * xj**2 / 6
-    return ca.if_else(ca.fabs(xj) < TAYLOR_BAND, taylor, q), ca.simplify(q)
+    t1, t2, t3 = (ca.substitute(v, xj, ca.DM(0.0)) for v in (d1, d2, d3))
+    taylor = t1 + t2 * xj / 2 + t3 * xj**2 / 6
+    return ca.if_else(ca.fabs(xj) < TAYLOR_BAND, taylor, q), expr_text(q)
 
 
-def _const(e: ca.SX, syms: ca.SX) -> bool:
-    return syms.numel() == 0 or not ca.depends_on(e, syms)
+def _value(e: ca.SX) -> float:
+    return float(ca.DM(ca.evalf(e)))
 
 
-def _split(plant: Plant, kind: str):
-    """Coefficient pieces of the drift or diffusion: lists of (matrix, row, col, factor, expr, text)."""
+def _split(plant: Plant, kind: str) -> tuple[list[_Piece], np.ndarray]:
+    """Coefficient pieces of the drift or the diffusion, and its constant offset."""
     x = plant.x
     if kind == "drift":
         rows = plant.drift_z
         vars_ = (("B", plant.u, plant.input_names), ("Bd", plant.d, plant.unknown_input_names),
                  ("Bf", plant.f, plant.fault_names))  # fmt: skip
-        xmat, what = "A", "drift"
+        xmat = "A"
     else:
         rows = plant.diffusion_z
         vars_ = (("G", plant.u, plant.input_names), ("Gf", plant.f, plant.fault_names),
                  ("M", plant.d2, plant.diffusion_input_names))  # fmt: skip
-        xmat, what = "W", "diffusion"
+        xmat = "W"
     others = (
-        ca.vertcat(*[v for _, v, _ in vars_ if v.numel()])
-        if any(v.numel() for _, v, _ in vars_)
-        else ca.SX(0, 1)
+        ca.vertcat(*[v for _, v, _ in vars_ if v.numel()]) if any(v.numel() for _, v, _ in vars_) else None
     )
     pieces, offset = [], np.zeros(plant.n)
     for i in range(plant.n):
+        row = f"{kind} row {plant.state_names[i]!r}"
         for k, h in _terms(rows[i]):
-            name = plant.state_names[i]
-            h0 = ca.substitute(h, others, ca.DM.zeros(others.numel())) if others.numel() else h
+            term = expr_text(k * h)
+            if ca.depends_on(h, x):
+                check_term(h, plant, f"{row}: the term {term}")
             for mat, v, vnames in vars_:
                 for c in range(v.numel()):
-                    b = ca.jacobian(h, v[c])
-                    if not _const(b, others):
-                        raise DerivationError(
-                            f"{what} row {name!r}: the term {str(k * h)[:100]} is nonlinear in {vnames[c]!r}; inputs, "
-                            "unknown inputs and faults must enter affinely (their coefficients may depend on the "
-                            "states): rewrite the term, or declare premises yourself (b.premise)"
-                        )
-                    b = ca.substitute(b, others, ca.DM.zeros(others.numel())) if others.numel() else b
-                    if not (b.is_constant() and float(ca.DM(b)) == 0.0):
-                        pieces.append((mat, i, c, k, b, str(b) if ca.depends_on(b, x) else ""))
-            if _const(h0, x):
-                offset[i] += k * float(ca.DM(ca.evalf(h0)))
+                    b = ca.jacobian(h, v[c])  # affine in u, d, f, d2: checked when the plant was built
+                    b = ca.substitute(b, others, ca.DM.zeros(others.numel()))
+                    if b.is_zero():
+                        continue
+                    nonconst = ca.depends_on(b, x)
+                    where = f"{row}: the coefficient of {vnames[c]!r} in the term {term}"
+                    pieces.append(_Piece(mat, i, c, k, b, expr_text(b) if nonconst else "", where))
+            h0 = ca.substitute(h, others, ca.DM.zeros(others.numel())) if others is not None else h
+            if not ca.depends_on(h0, x):
+                offset[i] += k * _value(h0)
                 continue
-            z0 = float(ca.DM(ca.evalf(ca.substitute(h0, x, ca.DM.zeros(plant.n)))))
+            z0 = _value(ca.substitute(h0, x, ca.DM.zeros(plant.n)))
             if not np.isfinite(z0):
                 raise DerivationError(
-                    f"{what} row {name!r}: the term {str(k * h)[:100]} is not finite at x = 0, so it cannot be written "
-                    "as bounded coefficients times the states; shift the states so that the plant is finite at 0, "
-                    "or declare premises yourself (b.premise)"
+                    f"{row}: the term {term} is not finite at x = 0, the point about which the sector model is "
+                    "built, so it cannot be written as bounded coefficients times the states; shift the states so "
+                    "that the plant is finite at 0, or declare premises yourself (b.premise)"
                 )
             offset[i] += k * z0
+            smooth = _smooth(h0)
             for j in range(plant.n):
                 if not ca.depends_on(h0, x[j]):
                     continue
-                if not ca.depends_on(ca.jacobian(h0, x[j]), x):  # linear in x_j alone
-                    pieces.append((xmat, i, j, k, ca.jacobian(h0, x[j]), ""))
-                    continue
-                c, text = _quotient(h0, x, j)
-                if not ca.depends_on(c, x):  # a constant after all (e.g. 0 from x1 x2 along x1)
-                    v = float(ca.DM(ca.evalf(c)))
-                    if v != 0.0:
-                        pieces.append((xmat, i, j, k, ca.SX(v), ""))
-                    continue
-                pieces.append((xmat, i, j, k, c, str(text)))
+                c, text = _coefficient(h0, x, j, smooth)
+                where = f"{row}: the coefficient of {plant.state_names[j]!r} in the term {term}"
+                if ca.depends_on(c, x):
+                    pieces.append(_Piece(xmat, i, j, k, c, text, where))
+                elif _value(c) != 0.0:
+                    pieces.append(_Piece(xmat, i, j, k, ca.SX(_value(c)), "", where))
     return pieces, offset
 
 
 def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator):
-    """Indices of a representative per candidate, and the (alpha, beta) with ``c = alpha + beta rep``."""
+    """A representative per candidate and ``(alpha, beta)`` with ``c = alpha + beta * rep``."""
     lo, hi = plant.region_lo, plant.region_hi
-    x = plant.x
     N = 64
     pts = np.zeros((plant.n, N))
-    for j in range(plant.n):
-        if np.isnan(lo[j]):
-            pts[j] = plant.x0[j] + rng.standard_normal(N)
-        else:
-            pts[j] = lo[j] + (hi[j] - lo[j]) * rng.random(N)
-    F = ca.Function("cands", [x], [ca.vertcat(*candidates)]) if candidates else None
-    vals = np.array(F.map(N)(pts)) if candidates else np.zeros((0, N))
+    for j in range(plant.n):  # candidates depend on bounded states only (checked before)
+        pts[j] = 0.0 if np.isnan(lo[j]) else lo[j] + (hi[j] - lo[j]) * rng.random(N)
+    vals = (
+        np.array(ca.Function("cands", [plant.x], [ca.vertcat(*candidates)]).map(N)(pts))
+        if candidates
+        else None
+    )
     reps, rep_of, coef = [], [], []
     for k in range(len(candidates)):
         v = vals[k]
@@ -174,7 +257,7 @@ def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator):
         for r in reps:
             A = np.column_stack([np.ones(N), vals[r]])
             ab, *_ = np.linalg.lstsq(A, v, rcond=None)
-            if np.max(np.abs(A @ ab - v)) <= 1e-9 * (1.0 + np.max(np.abs(v))):
+            if np.all(np.isfinite(ab)) and np.max(np.abs(A @ ab - v)) <= 1e-9 * (1.0 + np.max(np.abs(v))):
                 found = (r, float(ab[0]), float(ab[1]))
                 break
         if found is None:
@@ -185,40 +268,81 @@ def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator):
     return reps, rep_of, coef
 
 
-def premise_form(plant: Plant, seed: int = 0) -> tuple[Plant, list[str]]:
-    """The plant rewritten with automatically found premises (see the module docstring), and notes.
+def _bounds(plant: Plant, expr: ca.SX, text: str, where: list[str]):
+    """Bounds of a premise candidate, refusals naming the coefficients it stands for."""
+    try:
+        return premise_bounds(text, expr, plant.x, plant.region_lo, plant.region_hi, plant.state_names,
+                              allow_constant=True)  # fmt: skip
+    except BoundsError as exc:
+        what = "; ".join(where[:3]) + (f" (and {len(where) - 3} more)" if len(where) > 3 else "")
+        at = f"at {exc.where}" if exc.where else "on the region"
+        raise DerivationError(
+            f"{what}: the coefficient {text} is {exc.kind} {at}, so the term cannot be written as bounded "
+            "coefficients times the states. Narrow the region (b.region) to keep away from it, shift the states, "
+            "or declare premises yourself (b.premise)"
+        ) from None
+
+
+def _orient(plant: Plant, expr: ca.SX, mn: float, mx: float) -> bool:
+    """True when the premise must be negated: its value at the origin (projected onto the region) lies
+    in the lower half of its range (see the module docstring)."""
+    lo = np.where(np.isnan(plant.region_lo), 0.0, plant.region_lo)
+    hi = np.where(np.isnan(plant.region_hi), 0.0, plant.region_hi)
+    v0 = float(ca.Function("z", [plant.x], [expr])(np.clip(np.zeros(plant.n), lo, hi)))
+    return v0 < 0.5 * (mn + mx) - 1e-12 * (mx - mn)
+
+
+def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
+    """The plant rewritten with automatically found premises (see the module docstring).
 
     A plant without any nonlinear term gets no premise: one rule. Raises
-    :class:`~fte_casadi.errors.DerivationError` naming the term that cannot be written so, or when
-    more than :data:`MAX_PREMISES` premises would be needed."""
+    :class:`~fte_casadi.errors.DerivationError` naming the term that cannot be written so, or
+    listing the premises when more than :data:`MAX_PREMISES` would be needed.
+    """
     pieces_f, off_f = _split(plant, "drift")
     pieces_g, off_g = _split(plant, "diffusion")
     if np.any(off_g):
+        rows = [plant.state_names[i] for i in np.flatnonzero(off_g)]
         raise DerivationError(
-            "the diffusion has a term that is not proportional to x, u, f or d2 (additive noise): the paper's model has none"
+            f"the diffusion rows {rows} have a term that is not proportional to x, u, f or d2 (additive noise, "
+            f"{off_g[np.flatnonzero(off_g)].tolist()} at x = 0): the paper's model has none; remove it"
         )
     pieces = pieces_f + pieces_g
-    cand = [p for p in pieces if p[5]]  # non-constant coefficients
+    cand = [p for p in pieces if p.text]
     for p in cand:
-        for j in range(plant.n):
-            if ca.depends_on(p[4], plant.x[j]) and np.isnan(plant.region_lo[j]):
-                raise DerivationError(
-                    f"the coefficient {p[5][:80]} depends on state {plant.state_names[j]!r}, which has no bounds: "
-                    f"give them with b.region({plant.state_names[j]}=(lower, upper))"
-                )
-    reps, rep_of, coef = _group(plant, [p[4] for p in cand], np.random.default_rng(seed))
-    q = len(reps)
-    texts = [cand[r][5] for r in reps]
-    if q > MAX_PREMISES:
+        free = [plant.state_names[j] for j in range(plant.n) if ca.depends_on(p.expr, plant.x[j]) and np.isnan(plant.region_lo[j])]  # fmt: skip
+        if free:
+            raise DerivationError(
+                f"{p.where}: the coefficient {p.text} depends on {free}, which have no bounds: give them with "
+                f"b.region({free[0]}=(lower, upper))"
+            )
+    reps, rep_of, coef = _group(plant, [p.expr for p in cand], np.random.default_rng(seed))
+    texts = [cand[r].text for r in reps]
+    if len(reps) > MAX_PREMISES:
         raise DerivationError(
-            f"the plant needs {q} premises ({2**q} rules), more than {MAX_PREMISES}: {'; '.join(texts)}. Declare some "
-            "premises yourself (b.premise) so that terms share them, narrow the region so that some coefficients "
-            "become nearly constant, or linearise at operating points instead (b.operating_points)"
+            f"the plant needs {len(reps)} premises ({2 ** len(reps)} rules), more than {MAX_PREMISES}: "
+            f"{'; '.join(texts)}. Declare some premises yourself (b.premise) so that terms share them, narrow the "
+            "region so that some coefficients become nearly constant, or linearise at operating points instead "
+            "(b.operating_points)"
         )
+    # bounds, constants (a coefficient constant over the region after all), orientation
+    value, sign, bounds = {}, {}, {}
+    for r in reps:
+        members = [cand[k].where for k in range(len(cand)) if rep_of[k] == r]
+        mn, mx, idx, gap = _bounds(plant, cand[r].expr, cand[r].text, members)
+        if mx - mn <= 1e-12 * (1.0 + abs(mx)):
+            value[r] = 0.5 * (mn + mx)
+            continue
+        sign[r] = -1.0 if _orient(plant, cand[r].expr, mn, mx) else 1.0
+        bounds[r] = (mn, mx, idx, gap) if sign[r] > 0 else (0.0 - mx, 0.0 - mn, idx, gap)  # no -0.0
+    live = [r for r in reps if r not in value]
+    q = len(live)
+    names = tuple(f"z{k + 1}" for k in range(q))
+    texts = tuple(cand[r].text if sign[r] > 0 else f"-({cand[r].text})" for r in live)
     if q > WARN_PREMISES:
         warnings.warn(
             f"the automatic sector method found {q} premises ({2**q} rules): {'; '.join(texts)}; the design will be "
-            "slow and conservative: consider declaring premises yourself or linearising",
+            "slow and conservative: consider declaring premises yourself, narrowing the region, or linearising",
             RuntimeWarning,
             stacklevel=3,
         )
@@ -226,13 +350,20 @@ def premise_form(plant: Plant, seed: int = 0) -> tuple[Plant, list[str]]:
     mats = {k: ca.SX.zeros(plant.n, dim) for k, dim in (
         ("A", plant.n), ("B", plant.m), ("Bd", plant.ld), ("Bf", plant.lf),
         ("W", plant.n), ("G", plant.m), ("Gf", plant.lf), ("M", plant.d2.numel()))}  # fmt: skip
+    uses = {r: [] for r in live}
     ci = 0
-    for mat, i, j, k, e, text in pieces:
-        if text:
-            a, b = coef[ci]
-            e = a + b * z[reps.index(rep_of[ci])]
+    for p in pieces:
+        e = p.expr
+        if p.text:
+            (a, b), r = coef[ci], rep_of[ci]
+            e = a + b * value[r] if r in value else a + b * sign[r] * z[live.index(r)]
             ci += 1
-        mats[mat][i, j] += k * e
+            if (
+                r in uses
+                and f"{p.matrix}[{plant.state_names[p.row]}, {_column_name(plant, p)}]" not in uses[r]
+            ):
+                uses[r].append(f"{p.matrix}[{plant.state_names[p.row]}, {_column_name(plant, p)}]")
+        mats[p.matrix][p.row, p.col] += p.factor * e
     x, u, d, f, d2 = plant.x, plant.u, plant.d, plant.f, plant.d2
 
     def mv(M, v):
@@ -240,13 +371,22 @@ def premise_form(plant: Plant, seed: int = 0) -> tuple[Plant, list[str]]:
 
     drift = mv(mats["A"], x) + mv(mats["B"], u) + mv(mats["Bd"], d) + mv(mats["Bf"], f) + ca.DM(off_f)
     diff = mv(mats["W"], x) + mv(mats["G"], u) + mv(mats["Gf"], f) + mv(mats["M"], d2)
-    z_exprs = ca.vertcat(*[cand[r][4] for r in reps]) if q else ca.SX(0, 1)
-    names = tuple(f"z{k + 1}" for k in range(q))
-    work = dataclasses.replace(plant, z=z if q else ca.SX(0, 1), z_names=names, z_exprs=z_exprs, z_texts=tuple(texts),
+    z_exprs = ca.vertcat(*[sign[r] * cand[r].expr for r in live]) if q else ca.SX(0, 1)
+    work = dataclasses.replace(plant, z=z if q else ca.SX(0, 1), z_names=names, z_exprs=z_exprs, z_texts=texts,
                                drift_z=drift, diffusion_z=diff)  # fmt: skip
-    notes = [f"premises found automatically from the plain equations: {q}"] + [
-        f"{nm} = {t}" for nm, t in zip(names, texts)
-    ]
+    if q:
+        notes = [f"found automatically in the plain equations (sector nonlinearity): {q} premise{'s' * (q > 1)}, "
+                 f"{2**q} rules; each oriented so that rule 1 weighs most at the origin"]  # fmt: skip
+        notes += [f"{nm} schedules {', '.join(uses[r])}" for nm, r in zip(names, live)]
+    else:
+        notes = ["no nonlinear term in the states: one rule (the plant is linear)"]
     if np.any(off_f):
-        notes.append(f"constant drift offset a = {np.round(off_f, 6).tolist()} (kept in every rule)")
-    return work, notes
+        notes.append(f"constant drift offset a = {np.round(off_f, 6).tolist()} (the same in every rule)")
+    return PremiseForm(work, tuple(bounds[r] for r in live), tuple(notes))
+
+
+def _column_name(plant: Plant, p: _Piece) -> str:
+    names = {"A": plant.state_names, "W": plant.state_names, "B": plant.input_names, "G": plant.input_names,
+             "Bd": plant.unknown_input_names, "Bf": plant.fault_names, "Gf": plant.fault_names,
+             "M": plant.diffusion_input_names}  # fmt: skip
+    return names[p.matrix][p.col]

@@ -18,10 +18,20 @@ from scipy.optimize import minimize
 
 from ..errors import DerivationError
 
-__all__ = ["premise_bounds"]
+__all__ = ["premise_bounds", "BoundsError"]
 
 _SAMPLES = 200_001
 _MAX_SEARCHES = 200
+
+
+class BoundsError(DerivationError):
+    """A premise cannot be bounded: ``kind`` is ``"not finite"``, ``"unbounded"`` or ``"constant"``;
+    ``where`` names the point (``"x1 = 0"``) for ``"not finite"``, else ``""``."""
+
+    def __init__(self, message: str, kind: str, where: str = ""):
+        super().__init__(message)
+        self.kind = kind
+        self.where = where
 
 
 def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
@@ -69,12 +79,20 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
 
 
 def premise_bounds(
-    name: str, expr: ca.SX, x: ca.SX, lo: np.ndarray, hi: np.ndarray, state_names
+    name: str,
+    expr: ca.SX,
+    x: ca.SX,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    state_names,
+    allow_constant: bool = False,
 ) -> tuple[float, float, tuple[int, ...], float]:
     """Global min and max of ``expr(x)`` over the box ``[lo, hi]`` (only the states it uses).
 
     Returns ``(min, max, states, gap)``; ``gap`` > 0 means the bounds were widened by that
-    amount because not every suspicious cell could be searched.
+    amount because not every suspicious cell could be searched. Raises :class:`BoundsError`
+    when the expression is not finite somewhere on the grid, unbounded, or (unless
+    ``allow_constant``) constant over the box.
     """
     idx = tuple(j for j in range(x.numel()) if ca.depends_on(expr, x[j]))
     if not idx:
@@ -96,9 +114,11 @@ def premise_bounds(
     if np.any(bad):
         pt = grid[:, np.flatnonzero(bad)[0]]
         where = ", ".join(f"{state_names[j]} = {v:g}" for j, v in zip(idx, pt))
-        raise DerivationError(
+        raise BoundsError(
             f"premise {name!r} is not finite at {where}: define it there (e.g. with casadi.if_else for a "
-            "removable singularity such as sin(v)/v at 0) or shrink the region"
+            "removable singularity such as sin(v)/v at 0) or shrink the region",
+            "not finite",
+            where,
         )
     grads = np.array(G.map(N)(grid)).reshape(k, N)
     grads[~np.isfinite(grads)] = 0.0
@@ -106,10 +126,11 @@ def premise_bounds(
     mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k)
     mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k)
     if not (np.isfinite(mn) and np.isfinite(mx)):
-        raise DerivationError(f"premise {name!r} is unbounded over the region; shrink the region")
-    if mx - mn < 1e-12:
-        raise DerivationError(
+        raise BoundsError(f"premise {name!r} is unbounded over the region; shrink the region", "unbounded")
+    if mx - mn < 1e-12 and not allow_constant:
+        raise BoundsError(
             f"premise {name!r} is constant ({mn:g}) over the region: it schedules nothing; remove it "
-            "and write the constant into the equations"
+            "and write the constant into the equations",
+            "constant",
         )
     return mn, mx, idx, max(gap1, gap2)

@@ -44,7 +44,9 @@ def fidelity(
     ts, samples: int = 20_000, seed: int = 0, horizon: float | None = None, points: int = 400
 ) -> Fidelity:
     """Largest drift/diffusion error over ``samples`` random points of the region, and along
-    an open-loop trajectory of the nonlinear plant from x0 under the reference input."""
+    an open-loop trajectory of the nonlinear plant from x0 under the reference input; for a sector
+    model, up to the point where a premise leaves its bounds (the memberships saturate there and
+    the model is not claimed; ``trajectory_points`` and ``trajectory_horizon`` say how much was kept)."""
     plant = ts.plant
     rng = np.random.default_rng(seed)
     s = sample_box(plant, samples, rng)
@@ -91,7 +93,17 @@ def fidelity(
         rtol=1e-8,
         atol=1e-10,
     )
-    X = sol.y
+    X, T = sol.y, sol.t
+    if ts.premises and ts.method.startswith("sector"):
+        # a sector model is exact where its premises lie within their bounds (outside, the memberships
+        # saturate): compare up to the first point where a premise leaves them
+        Z = np.array(ts.premise_fn.map(X.shape[1])(X)).reshape(len(ts.premises), -1)
+        mn = np.array([p.min for p in ts.premises])[:, None]
+        mx = np.array([p.max for p in ts.premises])[:, None]
+        tol = 1e-9 * (1.0 + np.maximum(np.abs(mn), np.abs(mx)))
+        inside = np.all((Z >= mn - tol) & (Z <= mx + tol), axis=0)
+        keep = max(1, X.shape[1] if np.all(inside) else int(np.argmin(inside)))
+        X, T = X[:, :keep], T[:keep]
     M = X.shape[1]
     U = np.tile(uc[:, None], (1, M))
     tf = np.array(f1.map(M)(X, U, np.zeros((plant.ld, M)), np.zeros((plant.lf, M))))
@@ -110,5 +122,5 @@ def fidelity(
         drift_max_rel_error=ef / scale,
         trajectory_max_abs_error=et,
         trajectory_points=M,
-        trajectory_horizon=float(horizon),
+        trajectory_horizon=float(T[-1]) if M < points else float(horizon),
     )

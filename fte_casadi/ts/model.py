@@ -96,6 +96,8 @@ class TSModel:
     #: ``premise values -> h`` (r), a convex sum on the premises' bounds
     membership_fn: ca.Function
     fidelity: Fidelity
+    #: how the premises were found, for reports (the automatic method's choices; empty otherwise)
+    notes: tuple[str, ...] = ()
 
     @property
     def r(self) -> int:
@@ -155,6 +157,8 @@ class TSModel:
             "C": self.C.tolist(),
             "Df": self.Df.tolist(),
             "fidelity": self.fidelity.to_dict(),
+            "premises_found_automatically": self.method.startswith("sector (premises found automatically)"),
+            "notes": list(self.notes),
             "states": list(self.plant.state_names),
             "inputs": list(self.plant.input_names),
             "faults": list(self.plant.fault_names),

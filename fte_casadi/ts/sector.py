@@ -37,8 +37,13 @@ def _coefficients(plant: Plant):
 
 
 def sector_local_models(
-    plant: Plant,
+    plant: Plant, bounds=None
 ) -> tuple[tuple[Premise, ...], tuple[LocalModel, ...], ca.Function, ca.Function]:
+    """Local models at the vertices of the premises' bounds, memberships, premise Function.
+
+    ``bounds``: per premise ``(min, max, states, gap)`` when already known (the automatic method
+    finds them to orient its premises); otherwise they come from the global bound search.
+    """
     mats, c = _coefficients(plant)
     z = plant.z
     q = z.numel()
@@ -57,8 +62,17 @@ def sector_local_models(
     premises = []
     mins, maxs = [], []
     for k in range(q):
-        mn, mx, idx, gap = premise_bounds(
-            plant.z_names[k], plant.z_exprs[k], plant.x, plant.region_lo, plant.region_hi, plant.state_names
+        mn, mx, idx, gap = (
+            bounds[k]
+            if bounds is not None
+            else premise_bounds(
+                plant.z_names[k],
+                plant.z_exprs[k],
+                plant.x,
+                plant.region_lo,
+                plant.region_hi,
+                plant.state_names,
+            )
         )
         mins.append(mn)
         maxs.append(mx)
