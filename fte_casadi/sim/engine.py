@@ -279,10 +279,14 @@ class Prepared:
         sh = ca.SX.sym("sh", nfp + nm + ld)
         wd = ca.vertcat(w[0], w[1:] + sh[nfp + nm :]) if ld else w
         nxt, rec = sample(S, wd, sh[:nfp])
-        F = ca.Function("fte_cl", [S, w, sh], [nxt, rec, inc(rec, sh[nfp : nfp + nm])]).expand()
+        # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)
+        F = ca.Function(
+            "fte_cl", [S, w, sh], [nxt, rec, inc(rec, sh[nfp : nfp + nm])], {"cse": True}
+        ).expand()
         self.engine_function = F
         xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
         self.engine = VectorEngine(F, xs, name="fte_mc")
+        self.notes = (self.engine.note,) if self.engine.note else ()
 
     def rescaled(self, scales: dict) -> Prepared:
         """The same compiled engine with other factors: only the shared inputs change (no recompilation)."""
@@ -401,6 +405,7 @@ def simulate(
         paths if record_all else min(paths, scenario.paths if record_paths is None else int(record_paths))
     )
     prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc)
+    notes += list(prep.notes)
     starts = list(range(0, paths, chunk))
     acc = np.empty((paths, len(prep.names)))
     div = np.empty(paths, dtype=np.int_)
