@@ -10,7 +10,7 @@ from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.plants import SCENARIOS
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate
 from fte_casadi.sim import rng as frng
-from fte_casadi.sim.engine import closed_loop_sample
+from fte_casadi.sim.engine import auto_chunk, closed_loop_sample
 from fte_casadi.sim.perpath import monte_carlo
 from fte_casadi.sim.scenario import fault_schedule
 
@@ -275,8 +275,11 @@ def test_metrics_do_not_depend_on_chunks_or_threads(plants, lqr_designs):
     sc = _short_manip(0.5)
     a = simulate(design, plant, sc, paths=37, seed=4, progress=False, chunk=256, threads=2).metrics
     b = simulate(design, plant, sc, paths=37, seed=4, progress=False, chunk=5, threads=1).metrics
-    a.pop("wall_s"), b.pop("wall_s")
-    assert a == b
+    c = simulate(design, plant, sc, paths=37, seed=4, progress=False, threads=3).metrics  # default chunks
+    for m in (a, b, c):
+        m.pop("wall_s")
+    assert a == b == c
+    assert auto_chunk(37, 3) == 8 and auto_chunk(1000, 2) == 128 and auto_chunk(10**6, 2) == 256
 
 
 def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, tmp_path):

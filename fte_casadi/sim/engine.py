@@ -44,7 +44,7 @@ __all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", 
 
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
-#: paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
+#: at most this many paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
 CHUNK = 256
 #: the factors a sweep may vary, and their defaults
 SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0}
@@ -328,6 +328,14 @@ class Prepared:
         return state
 
 
+def auto_chunk(paths: int, threads: int) -> int:
+    """Paths per chunk: about four chunks per thread (load balance), whole lane vectors, at most CHUNK."""
+    from .vector import LANES
+
+    per = math.ceil(paths / (4 * max(int(threads), 1)))
+    return max(LANES, min(CHUNK, LANES * math.ceil(per / LANES)))
+
+
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
     """Paths ``path0 .. path0 + count - 1``: ``(ACC, DIV, REC)`` (REC only when ``every > 0``)."""
     paths = np.arange(path0, path0 + count)
@@ -350,7 +358,7 @@ def simulate(
     record_all: bool = False,
     record_every: int | None = None,
     threads: int | None = None,
-    chunk: int = CHUNK,
+    chunk: int | None = None,
     scheduler: str | None = None,
     scales: dict | None = None,
     prepared: Prepared | None = None,
@@ -378,8 +386,12 @@ def simulate(
         Keep every k-th sample of the recorded paths (default: at most ~2e4 samples per path).
     threads : int, optional
         Threads running chunks of ``chunk`` paths (default: the CPU count, at most 8).
-    scheduler : str, optional
-        Address of a dask.distributed scheduler: the chunks run on its workers (:mod:`.cluster`).
+    chunk : int, optional
+        Paths per call of the compiled engine (default: about four chunks per thread, or per thread
+        of the cluster, whole lane vectors, at most :data:`CHUNK`). The metrics do not depend on it.
+    scheduler : str or distributed.Client, optional
+        Address of a dask.distributed scheduler (or a client of one): the chunks run on its workers
+        (:mod:`.cluster`).
     scales : dict, optional
         ``fault_scale``, ``noise_scale``, ``d_scale`` (default 1): multiply every fault's magnitude,
         the diffusion, the unknown input.
@@ -392,7 +404,7 @@ def simulate(
     t_wall = time.perf_counter()
     _check_settings(design, plant, scenario, paths, seed, dt)
     paths, seed = int(paths), int(seed)
-    if not isinstance(chunk, int) or chunk < 1:
+    if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
     sc = _scales(scales)
     dt, nsteps, notes = resolve_dt(design, scenario, dt)
@@ -406,7 +418,6 @@ def simulate(
     )
     prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc)
     notes += list(prep.notes)
-    starts = list(range(0, paths, chunk))
     acc = np.empty((paths, len(prep.names)))
     div = np.empty(paths, dtype=np.int_)
     bar = tqdm(
@@ -428,6 +439,8 @@ def simulate(
             from concurrent.futures import ThreadPoolExecutor
 
             nthreads = threads or min(8, os.cpu_count() or 1)
+            chunk = chunk or auto_chunk(paths, nthreads)
+            starts = list(range(0, paths, chunk))
             with ThreadPoolExecutor(max_workers=nthreads) as pool:
                 futs = {a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed) for a in starts}
                 for a in starts:

@@ -60,6 +60,11 @@ def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, 
     dt, nsteps, _ = resolve_dt(design, scenario, dt)
     base = Prepared(design, plant, scenario, dt, nsteps, _scales(None))
     out = []
+    client = None
+    if isinstance(scheduler, str):  # one client for all points
+        from .cluster import client_for
+
+        client = scheduler = client_for(scheduler)
     bar = tqdm(total=len(grid) * paths, disable=not progress, delay=1.0, file=sys.stderr, unit=" paths",
                desc=f"sweep {plant.name} ({len(grid)} points)")  # fmt: skip
     try:
@@ -71,6 +76,8 @@ def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, 
             bar.update(paths)
     finally:
         bar.close()
+        if client is not None:
+            client.close()
     return out
 
 
