@@ -43,7 +43,7 @@ from ..errors import SimulationError
 from . import rng
 from .compile import cache_dir
 
-__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS"]
+__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS", "BOX_MULLER"]
 
 #: paths per lane vector (8 doubles: one AVX-512 register, two AVX2 ones)
 LANES = 8
@@ -84,6 +84,8 @@ _CALL = {
     "OP_HYPOT": "hypot",
 }  # fmt: skip
 _BINARY = {"OP_POW", "OP_CONSTPOW", "OP_FMOD", "OP_REMAINDER", "OP_ATAN2", "OP_HYPOT"}
+#: the standard normal of one sample from two uniforms (Box-Muller), as the driver loop writes it
+BOX_MULLER = "sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2)"
 
 
 def _op_names() -> dict[int, str]:
@@ -236,7 +238,7 @@ void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH
       uint64_t cb = (uint64_t)k * {nslot};
       for (l = 0; l < V; ++l) {{
         double u1 = 1.0 - fte_u01(key[l], cb + 1), u2 = fte_u01(key[l], cb + 2);
-        dw[l] = sqdt * (sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2));
+        dw[l] = sqdt * ({BOX_MULLER});
         for (j = 0; j < {ld}; ++j) dd[j][l] = damp * (2.0 * fte_u01(key[l], cb + 3 + j) - 1.0);
       }}
       fte_sample(st, nx, acc, rb, sh, dw, dd, recnow);
@@ -283,11 +285,11 @@ class VectorEngine:
 
     An operation the emitter does not know makes it fall back to CasADi's generated C lane by lane
     (``note`` says which; ``casadi_c=True`` asks for it); no C compiler, or a failed compile, raises
-    :class:`UnsupportedOperation`."""
+    :class:`UnsupportedOperation`. ``source_filter(str) -> str`` edits the C before it is compiled
+    (for measurements only)."""
 
-    def __init__(
-        self, F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool | None = None
-    ):
+    def __init__(self, F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool | None = None,
+                 source_filter=None):  # fmt: skip
         if not F.is_a("SXFunction"):
             F = F.expand()
         missing = unsupported(F)
@@ -304,6 +306,8 @@ class VectorEngine:
                 "write as lane vectors: it runs CasADi's own generated C path by path (same numbers, slower)"
             )
         src = emit(F, x_slots, name, casadi_c=casadi_c)
+        if source_filter is not None:  # the benchmark's anatomy: the same engine with parts left out
+            src = source_filter(src)
         cc = _compiler()
         if cc is None:
             raise UnsupportedOperation("no C compiler found (cc, gcc, clang or $CC)")
