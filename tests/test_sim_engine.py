@@ -318,3 +318,17 @@ def test_memory_does_not_grow_with_paths(plants, lqr_designs):
     assert a.recorded_paths == b.recorded_paths == sc.paths
     assert a.ftc.x.nbytes == b.ftc.x.nbytes and b.metrics["paths"] == 500
     np.testing.assert_array_equal(a.ftc.x, b.ftc.x)  # the example paths are the same paths
+
+
+def test_all_paths_recorded_in_their_chunks_equal_the_example_paths(plants, lqr_designs):
+    """With record_all (--save) the chunks record as they run; their first paths are the examples."""
+    plant, design = plants["manipulator"], lqr_designs["manipulator"]
+    sc = _short_manip(0.3)
+    kw = dict(paths=21, seed=8, progress=False, record_every=3, threads=2, chunk=8)
+    a = simulate(design, plant, sc, record_all=True, **kw)
+    b = simulate(design, plant, sc, **kw)
+    assert a.recorded_paths == 21 and b.recorded_paths == sc.paths
+    np.testing.assert_array_equal(a.ftc.x[: sc.paths], b.ftc.x)
+    np.testing.assert_array_equal(a.no_ftc.yc[: sc.paths], b.no_ftc.yc)
+    a.metrics.pop("wall_s"), b.metrics.pop("wall_s")
+    assert a.metrics == b.metrics

@@ -420,6 +420,9 @@ def simulate(
     notes += list(prep.notes)
     acc = np.empty((paths, len(prep.names)))
     div = np.empty(paths, dtype=np.int_)
+    # all paths recorded (--save) in-process: the chunks record as they run; else the examples run again below
+    every_all = record_every if (record_all and scheduler is None) else 0
+    rec = np.empty((paths, (nsamp - 1) // record_every + 1, prep.lay.nrec)) if every_all else None
     bar = tqdm(
         total=paths,
         disable=not progress,
@@ -442,10 +445,14 @@ def simulate(
             chunk = chunk or auto_chunk(paths, nthreads)
             starts = list(range(0, paths, chunk))
             with ThreadPoolExecutor(max_workers=nthreads) as pool:
-                futs = {a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed) for a in starts}
+                futs = {
+                    a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed, every_all) for a in starts
+                }
                 for a in starts:
-                    ca_, dv, _ = futs[a].result()
+                    ca_, dv, rc = futs[a].result()
                     acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
+                    if rc is not None:
+                        rec[a : a + len(dv)] = rc
                     bar.update(len(dv))
     finally:
         bar.close()
@@ -457,8 +464,7 @@ def simulate(
             f"{scenario.divergence_bound:g}); the closed loop is unstable for this design and step: check the "
             "design's certificates, lower dt, or shorten the fault"
         )
-    rec = None
-    if nrec_paths:
+    if nrec_paths and rec is None:
         _, _, rec = run_paths(prep, 0, nrec_paths, seed, record_every)
     wall = time.perf_counter() - t_wall
     doc = finalize(acc, prep.names, prep.masks, {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed,
