@@ -38,7 +38,7 @@ from ..model import Plant
 from ..step import step_function
 from .reduce import finalize, increments, masks
 from .result import RUNS, RunData, SimulationResult
-from .scenario import FaultSchedule, Scenario, Sinusoid, UniformNoise, fault_schedule
+from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, UniformNoise, fault_schedule
 
 __all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "SCALES"]
 
@@ -227,7 +227,8 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
     return dt, nsteps, notes
 
 
-def _scales(scales: dict | None) -> dict:
+def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
+    """The factors with their defaults, validated (against ``scenario``'s faults when given)."""
     out = dict(SCALES)
     for k, v in (scales or {}).items():
         if k not in SCALES:
@@ -239,6 +240,13 @@ def _scales(scales: dict | None) -> dict:
         if not (math.isfinite(fv) and fv >= 0):
             raise ParameterError(f"{k} must be a non-negative finite number; got {v!r}")
         out[k] = fv
+    for fp in scenario.faults if scenario is not None else ():
+        if isinstance(fp, LossOfEffectiveness) and fp.loss * out["fault_scale"] > 1.0:
+            raise ParameterError(
+                f"fault_scale = {out['fault_scale']:g} makes the {100 * fp.loss:g} % loss of effectiveness of "
+                f"{fp.fault!r} ({fp.start:g} to {fp.stop:g}) a loss of {100 * fp.loss * out['fault_scale']:g} %; "
+                f"a loss is at most 100 %: use fault_scale <= {1.0 / fp.loss:g}"
+            )
     return out
 
 
@@ -406,7 +414,7 @@ def simulate(
     paths, seed = int(paths), int(seed)
     if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
-    sc = _scales(scales)
+    sc = _scales(scales, scenario)
     dt, nsteps, notes = resolve_dt(design, scenario, dt)
     nsamp = nsteps + 1
     if record_every is None:

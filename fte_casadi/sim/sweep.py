@@ -57,6 +57,8 @@ def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, 
     """The metrics document of the scenario at every point of the grid ``vary`` (first factor slowest)."""
     _check_settings(design, plant, scenario, paths, seed, dt)
     grid = [dict(zip(vary, combo)) for combo in itertools.product(*vary.values())]
+    for point in grid:  # every point checked before the first runs
+        _scales(point, scenario)
     dt, nsteps, _ = resolve_dt(design, scenario, dt)
     base = Prepared(design, plant, scenario, dt, nsteps, _scales(None))
     out = []
@@ -69,7 +71,7 @@ def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, 
                desc=f"sweep {plant.name} ({len(grid)} points)")  # fmt: skip
     try:
         for point in grid:
-            sc = _scales(point)
+            sc = _scales(point, scenario)
             res = simulate(design, plant, scenario, paths=paths, seed=seed, dt=dt, progress=False, record_paths=0,
                            threads=threads, scheduler=scheduler, scales=sc, prepared=base.rescaled(sc))  # fmt: skip
             out.append({"point": dict(point), "metrics": res.metrics})
