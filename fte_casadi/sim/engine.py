@@ -27,6 +27,7 @@ import math
 import os
 import sys
 import time
+from typing import TYPE_CHECKING
 
 import casadi as ca
 import numpy as np
@@ -40,7 +41,11 @@ from .reduce import finalize, increments, masks
 from .result import RUNS, RunData, SimulationResult
 from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, UniformNoise, fault_schedule
 
-__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "SCALES"]
+if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
+    import distributed
+
+__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "SCALES",
+           "auto_chunk"]  # fmt: skip
 
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
@@ -367,7 +372,7 @@ def simulate(
     record_every: int | None = None,
     threads: int | None = None,
     chunk: int | None = None,
-    scheduler: str | None = None,
+    scheduler: str | distributed.Client | None = None,
     scales: dict | None = None,
     prepared: Prepared | None = None,
 ) -> SimulationResult:

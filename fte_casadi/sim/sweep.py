@@ -14,11 +14,15 @@ import itertools
 import json
 import math
 import sys
+from typing import TYPE_CHECKING
 
 from tqdm import tqdm
 
 from ..errors import ParameterError
 from .engine import SCALES, Prepared, _check_settings, _scales, resolve_dt, simulate
+
+if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
+    import distributed
 
 __all__ = ["sweep", "parse_vary", "to_csv"]
 
@@ -53,7 +57,7 @@ def parse_vary(items) -> dict[str, list[float]]:
 
 
 def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, seed: int, dt=None,
-          scheduler: str | None = None, threads: int | None = None, progress: bool = True) -> list[dict]:  # fmt: skip
+          scheduler: str | distributed.Client | None = None, threads: int | None = None, progress: bool = True) -> list[dict]:  # fmt: skip
     """The metrics document of the scenario at every point of the grid ``vary`` (first factor slowest)."""
     _check_settings(design, plant, scenario, paths, seed, dt)
     grid = [dict(zip(vary, combo)) for combo in itertools.product(*vary.values())]
