@@ -7,11 +7,23 @@ from fte_casadi.plants.manipulator import scenario
 
 def test_monte_carlo_bench_smoke(lqr_designs):
     out = bench(
-        lqr_designs["manipulator"], manipulator(), scenario(), paths=16, baseline_paths=1, horizon=0.5
+        lqr_designs["manipulator"],
+        manipulator(),
+        scenario(),
+        paths=16,
+        baseline_paths=1,
+        horizon=0.5,
+        repeats=1,
     )
     e = out["engine"]
     assert e["steps"] == 500 and e["flops_per_path_step"] > 100
     assert 0 < e["fraction_of_peak"] < 1
+    ops = e["operations_per_path_step"]
+    # the manipulator: sin(theta_l) once per run after CasADi's cse
+    assert ops["libm_calls_by_function"] == {"sin": 3}
+    assert ops["flops"] == ops["flops_closed_loop"] + 40  # 36 for the normal, 4 for the unknown input
+    one = e["one_thread"]
+    assert one["ns_per_path_step"] > 0 and 0 <= one["libm_share"] < 1
     assert out["per_path_engine"]["path_steps_per_s"] > 0 and out["speedup_vs_per_path"] > 0
     assert out["max_abs_diff_engine_vs_sdeint"] < 1e-9  # the baselines integrate the same SDE
     for key in ("speedup_vs_sdeint", "speedup_vs_python_loop"):
@@ -27,3 +39,13 @@ def test_layers_do_not_import_the_plants():
     bad = [str(p.relative_to(root)) for sub in ("sim", "codegen", "design", "ts", "model") for p in (root / sub).glob("*.py")
            if re.search(r"^\s*(from \.\.plants|from fte_casadi\.plants|import fte_casadi\.plants)", p.read_text(), re.M)]  # fmt: skip
     assert not bad, bad
+
+
+def test_leaving_out_the_libm_calls_changes_only_those_lines():
+    from fte_casadi.bench.anatomy import _no_libm
+
+    src = "  for (l = 0; l < V; ++l) w3[l] = sin(w1[l]);\n  w4 = w3 * w2;\n  dw[l] = fte_ndtri_tail(p[l]);"
+    assert (
+        _no_libm(src)
+        == "  for (l = 0; l < V; ++l) w3[l] = (w1[l]);\n  w4 = w3 * w2;\n  dw[l] = fte_ndtri_tail(p[l]);"
+    )

@@ -66,3 +66,13 @@ def test_cli_sweep_prints_points_and_writes_figure(tmp_path):
 def test_cli_sweep_bad_factor_is_one_paragraph():
     r = CliRunner().invoke(main, ["sweep", "manipulator", "--vary", "gain=1,2"])
     assert r.exit_code == 2 and "unknown factor 'gain'" in r.output and "Traceback" not in r.output
+
+
+def test_a_fault_scale_beyond_a_full_loss_is_refused_before_any_point_runs(plants, real_designs):
+    from fte_casadi.plants import SCENARIOS
+
+    with pytest.raises(
+        ParameterError, match=r"loss of effectiveness of 'fa' .* a loss of 120 %.*fault_scale <= 2.5"
+    ):
+        sweep(real_designs["manipulator"], plants["manipulator"], SCENARIOS["manipulator"](),
+              {"fault_scale": [1.0, 3.0]}, paths=4, seed=0, progress=False)  # fmt: skip

@@ -18,9 +18,10 @@ import numpy as np
 
 from ..design.record import Design
 from ..errors import SimulationError
-from ..sim.engine import Prepared, closed_loop_sample, plant_schedule, resolve_dt, simulate
+from ..sim.engine import SCALES, Prepared, closed_loop_sample, plant_schedule, resolve_dt, simulate
 from ..sim.perpath import monte_carlo, simulate_per_path
 from ..sim.scenario import UniformNoise
+from .anatomy import libm_share, op_counts, peak_flops
 
 __all__ = ["bench", "baseline_functions"]
 
@@ -71,37 +72,6 @@ def baseline_functions(design: Design, plant, scenario, dt: float):
     return fn, a, b, s0, D, FP, lay
 
 
-def flops_per_path_step(prep: Prepared) -> int:
-    """Arithmetic operations of one path-step of the emitted engine (everything but inputs, outputs,
-    constants and copies), counted from the CasADi instruction list."""
-    import casadi as ca
-
-    F = prep.engine_function
-    skip = {ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_ASSIGN}
-    return sum(1 for k in range(F.n_instructions()) if F.instruction_id(k) not in skip)
-
-
-def peak_flops() -> dict:
-    """The machine's double-precision peak as assumed here: cores x clock x (vector doubles x 2 FMA
-    units x 2 flops); vector width 8 with avx512f, 4 with avx2, else 2 (read from /proc/cpuinfo)."""
-    info = ""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            info = fh.read()
-    except OSError:
-        pass
-    mhz = [float(ln.split(":")[1]) for ln in info.splitlines() if ln.startswith("cpu MHz")]
-    ghz = (max(mhz) / 1000.0) if mhz else float("nan")
-    width = 8 if " avx512f" in info else 4 if " avx2" in info else 2
-    cores = os.cpu_count() or 1
-    return {
-        "cores": cores,
-        "ghz": ghz,
-        "doubles_per_vector": width,
-        "flops_per_s": cores * ghz * 1e9 * width * 4,
-    }
-
-
 def bench(
     design: Design | None = None,
     plant=None,
@@ -109,13 +79,15 @@ def bench(
     *,
     paths: int = 1000,
     baseline_paths: int = 2,
+    repeats: int = 3,
     seed: int = 0,
     threads: int | None = None,
     horizon: float | None = None,
 ) -> dict:
     """The manipulator scenario (T = 10 s, dt = 1 ms, three runs; ``horizon`` shortens T for tests):
     the vectorised engine against today's per-path engine on ``paths`` paths (whole ``simulate``
-    calls, random numbers included, compilation excluded: each engine runs once first), and the
+    calls, random numbers included, compilation excluded: each engine runs once first; then both
+    ``repeats`` times, interleaved, and the best of each is kept), and the
     sdeint and plain-Python baselines on ``baseline_paths`` paths, scaled to path-steps per second.
     ``design``, ``plant``, ``scenario``: the caller's (this module does not import the plants).
     """
@@ -131,13 +103,19 @@ def bench(
         return time.perf_counter() - t0, out
 
     first_vec, _ = timed(lambda: simulate(design, plant, scen, **kw))
-    vec_wall, _ = timed(lambda: simulate(design, plant, scen, **kw))
     first_pp, _ = timed(lambda: simulate_per_path(design, plant, scen, **kw))
-    pp_wall, _ = timed(lambda: simulate_per_path(design, plant, scen, **kw))
-    prep = Prepared(design, plant, scen, dt, nsteps, {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0})
-    flops = flops_per_path_step(prep)
-    vec_rate = paths * (nsteps + 1) / vec_wall
+    # interleaved, best of `repeats` each: the two engines see the same load on a shared machine
+    vec_walls, pp_walls = [], []
+    for _ in range(max(1, int(repeats))):
+        vec_walls.append(timed(lambda: simulate(design, plant, scen, **kw))[0])
+        pp_walls.append(timed(lambda: simulate_per_path(design, plant, scen, **kw))[0])
+    vec_wall, pp_wall = min(vec_walls), min(pp_walls)
+    prep = Prepared(design, plant, scen, dt, nsteps, dict(SCALES))
+    ops = op_counts(prep.engine_function, plant.ld)
+    flops = ops["flops"]
+    vec_rate = paths * nsteps / vec_wall
     peak = peak_flops()
+    anatomy = libm_share(prep, paths=min(paths, 256), seed=seed)
     engine_rate = vec_rate
     fn, a, b, s0, D, FP, lay = baseline_functions(design, plant, scen, dt)
     rng = np.random.default_rng(seed)
@@ -196,16 +174,20 @@ def bench(
             "paths": paths,
             "steps": nsteps,
             "wall_s": vec_wall,
+            "wall_s_all_repeats": vec_walls,
             "first_call_wall_s": first_vec,
             "path_steps_per_s": vec_rate,
             "threads": threads or min(8, os.cpu_count() or 1),
             "flops_per_path_step": flops,
+            "operations_per_path_step": ops,
             "fraction_of_peak": vec_rate * flops / peak["flops_per_s"],
             "peak_assumed": peak,
+            "one_thread": anatomy,
         },
         "per_path_engine": {
             "paths": paths,
             "wall_s": pp_wall,
+            "wall_s_all_repeats": pp_walls,
             "first_call_wall_s": first_pp,
             "path_steps_per_s": paths * nsteps / pp_wall,
         },

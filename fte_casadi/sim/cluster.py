@@ -83,13 +83,30 @@ def chunk_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: floa
     return acc, div
 
 
-def run_on_cluster(address: str, design, plant, scenario, dt: float, scales: dict, seed: int, paths: int, chunk: int,
-                   on_done: Callable[[int], None] = lambda k: None, task=chunk_task,
-                   ) -> Iterator[tuple[int, tuple[np.ndarray, np.ndarray]]]:  # fmt: skip
-    """Submit the chunks to the cluster and yield ``(path0, (acc, div))`` in path order."""
-    _require()
-    client = client_for(address)
+def _threads(client) -> int:
+    """Threads of the cluster's workers (at least 1)."""
     try:
+        workers = client.scheduler_info().get("workers", {})
+    except (OSError, TimeoutError):
+        return 1
+    return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
+
+
+def run_on_cluster(scheduler, design, plant, scenario, dt: float, scales: dict, seed: int, paths: int,
+                   chunk: int | None, on_done: Callable[[int], None] = lambda k: None, task=chunk_task,
+                   ) -> Iterator[tuple[int, tuple[np.ndarray, np.ndarray]]]:  # fmt: skip
+    """Submit the chunks to the cluster and yield ``(path0, (acc, div))`` in path order.
+
+    ``scheduler``: an address (a client is opened and closed here) or a ``distributed.Client``.
+    ``chunk``: paths per task; ``None``: about four tasks per worker thread (:func:`.engine.auto_chunk`)."""
+    from .engine import auto_chunk
+
+    _require()
+    own = isinstance(scheduler, str)
+    client = client_for(scheduler) if own else scheduler
+    futs: list = []
+    try:
+        chunk = chunk or auto_chunk(paths, _threads(client))
         args = (design.to_json(), plant_bytes(plant), json.dumps(scenario.to_dict()), float(dt),
                 json.dumps(scales, sort_keys=True), int(seed))  # fmt: skip
         starts = list(range(0, paths, chunk))
@@ -103,4 +120,7 @@ def run_on_cluster(address: str, design, plant, scenario, dt: float, scales: dic
             on_done(len(out[1]))
             yield a, out
     finally:
-        client.close()
+        if own:
+            client.close()  # cancels what is left
+        else:
+            client.cancel([f for f in futs if not f.done()])

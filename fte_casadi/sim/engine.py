@@ -27,6 +27,7 @@ import math
 import os
 import sys
 import time
+from typing import TYPE_CHECKING
 
 import casadi as ca
 import numpy as np
@@ -38,13 +39,17 @@ from ..model import Plant
 from ..step import step_function
 from .reduce import finalize, increments, masks
 from .result import RUNS, RunData, SimulationResult
-from .scenario import FaultSchedule, Scenario, Sinusoid, UniformNoise, fault_schedule
+from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, UniformNoise, fault_schedule
 
-__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "SCALES"]
+if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
+    import distributed
+
+__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "SCALES",
+           "auto_chunk"]  # fmt: skip
 
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
-#: paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
+#: at most this many paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
 CHUNK = 256
 #: the factors a sweep may vary, and their defaults
 SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0}
@@ -227,7 +232,8 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
     return dt, nsteps, notes
 
 
-def _scales(scales: dict | None) -> dict:
+def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
+    """The factors with their defaults, validated (against ``scenario``'s faults when given)."""
     out = dict(SCALES)
     for k, v in (scales or {}).items():
         if k not in SCALES:
@@ -239,6 +245,13 @@ def _scales(scales: dict | None) -> dict:
         if not (math.isfinite(fv) and fv >= 0):
             raise ParameterError(f"{k} must be a non-negative finite number; got {v!r}")
         out[k] = fv
+    for fp in scenario.faults if scenario is not None else ():
+        if isinstance(fp, LossOfEffectiveness) and fp.loss * out["fault_scale"] > 1.0:
+            raise ParameterError(
+                f"fault_scale = {out['fault_scale']:g} makes the {100 * fp.loss:g} % loss of effectiveness of "
+                f"{fp.fault!r} ({fp.start:g} to {fp.stop:g}) a loss of {100 * fp.loss * out['fault_scale']:g} %; "
+                f"a loss is at most 100 %: use fault_scale <= {1.0 / fp.loss:g}"
+            )
     return out
 
 
@@ -279,10 +292,14 @@ class Prepared:
         sh = ca.SX.sym("sh", nfp + nm + ld)
         wd = ca.vertcat(w[0], w[1:] + sh[nfp + nm :]) if ld else w
         nxt, rec = sample(S, wd, sh[:nfp])
-        F = ca.Function("fte_cl", [S, w, sh], [nxt, rec, inc(rec, sh[nfp : nfp + nm])]).expand()
+        # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)
+        F = ca.Function(
+            "fte_cl", [S, w, sh], [nxt, rec, inc(rec, sh[nfp : nfp + nm])], {"cse": True}
+        ).expand()
         self.engine_function = F
         xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
         self.engine = VectorEngine(F, xs, name="fte_mc")
+        self.notes = (self.engine.note,) if self.engine.note else ()
 
     def rescaled(self, scales: dict) -> Prepared:
         """The same compiled engine with other factors: only the shared inputs change (no recompilation)."""
@@ -324,6 +341,14 @@ class Prepared:
         return state
 
 
+def auto_chunk(paths: int, threads: int) -> int:
+    """Paths per chunk: about four chunks per thread (load balance), whole lane vectors, at most CHUNK."""
+    from .vector import LANES
+
+    per = math.ceil(paths / (4 * max(int(threads), 1)))
+    return max(LANES, min(CHUNK, LANES * math.ceil(per / LANES)))
+
+
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
     """Paths ``path0 .. path0 + count - 1``: ``(ACC, DIV, REC)`` (REC only when ``every > 0``)."""
     paths = np.arange(path0, path0 + count)
@@ -346,8 +371,8 @@ def simulate(
     record_all: bool = False,
     record_every: int | None = None,
     threads: int | None = None,
-    chunk: int = CHUNK,
-    scheduler: str | None = None,
+    chunk: int | None = None,
+    scheduler: str | distributed.Client | None = None,
     scales: dict | None = None,
     prepared: Prepared | None = None,
 ) -> SimulationResult:
@@ -374,8 +399,12 @@ def simulate(
         Keep every k-th sample of the recorded paths (default: at most ~2e4 samples per path).
     threads : int, optional
         Threads running chunks of ``chunk`` paths (default: the CPU count, at most 8).
-    scheduler : str, optional
-        Address of a dask.distributed scheduler: the chunks run on its workers (:mod:`.cluster`).
+    chunk : int, optional
+        Paths per call of the compiled engine (default: about four chunks per thread, or per thread
+        of the cluster, whole lane vectors, at most :data:`CHUNK`). The metrics do not depend on it.
+    scheduler : str or distributed.Client, optional
+        Address of a dask.distributed scheduler (or a client of one): the chunks run on its workers
+        (:mod:`.cluster`).
     scales : dict, optional
         ``fault_scale``, ``noise_scale``, ``d_scale`` (default 1): multiply every fault's magnitude,
         the diffusion, the unknown input.
@@ -388,9 +417,9 @@ def simulate(
     t_wall = time.perf_counter()
     _check_settings(design, plant, scenario, paths, seed, dt)
     paths, seed = int(paths), int(seed)
-    if not isinstance(chunk, int) or chunk < 1:
+    if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
-    sc = _scales(scales)
+    sc = _scales(scales, scenario)
     dt, nsteps, notes = resolve_dt(design, scenario, dt)
     nsamp = nsteps + 1
     if record_every is None:
@@ -401,9 +430,12 @@ def simulate(
         paths if record_all else min(paths, scenario.paths if record_paths is None else int(record_paths))
     )
     prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc)
-    starts = list(range(0, paths, chunk))
+    notes += list(prep.notes)
     acc = np.empty((paths, len(prep.names)))
     div = np.empty(paths, dtype=np.int_)
+    # all paths recorded (--save) in-process: the chunks record as they run; else the examples run again below
+    every_all = record_every if (record_all and scheduler is None) else 0
+    rec = np.empty((paths, (nsamp - 1) // record_every + 1, prep.lay.nrec)) if every_all else None
     bar = tqdm(
         total=paths,
         disable=not progress,
@@ -423,11 +455,17 @@ def simulate(
             from concurrent.futures import ThreadPoolExecutor
 
             nthreads = threads or min(8, os.cpu_count() or 1)
+            chunk = chunk or auto_chunk(paths, nthreads)
+            starts = list(range(0, paths, chunk))
             with ThreadPoolExecutor(max_workers=nthreads) as pool:
-                futs = {a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed) for a in starts}
+                futs = {
+                    a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed, every_all) for a in starts
+                }
                 for a in starts:
-                    ca_, dv, _ = futs[a].result()
+                    ca_, dv, rc = futs[a].result()
                     acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
+                    if rc is not None:
+                        rec[a : a + len(dv)] = rc
                     bar.update(len(dv))
     finally:
         bar.close()
@@ -439,8 +477,7 @@ def simulate(
             f"{scenario.divergence_bound:g}); the closed loop is unstable for this design and step: check the "
             "design's certificates, lower dt, or shorten the fault"
         )
-    rec = None
-    if nrec_paths:
+    if nrec_paths and rec is None:
         _, _, rec = run_paths(prep, 0, nrec_paths, seed, record_every)
     wall = time.perf_counter() - t_wall
     doc = finalize(acc, prep.names, prep.masks, {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed,

@@ -14,11 +14,15 @@ import itertools
 import json
 import math
 import sys
+from typing import TYPE_CHECKING
 
 from tqdm import tqdm
 
 from ..errors import ParameterError
 from .engine import SCALES, Prepared, _check_settings, _scales, resolve_dt, simulate
+
+if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
+    import distributed
 
 __all__ = ["sweep", "parse_vary", "to_csv"]
 
@@ -53,24 +57,33 @@ def parse_vary(items) -> dict[str, list[float]]:
 
 
 def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, seed: int, dt=None,
-          scheduler: str | None = None, threads: int | None = None, progress: bool = True) -> list[dict]:  # fmt: skip
+          scheduler: str | distributed.Client | None = None, threads: int | None = None, progress: bool = True) -> list[dict]:  # fmt: skip
     """The metrics document of the scenario at every point of the grid ``vary`` (first factor slowest)."""
     _check_settings(design, plant, scenario, paths, seed, dt)
     grid = [dict(zip(vary, combo)) for combo in itertools.product(*vary.values())]
+    for point in grid:  # every point checked before the first runs
+        _scales(point, scenario)
     dt, nsteps, _ = resolve_dt(design, scenario, dt)
     base = Prepared(design, plant, scenario, dt, nsteps, _scales(None))
     out = []
+    client = None
+    if isinstance(scheduler, str):  # one client for all points
+        from .cluster import client_for
+
+        client = scheduler = client_for(scheduler)
     bar = tqdm(total=len(grid) * paths, disable=not progress, delay=1.0, file=sys.stderr, unit=" paths",
                desc=f"sweep {plant.name} ({len(grid)} points)")  # fmt: skip
     try:
         for point in grid:
-            sc = _scales(point)
+            sc = _scales(point, scenario)
             res = simulate(design, plant, scenario, paths=paths, seed=seed, dt=dt, progress=False, record_paths=0,
                            threads=threads, scheduler=scheduler, scales=sc, prepared=base.rescaled(sc))  # fmt: skip
             out.append({"point": dict(point), "metrics": res.metrics})
             bar.update(paths)
     finally:
         bar.close()
+        if client is not None:
+            client.close()
     return out
 
 

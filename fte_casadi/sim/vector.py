@@ -3,19 +3,32 @@
 The closed-loop sample ``F: (state, w, sh) -> (next, rec, incr)`` (plant Euler-Maruyama step,
 observer/controller step for the three runs, and the metric summands) stays the source of truth:
 its algorithm (``instruction_id/input/output/constant``, CasADi's own register allocation of the
-work vector) is written out instruction by instruction, each as an operation over ``V`` paths
-held side by side (``w[slot][V]``), so that the C compiler vectorises across paths. Around it, a
-loop over samples draws the random numbers per path (:mod:`.rng`), reads the inputs shared by all
-paths at that sample (fault coefficients, masks), keeps the state in the lanes for the whole
-horizon, accumulates the metric sums per path in time order, records a sample when asked, and
-notes the first sample at which a path diverges. One call runs a range of paths; the caller splits
-paths over threads (ctypes releases the GIL) or over Dask workers.
+work vector) is written out instruction by instruction, each as one operation on a vector of
+``V`` paths side by side (GCC/Clang vector extensions: ``fte_vd w12 = w3 * w7;``), so the code is
+vectorised across paths by construction, not by the compiler's auto-vectoriser; calls into the C
+library (``sin``, ``exp``, ``pow``, ...) run lane by lane. Around it, a loop over samples draws
+the random numbers per path (:mod:`.rng`), reads the inputs shared by all paths at that sample
+(fault coefficients, masks), keeps the state in the lanes for the whole horizon, accumulates the
+metric sums per path in time order, records a sample when asked, and notes the first sample at
+which a path diverges. One call runs a range of paths; the caller splits paths over threads
+(ctypes releases the GIL) or over Dask workers.
+
+IEEE semantics are kept: no ``-ffast-math``, no fused multiply-adds (``-ffp-contract=off``), and
+``fmin``/``fmax``/``sign``/``if_else`` written as comparisons and selections that give the C
+library's results (NaN ignored by fmin/fmax, sign(NaN) = NaN). The engine therefore computes every
+operation exactly as CasADi's own generated C does: its trajectories equal the per-path engine's
+bit for bit on the same random numbers.
+
+A Function with an operation the emitter does not know (a lookup table's ``OP_CALL``, say) runs
+through CasADi's own generated C instead, called lane by lane inside the same loop (the same
+numbers, several times slower; :attr:`VectorEngine.note` says so).
 """
 
 from __future__ import annotations
 
 import ctypes
 import hashlib
+import math
 import os
 import platform
 import shutil
@@ -26,166 +39,173 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..errors import SimulationError
 from . import rng
 from .compile import cache_dir
 
-__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "LANES", "FLAGS"]
+__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS"]
 
-#: paths per lane group (8 doubles: one AVX-512 register, two AVX2 ones)
+#: paths per lane vector (8 doubles: one AVX-512 register, two AVX2 ones)
 LANES = 8
-#: compiler flags: IEEE semantics kept (no -ffast-math); -fno-trapping-math lets comparisons vectorise
-FLAGS = ("-O3", "-fno-trapping-math", "-fno-math-errno", "-march=native", "-shared", "-fPIC")
+#: compiler flags: IEEE semantics kept (no -ffast-math); -ffp-contract=off: no fused multiply-adds, so
+#: every operation rounds as in CasADi's own C and the numbers do not depend on whether a CPU has FMA
+FLAGS = ("-O3", "-fno-trapping-math", "-fno-math-errno", "-ffp-contract=off", "-march=native", "-shared", "-fPIC")  # fmt: skip
 
 
-class UnsupportedOperation(ValueError):
-    """The Function uses a CasADi operation the emitter does not know."""
+class UnsupportedOperation(SimulationError):
+    """The Function cannot be emitted (an operation the emitter does not know), or not compiled."""
 
 
-def _ops() -> dict[int, str]:
-    """C expression templates of CasADi's SX operations (``{a}``, ``{b}`` the operands)."""
-    t = {
-        "OP_ASSIGN": "{a}", "OP_ADD": "{a} + {b}", "OP_SUB": "{a} - {b}", "OP_MUL": "{a} * {b}",
-        "OP_DIV": "{a} / {b}", "OP_NEG": "-{a}", "OP_SQ": "{a} * {a}", "OP_TWICE": "2.0 * {a}",
-        "OP_INV": "1.0 / {a}", "OP_EXP": "exp({a})", "OP_LOG": "log({a})", "OP_POW": "pow({a}, {b})",
-        "OP_CONSTPOW": "pow({a}, {b})", "OP_SQRT": "sqrt({a})", "OP_SIN": "sin({a})", "OP_COS": "cos({a})",
-        "OP_TAN": "tan({a})", "OP_ASIN": "asin({a})", "OP_ACOS": "acos({a})", "OP_ATAN": "atan({a})",
-        "OP_LT": "(double)({a} < {b})", "OP_LE": "(double)({a} <= {b})", "OP_EQ": "(double)({a} == {b})",
-        "OP_NE": "(double)({a} != {b})", "OP_NOT": "(double)(!{a})", "OP_AND": "(double)({a} && {b})",
-        "OP_OR": "(double)({a} || {b})", "OP_FLOOR": "floor({a})", "OP_CEIL": "ceil({a})",
-        "OP_FMOD": "fmod({a}, {b})", "OP_FABS": "fabs({a})", "OP_SIGN": "({a} < 0 ? -1.0 : {a} > 0 ? 1.0 : {a})",
-        "OP_COPYSIGN": "copysign({a}, {b})", "OP_IF_ELSE_ZERO": "({a} ? {b} : 0.0)", "OP_ERF": "erf({a})",
-        "OP_FMIN": "fmin({a}, {b})", "OP_FMAX": "fmax({a}, {b})", "OP_SINH": "sinh({a})", "OP_COSH": "cosh({a})",
-        "OP_TANH": "tanh({a})", "OP_ASINH": "asinh({a})", "OP_ACOSH": "acosh({a})", "OP_ATANH": "atanh({a})",
-        "OP_ATAN2": "atan2({a}, {b})", "OP_LOG1P": "log1p({a})", "OP_EXPM1": "expm1({a})",
-        "OP_HYPOT": "hypot({a}, {b})",
-    }  # fmt: skip
-    return {getattr(ca, k): v for k, v in t.items() if hasattr(ca, k)}
+#: vector expressions of CasADi's SX operations; ``{a}``, ``{b}`` the operands (``fte_vd`` values)
+_VEC = {
+    "OP_ASSIGN": "{a}", "OP_LIFT": "{a}", "OP_ADD": "{a} + {b}", "OP_SUB": "{a} - {b}", "OP_MUL": "{a} * {b}",
+    "OP_DIV": "{a} / {b}", "OP_NEG": "-{a}", "OP_SQ": "{a} * {a}", "OP_TWICE": "FTE_BC(2.0) * {a}",
+    "OP_INV": "FTE_BC(1.0) / {a}",
+    "OP_LT": "FTE_TRUE({a} < {b})", "OP_LE": "FTE_TRUE({a} <= {b})", "OP_EQ": "FTE_TRUE({a} == {b})",
+    "OP_NE": "FTE_TRUE({a} != {b})", "OP_NOT": "FTE_TRUE({a} == FTE_BC(0.0))",
+    "OP_AND": "FTE_TRUE(({a} != FTE_BC(0.0)) & ({b} != FTE_BC(0.0)))",
+    "OP_OR": "FTE_TRUE(({a} != FTE_BC(0.0)) | ({b} != FTE_BC(0.0)))",
+    # if_else_zero(c, y) = c == 0 ? 0 : y (a NaN condition is true, as in C)
+    "OP_IF_ELSE_ZERO": "(fte_vd)((fte_vl){b} & ({a} != FTE_BC(0.0)))",
+    "OP_FABS": "(fte_vd)((fte_vl){a} & ~(fte_vl)FTE_BC(-0.0))",
+    "OP_COPYSIGN": "(fte_vd)(((fte_vl){a} & ~(fte_vl)FTE_BC(-0.0)) | ((fte_vl){b} & (fte_vl)FTE_BC(-0.0)))",
+    "OP_SIGN": "FTE_SEL({a} < FTE_BC(0.0), FTE_BC(-1.0), FTE_SEL({a} > FTE_BC(0.0), FTE_BC(1.0), {a}))",
+    # the C library's fmin/fmax: the other operand when one is NaN; the second one on a tie (+0/-0)
+    "OP_FMIN": "FTE_SEL(({a} < {b}) | ({b} != {b}), {a}, {b})",
+    "OP_FMAX": "FTE_SEL(({a} > {b}) | ({b} != {b}), {a}, {b})",
+}  # fmt: skip
+#: operations that call the C library, lane by lane
+_CALL = {
+    "OP_EXP": "exp", "OP_LOG": "log", "OP_SQRT": "sqrt", "OP_SIN": "sin", "OP_COS": "cos", "OP_TAN": "tan",
+    "OP_ASIN": "asin", "OP_ACOS": "acos", "OP_ATAN": "atan", "OP_FLOOR": "floor", "OP_CEIL": "ceil", "OP_ERF": "erf",
+    "OP_SINH": "sinh", "OP_COSH": "cosh", "OP_TANH": "tanh", "OP_ASINH": "asinh", "OP_ACOSH": "acosh",
+    "OP_ATANH": "atanh", "OP_LOG1P": "log1p", "OP_EXPM1": "expm1",
+    "OP_POW": "pow", "OP_CONSTPOW": "pow", "OP_FMOD": "fmod", "OP_REMAINDER": "remainder", "OP_ATAN2": "atan2",
+    "OP_HYPOT": "hypot",
+}  # fmt: skip
+_BINARY = {"OP_POW", "OP_CONSTPOW", "OP_FMOD", "OP_REMAINDER", "OP_ATAN2", "OP_HYPOT"}
 
 
-#: operations the compiler cannot vectorise without -ffast-math (calls into libm): each gets its own lane loop
-_CALLS = ("exp(", "log(", "pow(", "sin(", "cos(", "tan(", "asin(", "acos(", "atan(", "fmod(", "erf(", "fmin(",
-          "fmax(", "sinh(", "cosh(", "tanh(", "asinh(", "acosh(", "atanh(", "atan2(", "log1p(", "expm1(", "hypot(",
-          "floor(", "ceil(", "copysign(")  # fmt: skip
+def _op_names() -> dict[int, str]:
+    return {getattr(ca, k): k for k in dir(ca) if k.startswith("OP_")}
 
 
-def _instructions(F: ca.Function) -> list[tuple]:
-    """``(kind, out_slot, in_slots, text)`` per instruction; ``text`` uses ``{0}``, ``{1}`` for inputs."""
-    ops = _ops()
-    names = {getattr(ca, k): k for k in dir(ca) if k.startswith("OP_")}
-    out = []
-    for k in range(F.n_instructions()):
-        op = F.instruction_id(k)
-        ins, outs = list(F.instruction_input(k)), list(F.instruction_output(k))
-        if op == ca.OP_INPUT:
-            i, nz = ins
-            src = (
-                f"st[{nz}][l]"
-                if i == 0
-                else (("dw[l]" if nz == 0 else f"dd[{nz - 1}][l]") if i == 1 else f"sh[{nz}]")
-            )
-            out.append(("expr", outs[0], [], src))
-        elif op == ca.OP_CONST:
-            out.append(("expr", outs[0], [], repr(float(F.instruction_constant(k)))))
-        elif op == ca.OP_OUTPUT:
-            i, nz = outs
-            dest = {0: f"nx[{nz}][l] = ", 1: f"if (recnow) rb[{nz}][l] = ", 2: f"acc[{nz}][l] += "}[min(i, 2)]
-            out.append(("store", None, [ins[0]], dest + "{0};"))
-        elif op in ops:
-            tmpl = ops[op].replace("{a}", "{0}").replace("{b}", "{1}")
-            kind = "call" if any(c in tmpl for c in _CALLS) else "expr"
-            out.append((kind, outs[0], ins[:2] if "{1}" in tmpl else ins[:1], tmpl))
-        else:
-            raise UnsupportedOperation(
-                f"the vectorised engine cannot emit CasADi operation {names.get(op, op)}"
-            )
-    return out
+def unsupported(F: ca.Function) -> list[str]:
+    """The operations of ``F`` (SX) that the emitter cannot write as lane vectors (empty: none)."""
+    names = _op_names()
+    known = set(_VEC) | set(_CALL) | {"OP_INPUT", "OP_OUTPUT", "OP_CONST"}
+    ops = {names.get(F.instruction_id(k), str(F.instruction_id(k))) for k in range(F.n_instructions())}
+    return sorted(ops - known)
+
+
+def _prelude() -> str:
+    bc = ", ".join(["(c)"] * LANES)
+    return f"""typedef double fte_vd __attribute__((vector_size({8 * LANES})));
+typedef double fte_vdu __attribute__((vector_size({8 * LANES}), aligned(8)));
+typedef long long fte_vl __attribute__((vector_size({8 * LANES})));
+#define FTE_BC(c) ((fte_vd){{{bc}}})
+#define FTE_TRUE(m) ((fte_vd)((fte_vl)FTE_BC(1.0) & (m)))
+#define FTE_SEL(m, a, b) ((fte_vd)(((fte_vl)(a) & (m)) | ((fte_vl)(b) & ~(m))))
+#define FTE_LD(p) (*(const fte_vdu *)(p))
+#define FTE_ST(p, v) (*(fte_vdu *)(p) = (v))"""
+
+
+def _c_double(v: float) -> str:
+    """A C literal of ``v`` that reads back exactly (infinities and NaN from math.h)."""
+    if math.isnan(v):
+        return "NAN"
+    if math.isinf(v):
+        return "INFINITY" if v > 0 else "-INFINITY"
+    return repr(v)
 
 
 def _body(F: ca.Function) -> list[str]:
-    """The sample as C: runs of vectorisable instructions fused into one lane loop each (work slots as
-    local scalars, so values stay in registers); a libm call gets a lane loop of its own; between them
-    only the slots still needed travel through the lane arrays ``w[slot][l]``."""
-    ins = _instructions(F)
-    # segments: maximal runs of non-call instructions
-    segs, cur = [], []
-    for t in ins:
-        if t[0] == "call":
-            if cur:
-                segs.append(cur)
-                cur = []
-            segs.append([t])
+    """The sample as C statements on lane vectors, one per instruction of ``F``; work slots are
+    CasADi's (``F.sz_w()`` vector variables, reused as CasADi reuses them)."""
+    names = _op_names()
+    lines = [f"  fte_vd {', '.join(f'w{i}' for i in range(max(F.sz_w(), 1)))};", "  int l;"]
+    for k in range(F.n_instructions()):
+        op = F.instruction_id(k)
+        nm = names.get(op, str(op))
+        ins, outs = list(F.instruction_input(k)), list(F.instruction_output(k))
+        if op == ca.OP_INPUT:
+            i, nz = ins
+            src = f"FTE_LD(st[{nz}])" if i == 0 else (
+                ("FTE_LD(dw)" if nz == 0 else f"FTE_LD(dd[{nz - 1}])") if i == 1 else f"FTE_BC(sh[{nz}])")  # fmt: skip
+            lines.append(f"  w{outs[0]} = {src};")
+        elif op == ca.OP_CONST:
+            lines.append(f"  w{outs[0]} = FTE_BC({_c_double(float(F.instruction_constant(k)))});")
+        elif op == ca.OP_OUTPUT:
+            i, nz = outs
+            a = f"w{ins[0]}"
+            lines.append({0: f"  FTE_ST(nx[{nz}], {a});", 1: f"  if (recnow) FTE_ST(rb[{nz}], {a});",
+                          2: f"  FTE_ST(acc[{nz}], FTE_LD(acc[{nz}]) + {a});"}[min(i, 2)])  # fmt: skip
+        elif nm in _VEC:
+            b = f"w{ins[1]}" if len(ins) > 1 else ""
+            lines.append(f"  w{outs[0]} = {_VEC[nm].format(a=f'w{ins[0]}', b=b)};")
+        elif nm in _CALL:
+            args = f"w{ins[0]}[l], w{ins[1]}[l]" if nm in _BINARY else f"w{ins[0]}[l]"
+            lines.append(f"  for (l = 0; l < V; ++l) w{outs[0]}[l] = {_CALL[nm]}({args});")
         else:
-            cur.append(t)
-    if cur:
-        segs.append(cur)
-    # liveness across segments: a slot written in a segment is stored if a later segment reads it first
-    reads_later: set[int] = set()
-    live_out: list[set[int]] = [set() for _ in segs]
-    for g in range(len(segs) - 1, -1, -1):
-        written_here = {t[1] for t in segs[g] if t[1] is not None}
-        live_out[g] = written_here & reads_later
-        # slots read in this segment before being written in it
-        first_read, seen = set(), set()
-        for t in segs[g]:
-            first_read |= {s for s in t[2] if s not in seen}
-            if t[1] is not None:
-                seen.add(t[1])
-        reads_later = (reads_later - written_here) | first_read
-    lines = []
-    defined: set[int] = set()
-    for g, seg in enumerate(segs):
-        if seg[0][0] == "call":
-            _, o, a, tmpl = seg[0]
-            lines.append(f"  for (l = 0; l < V; ++l) w[{o}][l] = {tmpl.format(*[f'w[{x}][l]' for x in a])};")
-            defined.add(o)
-            continue
-        local, loads, seen = set(), [], set()
-        for _, o, a, _ in seg:
-            for x in a:
-                if x not in seen and x not in local:
-                    loads.append(x)
-                    local.add(x)
-            if o is not None:
-                local.add(o)
-                seen.add(o)
-        stmts = [f"double {', '.join(f's{x}' for x in sorted(local))};"] if local else []
-        stmts += [f"s{x} = w[{x}][l];" for x in loads]
-        for _, o, a, tmpl in seg:
-            e = tmpl.format(*[f"s{x}" for x in a])
-            stmts.append(e if o is None else f"s{o} = {e};")
-        stmts += [f"w[{x}][l] = s{x};" for x in sorted(live_out[g])]
-        lines.append("  for (l = 0; l < V; ++l) {\n    " + "\n    ".join(stmts) + "\n  }")
+            raise UnsupportedOperation(f"the vectorised engine cannot emit CasADi operation {nm}")
     return lines
 
 
-def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc") -> str:
+def _casadi_body(F: ca.Function) -> tuple[str, list[str]]:
+    """CasADi's own C of ``F`` and the statements that call it lane by lane (the fallback)."""
+    cg = ca.CodeGenerator("fte_cl_lane.c", {"with_header": False, "prefix": "fte_lane_"})
+    G = ca.Function("fte_lane_f", [F.sx_in(i) for i in range(3)], F.call([F.sx_in(i) for i in range(3)]))
+    cg.add(G)
+    ns, nw, nrec, ninc = F.size1_in(0), F.size1_in(1), F.size1_out(1), F.size1_out(2)
+    lines = [
+        f"  const double *arg[{max(G.sz_arg(), 3)}]; double *res[{max(G.sz_res(), 3)}];",
+        f"  long long iw[{max(G.sz_iw(), 1)}]; double wk[{max(G.sz_w(), 1)}];",
+        f"  double a0[{max(ns, 1)}], a1[{max(nw, 1)}], r0[{max(ns, 1)}], r1[{max(nrec, 1)}], r2[{max(ninc, 1)}];",
+        "  int l, j;",
+        "  arg[0] = a0; arg[1] = a1; arg[2] = sh; res[0] = r0; res[1] = r1; res[2] = r2;",
+        "  for (l = 0; l < V; ++l) {",
+        f"    for (j = 0; j < {ns}; ++j) a0[j] = st[j][l];",
+        "    a1[0] = dw[l];",
+        f"    for (j = 1; j < {nw}; ++j) a1[j] = dd[j - 1][l];",
+        "    fte_lane_f((const casadi_real **)arg, res, (casadi_int *)iw, wk, 0);",
+        f"    for (j = 0; j < {ns}; ++j) nx[j][l] = r0[j];",
+        f"    if (recnow) for (j = 0; j < {nrec}; ++j) rb[j][l] = r1[j];",
+        f"    for (j = 0; j < {ninc}; ++j) acc[j][l] += r2[j];",
+        "  }",
+    ]
+    return cg.dump(), lines
+
+
+def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool = False) -> str:
     """C source of the lane engine of ``F: (state, w, sh) -> (next, rec, incr)``.
 
     ``x_slots``: the entries of ``state`` that are plant states (checked for divergence).
-    Raises :class:`UnsupportedOperation` on an operation outside :func:`_ops`."""
+    ``casadi_c``: call CasADi's generated C of ``F`` lane by lane instead of emitting lane vectors.
+    Raises :class:`UnsupportedOperation` on an operation outside the emitter's tables."""
     if not F.is_a("SXFunction"):
         F = F.expand()
     ns, nw, nsh = F.size1_in(0), F.size1_in(1), F.size1_in(2)
     nrec, ninc = F.size1_out(1), F.size1_out(2)
     ld = nw - 1
-    body = _body(F)
+    head, body = _casadi_body(F) if casadi_c else ("", _body(F))
     xs = ", ".join(str(j) for j in x_slots) or "0"
-    nslot = 2 + ld
+    nslot = 1 + ld
     return f"""/* generated by fte_casadi.sim.vector from a CasADi Function: do not edit */
+{head}
 #include <math.h>
 #include <stdint.h>
 #define V {LANES}
 #define NS {ns}
-#define NREC {nrec}
-#define NINC {ninc}
+#define NREC {max(nrec, 1)}
+#define NINC {max(ninc, 1)}
 #define NSH {nsh}
 #define LD {max(ld, 1)}
+#define FTE_AL __attribute__((aligned({8 * LANES})))
+{_prelude()}
 {rng.C_SOURCE}
 static const int XS[] = {{{xs}}};
-#define SZW {max(F.sz_w(), 1)}
-static void fte_sample(double w[SZW][V], double st[NS][V], double nx[NS][V], double acc[NINC][V],
-                       double rb[NREC][V], const double *sh, const double *dw, double dd[LD][V], int recnow) {{
-  int l;
+static void fte_sample(double st[NS][V], double nx[NS][V], double acc[NINC][V], double rb[NREC][V],
+                       const double *sh, const double *dw, double dd[LD][V], int recnow) {{
 {chr(10).join(body)}
 }}
 
@@ -194,7 +214,7 @@ static void fte_sample(double w[SZW][V], double st[NS][V], double nx[NS][V], dou
    diverging sample or -1. SH: (nsamp x NSH) shared inputs. Random numbers: rng.py. */
 void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH, double sqdt, double damp,
             const double *S0, double *S1, double *ACC, long every, double *REC, long *DIV, double bound) {{
-  double w[SZW][V], st[NS][V], nx[NS][V], acc[NINC][V], rb[NREC][V], dw[V], dd[LD][V];
+  double st[NS][V] FTE_AL, nx[NS][V] FTE_AL, acc[NINC][V] FTE_AL, rb[NREC][V] FTE_AL, dw[V] FTE_AL, dd[LD][V] FTE_AL;
   uint64_t key[V];
   long div[V];
   long nrs = every > 0 ? (nsamp - 1) / every + 1 : 0;
@@ -206,6 +226,7 @@ void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH
       long p = c0 + (l < nl ? l : 0);
       for (j = 0; j < NS; ++j) st[j][l] = S0[p * NS + j];
       for (j = 0; j < NINC; ++j) acc[j][l] = 0.0;
+      for (j = 0; j < LD; ++j) dd[j][l] = 0.0;
       key[l] = fte_key(seed, (uint64_t)(path0 + p));
       div[l] = -1;
     }}
@@ -213,12 +234,20 @@ void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH
       const double *sh = SH + k * NSH;
       int recnow = REC != 0 && k % every == 0;
       uint64_t cb = (uint64_t)k * {nslot};
-      for (l = 0; l < V; ++l) {{
-        double u1 = 1.0 - fte_u01(key[l], cb + 1), u2 = fte_u01(key[l], cb + 2);
-        dw[l] = sqdt * sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2);
-        for (j = 0; j < {ld}; ++j) dd[j][l] = damp * (2.0 * fte_u01(key[l], cb + 3 + j) - 1.0);
+      {{  /* dW = sqrt(dt) N, N by AS 241 (rng.py): the central formula for 8 paths at once, the tail by path */
+        double p[V] FTE_AL;
+        fte_vd q, q_r;
+        for (l = 0; l < V; ++l) p[l] = fte_p01(key[l], cb + 1);
+        q = FTE_LD(p) - FTE_BC(0.5);
+        q_r = FTE_BC(0.180625) - q * q;
+        FTE_ST(dw, {rng.central_c("q", "q_r", lambda c: f"FTE_BC({c!r})")});
+        for (l = 0; l < V; ++l)
+          if (!(fabs(p[l] - 0.5) <= {rng.TAIL!r})) dw[l] = fte_ndtri_tail(p[l]);
+        for (l = 0; l < V; ++l) dw[l] = sqdt * dw[l];
+        for (j = 0; j < {ld}; ++j)
+          for (l = 0; l < V; ++l) dd[j][l] = damp * (2.0 * fte_u01(key[l], cb + 2 + j) - 1.0);
       }}
-      fte_sample(w, st, nx, acc, rb, sh, dw, dd, recnow);
+      fte_sample(st, nx, acc, rb, sh, dw, dd, recnow);
       if (recnow) {{
         for (l = 0; l < nl; ++l)
           for (j = 0; j < NREC; ++j) REC[((c0 + l) * nrs + k / every) * NREC + j] = rb[j][l];
@@ -258,10 +287,33 @@ def _compiler() -> str | None:
 
 
 class VectorEngine:
-    """The compiled lane engine of one closed-loop sample Function (compiled once, cached on disk)."""
+    """The compiled lane engine of one closed-loop sample Function (compiled once, cached on disk).
 
-    def __init__(self, F: ca.Function, x_slots: list[int], name: str = "fte_mc"):
-        src = emit(F, x_slots, name)
+    An operation the emitter does not know makes it fall back to CasADi's generated C lane by lane
+    (``note`` says which; ``casadi_c=True`` asks for it); no C compiler, or a failed compile, raises
+    :class:`UnsupportedOperation`. ``source_filter(str) -> str`` edits the C before it is compiled
+    (for measurements only)."""
+
+    def __init__(self, F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool | None = None,
+                 source_filter=None):  # fmt: skip
+        if not F.is_a("SXFunction"):
+            F = F.expand()
+        missing = unsupported(F)
+        self.note = None
+        if casadi_c is None:
+            casadi_c = bool(missing)
+        elif missing and not casadi_c:
+            raise UnsupportedOperation(
+                f"the vectorised engine cannot emit CasADi operation(s) {', '.join(missing)}"
+            )
+        if missing:
+            self.note = (
+                f"the closed loop uses CasADi operation(s) {', '.join(missing)} that the vectorised engine cannot "
+                "write as lane vectors: it runs CasADi's own generated C path by path (same numbers, slower)"
+            )
+        src = emit(F, x_slots, name, casadi_c=casadi_c)
+        if source_filter is not None:  # the benchmark's anatomy: the same engine with parts left out
+            src = source_filter(src)
         cc = _compiler()
         if cc is None:
             raise UnsupportedOperation("no C compiler found (cc, gcc, clang or $CC)")
@@ -274,12 +326,20 @@ class VectorEngine:
                 c = Path(tmp) / f"{name}.c"
                 c.write_text(src)
                 out = Path(tmp) / "lib.so"
-                proc = subprocess.run(
-                    [cc, *FLAGS, "-o", str(out), str(c), "-lm"], capture_output=True, text=True
-                )
+                try:
+                    proc = subprocess.run(
+                        [cc, *FLAGS, "-o", str(out), str(c), "-lm"],
+                        capture_output=True,
+                        text=True,
+                        timeout=900,
+                    )
+                except (OSError, subprocess.TimeoutExpired) as exc:
+                    raise UnsupportedOperation(
+                        f"compiling the vectorised engine with {cc} failed: {exc}"
+                    ) from None
                 if proc.returncode != 0:
                     raise UnsupportedOperation(
-                        f"compiling the vectorised engine failed: {proc.stderr[-1500:]}"
+                        f"compiling the vectorised engine with {cc} failed: {proc.stderr[-1500:]}"
                     )
                 fd, tmp_lib = tempfile.mkstemp(dir=folder, suffix=".so.tmp")
                 os.close(fd)
