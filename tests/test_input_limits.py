@@ -104,7 +104,14 @@ def test_manipulator_windows_one_per_fault_window(plants, real_designs):
     from fte_casadi.sim import simulate
 
     sc = SCENARIOS["manipulator"]()
-    m = simulate(real_designs["manipulator"], plants["manipulator"], sc, paths=4, seed=5, progress=False).metrics
-    assert [(w["fault"], w["start"], w["stop"]) for w in m["windows"]] == [("fa", 2.5, 5.0), ("fs", 7.0, 10.0)]
-    assert all(w["fault_rel_rms_error"] is not None and w["ftc_deviation_ratio"] is not None for w in m["windows"])
+    m = simulate(
+        real_designs["manipulator"], plants["manipulator"], sc, paths=4, seed=5, progress=False
+    ).metrics
+    assert [(w["fault"], w["start"], w["stop"]) for w in m["windows"]] == [
+        ("fa", 2.5, 5.0),
+        ("fs", 7.0, 10.0),
+    ]
+    assert all(
+        w["fault_rel_rms_error"] is not None and w["ftc_deviation_ratio"] is not None for w in m["windows"]
+    )
     assert m["input_saturation"] == [0.0]  # no limits declared
