@@ -28,6 +28,35 @@ def _fail(message: str, code: int = EXIT_BAD_INPUT) -> None:
     sys.exit(code)
 
 
+def _ours(path: Path) -> bool:
+    """True when ``path`` holds something fte wrote: a design document (JSON) or a saved result (.npz)."""
+    import zipfile
+
+    from .design.record import REQUIRED_KEYS
+
+    try:
+        if zipfile.is_zipfile(path):
+            with zipfile.ZipFile(path) as z:
+                return {"meta.npy", "design.npy", "scenario.npy"} <= set(z.namelist())
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError, zipfile.BadZipFile):
+        return False
+    return isinstance(doc, dict) and all(k in doc for k in REQUIRED_KEYS)
+
+
+def _writable_target(path: str, option: str, what: str) -> None:
+    """Refuse, before any work, to overwrite a file fte did not write (a plant file, a user's data);
+    a directory gets a hint. An earlier fte output is replaced, as ``-o`` promises."""
+    p = Path(path)
+    if p.is_dir():
+        raise ParameterError(f"{option} {path} is a directory; give a file name such as {p / what}")
+    if p.exists() and not _ours(p):
+        raise ParameterError(
+            f"{option} {path} exists and was not written by fte (it is not a {what.split('.')[0]} document): it is "
+            "left untouched; choose another file name, or move that file away first"
+        )
+
+
 def _guard(fn):
     """Run a command; on a known error print one paragraph and exit non-zero."""
 
@@ -265,8 +294,8 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 @click.option(
     "--explore", is_flag=True, help="Print and plot the feasible frontier (smallest gamma over sigma)."
 )
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="fte-explore", show_default=True,
-              help="With --explore: the directory of the frontier figure.")  # fmt: skip
+@click.option("--out", "out_dir", type=click.Path(file_okay=False),
+              help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
 def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, allow_uncertified, output,
            explore, out_dir):  # fmt: skip
@@ -274,12 +303,14 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
                            sample_time=sample_time)  # fmt: skip
     if explore:
-        _explore(plant, solver.upper(), gamma1, out_dir)
+        _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore")
         return
-    if output is not None and Path(output).is_dir():
+    if out_dir is not None:
         raise ParameterError(
-            f"-o {output} is a directory; give a file name such as {Path(output) / 'design.json'}"
+            f"--out {out_dir} is the directory of --explore's figure; to write the design document use -o FILE"
         )
+    if output is not None:
+        _writable_target(output, "-o", "design.json")
     d = _make_design(plant, variant, solver.upper(), params, allow_uncertified)
     click.echo(_design_summary(d))
     if output:
@@ -388,6 +419,8 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
         raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
     if dt is not None:
         _positive("dt", dt)
+    if save:
+        _writable_target(save, "--save", "result.npz")
     d = _design_or_plant(target, progress=not quiet)
     plant = load_plant(d.plant_spec)
     scenario = load_scenario(d.plant_spec)

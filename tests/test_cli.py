@@ -39,14 +39,57 @@ def test_design_writes_contract_document(tmp_path):
     assert all(v < 0 for v in d["checks"]["lmi_max_eig"].values())
 
 
-def test_infeasible_gamma_names_the_lmi_and_keeps_existing_file(tmp_path):
+def test_infeasible_gamma_names_the_lmi_and_keeps_existing_file(design_files, tmp_path):
     f = tmp_path / "keep.json"
-    f.write_text("precious")
+    old = design_files["manipulator"].read_text()  # an earlier design, which a failed run must not replace
+    f.write_text(old)
     r = run("design", "manipulator", "--gamma", "1e-6", "-o", str(f))
     assert r.exit_code != 0
     assert "LMI (45)" in r.text
-    assert f.read_text() == "precious"
+    assert f.read_text() == old
     assert not [p for p in tmp_path.iterdir() if p.name != "keep.json"]  # no temporary left behind
+
+
+@pytest.mark.parametrize("content", ["import casadi as ca\n# a user's plant\n", '{"not": "a design"}', ""])
+def test_design_never_overwrites_a_file_it_did_not_write(tmp_path, content):
+    f = tmp_path / "plant.py"
+    f.write_text(content)
+    r = run("design", "manipulator", "-o", str(f))
+    assert r.exit_code == 2
+    assert "was not written by fte" in r.text and "left untouched" in r.text
+    assert f.read_text() == content
+    assert [p.name for p in tmp_path.iterdir()] == ["plant.py"]
+
+
+def test_design_replaces_its_own_earlier_document(design_files, tmp_path):
+    f = tmp_path / "m.json"
+    doc = json.loads(design_files["manipulator"].read_text())
+    doc["theta"] = -1.0  # mark the old one
+    f.write_text(json.dumps(doc))
+    r = run("design", "manipulator", "-o", str(f))
+    assert r.exit_code == 0, r.output
+    assert json.loads(f.read_text())["theta"] > 0
+
+
+def test_design_out_without_explore_is_refused(tmp_path):
+    r = run("design", "manipulator", "--out", str(tmp_path / "d.json"))
+    assert r.exit_code == 2
+    assert "use -o FILE" in r.text
+    assert not list(tmp_path.iterdir())
+
+
+def test_simulate_save_never_overwrites_a_foreign_file(design_files, tmp_path):
+    f = tmp_path / "data.npz"
+    f.write_bytes(b"user data")
+    r = run("simulate", str(design_files["manipulator"]), "--paths", "2", "--quiet", "--save", str(f))
+    assert r.exit_code == 2
+    assert "was not written by fte" in r.text
+    assert f.read_bytes() == b"user data"
+    g = tmp_path / "run.npz"
+    for _ in range(2):  # a second run replaces the first's result
+        r = run("simulate", str(design_files["manipulator"]), "--paths", "2", "--quiet", "--save", str(g))
+        assert r.exit_code == 0, r.output
+    assert g.stat().st_size > 0
 
 
 @pytest.mark.parametrize(
