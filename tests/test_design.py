@@ -332,3 +332,38 @@ def test_user_alpha_too_fast_names_the_largest(ts_models, designs):
     assert alpha < designs["manipulator"].observer["alpha_max"]
     d = design(ts, alpha=alpha)
     assert d.certified and d.observer["alpha"] == alpha and "user" in d.observer["why"]
+
+
+def _kf_plant(fault_gain):
+    """B = [0, g(x1)] varies with x1; the actuator fault enters where u does (Bf = B) or with a
+    constant gain (Bf constant), written plainly (the premises are found automatically)."""
+    b = PlantBuilder("kf")
+    x1, x2 = b.states("x1", "x2")
+    (u,) = b.inputs("u")
+    (d,) = b.unknown_inputs("d")
+    (fa,) = b.faults("fa", kind="actuator")
+    (fs,) = b.faults("fs", kind="sensor")
+    g = 1 + 0.2 * ca.cos(x1)
+    b.drift([x2 + 0.1 * d, -x1 - x2 + g * u + (g if fault_gain is None else fault_gain) * fa + 0.2 * d])
+    b.diffusion([0.0, 0.02 * x2])
+    b.outputs([x1 + fs, x2, x1 + x2])
+    b.region(x1=(-2.0, 2.0), x2=(-3.0, 3.0))
+    b.reference(u=[0.3])
+    b.design_defaults(gamma=2.0, gamma1=0.1, sigma=0.5, delta=1e-4, epsilon=1e-4)
+    return b.build()
+
+
+def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
+    from fte_casadi import derive
+
+    ts = derive(_kf_plant(None))
+    assert not np.allclose(ts.local_models[0].B, ts.local_models[1].B)
+    d = design(ts)
+    assert d.certified
+    np.testing.assert_allclose(d.Kf, [[-1.0, 0.0]], atol=1e-12)  # -pinv(B_i) Bf_i = -[1, 0] in every rule
+    assert not [s for s in d.status if "Kf" in s]
+    ts2 = derive(_kf_plant(1.5))  # Bf constant, B varies: -1.5 / g differs between rules
+    d2 = design(ts2)
+    assert [s for s in d2.status if "Kf recorded as their mean" in s]
+    g = [lm.B[1, 0] for lm in ts2.local_models]
+    np.testing.assert_allclose(d2.Kf[0, 0], np.mean([-1.5 / gi for gi in g]), rtol=1e-12)
