@@ -140,5 +140,6 @@ def load_scenario(spec: str):
                 raise PlantLoadError(f"{target}:{attr}() raised {type(exc).__name__}: {exc}") from None
     raise PlantLoadError(
         f"{target!r} defines no scenario for {func!r}: add a function `scenario()` (or `{func}_scenario()`) "
-        "beside the plant that returns fte_casadi.sim.Scenario(...) with its faults, horizon and time step"
+        "beside the plant that returns fte_casadi.sim.Scenario(...) with its faults, horizon and time step (examples/pendulum_plain.py "
+        "in the fte_casadi repository has one to copy)"
     )
