@@ -172,7 +172,13 @@ def _design_summary(d) -> str:
         f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
         "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.items()),
         "  largest eigenvalue of each LMI at the returned point (negative = holds): "
-        + ", ".join(f"({k}) {v:.3g}" for k, v in lmi.items()),
+        + ", ".join(f"({k}) {v:.3g}" for k, v in lmi.items())
+        + (
+            "; round-off of each, 8 dim eps ||M||: "
+            + ", ".join(f"{v:.1g}" for v in c["lmi_roundoff"].values())
+            if c.get("lmi_roundoff")
+            else ""
+        ),
         f"  theta = {d.theta:.3g}, cond(Pbar) = {c['cond_Pbar']:.3g}, max|L1| = {c['max_abs_L1']:.3g}, max|K| = {K:.3g}",
         f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
         f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",

@@ -157,6 +157,16 @@ def _maxeig(L: np.ndarray) -> float:
     return float(np.max(np.linalg.eigvalsh(L))) if L.size else -np.inf
 
 
+def eig_roundoff(L: np.ndarray) -> float:
+    """Bound on the round-off of a computed eigenvalue of the symmetric ``L``: 8 dim eps ||L||_2.
+
+    Forming ``L`` from the design's matrices and ``eigvalsh`` are backward stable, so an
+    eigenvalue recomputed elsewhere (another BLAS, another CPU) moves by a few eps * dim * ||L||_2.
+    A largest eigenvalue within this bound of zero certifies nothing.
+    """
+    return float(8 * L.shape[0] * np.finfo(float).eps * np.linalg.norm(L, 2)) if L.size else 0.0
+
+
 def _block_max(L: np.ndarray, sizes) -> list[float]:
     out, k = [], 0
     for b in sizes:
@@ -180,28 +190,34 @@ def ts_max(R: list[np.ndarray]) -> float:
     return float(best)
 
 
+def lmi_matrices(aug, d: dict, params: dict):
+    """Yield ``(key, matrix)`` for every LMI of the design at the point ``d``: (45) and (46) for
+    every rule pair, (64) for every rule, (55) once. Each must be negative definite."""
+    X, K, P, T, Pbar, Q, N, theta = (d[k] for k in ("X", "K", "P", "T", "Pbar", "Q", "N", "theta"))
+    s, g, g1, g2 = params["sigma"], params["gamma"], params["gamma1"], params.get("gamma2", params["gamma"])
+    for i in range(aug.r):
+        for j in range(aug.r):
+            yield "45", lmi45(aug, i, X, K[j] @ X, s, g, g1)
+            yield "46", lmi46(aug, i, K[j], P, T, Pbar, Q[i], s, g1, g2)
+        yield "64", lmi64(aug, i, T, Pbar, theta)
+    yield "55", lmi55(aug, T, Pbar, N, theta)
+
+
 def certificate(aug, d: dict, params: dict) -> dict:
     """Recompute every LMI at the design point ``d`` (X, K, P, T, Pbar, Q, N, theta, R, L1).
 
     Returns the ``checks`` dictionary of the design document.
     """
-    X, K, P, T, Pbar, Q, N, theta = (d[k] for k in ("X", "K", "P", "T", "Pbar", "Q", "N", "theta"))
-    s, g, g1, g2 = params["sigma"], params["gamma"], params["gamma1"], params.get("gamma2", params["gamma"])
-    r = aug.r
+    X, K, Pbar, theta = d["X"], d["K"], d["Pbar"], d["theta"]
     sizes = block_sizes(aug)
     lm = {"45": -np.inf, "46": -np.inf, "55": -np.inf, "64": -np.inf}
     blocks = {k: [-np.inf] * len(v) for k, v in sizes.items()}
-
-    def note(key, L):
+    roundoff = dict.fromkeys(lm, 0.0)
+    for key, L in lmi_matrices(aug, d, params):
         lm[key] = max(lm[key], _maxeig(L))
+        roundoff[key] = max(roundoff[key], eig_roundoff(L))
         blocks[key] = [max(a, b) for a, b in zip(blocks[key], _block_max(L, sizes[key]))]
-
-    for i in range(r):
-        for j in range(r):
-            note("45", lmi45(aug, i, X, K[j] @ X, s, g, g1))
-            note("46", lmi46(aug, i, K[j], P, T, Pbar, Q[i], s, g1, g2))
-        note("64", lmi64(aug, i, T, Pbar, theta))
-    note("55", lmi55(aug, T, Pbar, N, theta))
+    r = aug.r
     cl = max(float(np.max(np.linalg.eigvals(aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ K[j]).real))
              for i in range(r) for j in range(r))  # fmt: skip
     R = d["R"]
@@ -210,6 +226,7 @@ def certificate(aug, d: dict, params: dict) -> dict:
     checks = {
         "lmi_max_eig": dict(lm),
         "lmi_block_max_eig": blocks,
+        "lmi_roundoff": roundoff,
         "X_min_eig": float(ev_X[0]),
         "Pbar_min_eig": float(ev_P[0]),
         "R_max_real_eig": float(max(np.max(np.linalg.eigvals(Ri).real) for Ri in R)),
@@ -224,6 +241,7 @@ def certificate(aug, d: dict, params: dict) -> dict:
         checks["theorem"] = 5
         for a, b in (("45", "78"), ("46", "79"), ("55", "80"), ("64", "81")):
             checks["lmi_max_eig"][b] = lm[a]
+            checks["lmi_roundoff"][b] = roundoff[a]
     else:
         checks["theorem"] = 3
     return checks
@@ -235,9 +253,13 @@ def failures(checks: dict) -> list[str]:
     names = {"45": "LMI (45)", "46": "LMI (46)", "55": "LMI (55)", "64": "LMI (64)"}
     if checks.get("theorem") == 5:
         names = {"45": "LMI (78)", "46": "LMI (79)", "55": "LMI (80)", "64": "LMI (81)"}
+    roundoff = checks.get("lmi_roundoff", {})
     for k, v in names.items():
-        if not checks["lmi_max_eig"][k] < 0:
-            bad.append(f"{v} (largest eigenvalue {checks['lmi_max_eig'][k]:.3g})")
+        lam, eps = checks["lmi_max_eig"][k], roundoff.get(k, 0.0)
+        if not lam < 0:
+            bad.append(f"{v} (largest eigenvalue {lam:.3g})")
+        elif not lam < -eps:
+            bad.append(f"{v} (largest eigenvalue {lam:.3g} is within the round-off {eps:.3g} of its matrix)")
     if not checks["X_min_eig"] > 0:
         bad.append(f"X > 0 (smallest eigenvalue {checks['X_min_eig']:.3g})")
     if not checks["Pbar_min_eig"] > 0:
