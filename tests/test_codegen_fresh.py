@@ -69,3 +69,18 @@ def test_committed_design_is_certified_by_its_own_numbers(plant):
         R = d.T @ aug.Abar[i] - np.linalg.solve(d.Pbar, d.Q[i]) @ aug.Cbar
         assert np.allclose(R, d.R[i], rtol=1e-9, atol=1e-12)
     assert checks["cond_Pbar"] <= 1e4 and checks["max_abs_L1"] <= 1e3
+
+
+def test_a_margin_inside_the_roundoff_is_not_a_certificate():
+    """failures() refuses a negative largest eigenvalue that is within its matrix's round-off bound."""
+    d = Design.load(GENERATED / "manipulator" / "design.json")
+    aug = augment(d.local_models, d.C, d.Df)
+    point = dict(X=d.X, K=list(d.K), P=d.P, T=d.T, Pbar=d.Pbar, Q=list(d.Q), N=d.N, theta=d.theta,
+                 R=list(d.R), L1=list(d.L1))  # fmt: skip
+    checks = certificate(aug, point, d.params)
+    eps = checks["lmi_roundoff"]["46"]
+    checks["lmi_max_eig"]["46"] = -0.5 * eps
+    bad = failures(checks)
+    assert len(bad) == 1 and bad[0].startswith("LMI (46)") and "round-off" in bad[0]
+    checks["lmi_max_eig"]["46"] = -2 * eps
+    assert not failures(checks)
