@@ -158,6 +158,7 @@ def derive(plant: str, as_json: bool) -> None:
         f"(drift {f.drift_max_abs_error:.3g}, {100 * f.drift_max_rel_error:.3g} % of its largest value; "
         f"diffusion {f.diffusion_max_abs_error:.3g}); along a {f.trajectory_horizon:.4g} {p.time_unit} "
         f"trajectory: {f.trajectory_max_abs_error:.3g}"
+        + (f" (stopped early: {f.trajectory_stop})" if f.trajectory_stop else "")
     )
 
 

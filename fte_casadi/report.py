@@ -95,7 +95,8 @@ def _derive_section(ts, printed: dict) -> list[str]:
         f"Fidelity: largest |T-S - nonlinear| over {f.samples} samples of the region: drift "
         f"{f.drift_max_abs_error:.3g} ({100 * f.drift_max_rel_error:.3g} % of the largest drift), diffusion "
         f"{f.diffusion_max_abs_error:.3g}; along a {f.trajectory_horizon:.4g} s open-loop trajectory: "
-        f"{f.trajectory_max_abs_error:.3g}.",
+        f"{f.trajectory_max_abs_error:.3g}"
+        + (f" (stopped early: {f.trajectory_stop})." if f.trajectory_stop else "."),
         "",
     ]
     return out

@@ -288,3 +288,43 @@ def test_ts_model_equals_the_nonlinear_equations(drift_terms, diff_terms, seed):
     assert np.all(H >= 0.0) and np.allclose(H.sum(axis=0), 1.0, atol=1e-12)
     h0 = ts.memberships(np.zeros(2))
     assert h0[0] == pytest.approx(np.max(h0), abs=1e-12)
+
+
+# -- the fidelity trajectory of an unstable or stiff open loop ---------------------------------
+def test_fidelity_trajectory_of_an_escaping_open_loop_stops_and_says_so():
+    """x1'' = 2 x1^2 - ... escapes in finite time; the adaptive integrator used to chase it with ever
+    smaller steps for minutes (a hypothesis example found this). It stops once the state is 1000 region
+    spans away, says why, and the model is still checked up to there at round-off."""
+    ts = derive(
+        two_state(lambda x1, x2, u, fa: [x2, -x1 - 0.5 * x2 + 2.0 * x1**2 + u + fa]), fidelity_samples=300
+    )
+    f = ts.fidelity
+    assert f.trajectory_stop.startswith("the open loop escapes") and f.trajectory_horizon < 10.0
+    assert 2 <= f.trajectory_points < 400 and f.trajectory_max_abs_error <= ROUNDOFF * 10
+
+
+def test_fidelity_trajectory_of_a_stiff_plant_is_integrated_by_a_stiff_method():
+    """Poles near -1e4 and -1e-3: the horizon is 1000 s and RK45 would need some 1e7 steps (it ran for
+    minutes). RK45 spends its share of the budget, LSODA integrates the whole horizon, and the sector
+    model is compared along all of it; with too small a budget for both, the trajectory stops where it
+    got to and says so."""
+    from fte_casadi.ts.fidelity import _trajectory
+
+    ts = derive(
+        two_state(lambda x1, x2, u, fa: [-1e4 * x1 + ca.sin(x2) + u, -1e-3 * x2 + fa]), fidelity_samples=300
+    )
+    f = ts.fidelity
+    assert (
+        f.trajectory_stop == ""
+        and f.trajectory_points == 400
+        and f.trajectory_horizon == pytest.approx(1000.0)
+    )
+    assert f.trajectory_max_abs_error <= ROUNDOFF * 1e4 * 4
+    plant = ts.plant
+    fun = plant.drift_function()
+    X, T, stop = _trajectory(
+        lambda t, x: np.array(fun(x, 0.0, np.zeros(0), 0.0)).ravel(),
+        np.array([1.0, 1.0]), 1000.0, 400, plant.region_lo, plant.region_hi, max_evaluations=60,
+    )  # fmt: skip
+    assert stop.startswith("stiff") and "LSODA" in stop and 2 <= T.size < 400 and X.shape == (2, T.size)
+    assert T[-1] > T[-2] and np.all(np.isfinite(X))

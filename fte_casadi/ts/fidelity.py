@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import solve_ivp
+from scipy.integrate import LSODA, RK45
 
 from .model import Fidelity
 
@@ -85,15 +85,14 @@ def fidelity(
     lo, hi = plant.region_lo, plant.region_hi
     start = plant.x0 + np.where(np.isnan(lo), 0.0, 0.2 * (np.nan_to_num(hi) - np.nan_to_num(lo)))
     start = np.where(np.isnan(lo), start, np.clip(start, np.nan_to_num(lo), np.nan_to_num(hi)))
-    sol = solve_ivp(
+    X, T, stop = _trajectory(
         lambda t, xx: np.array(f1(xx, uc, zd, zf)).ravel(),
-        (0.0, horizon),
         start,
-        t_eval=np.linspace(0, horizon, points),
-        rtol=1e-8,
-        atol=1e-10,
+        horizon,
+        points,
+        plant.region_lo,
+        plant.region_hi,
     )
-    X, T = sol.y, sol.t
     if ts.premises and ts.method.startswith("sector"):
         # a sector model is exact where its premises lie within their bounds (outside, the memberships
         # saturate): compare up to the first point where a premise leaves them
@@ -123,4 +122,64 @@ def fidelity(
         trajectory_max_abs_error=et,
         trajectory_points=M,
         trajectory_horizon=float(T[-1]) if M < points else float(horizon),
+        trajectory_stop=stop,
     )
+
+
+#: right-hand-side evaluations allowed for the fidelity trajectory, per method (RK45: 6 per step)
+MAX_EVALUATIONS = 60_000
+#: how far (in region spans) the open loop may wander before the trajectory stops
+ESCAPE = 1000.0
+
+
+def _trajectory(fun, start, horizon, points, lo, hi, max_evaluations=MAX_EVALUATIONS):
+    """The open-loop trajectory by RK45 (as ``solve_ivp`` would), and by LSODA, which switches to a
+    stiff method, where RK45 spends a third of the budget (see :func:`_integrate`; the built-in plants
+    and examples take 300-4300 evaluations)."""
+    X, T, stop = _integrate(RK45, fun, start, horizon, points, lo, hi, max_evaluations // 3)
+    if stop.startswith("stiff"):
+        X2, T2, stop2 = _integrate(LSODA, fun, start, horizon, points, lo, hi, max_evaluations)
+        if T2[-1] > T[-1]:
+            return X2, T2, stop2
+    return X, T, stop
+
+
+def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
+    """Integrate ``x' = fun(t, x)`` from ``start`` by ``method`` (rtol 1e-8, atol 1e-10) and return its values
+    at ``points`` equally spaced times of ``[0, horizon]`` (the same as ``solve_ivp`` with ``t_eval``),
+    up to where it stops early, and why it did ("" if it did not).
+
+    It stops when a state is ``ESCAPE`` spans of its region away from the region's centre (a state
+    without bounds: ``ESCAPE max(1, |start|)`` from 0) or not finite -- an unstable open loop escaping,
+    possibly in finite time, which an adaptive integrator would otherwise chase with ever smaller
+    steps -- and when ``max_evaluations`` right-hand sides have been spent (a stiff plant over a long
+    horizon)."""
+    t_eval = np.linspace(0.0, horizon, points)
+    free = np.isnan(lo)
+    centre = np.where(free, 0.0, 0.5 * (np.nan_to_num(lo) + np.nan_to_num(hi)))
+    scale = np.where(free, np.maximum(1.0, np.abs(start)), np.nan_to_num(hi) - np.nan_to_num(lo))
+    solver = method(fun, 0.0, np.asarray(start, float), horizon, rtol=1e-8, atol=1e-10)
+    ts, ys, i, stop = [], [], 0, ""
+    while solver.status == "running":
+        solver.step()
+        if solver.status == "failed":
+            stop = f"the integrator failed at t = {solver.t:.4g}"
+            break
+        j = int(np.searchsorted(t_eval, solver.t, side="right"))
+        if j > i:
+            ts.append(t_eval[i:j])
+            ys.append(solver.dense_output()(t_eval[i:j]))
+            i = j
+        y = solver.y
+        if not np.all(np.isfinite(y)) or np.any(np.abs(y - centre) > ESCAPE * scale):
+            stop = f"the open loop escapes (beyond {ESCAPE:g} region spans by t = {solver.t:.4g})"
+        elif solver.status == "running" and solver.nfev > max_evaluations:
+            stop = f"stiff: {max_evaluations} evaluations spent by t = {solver.t:.4g} ({method.__name__})"
+        if stop:  # keep where it got to (beyond the last equally spaced time)
+            if np.all(np.isfinite(y)) and (not ts or solver.t > ts[-1][-1]):
+                ts.append(np.array([solver.t]))
+                ys.append(np.asarray(y, float)[:, None])
+            break
+    if not ts:
+        return np.asarray(start, float)[:, None], np.zeros(1), stop
+    return np.hstack(ys), np.hstack(ts), stop

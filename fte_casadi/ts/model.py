@@ -65,7 +65,8 @@ class Fidelity:
 
     ``max_abs_error`` is the largest absolute difference of drift or diffusion over
     ``samples`` points of the region; ``trajectory_max_abs_error`` the same along a
-    simulated open-loop trajectory from x0 (``trajectory_points`` points).
+    simulated open-loop trajectory from x0 (``trajectory_points`` points, up to
+    ``trajectory_horizon``; ``trajectory_stop`` says why it ended early, if it did).
     """
 
     max_abs_error: float
@@ -76,6 +77,9 @@ class Fidelity:
     trajectory_max_abs_error: float
     trajectory_points: int
     trajectory_horizon: float
+    #: why the trajectory ends before its horizon ("" if it does not): it left the region far
+    #: behind (an unstable open loop), its step budget ran out (a stiff plant) or the integrator failed
+    trajectory_stop: str = ""
 
     def to_dict(self) -> dict:
         return {k: (float(v) if isinstance(v, float) else v) for k, v in self.__dict__.items()}
