@@ -519,6 +519,10 @@ def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
             click.echo(", ".join(f"{k} = {v:g}" for k, v in p["point"].items()) + ": fault relative RMS error "
                        f"{_fmt_list(m['fault_rel_rms_error'])}, FTC deviation ratio "
                        f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}")  # fmt: skip
+    for p in points:  # the per-window verdicts, as fte simulate gives them, named by their point
+        at = ", ".join(f"{k} = {v:g}" for k, v in p["point"].items())
+        for w in _warnings(p["metrics"], list(plant.input_names)):
+            click.echo(textwrap.fill(f"fte: at {at}: {w}", width=100), err=True)
 
 
 # -- reproduce ----------------------------------------------------------------------------

@@ -76,3 +76,20 @@ def test_a_fault_scale_beyond_a_full_loss_is_refused_before_any_point_runs(plant
     ):
         sweep(real_designs["manipulator"], plants["manipulator"], SCENARIOS["manipulator"](),
               {"fault_scale": [1.0, 3.0]}, paths=4, seed=0, progress=False)  # fmt: skip
+
+
+def test_cli_sweep_warns_by_point_where_tolerant_control_is_worse_than_none(monkeypatch):
+    """The per-window verdict of fte simulate, for every point of a sweep, on stderr (also with --json)."""
+    import fte_casadi.sim.sweep as sweep_module
+
+    def fake(d, plant, scenario, grid, **kw):
+        w = {"fault": "fa", "start": 2.0, "stop": 4.0, "fault_rel_rms_error": 0.1, "input_saturation": [0.0]}
+        return [{"point": {"fault_scale": s}, "metrics": {"windows": [dict(w, ftc_deviation_ratio=r)]}}
+                for s, r in ((1.0, 0.3), (3.0, 1.75))]  # fmt: skip
+
+    monkeypatch.setattr(sweep_module, "sweep", fake)
+    r = CliRunner().invoke(main, ["sweep", "manipulator", "--vary", "fault_scale=1,3", "--json", "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert len(json.loads(r.stdout)) == 2
+    assert r.stderr.count("worse than none") == 1
+    assert "at fault_scale = 3: warning: in the window of fa [2, 4)" in r.stderr and "1.75 > 1" in r.stderr

@@ -299,7 +299,11 @@ def test_fidelity_trajectory_of_an_escaping_open_loop_stops_and_says_so():
         two_state(lambda x1, x2, u, fa: [x2, -x1 - 0.5 * x2 + 2.0 * x1**2 + u + fa]), fidelity_samples=300
     )
     f = ts.fidelity
-    assert f.trajectory_stop.startswith("the open loop escapes") and f.trajectory_horizon < 10.0
+    assert f.trajectory_stop.startswith(
+        "the open loop leaves the region: premise x1 leaves its bounds [-2, 2]"
+    )
+    assert "later the open loop escapes (beyond 1000 region spans" in f.trajectory_stop
+    assert f.trajectory_horizon < 10.0
     assert 2 <= f.trajectory_points < 400 and f.trajectory_max_abs_error <= ROUNDOFF * 10
 
 

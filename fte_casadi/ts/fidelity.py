@@ -102,6 +102,16 @@ def fidelity(
         tol = 1e-9 * (1.0 + np.maximum(np.abs(mn), np.abs(mx)))
         inside = np.all((Z >= mn - tol) & (Z <= mx + tol), axis=0)
         keep = max(1, X.shape[1] if np.all(inside) else int(np.argmin(inside)))
+        if keep < X.shape[1]:
+            k = int(np.argmin(inside))
+            bad = ts.premises[
+                int(np.argmax(~((Z[:, k] >= mn[:, 0] - tol[:, 0]) & (Z[:, k] <= mx[:, 0] + tol[:, 0]))))
+            ]
+            stop = (
+                f"the open loop leaves the region: premise {bad.expr} leaves its bounds [{bad.min:.4g}, {bad.max:.4g}] "
+                f"by t = {T[k]:.4g}, beyond which the model is not claimed"
+                + (f"; later {stop}" if stop else "")
+            )
         X, T = X[:, :keep], T[:keep]
     M = X.shape[1]
     U = np.tile(uc[:, None], (1, M))
