@@ -222,7 +222,9 @@ def _absolute_spec(plant_spec: str) -> str:
     return plant_spec
 
 
-def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False):
+def _make_design(
+    plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=()
+):
     from .design import design as run_design
     from .plants.loader import load_plant
     from .ts import derive as derive_ts
@@ -236,6 +238,7 @@ def _make_design(plant_spec: str, variant: str, solver: str, params: dict, allow
         variant=variant,
         solver=solver,
         allow_uncertified=allow_uncertified,
+        accept_assumptions=tuple(accept),
         plant_spec=_absolute_spec(plant_spec),
         **params,
     )
@@ -296,6 +299,10 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
     "--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so)."
 )
 @click.option(
+    "--accept-assumption", "accept", multiple=True, type=click.Choice(["1", "2", "3", "4", "5"]),
+    help="Design even though assumption N of Section 3 fails (repeatable; the document records it).",
+)  # fmt: skip
+@click.option(
     "-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here."
 )
 @click.option(
@@ -304,8 +311,8 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
-def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, allow_uncertified, output,
-           explore, out_dir):  # fmt: skip
+def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, allow_uncertified, accept,
+           output, explore, out_dir):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
                            sample_time=sample_time)  # fmt: skip
@@ -318,7 +325,7 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
         )
     if output is not None:
         _writable_target(output, "-o", "design.json")
-    d = _make_design(plant, variant, solver.upper(), params, allow_uncertified)
+    d = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept)
     click.echo(_design_summary(d))
     if output:
         d.save(output)

@@ -125,7 +125,9 @@ def check_full_column_rank(aug: Augmented, models) -> AssumptionCheck:
     ok = not bad
     msg = (f"assumption (2) holds: [[A_i, Bf_i, Bd_i], [C, Df, 0]] has full column rank {cols} for every rule" if ok
            else f"assumption (2) fails for rule(s) {bad}: [[A_i, Bf_i, Bd_i], [C, Df, 0]] has rank {min(ranks)} "
-           f"< {cols} columns; faults and unknown inputs cannot be told apart from the outputs")  # fmt: skip
+           f"< {cols} columns; faults and unknown inputs cannot be told apart from the outputs"
+           + (f" (it needs at least as many outputs as faults plus unknown inputs: {aug.p} < {aug.lf + aug.ld}; "
+              "measure more, or model fewer faults or unknown inputs)" if aug.p < aug.lf + aug.ld else ""))  # fmt: skip
     return AssumptionCheck("(2)", ok, msg, {"ranks": ranks, "columns": cols})
 
 
@@ -200,7 +202,7 @@ def check_observability(aug: Augmented, T: np.ndarray) -> AssumptionCheck:
         return AssumptionCheck(
             "(4)", True, "assumption (4) holds: (T Abar_i, Cbar) is observable for every rule", nums
         )
-    lst = ", ".join(f"s = {_fmt(v)} (rule {i})" for i, v in (unstable or unobs))
+    lst = _grouped(unstable or unobs)
     if unstable:
         return AssumptionCheck("(4)", False, f"assumption (4) fails: (T Abar_i, Cbar) has the unobservable, "
                                f"non-decaying eigenvalue(s) {lst}; no observer gain can make R_i Hurwitz", nums)  # fmt: skip
@@ -244,7 +246,7 @@ def enforce(checks: Iterable[AssumptionCheck], accept: bool | Iterable[str] = ()
         if accept is True
         else {a if a.startswith("(") else f"({a})" for a in accept}
     )
-    refused, notes = [], []
+    refused, notes, names = [], [], []
     for c in checks:
         if c.holds:
             if c.warning:
@@ -253,9 +255,30 @@ def enforce(checks: Iterable[AssumptionCheck], accept: bool | Iterable[str] = ()
             notes.append("accepted: " + c.message)
         else:
             refused.append(c.message)
+            names.append(c.name)
     if refused:
-        raise AssumptionError("; ".join(refused) + ". Pass accept_assumptions=[...] to design anyway.")
+        raise AssumptionError(
+            "; ".join(refused)
+            + ". To design anyway (the document records it): "
+            + " ".join(f"--accept-assumption {n.strip('()')}" for n in names)
+            + " with fte design, or accept_assumptions="
+            + repr(names)
+            + " in Python."
+        )
     return notes
+
+
+def _grouped(eigs: list[tuple[int, complex]]) -> str:
+    """``s = 0 (12 times; rules 1, 2)``: each printed value once, with its count and rules."""
+    groups: dict[str, list[int]] = {}
+    for i, v in eigs:
+        groups.setdefault(_fmt(v), []).append(i)
+    out = []
+    for k, r in groups.items():
+        rules = sorted(set(r))
+        where = f"rule{'s' if len(rules) > 1 else ''} {', '.join(map(str, rules))}"
+        out.append(f"s = {k} ({len(r)} times; {where})" if len(r) > 1 else f"s = {k} ({where})")
+    return ", ".join(out)
 
 
 def _fmt(v: complex) -> str:
