@@ -352,7 +352,11 @@ def _design_or_plant(target: str, progress: bool = True):
 @click.option(
     "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files."
 )
-@click.option("--ts", type=float, help="Sample time (default: a tenth of the design's ts_max, rounded down).")
+@click.option(
+    "--ts", type=float,
+    help="Sample time (default: the one the design was made for and fte simulate runs, its scenario's step; "
+    "without one, a tenth of the design's ts_max, rounded down).",
+)  # fmt: skip
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
 @_guard

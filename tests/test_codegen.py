@@ -315,20 +315,33 @@ def test_failed_write_leaves_nothing_half_written(designs, tmp_path, monkeypatch
 
 
 def test_default_ts(designs):
-    """A tenth of ts_max rounded down to 1-2-5, capped by the built-in scenario's simulation step."""
+    """The sample time the design was made for (the scenario's step, which fte simulate runs); without
+    one, a tenth of ts_max rounded down to 1-2-5, capped by the built-in scenario's simulation step."""
+    import dataclasses
+
     from fte_casadi.codegen.generate import BUILTIN_DT
     from fte_casadi.plants import SCENARIOS
 
     for plant, d in designs.items():
         ts, tsm = default_ts(d), d.checks["ts_max"]
+        assert ts == d.observer["sample_time"] == SCENARIOS[plant]().dt < tsm
+        bare = dataclasses.replace(d, observer={k: v for k, v in d.observer.items() if k != "sample_time"})
+        ts = default_ts(bare)
         assert ts <= 0.1 * tsm and f"{ts:e}"[0] in "125"
         assert ts == min(BUILTIN_DT[plant], _nice_floor(0.1 * tsm))
         assert BUILTIN_DT[plant] == SCENARIOS[plant]().dt  # kept in step with the simulator
-    import dataclasses
-
-    user = dataclasses.replace(designs["three-tank"], plant="my-tank")
+    d = designs["three-tank"]
+    user = dataclasses.replace(
+        d, plant="my-tank", observer={k: v for k, v in d.observer.items() if k != "sample_time"}
+    )
     assert default_ts(user) == _nice_floor(0.1 * user.checks["ts_max"])
     assert 0.04 * user.checks["ts_max"] < default_ts(user) <= 0.1 * user.checks["ts_max"]
+    motor = dataclasses.replace(d, plant="motor", observer=dict(d.observer, sample_time=1e-3))
+    assert default_ts(motor) == 1e-3  # the simulated rate, not a tenth of ts_max
+    too_slow = dataclasses.replace(
+        d, plant="motor", observer=dict(d.observer, sample_time=2 * d.checks["ts_max"])
+    )
+    assert default_ts(too_slow) == _nice_floor(0.1 * d.checks["ts_max"])  # never an unstable default
     assert [_nice_floor(v) for v in (0.0999, 0.1, 0.35, 7.0, 1.99e-3)] == [0.05, 0.1, 0.2, 5.0, 1e-3]
 
 

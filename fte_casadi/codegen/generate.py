@@ -14,10 +14,11 @@ CONTRACT.md and a README. What the CasADi output is made to satisfy, and how:
   (``iw``, ``w``, ``mem``); a ``(void)name;`` line is added for each, nothing else is changed.
 - deterministic: no timestamps, CasADi prints constants with 17 significant digits.
 
-Default sample time (when ``ts`` is not given): ``0.1 * ts_max`` rounded down to 1, 2 or 5
-times a power of ten, and for a built-in plant at most the time step its paper scenario is
-simulated with (manipulator 1 ms, three-tank 10 ms), so that the C runs the very step the
-simulator runs. ``ts_max`` is the design's largest stable observer sample time
+Default sample time (when ``ts`` is not given): the sample time the design was made for
+(``observer.sample_time``: the plant's scenario step, the step ``fte simulate`` runs), so that the C
+runs the very step the simulator ran; for a design without one, ``0.1 * ts_max`` rounded down to
+1, 2 or 5 times a power of ten, and for a built-in plant at most the time step its paper scenario
+is simulated with (manipulator 1 ms, three-tank 10 ms). ``ts_max`` is the design's largest stable observer sample time
 (``design.checks["ts_max"]``); a tenth of it keeps ``|Ts lambda|`` of the fastest observer mode
 near 0.2, so the discrete observer follows the continuous one closely.
 """
@@ -100,8 +101,13 @@ BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2}
 
 
 def default_ts(design: Design) -> float:
-    """Default sample time: ``0.1 * ts_max`` rounded down to 1, 2 or 5 times a power of ten,
-    and no more than the simulation step of a built-in plant (:data:`BUILTIN_DT`)."""
+    """Default sample time: the sample time the design was made for (``observer.sample_time``, the
+    scenario's step, which ``fte simulate`` runs and the default alpha respects) when it is below
+    ``ts_max``; otherwise ``0.1 * ts_max`` rounded down to 1, 2 or 5 times a power of ten, and no
+    more than the simulation step of a built-in plant (:data:`BUILTIN_DT`)."""
+    st = (design.observer or {}).get("sample_time") if isinstance(design.observer, dict) else None
+    if st is not None and math.isfinite(float(st)) and 0 < float(st) < _ts_max(design):
+        return float(st)
     ts = _nice_floor(0.1 * _ts_max(design))
     return min(ts, BUILTIN_DT.get(design.plant, ts))
 
