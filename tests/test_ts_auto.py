@@ -120,12 +120,15 @@ def test_kinked_terms_are_exact():
         (lambda x1, x2, u, fa: [x2, ca.sqrt(x1) + u + fa], (0.0, 1.0),
          r"drift row 'x2': the coefficient of 'x1' in the term sqrt\(x1\): the coefficient sqrt\(x1\)/x1 is not finite "
          r"at x1 = 0"),
+        (lambda x1, x2, u, fa: [x2, 0.1 * ca.sqrt(x1 + 1.5) + u + fa], (-2.0, 2.0),
+         r"the term 0.1\*sqrt\(x1\+1.5\) is not real on the region: the argument x1\+1.5 of its sqrt is negative "
+         r"there \(it ranges over \[-0.5, 3.5\]"),
         (lambda x1, x2, u, fa: [x2, ca.log(x1) + u + fa], (1.0, 2.0),
          r"drift row 'x2': the term log\(x1\) is not finite at x = 0"),
         (lambda x1, x2, u, fa: [x2, ca.sign(x1) + u + fa], (-2.0, 2.0),
          r"the automatic sector model is not exact: drift row 'x2' differs from the plain equations by 1 at x1 = "),
     ],
-    ids=["1/x1", "1/(x1-1)", "tan", "u/(x1-1)", "sqrt", "log", "sign"],
+    ids=["1/x1", "1/(x1-1)", "tan", "u/(x1-1)", "sqrt", "sqrt<0", "log", "sign"],
 )  # fmt: skip
 def test_terms_that_cannot_be_bounded_are_refused_by_name(rows, region, message):
     with pytest.raises(DerivationError, match=message) as exc:

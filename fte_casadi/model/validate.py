@@ -130,8 +130,13 @@ def validate(b: PlantBuilder) -> Plant:
     yf = ca.Function("y", [x, f], [y, ca.jacobian(y, x), ca.jacobian(y, f)])
     y0, Cs, Dfs = yf(np.zeros(n), np.zeros(f.numel()))
     if _depends(ca.jacobian(y, ca.vertcat(x, f)), ca.vertcat(x, f)):
+        xf = ca.vertcat(x, f)
+        bad = [k for k in range(y.numel()) if _depends(ca.jacobian(y[k], xf), xf)]
+        names = b._yn or tuple(f"y{k + 1}" for k in range(y.numel()))
         raise PlantError(
-            "outputs must be linear in states and faults (y = C x + Df f); an output is nonlinear"
+            "outputs must be linear in states and faults (y = C x + Df f); nonlinear: "
+            + ", ".join(f"output {k + 1} ({names[k]} = {y[k]})" for k in bad)
+            + "; measure a linear combination, or make the nonlinear quantity a state"
         )
     if np.max(np.abs(np.array(y0))) > 0:
         raise PlantError(

@@ -90,7 +90,8 @@ def load_plant(spec: str) -> Plant:
     fn = getattr(module, func, None)
     if fn is None or not callable(fn):
         avail = [k for k, v in vars(module).items() if callable(v) and not k.startswith("_")]
-        raise PlantLoadError(f"{target!r} has no function {func!r}; callables there: {avail[:10]}")
+        shown = ", ".join(avail[:10]) + (f" and {len(avail) - 10} more" if len(avail) > 10 else "")
+        raise PlantLoadError(f"{target!r} has no function {func!r}; callables there: {shown or 'none'}")
     try:
         plant = fn()
     except FteError as exc:

@@ -136,10 +136,12 @@ def check_term(h: ca.SX, plant: Plant, where: str) -> None:
             ) from None
         if bad(mn, mx):
             states = ", ".join(plant.state_names[j] for j in idx)
+            real = op in ("division", "tan", "negative power")  # a pole; the others leave their domain
             raise DerivationError(
-                f"{where} is unbounded on the region: the argument {text} of its {op} {what} there (it ranges over "
-                f"[{mn:.6g}, {mx:.6g}] for {states} in the region). Its coefficients cannot be bounded: narrow the "
-                "region (b.region) to keep away from the singularity, or rewrite the term"
+                f"{where} is {'unbounded' if real else 'not real'} on the region: the argument {text} of its {op} "
+                f"{what} there (it ranges over [{mn:.6g}, {mx:.6g}] for {states} in the region). "
+                + ("Its coefficients cannot be bounded: narrow" if real else "Narrow")
+                + " the region (b.region) to keep away from the singularity, or rewrite the term"
             )
 
 
