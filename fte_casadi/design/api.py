@@ -290,8 +290,17 @@ def explain_45(ts, aug, params: dict, solver: str, retry: dict) -> InfeasibleDes
         parts.append(f"no gamma makes (45) feasible at sigma = {sg:g}"
                      + (f" (any gamma needs sigma < {sup:.3g})" if sup else ""))  # fmt: skip
     else:
+        lowered = retry.get("gamma1") is None and g1 != float(
+            (getattr(ts.plant, "design_defaults", {}) or {}).get("gamma1", GENERIC_DEFAULTS["gamma1"])
+        )
         parts.append(
-            f"the smallest gamma for which (45) is feasible with gamma1 = {g1:g}, sigma = {sg:g} is {gmin:.3g}"
+            f"the smallest gamma for which (45) is feasible with gamma1 = {g1:g}"
+            + (
+                " (the default gamma1, lowered with gamma to stay below it; --gamma1 sets it)"
+                if lowered
+                else ""
+            )
+            + f", sigma = {sg:g} is {gmin:.3g}"
         )
         for f in (1.05, 1.25, 1.6, 2.5, 4.0):
             cand = nice_ceil(max(gmin * f, g1 * 1.01))
