@@ -390,8 +390,12 @@ def _window_lines(m: dict, inputs) -> list[str]:
     return out
 
 
-def _warnings(m: dict, inputs) -> list[str]:
+def _warnings(m: dict, inputs, faults=()) -> list[str]:
     out = []
+    for name, v in zip(faults, m.get("false_alarm_rel_rms") or ()):
+        if v is not None and v > 1:
+            out.append(f"warning: the estimate of {name} outside its fault windows is as large as the fault itself "
+                       f"(relative RMS {v:.3g} > 1): false alarms, e.g. cross-talk from another fault; see the figures")  # fmt: skip
     for w in m.get("windows", []):
         r = w.get("ftc_deviation_ratio")
         if r is not None and r > 1:
@@ -452,7 +456,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
         from .plot import write_figures
 
         figs = write_figures(res, plots)
-    warn = _warnings(m, list(plant.input_names))
+    warn = _warnings(m, list(plant.input_names), list(plant.fault_names))
     if as_json:
         click.echo(json.dumps(m, indent=1))
     else:
@@ -461,6 +465,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
             f"{m['wall_s']:.2f} s\n"
             f"  state RMS error (t >= 1 s, FTC run): {_fmt_list(m['state_rms_error'])}\n"
             f"  fault relative RMS error: {_fmt_list(m['fault_rel_rms_error'])}\n"
+            f"  fault estimate outside its windows (false alarm, relative RMS): {_fmt_list(m['false_alarm_rel_rms'])}\n"
             f"  FTC deviation ratio (smaller is better): "
             f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}\n"
             f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}"
@@ -532,7 +537,7 @@ def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
                        f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}")  # fmt: skip
     for p in points:  # the per-window verdicts, as fte simulate gives them, named by their point
         at = ", ".join(f"{k} = {v:g}" for k, v in p["point"].items())
-        for w in _warnings(p["metrics"], list(plant.input_names)):
+        for w in _warnings(p["metrics"], list(plant.input_names), list(plant.fault_names)):
             click.echo(textwrap.fill(f"fte: at {at}: {w}", width=100), err=True)
 
 

@@ -182,6 +182,12 @@ def _windows_section(m: dict, plant) -> list[str]:
         out.append(
             f"| {w['fault']} | [{w['start']:g}, {w['stop']:g}) | {_g(w['fault_rel_rms_error'])} | {rs} | {sat} |"
         )
+    fa = m.get("false_alarm_rel_rms")
+    if fa:
+        out += ["", "Each fault's estimate outside its own windows (t >= 1 s), where the fault is zero, as RMS relative to "
+                "the fault's RMS in its windows (false alarms: cross-talk from the other faults, noise, the decay after "
+                "a window): " + ", ".join(f"{nm} {_g(v)}" + (" (**as large as the fault**)" if v is not None and v > 1 else "")
+                                          for nm, v in zip(plant.fault_names, fa)) + "."]  # fmt: skip
     return out + [""]
 
 

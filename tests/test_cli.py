@@ -111,7 +111,7 @@ def test_design_parameter_errors(args, needle):
 def test_simulate_json_contract(design_files):
     r = run("simulate", str(design_files["manipulator"]), "--paths", "2", "--seed", "1", "--json", "--quiet")
     assert r.exit_code == 0, r.output
-    m = json.loads(r.output)
+    m = json.loads(r.stdout)  # warnings go to stderr
     assert (
         m["paths"] == 2
         and m["seed"] == 1

@@ -296,7 +296,7 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
         save_result(res, tmp_path / f"{name}.npz")  # recompute from the saved per-path arrays
         res = load_result(tmp_path / f"{name}.npz")
         ref, got = metrics_from_arrays(res), res.metrics
-        for key in ("state_rms_error", "fault_rel_rms_error", "input_saturation"):
+        for key in ("state_rms_error", "fault_rel_rms_error", "false_alarm_rel_rms", "input_saturation"):
             assert [v is None for v in got[key]] == [v is None for v in ref[key]]
             np.testing.assert_allclose([v for v in got[key] if v is not None], [v for v in ref[key] if v is not None],
                                        rtol=1e-12, atol=1e-15)  # fmt: skip

@@ -7,7 +7,12 @@ import pytest
 
 from fte_casadi.errors import SimulationError
 from fte_casadi.sim import Bias, RunData, Scenario, SimulationResult, load_result, metrics, save_result
-from fte_casadi.sim.metrics import fault_rel_rms_error, ftc_deviation_ratio, state_rms_error
+from fte_casadi.sim.metrics import (
+    false_alarm_rel_rms,
+    fault_rel_rms_error,
+    ftc_deviation_ratio,
+    state_rms_error,
+)
 
 
 def _hand_made(design, names):
@@ -22,6 +27,7 @@ def _hand_made(design, names):
     xbh = np.zeros((P, S, 3))  # [xhat, fdothat, fhat]
     xbh[0, :, 0], xbh[1, :, 0] = 1.1, -1.3  # errors 0.1 and 0.3 everywhere
     xbh[:, :, 2] = f[:, :, 0] + 0.5 * win  # fhat = f + 0.5 in the window
+    xbh[:, (t >= 1.0) & (t < 2.5), 2] = 0.4  # and a false alarm of 0.4 at t = 1, 1.5, 2
     y_free = np.zeros((P, S, 1))
     y_nf = y_free + 2.0 * win[None, :, None]
     yc = y_free + 0.5 * win[None, :, None]
@@ -71,6 +77,7 @@ def test_metrics_hand_made(lqr_designs):
         "seed",
         "state_rms_error",
         "fault_rel_rms_error",
+        "false_alarm_rel_rms",
         "ftc_deviation_ratio",
         "windows",
         "input_saturation",
@@ -87,6 +94,9 @@ def test_metrics_hand_made(lqr_designs):
     assert m["state_rms_error"] == pytest.approx([0.2], abs=1e-12)
     # fault: window [4, 9) minus its first 20 % -> [5, 9): fhat - f = 0.5, f = 2 -> 0.25
     assert m["fault_rel_rms_error"] == pytest.approx([0.25], abs=1e-12)
+    # false alarm: t >= 1 outside [4, 9) is 9 samples (1 .. 3.5 and 9 .. 10), fhat = 0.4 on 3 of them:
+    # RMS 0.4 / sqrt(3), against RMS(f) = 2 over [5, 9)
+    assert m["false_alarm_rel_rms"] == pytest.approx([0.4 / np.sqrt(3) / 2], abs=1e-12)
     # outputs: yc - y_free = 0.5, y_noFTC - y_free = 2 over the window -> 0.25
     assert m["ftc_deviation_ratio"] == pytest.approx(0.25, abs=1e-12)
 
@@ -100,6 +110,9 @@ def test_metric_functions_edge_cases():
     f = np.zeros((1, 5, 1))
     assert fault_rel_rms_error(f, f, t, [[(0.0, 2.0)]]) == [None]  # no fault: undefined
     assert fault_rel_rms_error(f, f, t, [[]]) == [None]
+    assert false_alarm_rel_rms(f, f, t, [[(0.0, 2.0)]]) == [None]  # no fault: undefined
+    f[0, 2:4, 0] = 1.0
+    assert false_alarm_rel_rms(f, f, t, [[(0.0, 2.5)]]) == [None]  # no sample outside the window
     y = np.zeros((1, 5, 1))
     assert ftc_deviation_ratio(y, y, y, t, [[(0.0, 1.0)]]) is None
 

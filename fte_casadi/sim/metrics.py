@@ -7,7 +7,7 @@ import numpy as np
 from .result import SimulationResult
 
 __all__ = ["metrics", "metrics_from_arrays", "windows", "input_saturation", "fault_windows", "state_rms_error",
-           "fault_rel_rms_error", "ftc_deviation_ratio"]  # fmt: skip
+           "fault_rel_rms_error", "false_alarm_rel_rms", "ftc_deviation_ratio"]  # fmt: skip
 
 from .reduce import SETTLE_FRACTION, SETTLE_T, _mask
 
@@ -38,6 +38,24 @@ def fault_rel_rms_error(f: np.ndarray, fhat: np.ndarray, t: np.ndarray, windows)
             out.append(None)
             continue
         out.append(float(np.sqrt(np.mean((fhat[:, keep, j] - fj) ** 2)) / den))
+    return out
+
+
+def false_alarm_rel_rms(f: np.ndarray, fhat: np.ndarray, t: np.ndarray, windows) -> list[float | None]:
+    """Per fault j: RMS(fhat_j) over ``t >= 1 s`` outside all of its windows (where f_j = 0: what the
+    estimate shows there is a false alarm, e.g. cross-talk from another fault) divided by RMS(f_j) over
+    its windows minus their first 20 % (the denominator of :func:`fault_rel_rms_error`), paths pooled.
+
+    ``None`` when either set of samples is empty or f_j is zero in its windows."""
+    out = []
+    for j, wins in enumerate(windows):
+        inside, outside = _mask(t, wins, SETTLE_FRACTION), (t >= SETTLE_T) & ~_mask(t, wins)
+        fj = f[:, inside, j]
+        den = np.sqrt(np.mean(fj**2)) if fj.size else 0.0
+        if den == 0.0 or not outside.any():
+            out.append(None)
+            continue
+        out.append(float(np.sqrt(np.mean(fhat[:, outside, j] ** 2)) / den))
     return out
 
 
@@ -98,6 +116,7 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         "seed": int(result.seed),
         "state_rms_error": state_rms_error(ftc.x, ftc.xhat, t),
         "fault_rel_rms_error": fault_rel_rms_error(ftc.f, ftc.fhat, t, wins),
+        "false_alarm_rel_rms": false_alarm_rel_rms(ftc.f, ftc.fhat, t, wins),
         "ftc_deviation_ratio": ftc_deviation_ratio(result.free.y, result.no_ftc.y, ftc.yc, t, wins),
         "windows": windows(result),
         "input_saturation": input_saturation(ftc.u, result.design.input_limits),

@@ -38,7 +38,8 @@ def _mask(t: np.ndarray, windows, settle: float = 0.0) -> np.ndarray:
 @dataclass(frozen=True)
 class Masks:
     """Per-sample masks, rows of ``M`` (nmask, samples): ``t >= 1``, per fault the settled union of
-    its windows, the union of all windows, per window its settled part, per window all of it."""
+    its windows, the union of all windows, per window its settled part, per window all of it, per
+    fault ``t >= 1`` outside all of its windows (where its estimate should be 0)."""
 
     M: np.ndarray
     fault_of_window: tuple[int, ...]
@@ -59,6 +60,7 @@ def masks(t: np.ndarray, scenario, fault_names) -> Masks:
     rows.append(_mask(t, [w for ws in wins for w in ws]))
     rows += [_mask(t, [(a, b)], SETTLE_FRACTION) for _, a, b in prof]
     rows += [_mask(t, [(a, b)]) for _, a, b in prof]
+    rows += [(t >= SETTLE_T) & ~_mask(t, wins[j]) for j in range(len(names))]
     M = np.array(rows, dtype=float).reshape(len(rows), len(t))
     return Masks(M, tuple(names.index(f) for f, _, _ in prof), tuple(prof), len(names))
 
@@ -85,6 +87,7 @@ def increments(lay, mk: Masks, limits) -> tuple[ca.Function, list[str]]:
     m_t1, m_f, m_u = msk[0], msk[1 : 1 + lf], msk[1 + lf]
     m_ws = msk[2 + lf : 2 + lf + mk.nw]
     m_w = msk[2 + lf + mk.nw : 2 + lf + 2 * mk.nw]
+    m_out = msk[2 + lf + 2 * mk.nw : 2 + 2 * lf + 2 * mk.nw]
     dy_ftc = ca.sumsqr(ftc["yc"] - free["y"])
     dy_no = ca.sumsqr(noftc["y"] - free["y"])
     out, names = [], []
@@ -98,6 +101,7 @@ def increments(lay, mk: Masks, limits) -> tuple[ca.Function, list[str]]:
     for j in range(lf):
         add(f"ef{j}", m_f[j] * (fhat[j] - ftc["f"][j]) ** 2)
         add(f"ff{j}", m_f[j] * ftc["f"][j] ** 2)
+        add(f"oa{j}", m_out[j] * fhat[j] ** 2)
     add("a", m_u * dy_ftc)
     add("b", m_u * dy_no)
     for w in range(mk.nw):
@@ -142,6 +146,14 @@ def finalize(acc: np.ndarray, names: list[str], mk: Masks, meta: dict) -> dict:
     srms = [math.fsum(math.sqrt(v / n1) for v in col[f"sx{j}"]) / P if n1 else None for j in range(n)]
     fault = [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(mk.lf)]
     ratio = _ratio(_fsum(col["a"]), _fsum(col["b"]))
+    n_in = [float(np.sum(mk.M[1 + j])) for j in range(mk.lf)]
+    n_out = [float(np.sum(mk.M[2 + mk.lf + 2 * mk.nw + j])) for j in range(mk.lf)]
+    false_alarm = [
+        _ratio(_fsum(col[f"oa{j}"]) / n_out[j], _fsum(col[f"ff{j}"]) / n_in[j])
+        if n_out[j] and n_in[j]
+        else None
+        for j in range(mk.lf)
+    ]
     m = int(meta["m"])
     windows = []
     for w, (name, a, b) in enumerate(mk.windows):
@@ -159,6 +171,7 @@ def finalize(acc: np.ndarray, names: list[str], mk: Masks, meta: dict) -> dict:
         "seed": int(meta["seed"]),
         "state_rms_error": srms,
         "fault_rel_rms_error": fault,
+        "false_alarm_rel_rms": false_alarm,
         "ftc_deviation_ratio": ratio,
         "windows": windows,
         "input_saturation": [_fsum(col[f"sat{i}"]) / (P * nsamp) for i in range(m)],
