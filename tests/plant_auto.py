@@ -3,7 +3,7 @@
 ``manipulator_plain`` is the paper's manipulator exactly as (82) prints it (plain ``sin(theta_l)``,
 no premise), with the numbers of fte_casadi/plants/manipulator.py; ``linear`` has no nonlinear term
 (the example pendulum linearised).
-Both can be given to the CLI as ``tests/plant_auto.py:manipulator_plain``.
+Each can be given to the CLI as ``tests/plant_auto.py:manipulator_plain``; ``too_few_outputs`` fails assumption (2).
 """
 
 import casadi as ca
@@ -72,4 +72,19 @@ def two_state(drift_rows, diff_rows=(0.0, 0.0), region=((-2.0, 2.0), (-2.0, 2.0)
     b.diffusion([r(x1, x2) if callable(r) else r for r in diff_rows])
     b.outputs([x1, x2])
     b.region(x1=region[0], x2=region[1])
+    return b.build()
+
+
+def too_few_outputs():
+    """Two outputs for an actuator fault, a sensor fault and an unknown input: assumption (2) cannot hold."""
+    b = PlantBuilder("few")
+    x1, x2 = b.states("x1", "x2")
+    (u,) = b.inputs("u")
+    (d,) = b.unknown_inputs("d")
+    (fa,) = b.faults("fa", kind="actuator")
+    (fs,) = b.faults("fs", kind="sensor")
+    b.drift([x2, -x1 - x1**3 + u + fa + 0.1 * d])
+    b.diffusion([0.0, 0.01 * x1])
+    b.outputs([x1 + fs, x2])
+    b.region(x1=(-1, 1), x2=(-1, 1))
     return b.build()

@@ -1,6 +1,7 @@
 """The `fte` commands end to end: contract documents and clear errors, never a traceback."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -173,36 +174,19 @@ def test_codegen_cli(design_files, tmp_path):
     assert r.exit_code != 0 and "--out" in r.text
 
 
-_TOO_FEW_OUTPUTS = """
-from fte_casadi import PlantBuilder
+PLANT_AUTO = Path(__file__).resolve().parent / "plant_auto.py"
 
 
-def p():
-    b = PlantBuilder("few")
-    x1, x2 = b.states("x1", "x2")
-    (u,) = b.inputs("u")
-    (d,) = b.unknown_inputs("d")
-    (fa,) = b.faults("fa", kind="actuator")
-    (fs,) = b.faults("fs", kind="sensor")
-    b.drift([x2, -x1 - x1**3 + u + fa + 0.1 * d])
-    b.diffusion([0.0, 0.01 * x1])
-    b.outputs([x1 + fs, x2])
-    b.region(x1=(-1, 1), x2=(-1, 1))
-    return b.build()
-"""
-
-
-def test_failed_assumptions_are_named_with_the_cli_option_to_accept_them(tmp_path):
+def test_failed_assumptions_are_named_with_the_cli_option_to_accept_them():
     """Two outputs for a fault, a sensor fault and an unknown input: (2) fails with the count that
     explains why, (4)'s repeated eigenvalue is printed once with its count, and the advice is a CLI option
     that exists (and is accepted by fte design)."""
-    (tmp_path / "few.py").write_text(_TOO_FEW_OUTPUTS)
-    r = CliRunner().invoke(main, ["design", f"{tmp_path / 'few.py'}:p"])
+    r = CliRunner().invoke(main, ["design", f"{PLANT_AUTO}:too_few_outputs"])
     msg = " ".join(r.output.split())
     assert r.exit_code == 2 and "Traceback" not in r.output, r.output
     assert "assumption (2) fails" in msg and "as many outputs as faults plus unknown inputs: 2 < 3" in msg
     assert "times; rules 1, 2)" in msg and msg.count("s = ") < 4  # each value once, with its count
     assert "--accept-assumption 2 --accept-assumption 4 with fte design" in msg
-    r = CliRunner().invoke(main, ["design", f"{tmp_path / 'few.py'}:p", "--accept-assumption", "2",
+    r = CliRunner().invoke(main, ["design", f"{PLANT_AUTO}:too_few_outputs", "--accept-assumption", "2",
                                   "--accept-assumption", "4"])  # fmt: skip
     assert "assumption (" not in r.output and "Traceback" not in r.output, r.output

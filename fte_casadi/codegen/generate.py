@@ -105,7 +105,7 @@ def default_ts(design: Design) -> float:
     scenario's step, which ``fte simulate`` runs and the default alpha respects) when it is below
     ``ts_max``; otherwise ``0.1 * ts_max`` rounded down to 1, 2 or 5 times a power of ten, and no
     more than the simulation step of a built-in plant (:data:`BUILTIN_DT`)."""
-    st = (design.observer or {}).get("sample_time") if isinstance(design.observer, dict) else None
+    st = design.observer.get("sample_time") if isinstance(design.observer, dict) else None
     if st is not None and math.isfinite(float(st)) and 0 < float(st) < _ts_max(design):
         return float(st)
     ts = _nice_floor(0.1 * _ts_max(design))

@@ -127,15 +127,17 @@ def validate(b: PlantBuilder) -> Plant:
     _linearity("diffusion", b._xn, diff, w, wn, z, auto)
 
     # outputs: y = C x + Df f exactly
+    yn = b._yn or tuple(f"y{k + 1}" for k in range(p))
+    if len(yn) != p:
+        raise PlantError(f"output names: expected {p} entries instead of {len(yn)}")
     yf = ca.Function("y", [x, f], [y, ca.jacobian(y, x), ca.jacobian(y, f)])
     y0, Cs, Dfs = yf(np.zeros(n), np.zeros(f.numel()))
-    if _depends(ca.jacobian(y, ca.vertcat(x, f)), ca.vertcat(x, f)):
-        xf = ca.vertcat(x, f)
-        bad = [k for k in range(y.numel()) if _depends(ca.jacobian(y[k], xf), xf)]
-        names = b._yn or tuple(f"y{k + 1}" for k in range(y.numel()))
+    xf = ca.vertcat(x, f)
+    if _depends(ca.jacobian(y, xf), xf):
+        bad = [k for k in range(p) if _depends(ca.jacobian(y[k], xf), xf)]
         raise PlantError(
             "outputs must be linear in states and faults (y = C x + Df f); nonlinear: "
-            + ", ".join(f"output {k + 1} ({names[k]} = {y[k]})" for k in bad)
+            + ", ".join(f"output {k + 1} ({yn[k]} = {y[k]})" for k in bad)
             + "; measure a linear combination, or make the nonlinear quantity a state"
         )
     if np.max(np.abs(np.array(y0))) > 0:
@@ -150,9 +152,6 @@ def validate(b: PlantBuilder) -> Plant:
                 f"sensor fault {b._fn[k]!r} does not appear in any output; add it to an output expression"
             )
 
-    yn = b._yn or tuple(f"y{k + 1}" for k in range(p))
-    if len(yn) != p:
-        raise PlantError(f"output names: expected {p} entries instead of {len(yn)}")
     yu = b._yu
     if yu is None:
         yu = []

@@ -100,13 +100,12 @@ def fidelity(
         mn = np.array([p.min for p in ts.premises])[:, None]
         mx = np.array([p.max for p in ts.premises])[:, None]
         tol = 1e-9 * (1.0 + np.maximum(np.abs(mn), np.abs(mx)))
-        inside = np.all((Z >= mn - tol) & (Z <= mx + tol), axis=0)
+        within = (Z >= mn - tol) & (Z <= mx + tol)  # (premises, points)
+        inside = np.all(within, axis=0)
         keep = max(1, X.shape[1] if np.all(inside) else int(np.argmin(inside)))
         if keep < X.shape[1]:
             k = int(np.argmin(inside))
-            bad = ts.premises[
-                int(np.argmax(~((Z[:, k] >= mn[:, 0] - tol[:, 0]) & (Z[:, k] <= mx[:, 0] + tol[:, 0]))))
-            ]
+            bad = ts.premises[int(np.argmin(within[:, k]))]
             stop = (
                 f"the open loop leaves the region: premise {bad.expr} leaves its bounds [{bad.min:.4g}, {bad.max:.4g}] "
                 f"by t = {T[k]:.4g}, beyond which the model is not claimed"
