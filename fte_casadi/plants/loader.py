@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
 import sys
 import traceback
+from collections.abc import Iterator
 from pathlib import Path
 
 from ..errors import FteError, PlantError, PlantLoadError
@@ -18,6 +20,33 @@ def builtin_names() -> list[str]:
     from . import BUILTIN
 
     return sorted(BUILTIN)
+
+
+@contextlib.contextmanager
+def _plant_folder(path: str | None) -> Iterator[None]:
+    """The plant file's folder importable while its code runs, as for a script run from there.
+
+    A plant file may import modules beside it (parameters apart from equations). The folder goes
+    first on ``sys.path`` only while the file is executed and its functions run; afterwards
+    ``sys.path`` is as it was and the modules imported from that folder are taken out of
+    ``sys.modules`` (the plant module keeps its own references), so that another plant folder
+    with a helper of the same name gets its own.
+    """
+    if path is None:
+        yield
+        return
+    folder = str(Path(path).resolve().parent)
+    before = set(sys.modules)
+    sys.path.insert(0, folder)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):
+            sys.path.remove(folder)
+        for name in set(sys.modules) - before:
+            origin = getattr(sys.modules[name], "__file__", None)
+            if origin and Path(origin).resolve().is_relative_to(folder):
+                del sys.modules[name]
 
 
 def _last_frame(exc: BaseException, path: str | None) -> str:
@@ -71,10 +100,12 @@ def load_plant(spec: str) -> Plant:
             raise PlantLoadError(f"plant file {target!r} cannot be read: {exc}") from None
         mspec = importlib.util.spec_from_file_location(name, p)
         module = importlib.util.module_from_spec(mspec)
-        sys.modules[name] = module
+        sys.modules[name] = module  # before executing it: dataclasses in the file look it up
         try:
-            mspec.loader.exec_module(module)
+            with _plant_folder(path):
+                mspec.loader.exec_module(module)
         except Exception as exc:  # noqa: BLE001 - user code may raise anything; report it
+            sys.modules.pop(name, None)
             raise PlantLoadError(
                 f"importing plant file {target!r} raised {type(exc).__name__}: {exc}{_last_frame(exc, path)}; fix the file"
             ) from None
@@ -93,7 +124,8 @@ def load_plant(spec: str) -> Plant:
         shown = ", ".join(avail[:10]) + (f" and {len(avail) - 10} more" if len(avail) > 10 else "")
         raise PlantLoadError(f"{target!r} has no function {func!r}; callables there: {shown or 'none'}")
     try:
-        plant = fn()
+        with _plant_folder(path):
+            plant = fn()
     except FteError as exc:
         raise PlantError(f"plant function {spec!r} failed: {exc}") from None
     except Exception as exc:  # noqa: BLE001
@@ -121,8 +153,10 @@ def load_scenario(spec: str):
     if ":" not in spec:
         raise PlantLoadError(f"unknown plant {spec!r}: no scenario for it")
     target, func = spec.rsplit(":", 1)
+    path = None
     # the plant module was imported by load_plant; import it again the same way
     if target.endswith(".py") or "/" in target or "\\" in target:
+        path = target
         name = f"fte_user_plant_{abs(hash(str(Path(target).resolve())))}"
         module = sys.modules.get(name)
         if module is None:
@@ -134,7 +168,8 @@ def load_scenario(spec: str):
         fn = getattr(module, attr, None)
         if callable(fn):
             try:
-                return fn()
+                with _plant_folder(path):
+                    return fn()
             except FteError:
                 raise
             except Exception as exc:  # noqa: BLE001
