@@ -32,7 +32,7 @@ from ..codegen.generate import _void_unused, c_name, default_ts, generate_c, mem
 from ..design.record import Design
 from ..step import step_function
 
-__all__ = ["bench_c_step", "bench_builtin", "hand_written_c"]
+__all__ = ["bench_c_step", "hand_written_c"]
 
 
 def _arr(name: str, a) -> str:
@@ -266,17 +266,3 @@ def bench_c_step(
         hand_max_diff=diff,
     )
     return result
-
-
-def bench_builtin(*, iters: int = 200_000, reps: int = 5) -> list[dict]:
-    """:func:`bench_c_step` for each built-in plant, from the committed ``generated/*/design.json``
-    when found (else a fresh design)."""
-    from .generate import BUILTIN_DIRS, builtin_design
-
-    root = Path(__file__).resolve().parents[2] / "generated"
-    out = []
-    for plant, sub in BUILTIN_DIRS.items():
-        path = root / sub / "design.json"
-        d = Design.load(path) if path.is_file() else builtin_design(plant)
-        out.append(bench_c_step(d, iters=iters, reps=reps))
-    return out
