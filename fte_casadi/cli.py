@@ -203,15 +203,21 @@ def _check_params(**kw) -> dict:
     return out
 
 
-def _scenario_dt(plant_spec: str) -> float | None:
-    """The sample time of the plant's scenario (its Euler-Maruyama step), when it has one."""
+def _scenario(plant_spec: str):
+    """The plant's scenario, or None when it has none."""
     from .errors import PlantLoadError
     from .plants.loader import load_scenario
 
     try:
-        return float(load_scenario(plant_spec).dt)
+        return load_scenario(plant_spec)
     except PlantLoadError:
         return None
+
+
+def _scenario_dt(plant_spec: str) -> float | None:
+    """The sample time of the plant's scenario (its Euler-Maruyama step), when it has one."""
+    sc = _scenario(plant_spec)
+    return None if sc is None else float(sc.dt)
 
 
 def _absolute_spec(plant_spec: str) -> str:
@@ -231,8 +237,11 @@ def _make_design(
 
     ts = derive_ts(load_plant(plant_spec))
     params = dict(params)
-    if params.get("sample_time") is None:
-        params["sample_time"] = _scenario_dt(plant_spec)
+    sc = _scenario(plant_spec)
+    if params.get("sample_time") is None and sc is not None:
+        params["sample_time"] = float(sc.dt)
+    if sc is not None and sc.x0 is not None:
+        params["initial_state"] = sc.x0  # the simulation's nominal start, for the C's init_from_y
     return run_design(
         ts,
         variant=variant,

@@ -23,8 +23,9 @@ def builtin_design(plant_name: str) -> Design:
     from .plants import BUILTIN, SCENARIOS
     from .ts import derive
 
+    sc = SCENARIOS[plant_name]()
     return lmi_design(derive(BUILTIN[plant_name]()), variant="conditioned", plant_spec=plant_name,
-                      sample_time=SCENARIOS[plant_name]().dt)  # fmt: skip
+                      sample_time=sc.dt, initial_state=sc.x0)  # fmt: skip
 
 
 def regenerate_builtin(root: str | os.PathLike) -> dict[str, list[Path]]:

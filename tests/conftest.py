@@ -153,5 +153,6 @@ def real_designs(ts_models):
     from fte_casadi.plants import SCENARIOS
 
     return {
-        k: design(ts, variant="conditioned", sample_time=SCENARIOS[k]().dt) for k, ts in ts_models.items()
+        k: design(ts, variant="conditioned", sample_time=SCENARIOS[k]().dt, initial_state=SCENARIOS[k]().x0)
+        for k, ts in ts_models.items()
     }

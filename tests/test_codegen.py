@@ -374,3 +374,47 @@ def test_bench_measures_and_baseline_agrees(designs):
     assert res["sizeof_state"] == res["state_bytes"]
     if res["objects"] is not None:
         assert res["objects"]["data"] == 0 and res["objects"]["bss"] == 0
+
+
+@needs_cc
+@pytest.mark.parametrize("plant", PLANTS)
+def test_init_from_y_starts_as_the_simulation(plant, designs, libs):
+    """Issue #21: the C started from its first measurement holds the observer state the Monte Carlo
+    engine starts from (z0 = [x0; 0; 0] - H C x0 for each path's x0), and a bad y0 is refused."""
+    from fte_casadi.plants import SCENARIOS
+    from fte_casadi.sim.engine import Prepared, _scales
+
+    d = designs[plant]
+    sc = SCENARIOS[plant]()
+    np.testing.assert_array_equal(d.xbar0[: d.dims["n"]], np.asarray(sc.x0, float))
+    prep = Prepared(d, load_plant(plant), sc, sc.dt, 4, _scales(None, sc))
+    lay = prep.lay
+    start = prep.initial_states(np.arange(3), seed=7)
+    c = CStep(libs[plant, "double"][1], d, "double")
+    o = 2 * lay.run_state  # the run with tolerant control; all three start alike
+    for row in start:
+        x0 = row[o : o + lay.n]
+        z_sim = row[o + lay.n : o + lay.n + lay.nbar]
+        assert np.max(np.abs(x0 - d.xbar0[: lay.n])) > 0  # the path's x0 carries its noise
+        assert c.init_from_y(np.asarray(d.C) @ x0) == 0
+        np.testing.assert_allclose(c.z, z_sim, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(z_sim))))
+    before = c.z.copy()
+    bad = np.asarray(d.C) @ d.xbar0[: lay.n]
+    bad[0] = np.nan
+    assert c.init_from_y(bad) == 1
+    np.testing.assert_array_equal(c.z, before)  # refused: the state is unchanged
+
+
+@needs_cc
+@pytest.mark.parametrize("plant", PLANTS)
+def test_closed_loop_from_first_measurement_matches_casadi(plant, designs, libs):
+    """The start-up window: plant at the nominal x0, both observers started from y0 (C: init_from_y)."""
+    d = designs[plant]
+    ts = default_ts(d)
+    c = CStep(libs[plant, "double"][1], d, "double")
+    steps = min(int(round((1.0 if plant == "manipulator" else 20.0) / ts)), 1000)
+    err, traj = closed_loop_compare(d, c, ts, steps, plant=load_plant(plant), start_from_y=True)
+    scale = max(1.0, float(np.max(np.abs(traj["y"]))), float(np.max(np.abs(traj["u"]))))
+    assert max(err.values()) <= C_DOUBLE * scale, err
+    # started where the plant is, the fault-free estimate stays near zero from the first sample on
+    assert np.max(np.abs(traj["fhat"][0])) <= 1e-9 * scale

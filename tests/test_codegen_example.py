@@ -37,7 +37,7 @@ def test_example_runs_and_matches_casadi(tmp_path):
     assert got.shape == (len(ys), 4)
     design = Design.load(GEN / "design.json")
     fn = step_function(design, default_ts(design))
-    z = np.zeros(design.nbar)
+    z = design.observer_start(ys[0])  # main.c starts with init_from_y on the first measurement
     for k, y in enumerate(ys):
         z, u, xb, *_ = (np.asarray(v).ravel() for v in fn(z, y))
         assert got[k, 0] == k

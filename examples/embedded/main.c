@@ -45,9 +45,14 @@ int main(int argc, char **argv) {
     return 2;
   }
   memset(u, 0, sizeof u);
-  fte_manipulator_init(&st, NULL);
   printf("# k u fhat_fa fhat_fs (Ts = %g s)\n", (double)FTE_MANIPULATOR_TS);
   while ((rc = read_sample(fp, y)) == 1) {
+    /* start as fte simulate does, from the first measurement: z0 = xbar0 - H y0 */
+    if (k == 0 && fte_manipulator_init_from_y(&st, y, NULL) != 0) {
+      fprintf(stderr, "first measurement not finite: cannot start\n");
+      fclose(fp);
+      return 4;
+    }
     if (fte_manipulator_step(&st, y, u, xbarhat, yc) != 0) {
       fprintf(stderr, "sample %d: measurement not finite, state kept, u held\n", k);
     }

@@ -2,7 +2,8 @@
 
 A short Euler closed loop of the nonlinear manipulator, driven by the in-process CasADi step of
 the design in generated/manipulator/design.json at the generated sample time, with a 40 % loss
-of actuator effectiveness from t = 0.3 s. Deterministic (no noise), so the file can be
+of actuator effectiveness from t = 0.3 s. The plant starts at the design's nominal x0 and the
+observer from the first measurement, as ``fte simulate`` and ``fte_manipulator_init_from_y`` do. Deterministic (no noise), so the file can be
 regenerated bit for bit: ``python examples/embedded/make_measurements.py``.
 """
 
@@ -28,8 +29,8 @@ def record(design: Design, horizon: float = HORIZON_S) -> tuple[float, np.ndarra
     F = plant.drift_function()
     ts = default_ts(design)
     fn = step_function(design, ts)
-    x = np.asarray(plant.x0, float).copy()
-    z = np.zeros(design.nbar)
+    x = design.xbar0[: plant.n].copy()
+    z = design.observer_start(design.C @ x)
     u = np.zeros(plant.m)
     ys = []
     for k in range(int(round(horizon / ts))):

@@ -36,6 +36,9 @@ class CStep:
         ptr = ctypes.POINTER(_CTYPES[real])
         self._init.argtypes = [ctypes.c_void_p, ptr]
         self._init.restype = None
+        self._init_from_y = getattr(self.lib, f"fte_{name}_init_from_y")
+        self._init_from_y.argtypes = [ctypes.c_void_p, ptr, ptr]
+        self._init_from_y.restype = ctypes.c_int
         self._step.argtypes = [ctypes.c_void_p, ptr, ptr, ptr, ptr]
         self._step.restype = ctypes.c_int
         self._ptr = ptr
@@ -52,6 +55,12 @@ class CStep:
             z = np.ascontiguousarray(z0, dtype=self.dtype)
             self._init(ctypes.byref(self.state), self._p(z))
 
+    def init_from_y(self, y0, xbar0=None) -> int:
+        """``fte_NAME_init_from_y``: z0 = xbar0 - H y0 (xbar0 None: the design's nominal one); its return code."""
+        y = np.ascontiguousarray(y0, dtype=self.dtype)
+        xb = None if xbar0 is None else self._p(np.ascontiguousarray(xbar0, dtype=self.dtype))
+        return int(self._init_from_y(ctypes.byref(self.state), self._p(y), xb))
+
     @property
     def z(self) -> np.ndarray:
         return np.frombuffer(bytes(self.state), dtype=self.dtype, count=self.nbar).astype(float)
@@ -66,20 +75,44 @@ class CStep:
 
 
 def closed_loop_compare(
-    design: Design, cstep: CStep, ts: float, steps: int, *, plant, fault=None, boundary_layer=None
+    design: Design,
+    cstep: CStep,
+    ts: float,
+    steps: int,
+    *,
+    plant,
+    fault=None,
+    boundary_layer=None,
+    start_from_y: bool = False,
 ):
     """Euler closed loop of the nonlinear plant driven by the CasADi step; the C step gets the same y.
 
-    ``plant``: the nonlinear plant the design is for. Returns a dict of the largest absolute differences (z, u, xbarhat, yc) over the run, plus
+    ``plant``: the nonlinear plant the design is for. ``start_from_y``: the plant starts at the
+    design's nominal x0 and both observers start as ``fte simulate`` does, z0 = xbar0 - H y0 (the C
+    through ``init_from_y``); otherwise the plant starts at its own x0 and both observers at z = 0. Returns a dict of the largest absolute differences (z, u, xbarhat, yc) over the run, plus
     the trajectories. ``fault(t, u) -> f`` gives the fault signal (default none).
     """
     F = plant.drift_function()
     fn = step_function(design, ts, boundary_layer=boundary_layer)
     n, m, ld, lf = plant.n, plant.m, plant.ld, plant.lf
-    x = np.asarray(plant.x0, float).copy()
-    z = np.zeros(int(design.dims["nbar"]))
-    cstep.init(z)
     C, Df = np.asarray(design.C), np.asarray(design.Df)
+    if start_from_y:
+        x = design.xbar0[:n].copy()
+        y0 = C @ x + (0.0 if fault is None else Df @ np.asarray(fault(0.0, np.zeros(m)), float))
+        rc = cstep.init_from_y(y0)
+        if rc != 0:
+            raise CodegenError(f"the C init_from_y returned {rc} on a finite measurement")
+        # both steps continue from the C's z0 (equal to xbar0 - H y0 up to round-off): at this start the
+        # residual y - Cbar xbarhat is zero up to round-off, and sgn of a round-off would differ otherwise
+        z = cstep.z
+        if np.max(np.abs(z - (design.xbar0 - np.asarray(design.H) @ y0))) > 1e-12 * max(
+            1.0, np.max(np.abs(z))
+        ):
+            raise CodegenError("the C init_from_y does not give z0 = xbar0 - H y0")
+    else:
+        x = np.asarray(plant.x0, float).copy()
+        z = np.zeros(int(design.dims["nbar"]))
+        cstep.init(z)
     err = {"z": 0.0, "u": 0.0, "xbarhat": 0.0, "yc": 0.0}
     traj = {"y": [], "u": [], "fhat": []}
     u_prev = np.zeros(m)

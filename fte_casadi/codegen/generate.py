@@ -232,6 +232,12 @@ def _fmt(v: float) -> str:
     return repr(float(v))
 
 
+def _c_values(values) -> str:
+    """Numbers as a C initialiser list, 17 significant digits, four to a line."""
+    items = [_fmt(float(v)) for v in values]
+    return ",\n".join("  " + ", ".join(items[k : k + 4]) for k in range(0, len(items), 4))
+
+
 def _wrapper(
     design: Design, name: str, real: str, ts: float, tsm: float, boundary_layer, c_src: str, h_src: str
 ):
@@ -300,6 +306,9 @@ def _wrapper(
         "affine": " + T abar_i" if affine else "",
         "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
         "saturation_text": _saturation_text(design),
+        "H_values": _c_values(np.asarray(design.H, dtype=float).ravel()),
+        "xbar0_values": _c_values(design.xbar0),
+        "x0_text": ", ".join(_fmt(v) for v in design.xbar0[:n]),
         **mem,
     }
     files = output_files(design.plant)

@@ -42,14 +42,28 @@ typedef struct {
   fte_real z_next[FTE_${NAME}_NXBAR]; /* scratch for z_{k+1} (state stays unchanged on error) */
 ${work_fields}} fte_${name}_state;
 
-/* Set z_0 = z0 (FTE_${NAME}_NXBAR values), or zeros when z0 is NULL. */
+/* The unknown-input gain H (FTE_${NAME}_NXBAR x FTE_${NAME}_NY, row-major): xbarhat = z + H y. */
+extern const fte_real fte_${name}_H[FTE_${NAME}_NXBAR * FTE_${NAME}_NY];
+/* The nominal augmented initial state [x0; 0; 0] the simulation (fte simulate) starts from:
+ * x0 = [${x0_text}]. */
+extern const fte_real fte_${name}_XBAR0[FTE_${NAME}_NXBAR];
+
+/* Set z_0 = z0 (FTE_${NAME}_NXBAR values), or zeros when z0 is NULL. Does nothing when s is NULL. */
 void fte_${name}_init(fte_${name}_state *s, const fte_real *z0);
+
+/* Start as the simulation does, from the first measurement y0 (FTE_${NAME}_NY values):
+ * z_0 = xbar0 - H y0, so that the first xbarhat = z_0 + H y0 is xbar0 (FTE_${NAME}_NXBAR values;
+ * NULL: the nominal fte_${name}_XBAR0). Call it once, then fte_${name}_step with y0 itself.
+ * Returns 0; returns 1 and leaves the state untouched when y0 or xbar0 holds a NaN or an
+ * infinity; returns -1 (state untouched) when s or y0 is NULL. */
+int fte_${name}_init_from_y(fte_${name}_state *s, const fte_real *y0, const fte_real *xbar0);
 
 /* One sample of the discrete step (SPEC.md): from y_k (FTE_${NAME}_NY values) compute
  * u_k (FTE_${NAME}_NU), xbarhat_k (FTE_${NAME}_NXBAR) and the compensated output yc_k
  * (FTE_${NAME}_NY), and advance the state to z_{k+1}. Any output pointer may be NULL.
  * Returns 0; returns 1 and leaves the state and outputs untouched when y holds a NaN or an
- * infinity; returns -1 when s or y is NULL. */
+ * infinity; returns -1 when s or y is NULL; returns 2 (state untouched) if the generated
+ * maths reports an error (it does not for this step: no division, no iteration). */
 int fte_${name}_step(fte_${name}_state *s, const fte_real *y,
                      fte_real *u, fte_real *xbarhat, fte_real *yc);
 
@@ -68,6 +82,14 @@ SOURCE = Template(
 #include "fte_${name}.h"
 #include "fte_${name}_casadi.h"
 
+const fte_real fte_${name}_H[FTE_${NAME}_NXBAR * FTE_${NAME}_NY] = {
+${H_values}
+};
+
+const fte_real fte_${name}_XBAR0[FTE_${NAME}_NXBAR] = {
+${xbar0_values}
+};
+
 void fte_${name}_init(fte_${name}_state *s, const fte_real *z0) {
   int i;
   if (s == 0) return;
@@ -76,6 +98,26 @@ void fte_${name}_init(fte_${name}_state *s, const fte_real *z0) {
     s->z_next[i] = s->z[i];
   }
 ${work_init}}
+
+int fte_${name}_init_from_y(fte_${name}_state *s, const fte_real *y0, const fte_real *xbar0) {
+  fte_real z0[FTE_${NAME}_NXBAR];
+  const fte_real *xb = xbar0 ? xbar0 : fte_${name}_XBAR0;
+  int i, j;
+  if (s == 0 || y0 == 0) return -1;
+  for (i = 0; i < FTE_${NAME}_NY; ++i) {
+    if (!(y0[i] - y0[i] == 0)) return 1;
+  }
+  for (i = 0; i < FTE_${NAME}_NXBAR; ++i) {
+    if (!(xb[i] - xb[i] == 0)) return 1;
+  }
+  for (i = 0; i < FTE_${NAME}_NXBAR; ++i) {
+    fte_real hy = 0;
+    for (j = 0; j < FTE_${NAME}_NY; ++j) hy += fte_${name}_H[i * FTE_${NAME}_NY + j] * y0[j];
+    z0[i] = xb[i] - hy;
+  }
+  fte_${name}_init(s, z0);
+  return 0;
+}
 
 int fte_${name}_step(fte_${name}_state *s, const fte_real *y,
                      fte_real *u, fte_real *xbarhat, fte_real *yc) {
@@ -127,7 +169,8 @@ states [${x_names}] and faults [${f_names}].
 fte_${name}_state st;                 /* all the memory the step needs */
 fte_real y[FTE_${NAME}_NY], u[FTE_${NAME}_NU], xbarhat[FTE_${NAME}_NXBAR], yc[FTE_${NAME}_NY];
 
-fte_${name}_init(&st, NULL);         /* z0 = 0, or pass FTE_${NAME}_NXBAR values */
+/* read the first measurement y, then start as fte simulate does: z0 = xbar0 - H y0 */
+if (fte_${name}_init_from_y(&st, y, NULL) != 0) { /* y held a NaN or an infinity */ }
 for (;;) {                             /* every Ts = FTE_${NAME}_TS */
   /* read y */
   if (fte_${name}_step(&st, y, u, xbarhat, yc) != 0) {

@@ -93,6 +93,7 @@ def design(
     gamma2: float | None = None,
     alpha: float | None = None,
     sample_time: float | None = None,
+    initial_state=None,
     allow_uncertified: bool = False,
     accept_assumptions=(),
     plant_spec: str | None = None,
@@ -106,7 +107,9 @@ def design(
     solves them as printed (:mod:`fte_casadi.design.paper`). ``alpha`` is the observer decay rate
     of the conditioned variant (default: a fraction of the largest feasible one, lowered so that
     ``ts_max >= 2 sample_time`` when ``sample_time`` is given); ``gamma2`` the d2 attenuation of
-    Theorem 5 (default gamma). Raises :class:`~fte_casadi.errors.InfeasibleDesignError` when an
+    Theorem 5 (default gamma). ``initial_state`` is the nominal x(0) the simulations start from
+    (default: the plant's), recorded as ``x0`` for the generated C's start from a first measurement.
+    Raises :class:`~fte_casadi.errors.InfeasibleDesignError` when an
     LMI is infeasible (with the bounds that are feasible, when ``diagnose``) or a certificate
     fails (unless ``allow_uncertified``), :class:`~fte_casadi.design.conditioned.SolverFailedError`
     when the solver fails numerically, :class:`~fte_casadi.errors.AssumptionError` when an
@@ -265,7 +268,20 @@ def design(
         solves={"step3": int(s3.solves), "step5": int(s5.solves), "total": int(s3.solves + s5.solves)},
         observer=observer,
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
+        x0=_initial_state(plant, initial_state),
     )
+
+
+def _initial_state(plant, x0) -> np.ndarray:
+    """The nominal initial state: ``x0`` if given (checked against the plant's states), else the plant's."""
+    if x0 is None:
+        return np.array(plant.x0, dtype=float).ravel()
+    a = np.asarray(x0, dtype=float).ravel()
+    if a.shape != (plant.n,) or not np.all(np.isfinite(a)):
+        raise ParameterError(
+            f"initial_state must hold {plant.n} finite numbers (one per state of {plant.name!r}); got {list(a)}"
+        )
+    return a
 
 
 def _try(ts, retry: dict, **change) -> Design | None:

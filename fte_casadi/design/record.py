@@ -122,6 +122,9 @@ class Design:
     observer: dict = field(default_factory=dict)
     #: actuator limits, (m, 2) rows [lo, hi] with -inf/inf for an open side; None: no limits
     input_limits: np.ndarray | None = None
+    #: the nominal initial state x0 the simulation starts the observer from (its scenario's, else the
+    #: plant's); the generated C's ``init_from_y`` starts there: z0 = [x0; 0; 0] - H y0. None: zeros
+    x0: np.ndarray | None = None
 
     # -- convenience ---------------------------------------------------------------------
     @property
@@ -131,6 +134,29 @@ class Design:
     @property
     def nbar(self) -> int:
         return int(self.dims["nbar"])
+
+    @property
+    def xbar0(self) -> np.ndarray:
+        """The nominal augmented initial state ``[x0; 0; 0]`` (zeros when no x0 is recorded)."""
+        out = np.zeros(self.nbar)
+        if self.x0 is not None:
+            out[: int(self.dims["n"])] = _arr(self.x0)
+        return out
+
+    def observer_start(self, y0, xbar0=None) -> np.ndarray:
+        """``z0 = xbar0 - H y0`` (xbar0 None: :attr:`xbar0`), summed in the order of the generated C's
+        ``init_from_y`` so that both give the same bits (at that start the residual ``y - Cbar xbarhat``
+        is zero up to round-off, and ``sgn`` of a round-off decides the first sliding term)."""
+        H = _arr(self.H)
+        y = [float(v) for v in np.ravel(y0)]
+        xb = self.xbar0 if xbar0 is None else _arr(xbar0).ravel()
+        out = np.empty(H.shape[0])
+        for i in range(H.shape[0]):
+            hy = 0.0
+            for j, yj in enumerate(y):
+                hy += float(H[i, j]) * yj
+            out[i] = float(xb[i]) - hy
+        return out
 
     def scheduling_function(self):
         """The CasADi Function ``(y, xhat) -> h``."""
@@ -181,6 +207,8 @@ class Design:
         out["plant_spec"] = self.plant_spec
         out["u_ref"] = _arr(self.u_ref).tolist()
         out["x_ref"] = None if self.x_ref is None else _arr(self.x_ref).tolist()
+        if self.x0 is not None:
+            out["x0"] = _arr(self.x0).tolist()
         out["scheduling"] = self.scheduling
         out["names"] = self.names
         out["certified"] = bool(self.certified)
@@ -255,6 +283,7 @@ class Design:
             timings=dict(doc["timings"]),
             u_ref=u_ref,
             x_ref=None if doc.get("x_ref") is None else _arr(doc["x_ref"]),
+            x0=None if doc.get("x0") is None else _finite(source, "x0", doc["x0"]),
             scheduling=str(doc["scheduling"]),
             names=dict(doc.get("names", {})),
             certified=bool(doc.get("certified", True)),

@@ -3,6 +3,20 @@
 #include "fte_manipulator.h"
 #include "fte_manipulator_casadi.h"
 
+const fte_real fte_manipulator_H[FTE_MANIPULATOR_NXBAR * FTE_MANIPULATOR_NY] = {
+  0.07142857142857145, -0.1428571428571429, 0.2142857142857143, -0.1428571428571429,
+  0.2857142857142858, -0.4285714285714286, 0.2142857142857143, -0.4285714285714286,
+  0.6428571428571428, 0.3571428571428572, -0.7142857142857144, 1.0714285714285714,
+  0.0, 0.0, 0.0, 0.0,
+  0.0, 0.0, 0.0, 0.0,
+  0.0, 0.0, 0.0, 0.0
+};
+
+const fte_real fte_manipulator_XBAR0[FTE_MANIPULATOR_NXBAR] = {
+  0.1, 0.05, 0.02, 0.03,
+  0.0, 0.0, 0.0, 0.0
+};
+
 void fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0) {
   int i;
   if (s == 0) return;
@@ -10,6 +24,26 @@ void fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0) {
     s->z[i] = z0 ? z0[i] : (fte_real)0;
     s->z_next[i] = s->z[i];
   }
+}
+
+int fte_manipulator_init_from_y(fte_manipulator_state *s, const fte_real *y0, const fte_real *xbar0) {
+  fte_real z0[FTE_MANIPULATOR_NXBAR];
+  const fte_real *xb = xbar0 ? xbar0 : fte_manipulator_XBAR0;
+  int i, j;
+  if (s == 0 || y0 == 0) return -1;
+  for (i = 0; i < FTE_MANIPULATOR_NY; ++i) {
+    if (!(y0[i] - y0[i] == 0)) return 1;
+  }
+  for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) {
+    if (!(xb[i] - xb[i] == 0)) return 1;
+  }
+  for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) {
+    fte_real hy = 0;
+    for (j = 0; j < FTE_MANIPULATOR_NY; ++j) hy += fte_manipulator_H[i * FTE_MANIPULATOR_NY + j] * y0[j];
+    z0[i] = xb[i] - hy;
+  }
+  fte_manipulator_init(s, z0);
+  return 0;
 }
 
 int fte_manipulator_step(fte_manipulator_state *s, const fte_real *y,

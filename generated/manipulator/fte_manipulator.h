@@ -27,14 +27,28 @@ typedef struct {
   fte_real z_next[FTE_MANIPULATOR_NXBAR]; /* scratch for z_{k+1} (state stays unchanged on error) */
 } fte_manipulator_state;
 
-/* Set z_0 = z0 (FTE_MANIPULATOR_NXBAR values), or zeros when z0 is NULL. */
+/* The unknown-input gain H (FTE_MANIPULATOR_NXBAR x FTE_MANIPULATOR_NY, row-major): xbarhat = z + H y. */
+extern const fte_real fte_manipulator_H[FTE_MANIPULATOR_NXBAR * FTE_MANIPULATOR_NY];
+/* The nominal augmented initial state [x0; 0; 0] the simulation (fte simulate) starts from:
+ * x0 = [0.1, 0.05, 0.02, 0.03]. */
+extern const fte_real fte_manipulator_XBAR0[FTE_MANIPULATOR_NXBAR];
+
+/* Set z_0 = z0 (FTE_MANIPULATOR_NXBAR values), or zeros when z0 is NULL. Does nothing when s is NULL. */
 void fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0);
+
+/* Start as the simulation does, from the first measurement y0 (FTE_MANIPULATOR_NY values):
+ * z_0 = xbar0 - H y0, so that the first xbarhat = z_0 + H y0 is xbar0 (FTE_MANIPULATOR_NXBAR values;
+ * NULL: the nominal fte_manipulator_XBAR0). Call it once, then fte_manipulator_step with y0 itself.
+ * Returns 0; returns 1 and leaves the state untouched when y0 or xbar0 holds a NaN or an
+ * infinity; returns -1 (state untouched) when s or y0 is NULL. */
+int fte_manipulator_init_from_y(fte_manipulator_state *s, const fte_real *y0, const fte_real *xbar0);
 
 /* One sample of the discrete step (SPEC.md): from y_k (FTE_MANIPULATOR_NY values) compute
  * u_k (FTE_MANIPULATOR_NU), xbarhat_k (FTE_MANIPULATOR_NXBAR) and the compensated output yc_k
  * (FTE_MANIPULATOR_NY), and advance the state to z_{k+1}. Any output pointer may be NULL.
  * Returns 0; returns 1 and leaves the state and outputs untouched when y holds a NaN or an
- * infinity; returns -1 when s or y is NULL. */
+ * infinity; returns -1 when s or y is NULL; returns 2 (state untouched) if the generated
+ * maths reports an error (it does not for this step: no division, no iteration). */
 int fte_manipulator_step(fte_manipulator_state *s, const fte_real *y,
                      fte_real *u, fte_real *xbarhat, fte_real *yc);
 

@@ -3,6 +3,17 @@
 #include "fte_three_tank.h"
 #include "fte_three_tank_casadi.h"
 
+const fte_real fte_three_tank_H[FTE_THREE_TANK_NXBAR * FTE_THREE_TANK_NY] = {
+  0.20000000000000023, -0.40000000000000024, -0.4000000000000002, 0.7999999999999999,
+  1.0000000000000004, -1.9999999999999996, 0.0, 0.0,
+  0.0, 0.0
+};
+
+const fte_real fte_three_tank_XBAR0[FTE_THREE_TANK_NXBAR] = {
+  20.0, 10.0, 15.0, 0.0,
+  0.0
+};
+
 void fte_three_tank_init(fte_three_tank_state *s, const fte_real *z0) {
   int i;
   if (s == 0) return;
@@ -10,6 +21,26 @@ void fte_three_tank_init(fte_three_tank_state *s, const fte_real *z0) {
     s->z[i] = z0 ? z0[i] : (fte_real)0;
     s->z_next[i] = s->z[i];
   }
+}
+
+int fte_three_tank_init_from_y(fte_three_tank_state *s, const fte_real *y0, const fte_real *xbar0) {
+  fte_real z0[FTE_THREE_TANK_NXBAR];
+  const fte_real *xb = xbar0 ? xbar0 : fte_three_tank_XBAR0;
+  int i, j;
+  if (s == 0 || y0 == 0) return -1;
+  for (i = 0; i < FTE_THREE_TANK_NY; ++i) {
+    if (!(y0[i] - y0[i] == 0)) return 1;
+  }
+  for (i = 0; i < FTE_THREE_TANK_NXBAR; ++i) {
+    if (!(xb[i] - xb[i] == 0)) return 1;
+  }
+  for (i = 0; i < FTE_THREE_TANK_NXBAR; ++i) {
+    fte_real hy = 0;
+    for (j = 0; j < FTE_THREE_TANK_NY; ++j) hy += fte_three_tank_H[i * FTE_THREE_TANK_NY + j] * y0[j];
+    z0[i] = xb[i] - hy;
+  }
+  fte_three_tank_init(s, z0);
+  return 0;
 }
 
 int fte_three_tank_step(fte_three_tank_state *s, const fte_real *y,

@@ -27,14 +27,28 @@ typedef struct {
   fte_real z_next[FTE_THREE_TANK_NXBAR]; /* scratch for z_{k+1} (state stays unchanged on error) */
 } fte_three_tank_state;
 
-/* Set z_0 = z0 (FTE_THREE_TANK_NXBAR values), or zeros when z0 is NULL. */
+/* The unknown-input gain H (FTE_THREE_TANK_NXBAR x FTE_THREE_TANK_NY, row-major): xbarhat = z + H y. */
+extern const fte_real fte_three_tank_H[FTE_THREE_TANK_NXBAR * FTE_THREE_TANK_NY];
+/* The nominal augmented initial state [x0; 0; 0] the simulation (fte simulate) starts from:
+ * x0 = [20.0, 10.0, 15.0]. */
+extern const fte_real fte_three_tank_XBAR0[FTE_THREE_TANK_NXBAR];
+
+/* Set z_0 = z0 (FTE_THREE_TANK_NXBAR values), or zeros when z0 is NULL. Does nothing when s is NULL. */
 void fte_three_tank_init(fte_three_tank_state *s, const fte_real *z0);
+
+/* Start as the simulation does, from the first measurement y0 (FTE_THREE_TANK_NY values):
+ * z_0 = xbar0 - H y0, so that the first xbarhat = z_0 + H y0 is xbar0 (FTE_THREE_TANK_NXBAR values;
+ * NULL: the nominal fte_three_tank_XBAR0). Call it once, then fte_three_tank_step with y0 itself.
+ * Returns 0; returns 1 and leaves the state untouched when y0 or xbar0 holds a NaN or an
+ * infinity; returns -1 (state untouched) when s or y0 is NULL. */
+int fte_three_tank_init_from_y(fte_three_tank_state *s, const fte_real *y0, const fte_real *xbar0);
 
 /* One sample of the discrete step (SPEC.md): from y_k (FTE_THREE_TANK_NY values) compute
  * u_k (FTE_THREE_TANK_NU), xbarhat_k (FTE_THREE_TANK_NXBAR) and the compensated output yc_k
  * (FTE_THREE_TANK_NY), and advance the state to z_{k+1}. Any output pointer may be NULL.
  * Returns 0; returns 1 and leaves the state and outputs untouched when y holds a NaN or an
- * infinity; returns -1 when s or y is NULL. */
+ * infinity; returns -1 when s or y is NULL; returns 2 (state untouched) if the generated
+ * maths reports an error (it does not for this step: no division, no iteration). */
 int fte_three_tank_step(fte_three_tank_state *s, const fte_real *y,
                      fte_real *u, fte_real *xbarhat, fte_real *yc);
 
