@@ -184,6 +184,13 @@ def _design_summary(d) -> str:
         f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
         f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",
     ]
+    disc = c.get("discrete")
+    if disc:
+        lines.append(
+            f"  discrete step at the sample time Ts = {disc['sample_time']:g}: "
+            + ("proven stable" if disc["holds"] else "NOT proven stable")
+            + f" for any blending of the rules (Pbar decreases for Ts < {disc['ts_max_lyapunov']:.4g})"
+        )
     if obs.get("alpha") is not None:
         lines.append(f"  observer decay rate alpha = {obs['alpha']:.4g}: {obs.get('why', '')}")
     solves = f", {d.solves.get('total')} conic solves" if d.solves else ""
@@ -267,13 +274,16 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
         f"feasible frontier of {ts.plant.name} (gamma1 = {info['gamma1']:g}; (45) is feasible for any gamma only with "
         f"sigma < {info['sigma_sup']:.4g}); the plant's defaults: gamma = {info['gamma']:g}, sigma = {info['sigma']:g}"
     )
-    click.echo(f"{'sigma':>10} {'gamma_min (45)':>15} {'certified from':>15} {'alpha':>9} {'max|L1|':>9}")
+    click.echo(
+        f"{'sigma':>10} {'gamma_min (45)':>15} {'certified from':>15} {'alpha':>9} {'max|L1|':>9} {'ts_max':>9}"
+    )
     for pt in points:
         click.echo(
             f"{pt.sigma:10.4g} {'-' if pt.gamma_min is None else format(pt.gamma_min, '.4g'):>15} "
             f"{'-' if pt.gamma_tried is None else format(pt.gamma_tried, 'g'):>15} "
             f"{'-' if pt.alpha is None else format(pt.alpha, '.3g'):>9} "
-            f"{'-' if pt.max_abs_L1 is None else format(pt.max_abs_L1, '.3g'):>9}"
+            f"{'-' if pt.max_abs_L1 is None else format(pt.max_abs_L1, '.3g'):>9} "
+            f"{'-' if pt.ts_max is None else format(pt.ts_max, '.3g'):>9}"
             + (f"  {pt.note}" if pt.note and not pt.certified else "")
         )
     fig = frontier_figure(points, info, ts.plant.name, out_dir)

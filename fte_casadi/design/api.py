@@ -12,7 +12,7 @@ from ..errors import FteError, InfeasibleDesignError, ParameterError
 from ..ts import TSModel, scheduling_from_measurements
 from . import conditioned, paper
 from .augment import augment
-from .certify import certificate, failures
+from .certify import certificate, discrete_certificate, failures
 from .diagnose import FrontierPoint, gamma_min, nice_ceil, nice_floor, sigma_max
 from .record import Design
 from .uio import check_assumptions, enforce, uio_gain
@@ -197,6 +197,8 @@ def design(
                       "their mean (exact cancellation would need -pinv(B_h) Bf_h blended per sample)")  # fmt: skip
     point = dict(X=X, K=K, P=P, T=T, Pbar=s5.Pbar, Q=s5.Q, N=s5.N, theta=s5.theta, R=R, L1=L1)
     checks = certificate(aug, point, params)
+    if sample_time is not None:  # the step that runs: z+ = z + Ts (...), checked with Pbar for any blending
+        checks["discrete"] = discrete_certificate(R, s5.Pbar, float(sample_time))
     checks["assumptions"] = [c.to_dict() for c in checks_a]
     checks["alpha"] = float(s5.alpha)
     bad = failures(checks)
@@ -419,7 +421,13 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                     continue
                 if d.certified:
                     point = FrontierPoint(
-                        float(sg), gmin, gt, True, d.observer.get("alpha"), d.checks["max_abs_L1"]
+                        float(sg),
+                        gmin,
+                        gt,
+                        True,
+                        d.observer.get("alpha"),
+                        d.checks["max_abs_L1"],
+                        ts_max=d.checks["ts_max"],
                     )
                     break
             points.append(point or FrontierPoint(float(sg), gmin, None, False, None, None, f"no gamma up to "

@@ -25,6 +25,7 @@ import numpy as np
 from .augment import Augmented
 
 __all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "sliding_mismatch", "diffusion_coupling", "certificate", "ts_max",
+           "lyapunov_ts_max", "discrete_certificate",
            "block_sizes", "failures"]  # fmt: skip
 
 
@@ -190,6 +191,47 @@ def ts_max(R: list[np.ndarray]) -> float:
     return float(best)
 
 
+def lyapunov_ts_max(R: list[np.ndarray], Pbar: np.ndarray) -> float:
+    """Largest Ts for which ``V(e) = e^T Pbar e`` decreases along the discrete step of every rule.
+
+    ``(I + Ts R_i)^T Pbar (I + Ts R_i) - Pbar = Ts (S_i + Ts G_i)`` with ``S_i = R_i^T Pbar + Pbar R_i``
+    and ``G_i = R_i^T Pbar R_i >= 0``: negative definite iff ``S_i < 0`` and ``Ts < 1 / lambda_max(G_i,
+    -S_i)`` (generalised eigenvalue). One Pbar for all rules, and the left side is convex in the step
+    matrix, so this bounds the *blended* discrete observer ``z+ = sum_i h_i (I + Ts R_i) z`` for any
+    memberships, unlike the per-rule eigenvalues of :func:`ts_max`. Zero when some ``S_i`` is not < 0.
+    """
+    best = np.inf
+    for Ri in R:
+        S = Ri.T @ Pbar + Pbar @ Ri
+        S = 0.5 * (S + S.T)
+        if not np.linalg.eigvalsh(S).max() < 0:
+            return 0.0
+        G = Ri.T @ Pbar @ Ri
+        L = np.linalg.cholesky(-S)  # -S = L L^T; eigenvalues of L^-1 G L^-T
+        Li = np.linalg.inv(L)
+        lam = np.linalg.eigvalsh(Li @ (0.5 * (G + G.T)) @ Li.T).max()
+        best = min(best, 1.0 / lam if lam > 0 else np.inf)
+    return float(best)
+
+
+def discrete_certificate(R: list[np.ndarray], Pbar: np.ndarray, ts: float) -> dict:
+    """The discrete step at sample time ``ts`` checked with Pbar: the largest eigenvalue of
+    ``(I + ts R_i)^T Pbar (I + ts R_i) - Pbar`` over the rules, relative to ``||Pbar||`` (negative:
+    certified for any blending of the rules), and the largest Ts this holds for."""
+    n = Pbar.shape[0]
+    worst = max(
+        float(np.linalg.eigvalsh((np.eye(n) + ts * Ri).T @ Pbar @ (np.eye(n) + ts * Ri) - Pbar).max())
+        for Ri in R
+    )
+    rel = worst / float(np.linalg.norm(Pbar, 2))
+    return {
+        "sample_time": float(ts),
+        "max_eig_rel": rel,
+        "ts_max_lyapunov": lyapunov_ts_max(R, Pbar),
+        "holds": bool(rel < -8 * n * np.finfo(float).eps),
+    }
+
+
 def lmi_matrices(aug, d: dict, params: dict):
     """Yield ``(key, matrix)`` for every LMI of the design at the point ``d``: (45) and (46) for
     every rule pair, (64) for every rule, (55) once. Each must be negative definite."""
@@ -268,4 +310,10 @@ def failures(checks: dict) -> list[str]:
         bad.append(f"R_i Hurwitz (largest real part {checks['R_max_real_eig']:.3g})")
     if not checks["closed_loop_max_real_eig"] < 0:
         bad.append(f"A_i + B_i K_j Hurwitz (largest real part {checks['closed_loop_max_real_eig']:.3g})")
+    disc = checks.get("discrete")
+    if disc is not None and not disc["holds"]:
+        bad.append(
+            f"the discrete step at Ts = {disc['sample_time']:g} (Pbar decreases only for Ts < "
+            f"{disc['ts_max_lyapunov']:.3g})"
+        )
     return bad

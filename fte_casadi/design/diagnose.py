@@ -116,3 +116,5 @@ class FrontierPoint:
     alpha: float | None
     max_abs_L1: float | None
     note: str = ""
+    #: the certified design's largest stable sample time (eigenvalues of I + Ts R_i), None without one
+    ts_max: float | None = None

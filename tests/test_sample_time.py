@@ -1,0 +1,61 @@
+"""Issue #21: the design is made for the sample time the step runs at, and says when it cannot be."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from fte_casadi.design import design
+from fte_casadi.errors import InfeasibleDesignError
+
+
+def _blended_decrease(d, ts: float, rng, count: int = 200) -> float:
+    """Largest eigenvalue of A(h)^T Pbar A(h) - Pbar over random memberships h, A(h) = I + ts sum h_i R_i."""
+    P, R = np.asarray(d.Pbar), [np.asarray(r) for r in d.R]
+    n = P.shape[0]
+    worst = -np.inf
+    for h in rng.dirichlet(np.ones(len(R)), size=count):
+        A = np.eye(n) + ts * sum(hi * Ri for hi, Ri in zip(h, R))
+        worst = max(worst, float(np.linalg.eigvalsh(A.T @ P @ A - P).max()))
+    return worst
+
+
+@pytest.mark.parametrize("plant", ["manipulator", "three-tank"])
+def test_design_certifies_the_discrete_step_it_runs(plant, real_designs):
+    from fte_casadi.plants import SCENARIOS
+
+    d = real_designs[plant]
+    ts = SCENARIOS[plant]().dt
+    disc = d.checks["discrete"]
+    assert disc["sample_time"] == ts and disc["holds"] and disc["max_eig_rel"] < 0
+    assert disc["ts_max_lyapunov"] >= 2 * ts  # the default alpha keeps a factor of 2
+    # independently: V = e^T Pbar e decreases along the blended discrete step for any memberships
+    assert _blended_decrease(d, ts, np.random.default_rng(1)) < 0
+    assert not any("kept" in s for s in d.status)
+
+
+def test_too_slow_a_sample_time_names_the_fastest_that_works(ts_models):
+    ts = ts_models["manipulator"]
+    with pytest.raises(InfeasibleDesignError) as err:
+        design(ts, sample_time=0.05)
+    msg = " ".join(str(err.value).split())
+    assert "no certified design runs at the sample time 0.05" in msg
+    m = re.search(r"sample time <= ([0-9.e-]+)", msg)
+    assert m, msg
+    fastest = float(m.group(1))
+    assert 0 < fastest < 0.05
+    # the sample time the message names does give a certified design, proven at that step
+    d = design(ts, sample_time=fastest)
+    assert d.certified and d.checks["discrete"]["holds"]
+    assert _blended_decrease(d, fastest, np.random.default_rng(2)) < 0
+
+
+def test_a_slower_sample_time_lowers_alpha_and_keeps_the_proof(ts_models, real_designs):
+    ts = ts_models["manipulator"]
+    d = design(ts, sample_time=0.01)
+    assert d.certified and d.checks["discrete"]["holds"]
+    assert d.checks["discrete"]["ts_max_lyapunov"] >= 0.01
+    assert d.observer["alpha"] < real_designs["manipulator"].observer["alpha"]
+    assert "lowered to" in d.observer["why"]
