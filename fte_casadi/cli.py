@@ -381,13 +381,18 @@ def _design_or_plant(target: str, progress: bool = True):
 @_guard
 def codegen(target, out_dir, ts, real, boundary_layer):
     """Generate the embedded C of the observer/controller step."""
-    from .codegen import generate_c
+    from .codegen import default_ts, generate_c
 
     _positive("ts", ts)
     _positive("boundary-layer", boundary_layer)
     d = _design_or_plant(target)
     files = generate_c(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
+    step = ts if ts is not None else default_ts(d)
+    how = "--ts" if ts is not None else "the design's sample time, the step fte simulate runs"
+    if ts is not None and abs(ts - default_ts(d)) > 1e-12 * ts:
+        how += f"; the design was made for {default_ts(d):g}"
     click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
+    click.echo(f"sample time Ts = {step:g} ({how})")
     click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")
 
 
@@ -476,6 +481,13 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
 
         figs = write_figures(res, plots)
     warn = _warnings(m, list(plant.input_names), list(plant.fault_names))
+    change = m.get("dt_change")
+    if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
+        click.echo(
+            f"note: simulated at dt = {change['to']:g}, not the design's sample time {change['from']:g} "
+            f"({change['why']}); the generated C runs {change['from']:g} unless --ts says otherwise",
+            err=True,
+        )
     if as_json:
         click.echo(json.dumps(m, indent=1))
     else:

@@ -59,3 +59,33 @@ def test_a_slower_sample_time_lowers_alpha_and_keeps_the_proof(ts_models, real_d
     assert d.checks["discrete"]["ts_max_lyapunov"] >= 0.01
     assert d.observer["alpha"] < real_designs["manipulator"].observer["alpha"]
     assert "lowered to" in d.observer["why"]
+
+
+def test_one_step_everywhere(ts_models, tmp_path):
+    """The design records its sample time; simulate runs it, codegen uses it, a change is a metrics key."""
+    import json
+
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+    from fte_casadi.codegen.generate import default_ts
+
+    d = design(ts_models["manipulator"], sample_time=0.002, plant_spec="manipulator")
+    f = tmp_path / "m.json"
+    d.save(f)
+    assert default_ts(d) == 0.002
+    runner = CliRunner()
+    r = runner.invoke(main, ["simulate", str(f), "--paths", "1", "--seed", "1", "--json", "--quiet"])
+    assert r.exit_code == 0, r.output
+    m = json.loads(r.stdout)
+    assert m["dt"] == 0.002 and m["dt_change"] is None  # the scenario says 0.001; the design's step runs
+    r = runner.invoke(
+        main, ["simulate", str(f), "--paths", "1", "--seed", "1", "--dt", "0.001", "--json", "--quiet"]
+    )
+    assert r.exit_code == 0, r.output
+    m = json.loads(r.stdout)
+    assert m["dt"] == 0.001 and m["dt_change"] == {"from": 0.002, "to": 0.001, "why": "--dt given"}
+    assert "not the design's sample time 0.002" in r.stderr
+    r = runner.invoke(main, ["codegen", str(f), "--out", str(tmp_path / "c")])
+    assert r.exit_code == 0, r.output
+    assert "#define FTE_MANIPULATOR_TS (0.002)" in (tmp_path / "c" / "fte_manipulator.h").read_text()

@@ -44,7 +44,7 @@ from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, Un
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
 
-__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "SCALES",
+__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_step", "SCALES",
            "auto_chunk"]  # fmt: skip
 
 #: at most about this many recorded samples per example path
@@ -203,19 +203,25 @@ def result_names(plant: Plant) -> dict:
     }
 
 
+def design_step(design: Design, scenario: Scenario) -> float:
+    """The step the design was made (and certified) for: its recorded sample time, else the scenario's."""
+    ts = (design.observer or {}).get("sample_time")
+    return float(ts) if ts else float(scenario.dt)
+
+
 def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[float, int, list[str]]:
-    """The step (the scenario's, lowered below the design's ts_max when it must be), the number of
+    """The step (the design's sample time, lowered below its ts_max when it must be), the number of
     steps, and notes. An explicit ``dt`` above ts_max is refused."""
     notes = []
     ts_max = float(design.checks.get("ts_max", math.inf) or math.inf)
     if dt is None:
-        dt = float(scenario.dt)
+        dt = design_step(design, scenario)
         if dt > ts_max:
             new = _nice_below(ts_max / 2)
             while abs(scenario.T / new - round(scenario.T / new)) > 1e-9 * scenario.T / new:
                 new = _nice_below(new * 0.999)
             notes.append(
-                f"scenario dt = {dt:g} exceeds the design's ts_max = {ts_max:.4g}; using dt = {new:g}"
+                f"the design's sample time {dt:g} exceeds its ts_max = {ts_max:.4g}; using dt = {new:g}"
             )
             dt = new
     elif dt > ts_max:
@@ -230,6 +236,21 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
             f"the horizon T = {scenario.T:g} is not a whole number of steps dt = {dt:g}; choose dt dividing T"
         )
     return dt, nsteps, notes
+
+
+def step_change(design: Design, scenario: Scenario, dt: float, given: float | None) -> dict | None:
+    """``{"from", "to", "why"}`` when the step run differs from the design's sample time, else None."""
+    ts = design_step(design, scenario)
+    if abs(dt - ts) <= 1e-12 * ts:
+        return None
+    why = (
+        "--dt given"
+        if given is not None
+        else "the design's sample time exceeds its ts_max (lowered below it)"
+    )
+    if given is not None and "sample_time" not in (design.observer or {}):
+        why = "--dt given (the design records no sample time: compared with the scenario's step)"
+    return {"from": ts, "to": float(dt), "why": why}
 
 
 def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
@@ -420,6 +441,7 @@ def simulate(
     if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
     sc = _scales(scales, scenario)
+    given_dt = dt
     dt, nsteps, notes = resolve_dt(design, scenario, dt)
     nsamp = nsteps + 1
     if record_every is None:
@@ -482,6 +504,7 @@ def simulate(
     wall = time.perf_counter() - t_wall
     doc = finalize(acc, prep.names, prep.masks, {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed,
                                                  "wall_s": wall, "m": plant.m})  # fmt: skip
+    doc["dt_change"] = step_change(design, scenario, dt, given_dt)
     names = result_names(plant)
     if rec is None:
         rec = np.zeros((0, (nsamp - 1) // record_every + 1, prep.lay.nrec))
