@@ -67,6 +67,9 @@ class Plant:
     design_defaults: Mapping[str, float] = field(default_factory=dict)
     #: actuator limits, (m, 2) rows [lo, hi] with -inf/inf for an open side; None: no limits
     input_limits: np.ndarray | None = None
+    #: the operating point's inputs when the plant is written in deviations from it: the actuator
+    #: delivers ``u_operating + u`` (a loss of effectiveness scales that); None: u is the delivered input
+    u_operating: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -208,6 +211,7 @@ class PlantBuilder:
         self._yu: tuple[str, ...] | None = None
         self._region: dict[str, tuple[float, float]] = {}
         self._uref = None
+        self._uop = None
         self._xref = None
         self._x0 = None
         self._ops = None
@@ -349,6 +353,15 @@ class PlantBuilder:
             raise PlantError("reference: give exactly one of u= (reference input) or x= (reference state)")
         self._uref = None if u is None else np.atleast_1d(np.asarray(u, dtype=float))
         self._xref = None if x is None else np.atleast_1d(np.asarray(x, dtype=float))
+
+    def operating_point(self, u) -> None:
+        """The inputs of the operating point the equations are written about (deviation coordinates).
+
+        With ``b.operating_point(u=[3.0, 3.0])`` the input ``u`` of the equations is a deviation and the
+        actuator delivers ``3.0 + u``: a :class:`~fte_casadi.sim.LossOfEffectiveness` scales that, as a
+        worn pump would. Without it the input of the equations is taken to be the delivered one.
+        """
+        self._uop = np.atleast_1d(np.asarray(u, dtype=float))
 
     def input_limits(self, **limits) -> None:
         """Actuator limits per input name, e.g. ``b.input_limits(Q1=(0, 100), Q2=(0, 100))``.

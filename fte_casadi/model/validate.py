@@ -213,6 +213,11 @@ def validate(b: PlantBuilder) -> Plant:
         raise PlantError(f"reference state must hold {n} finite numbers; got {xref.tolist()}")
 
     ulim = _input_limits(b, m, uref)
+    uop = b._uop
+    if uop is not None and (uop.shape != (m,) or not np.all(np.isfinite(uop))):
+        raise PlantError(
+            f"operating_point(u=...) must hold {m} finite numbers (one per input {list(b._un)}); got {uop.tolist()}"
+        )
 
     if method == "linearisation":
         r = ops.shape[0]
@@ -268,6 +273,7 @@ def validate(b: PlantBuilder) -> Plant:
         time_unit=b._time_unit,
         design_defaults=dict(b._design),
         input_limits=ulim,
+        u_operating=uop,
     )
 
 

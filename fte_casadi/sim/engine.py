@@ -186,6 +186,7 @@ def plant_schedule(
     return fault_schedule(
         scenario, plant.fault_names, plant.fault_kinds, _lm(design, "B"), _lm(design, "Bf"),
         np.asarray(plant.Df), plant.input_names, t, dt,
+        u_operating=getattr(plant, "u_operating", None), u_ref=design.u_ref,
     )  # fmt: skip
 
 

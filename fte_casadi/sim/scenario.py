@@ -279,8 +279,16 @@ def fault_schedule(
     input_names,
     t: np.ndarray,
     dt: float,
+    u_operating: np.ndarray | None = None,
+    u_ref: np.ndarray | None = None,
 ) -> FaultSchedule:
-    """Resolve ``scenario``'s fault profiles against a plant and tabulate them at times ``t``."""
+    """Resolve ``scenario``'s fault profiles against a plant and tabulate them at times ``t``.
+
+    A loss of effectiveness scales the input the actuator delivers: ``u_operating + u`` for a plant
+    written in deviations from an operating point (``b.operating_point(u=...)``), else ``u`` itself
+    (which holds the reference input ``u_ref``). Without an operating point and with a zero reference
+    on that input the loss would scale a signal that is zero at rest: it is refused, with what to do.
+    """
     fault_names = list(fault_names)
     lf, steps = len(fault_names), len(t)
     a, lu, st, la = (np.zeros((steps, lf)) for _ in range(4))
@@ -324,8 +332,18 @@ def fault_schedule(
                 raise ParameterError(
                     f"fault {fp.fault!r}: loss-of-effectiveness profiles on different inputs"
                 )
+            if u_operating is None and u_ref is not None and float(np.ravel(u_ref)[i]) == 0.0:
+                raise ParameterError(
+                    f"scenario {scenario.name!r}: a loss of effectiveness of {fp.fault!r} scales input "
+                    f"{input_names[i]!r}, which is zero at rest here (no reference input on it and no operating point "
+                    "declared), so the loss would do next to nothing. If the equations are written in deviations from "
+                    f"an operating point, declare it with b.operating_point(u=[...]) so that the loss scales the input "
+                    "the actuator delivers; otherwise describe the fault as a Bias (or Drift) of the delivered input"
+                )
             iu[j] = i
             lu[on, j] -= fp.loss * c  # B u + Bf fa = B (1 - loss) u  <=>  fa = -loss * c * u
+            if u_operating is not None:  # delivered input u0 + u: fa = -loss * c * (u0 + u)
+                a[on, j] -= fp.loss * c * float(np.ravel(u_operating)[i])
         elif isinstance(fp, Bias):
             a[on, j] += fp.value
         elif isinstance(fp, Drift):
