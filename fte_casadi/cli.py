@@ -29,11 +29,15 @@ def _fail(message: str, code: int = EXIT_BAD_INPUT) -> None:
 
 
 def _ours(path: Path) -> bool:
-    """True when ``path`` holds something fte wrote: a design document (JSON) or a saved result (.npz)."""
+    """True when ``path`` holds something fte wrote: a design document (JSON or MAT) or a saved result (.npz)."""
     import zipfile
 
     from .design.record import REQUIRED_KEYS
 
+    if path.suffix.lower() == ".mat":
+        from .design.matfile import is_fte_mat
+
+        return is_fte_mat(path)
     try:
         if zipfile.is_zipfile(path):
             with zipfile.ZipFile(path) as z:
@@ -347,8 +351,14 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     d = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept)
     click.echo(_design_summary(d))
     if output:
-        d.save(output)
-        click.echo(f"design document written to {output}")
+        if Path(output).suffix.lower() == ".mat":
+            d.save_mat(output)
+            click.echo(
+                f"design document written to {output} (MAT file: every matrix under its contract name)"
+            )
+        else:
+            d.save(output)
+            click.echo(f"design document written to {output}")
     else:
         click.echo("(design document not saved: add -o FILE)")
 

@@ -238,6 +238,12 @@ class Design:
                 f"cannot write the design to {path}: {exc.strerror or exc}; choose a writable path with -o"
             ) from None
 
+    def save_mat(self, path: str | os.PathLike) -> None:
+        """Write the design document as a MAT file (:mod:`fte_casadi.design.matfile`), atomically."""
+        from .matfile import save_mat
+
+        save_mat(self.to_dict(), path)
+
     @classmethod
     def from_dict(cls, doc: dict, source: str = "design document") -> Design:
         if not isinstance(doc, dict):
