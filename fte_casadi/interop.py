@@ -59,7 +59,7 @@ def closed_loop_ss(design, i: int, j: int, dt: float | None = None):
     TB = T @ np.vstack([B, np.zeros((2 * lf, m))])
     J0 = np.hstack([np.eye(n), np.zeros((n, 2 * lf))])
     J2 = np.hstack([np.zeros((lf, n + lf)), np.eye(lf)])
-    M = np.asarray(design.K[j], float) @ J0 + np.asarray(design.Kf, float) @ J2  # u = r + M xbarhat
+    M = np.asarray(design.K[j], float) @ J0 + design.kf(j) @ J2  # u = r + M xbarhat
     # xbarhat = z + H y, y = C x + Df f, u = r + M xbarhat: inputs [r; d; f], states [x; z]
     Uz, Ux, Uf = M, M @ H @ C, M @ H @ Df
     Gx = np.hstack([B, Bd, Bf])  # how [u; d; f] enters the plant

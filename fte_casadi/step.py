@@ -7,7 +7,8 @@ measurement ``y`` and observer state ``z``::
     xbarhat = z + H y                                   = [xhat; fdothat; fhat]
     h       = h(y, xhat)                                memberships from measured signals
     s       = N (y - Cbar xbarhat),  us = (delta + eps) sgn(s)   (or a boundary layer)
-    u       = sat(u_ref + sum_j h_j (K_j xhat + Kf fhat))   (no Kf term without tolerant control;
+    u       = sat(u_ref + sum_j h_j (K_j xhat + Kf_j fhat))   (no Kf term without tolerant control;
+                                                         Kf_j = Kf unless the rules' Kf_i differ;
                                                          sat: the actuator limits, if any)
     yc      = y - Df fhat                               (y itself without tolerant control)
     z+      = z + Ts sum_i h_i (R_i z + T Bbar_i u + (L_i1 + L_i2) y + Ls us + T abar_i)
@@ -104,7 +105,11 @@ def step_function(
     for j in range(r):
         uj = ca.mtimes(_dm(design.K[j]), xhat)
         u = u + h[j] * uj
-    if tolerant:
+    if tolerant and design.Kf_rules is not None:  # Kf(h) = sum_i h_i Kf_i where the rules' Kf_i differ
+        for i in range(r):
+            u = u + h[i] * ca.mtimes(_dm(design.Kf_rules[i]), fhat)
+        yc = y - ca.mtimes(_dm(design.Df), fhat)
+    elif tolerant:
         u = u + ca.mtimes(_dm(design.Kf), fhat)
         yc = y - ca.mtimes(_dm(design.Df), fhat)
     else:

@@ -188,13 +188,13 @@ def design(
     Bs = [lm.B for lm in ts.local_models]
     Bfs = [lm.Bf for lm in ts.local_models]
     Kfs = [-np.linalg.pinv(B) @ Bf for B, Bf in zip(Bs, Bfs)]
-    Kf = Kfs[0]
+    Kf, Kf_rules = Kfs[0], None
     # B_i and Bf_i may both vary (an actuator fault enters where u does: Bf = B E) and still give one Kf
     spread = max(float(np.max(np.abs(Ki - Kfs[0]))) for Ki in Kfs)
     if spread > 1e-9 * max(1.0, float(np.max(np.abs(Kfs[0])))):
-        Kf = sum(Kfs) / len(Kfs)
-        status.append(f"warning: -pinv(B_i) Bf_i differs between rules (by up to {spread:.3g}); Kf recorded as "
-                      "their mean (exact cancellation would need -pinv(B_h) Bf_h blended per sample)")  # fmt: skip
+        Kf_rules = tuple(Kfs)
+        status.append(f"Kf scheduled: -pinv(B_i) Bf_i differs between rules (by up to {spread:.3g}); the step blends "
+                      "Kf(h) = sum_i h_i Kf_i (document: Kf_rules; Kf is rule 1's)")  # fmt: skip
     point = dict(X=X, K=K, P=P, T=T, Pbar=s5.Pbar, Q=s5.Q, N=s5.N, theta=s5.theta, R=R, L1=L1)
     checks = certificate(aug, point, params)
     if sample_time is not None:  # the step that runs: z+ = z + Ts (...), checked with Pbar for any blending
@@ -243,6 +243,7 @@ def design(
         P=P,
         K=tuple(K),
         Kf=Kf,
+        Kf_rules=Kf_rules,
         Pbar=s5.Pbar,
         Q=tuple(s5.Q),
         N=s5.N,

@@ -122,6 +122,9 @@ class Design:
     observer: dict = field(default_factory=dict)
     #: actuator limits, (m, 2) rows [lo, hi] with -inf/inf for an open side; None: no limits
     input_limits: np.ndarray | None = None
+    #: one Kf_i = -pinv(B_i) Bf_i per rule where they differ (the step then blends them, Kf(h) =
+    #: sum_i h_i Kf_i); None when one Kf serves every rule (``Kf`` is then that one, else rule 1's)
+    Kf_rules: tuple | None = None
     #: the nominal initial state x0 the simulation starts the observer from (its scenario's, else the
     #: plant's); the generated C's ``init_from_y`` starts there: z0 = [x0; 0; 0] - H y0. None: zeros
     x0: np.ndarray | None = None
@@ -134,6 +137,10 @@ class Design:
     @property
     def nbar(self) -> int:
         return int(self.dims["nbar"])
+
+    def kf(self, i: int) -> np.ndarray:
+        """Rule ``i``'s fault-compensation gain: its own where the rules differ, else the common Kf."""
+        return _arr(self.Kf if self.Kf_rules is None else self.Kf_rules[i])
 
     @property
     def xbar0(self) -> np.ndarray:
@@ -209,6 +216,8 @@ class Design:
         out["x_ref"] = None if self.x_ref is None else _arr(self.x_ref).tolist()
         if self.x0 is not None:
             out["x0"] = _arr(self.x0).tolist()
+        if self.Kf_rules is not None:
+            out["Kf_rules"] = [_arr(M).tolist() for M in self.Kf_rules]
         out["scheduling"] = self.scheduling
         out["names"] = self.names
         out["certified"] = bool(self.certified)
@@ -290,6 +299,9 @@ class Design:
             u_ref=u_ref,
             x_ref=None if doc.get("x_ref") is None else _arr(doc["x_ref"]),
             x0=None if doc.get("x0") is None else _finite(source, "x0", doc["x0"]),
+            Kf_rules=None
+            if doc.get("Kf_rules") is None
+            else tuple(_finite(source, "Kf_rules", M) for M in doc["Kf_rules"]),
             scheduling=str(doc["scheduling"]),
             names=dict(doc.get("names", {})),
             certified=bool(doc.get("certified", True)),
