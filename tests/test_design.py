@@ -367,3 +367,25 @@ def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
     assert [s for s in d2.status if "Kf recorded as their mean" in s]
     g = [lm.B[1, 0] for lm in ts2.local_models]
     np.testing.assert_allclose(d2.Kf[0, 0], np.mean([-1.5 / gi for gi in g]), rtol=1e-12)
+
+
+def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeypatch):
+    """Issue #17: a solver's numerical failure is retried with the other solver before it is reported."""
+    from fte_casadi.design import conditioned
+    from fte_casadi.design.api import design as run_design
+
+    real_step3 = conditioned.step3
+    failing = {"CLARABEL"}
+
+    def step3(aug, params, solver):
+        if solver in failing:
+            raise conditioned.SolverFailedError(f"{solver} stalled (test)")
+        return real_step3(aug, params, solver)
+
+    monkeypatch.setattr(conditioned, "step3", step3)
+    d = run_design(ts_models["manipulator"], solver="CLARABEL")
+    assert d.certified and d.solver == "SCS"
+    assert "CLARABEL failed numerically in step 3" in d.status[0] and "designed with SCS" in d.status[0]
+    failing.add("SCS")
+    with pytest.raises(conditioned.SolverFailedError, match="both solvers failed numerically.*CLARABEL.*SCS"):
+        run_design(ts_models["manipulator"], solver="CLARABEL")

@@ -98,6 +98,7 @@ def design(
     accept_assumptions=(),
     plant_spec: str | None = None,
     diagnose: bool = True,
+    _retried: str | None = None,
 ) -> Design:
     """Design the sliding-mode UIO and fault-tolerant controller of ``ts`` (Section 4.3 / Theorem 5).
 
@@ -165,15 +166,19 @@ def design(
     else:
         try:
             s3 = conditioned.step3(aug, params, solver)
-        except conditioned.SolverFailedError:
-            raise
+        except conditioned.SolverFailedError as exc:
+            return _other_solver(ts, retry, solver, exc, "step 3 (LMI (45))", plant_spec=plant_spec,
+                                 allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
+                                 retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
             raise (explain_45(ts, aug, params, solver, retry) if diagnose else exc) from None
         K = [s3.K] * aug.r
         try:
             s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time)
-        except conditioned.SolverFailedError:
-            raise
+        except conditioned.SolverFailedError as exc:
+            return _other_solver(ts, retry, solver, exc, "step 5 (LMIs (46), (55), (64))", plant_spec=plant_spec,
+                                 allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
+                                 retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
             if diagnose and "alpha" not in str(exc):
                 raise explain_46(ts, aug, params, solver, retry, exc) from None
@@ -273,6 +278,22 @@ def design(
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
     )
+
+
+def _other_solver(ts, retry: dict, solver: str, exc: Exception, where: str, *, retried, **kw) -> Design:
+    """A numerical failure of one solver is retried with the other before it is reported; the
+    design's status says so, and a failure of both names both."""
+    other = SOLVERS[1 - SOLVERS.index(solver)]
+    if retried:
+        raise conditioned.SolverFailedError(
+            f"both solvers failed numerically: first {retried.rstrip('.')}; then {solver} in {where}: "
+            f"{str(exc).rstrip('.')}. See the feasible region with `fte design PLANT --explore`, or rescale the "
+            "plant's units"
+        ) from None
+    d = design(ts, **(dict(retry) | {"solver": other}), _retried=f"{solver} in {where}: {exc}", **kw)
+    d.status.insert(0, f"{solver} failed numerically in {where} ({' '.join(str(exc).split())[:200]}); "
+                       f"designed with {other} instead")  # fmt: skip
+    return d
 
 
 def _initial_state(plant, x0) -> np.ndarray:
