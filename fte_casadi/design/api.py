@@ -153,7 +153,7 @@ def design(
             "Theorem 5: faults/inputs/d2 in the diffusion, LMIs (78)-(81) (keys 45/46/55/64 hold the same values)"
         )
     H, T = uio_gain(aug)
-    checks_a = check_assumptions(aug, T)
+    checks_a = _named(check_assumptions(aug, T), aug, ts.plant)
     status += enforce(checks_a, accept_assumptions)
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
                  gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions)  # fmt: skip
@@ -294,6 +294,23 @@ def _other_solver(ts, retry: dict, solver: str, exc: Exception, where: str, *, r
     d.status.insert(0, f"{solver} failed numerically in {where} ({' '.join(str(exc).split())[:200]}); "
                        f"designed with {other} instead")  # fmt: skip
     return d
+
+
+def _named(checks: list, aug, plant) -> list:
+    """The failed assumptions (1) and (2) with the faults and unknown inputs behind them named, and the
+    measurement that would separate them (:mod:`fte_casadi.design.structure`)."""
+    import dataclasses
+
+    from .structure import describe
+
+    out = []
+    for c in checks:
+        if not c.holds and c.name in ("(1)", "(2)"):
+            why = describe(aug, plant, {c.name})
+            if why:
+                c = dataclasses.replace(c, message=f"{c.message}. Which: {why}")
+        out.append(c)
+    return out
 
 
 def _initial_state(plant, x0) -> np.ndarray:
