@@ -24,7 +24,9 @@ EXIT_FAILED = 1
 
 
 def _fail(message: str, code: int = EXIT_BAD_INPUT) -> None:
-    click.echo(textwrap.fill("fte: " + " ".join(message.split()), width=100), err=True)
+    click.echo(
+        textwrap.fill("fte: " + " ".join(message.split()), width=100, break_on_hyphens=False), err=True
+    )
     sys.exit(code)
 
 

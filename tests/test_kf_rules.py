@@ -78,3 +78,17 @@ def test_c_and_simulation_run_the_scheduled_term(kf_design, tmp_path):
         z = zn
     m = simulate(d, plant(), scenario(), paths=4, seed=1, progress=False).metrics
     assert m["fault_rel_rms_error"][0] < 0.3 and m["ftc_deviation_ratio"] < 0.5
+
+
+def test_parameters_the_user_did_not_set_are_found_by_the_tool(tmp_path):
+    """Issue #17 item 2: the generic sigma fails on this plant; the tool picks one below the largest
+    sigma (45) allows, certifies, and records what it chose and why. A sigma the user gave is kept."""
+    ts = derive(plant())
+    d = design(ts, sample_time=scenario().dt)
+    assert d.certified and set(d.params_chosen) == {"sigma"}
+    c = d.params_chosen["sigma"]
+    assert c["value"] == d.params["sigma"] < 1.0 and "largest sigma for which (45) is feasible" in c["why"]
+    d.save(tmp_path / "d.json")
+    assert Design.load(tmp_path / "d.json").params_chosen == d.params_chosen
+    with pytest.raises(Exception, match=r"LMI \(45\) is infeasible.*[Ll]ower sigma to <="):
+        design(ts, sigma=1.0, sample_time=scenario().dt)

@@ -135,6 +135,8 @@ def design(
     params = _params(
         ts, {"gamma": gamma, "gamma1": gamma1, "sigma": sigma, "delta": delta, "epsilon": epsilon}, status
     )
+    plant_defaults = getattr(ts.plant, "design_defaults", {}) or {}
+    generic = {k for k, v in (("gamma", gamma), ("sigma", sigma)) if v is None and k not in plant_defaults}
     if gamma2 is not None:
         params["gamma2"] = _params(
             ts, {"gamma": gamma2, "gamma1": None, "sigma": None, "delta": None, "epsilon": None}, []
@@ -171,6 +173,9 @@ def design(
                                  allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
                                  retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
+            chosen = _choose(ts, aug, params, solver, retry, generic, "45", exc) if diagnose else None
+            if chosen is not None:
+                return chosen
             raise (explain_45(ts, aug, params, solver, retry) if diagnose else exc) from None
         K = [s3.K] * aug.r
         try:
@@ -180,7 +185,10 @@ def design(
                                  allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
                                  retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
-            if diagnose and "alpha" not in str(exc):
+            if diagnose and "alpha" not in str(exc) and "sample time" not in str(exc):
+                chosen = _choose(ts, aug, params, solver, retry, generic, "46", exc)
+                if chosen is not None:
+                    return chosen
                 raise explain_46(ts, aug, params, solver, retry, exc) from None
             raise
     status += s3.notes + s5.notes
@@ -294,6 +302,63 @@ def _other_solver(ts, retry: dict, solver: str, exc: Exception, where: str, *, r
     d.status.insert(0, f"{solver} failed numerically in {where} ({' '.join(str(exc).split())[:200]}); "
                        f"designed with {other} instead")  # fmt: skip
     return d
+
+
+#: fractions of the largest feasible sigma tried, in order, when the tool chooses sigma itself
+SIGMA_TRIALS = (0.8, 0.6, 0.4, 0.2, 0.1, 0.05)
+#: multiples of the smallest feasible gamma tried when the tool chooses gamma itself
+GAMMA_TRIALS = (1.25, 1.6, 2.5, 4.0, 10.0)
+
+
+def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: str, exc) -> Design | None:
+    """Parameters the tool finds itself (issue #17): when sigma and/or gamma came from the generic
+    defaults (neither the user nor the plant set them) and the design fails at them, the feasibility
+    bounds say where to look: sigma below the largest sigma (45) allows, else gamma above the smallest
+    one it allows. The first value tried that gives a certified design is taken, and the document's
+    ``params_chosen`` says what was chosen and why. None when nothing was generic or nothing tried works."""
+    import dataclasses
+
+    if not generic:
+        return None
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    trials = []
+    if "sigma" in generic:
+        smax, _ = sigma_max(aug, g, g1, solver)
+        if smax is not None:
+            if lmi == "45":
+                cands = [nice_floor(smax * f) for f in SIGMA_TRIALS]
+            else:  # (46) wants sigma large enough to dominate the observer-loop coupling
+                cands = [nice_floor(sg + f * (smax - sg)) for f in (0.2, 0.4, 0.6, 0.8, 0.95) if smax > sg]
+                cands += [nice_floor(smax * f) for f in SIGMA_TRIALS]
+            why = f"the largest sigma for which (45) is feasible at gamma = {g:g}, gamma1 = {g1:g} is {smax:.3g}"
+            trials += [({"sigma": c}, why) for c in dict.fromkeys(cands) if c > 0]
+    if {"sigma", "gamma"} <= generic and sigma_max(aug, g, g1, solver)[0] is None:
+        sup, _ = sigma_max(aug, None, g1, solver)  # no sigma works at this gamma: move both
+        for f in (0.5, 0.2, 0.05) if sup is not None else ():
+            sc = nice_floor(sup * f)
+            gm, _ = gamma_min(aug, sc, g1, solver)
+            if gm is None:
+                continue
+            why = (f"no sigma makes (45) feasible at gamma = {g:g}; any gamma needs sigma < {sup:.3g}, and at "
+                   f"sigma = {sc:g} the smallest feasible gamma is {gm:.3g}")  # fmt: skip
+            trials += [
+                ({"sigma": sc, "gamma": nice_ceil(max(gm * gf, g1 * 1.01))}, why) for gf in (1.25, 2.5)
+            ]
+    if "gamma" in generic:
+        gmin, _ = gamma_min(aug, sg, g1, solver)
+        if gmin is not None:
+            why = f"the smallest gamma for which (45) is feasible at sigma = {sg:g}, gamma1 = {g1:g} is {gmin:.3g}"
+            trials += [({"gamma": nice_ceil(max(gmin * f, g1 * 1.01))}, why) for f in GAMMA_TRIALS]
+    for change, why in trials:
+        d = _try(ts, retry, **change)
+        if d is not None:
+            first = " ".join(str(exc).split())[:160]
+            chosen = {k: {"value": v, "why": f"the generic default {params[k]:g} failed ({first}); {why}; "
+                          f"{k} = {v:g} is the first value tried that gives a certified design"}
+                      for k, v in change.items()}  # fmt: skip
+            notes = [f"{k} = {c['value']:g} chosen by the tool: {c['why']}" for k, c in chosen.items()]
+            return dataclasses.replace(d, params_chosen=chosen, status=notes + list(d.status))
+    return None
 
 
 def _named(checks: list, aug, plant) -> list:

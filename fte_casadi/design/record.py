@@ -125,6 +125,8 @@ class Design:
     #: one Kf_i = -pinv(B_i) Bf_i per rule where they differ (the step then blends them, Kf(h) =
     #: sum_i h_i Kf_i); None when one Kf serves every rule (``Kf`` is then that one, else rule 1's)
     Kf_rules: tuple | None = None
+    #: parameters the tool chose itself (none given by the user or the plant): {name: {"value", "why"}}
+    params_chosen: dict = field(default_factory=dict)
     #: the nominal initial state x0 the simulation starts the observer from (its scenario's, else the
     #: plant's); the generated C's ``init_from_y`` starts there: z0 = [x0; 0; 0] - H y0. None: zeros
     x0: np.ndarray | None = None
@@ -216,6 +218,8 @@ class Design:
         out["x_ref"] = None if self.x_ref is None else _arr(self.x_ref).tolist()
         if self.x0 is not None:
             out["x0"] = _arr(self.x0).tolist()
+        if self.params_chosen:
+            out["params_chosen"] = _jsonable(self.params_chosen)
         if self.Kf_rules is not None:
             out["Kf_rules"] = [_arr(M).tolist() for M in self.Kf_rules]
         out["scheduling"] = self.scheduling
@@ -298,6 +302,7 @@ class Design:
             timings=dict(doc["timings"]),
             u_ref=u_ref,
             x_ref=None if doc.get("x_ref") is None else _arr(doc["x_ref"]),
+            params_chosen=dict(doc.get("params_chosen", {})),
             x0=None if doc.get("x0") is None else _finite(source, "x0", doc["x0"]),
             Kf_rules=None
             if doc.get("Kf_rules") is None
