@@ -157,6 +157,8 @@ def design(
     H, T = uio_gain(aug)
     checks_a = _named(check_assumptions(aug, T), aug, ts.plant)
     status += enforce(checks_a, accept_assumptions)
+    if not all(c.holds for c in checks_a):
+        generic = set()  # a plant that fails an assumption gets the bounds, not a search over parameters
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
                  gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions)  # fmt: skip
     if variant == "paper":
