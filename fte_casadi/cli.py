@@ -444,6 +444,14 @@ def _warnings(m: dict, inputs, faults=()) -> list[str]:
     return out
 
 
+def _why(d, m: dict) -> list[str]:
+    """The structural cause behind a window where tolerant control is worse than none, or behind false
+    alarms (:func:`fte_casadi.design.limits.explain_metrics`)."""
+    from .design.limits import explain_metrics
+
+    return ["why: " + s for s in explain_metrics(d, m)]
+
+
 @main.command()
 @click.argument("target", metavar="DESIGN.json|PLANT")
 @click.option(
@@ -493,6 +501,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
 
         figs = write_figures(res, plots)
     warn = _warnings(m, list(plant.input_names), list(plant.fault_names))
+    warn += _why(d, m)
     change = m.get("dt_change")
     if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
         click.echo(
@@ -662,3 +671,141 @@ def bench(as_json, paths):
             f"(ratio {b.get('ratio') or float('nan'):.2f}); through CasADi from Python {b['casadi_us']:.1f} us; "
             f"state {b['state_bytes']} B, constants {b['const_bytes']} B"
         )
+
+
+# -- tune ---------------------------------------------------------------------------------
+def _tune_target(out_dir: str) -> None:
+    """Refuse, before any work, to overwrite in DIR a file fte tune did not write."""
+    from .tune.output import is_tune_record
+
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ParameterError(
+            f"--out {out_dir} is a file; give a directory (fte tune writes tuned.json and more there)"
+        )
+    _writable_target(str(out / "tuned.json"), "--out", "design.json")
+    rec, fig, designs = out / "tune.json", out / "pareto.png", out / "designs"
+    if rec.exists() and not is_tune_record(rec):
+        raise ParameterError(f"{rec} exists and was not written by fte tune: it is left untouched; choose another "
+                             "--out directory, or move that file away first")  # fmt: skip
+    if fig.exists() and not rec.exists():
+        raise ParameterError(f"{fig} exists and the directory holds no tune.json of fte tune: it is left untouched; "
+                             "choose another --out directory, or move that file away first")  # fmt: skip
+    if designs.exists() and not designs.is_dir():
+        raise ParameterError(
+            f"{designs} is a file; fte tune writes the front's designs into that folder: move it away"
+        )
+    for f in designs.glob("trial-*.json") if designs.is_dir() else ():
+        if not _ours(f):
+            raise ParameterError(f"{f} exists and was not written by fte (it is not a design document): it is left "
+                                 "untouched; choose another --out directory, or move that file away first")  # fmt: skip
+
+
+def _tune_table(result) -> list[str]:
+    cols = [("gamma", "gamma"), ("gamma1", "gamma1"), ("sigma", "sigma"), ("alpha", "alpha"), ("kappa", "kappa"),
+            ("epsilon", "eps"), ("boundary_layer", "phi")]  # fmt: skip
+    short = [n.replace("fault_error", "err").replace("false_alarm", "fa")
+             .replace("input_peak", "u_peak").replace("input_saturation", "u_sat") for n in result.objectives]  # fmt: skip
+    w = max(8, *(len(s) for s in short))
+    lines = [
+        f"{'trial':>6} " + " ".join(f"{h:>8}" for _, h in cols) + " " + " ".join(f"{s:>{w}}" for s in short)
+    ]
+    order = [result.chosen] + [k for k in result.front if k != result.chosen]
+    for k in order:
+        r = result.record(k)
+        tag = ("*" if k == result.chosen else "") + ("d" if k == 0 else "")
+        cells = ["-" if r.params.get(c) is None else format(r.params[c], ".3g") for c, _ in cols]
+        lines.append(f"{str(k) + tag:>6} " + " ".join(f"{c:>8}" for c in cells) + " "
+                     + " ".join(f"{v:>{w}.3g}" for v in r.values))  # fmt: skip
+    return lines
+
+
+@main.command()
+@click.argument("target", metavar="PLANT|DESIGN.json")
+@click.option(
+    "--trials",
+    type=int,
+    default=60,
+    show_default=True,
+    help="Trials in all, trial 0 (the base design) included.",
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Seed of the sampler and of the Monte Carlo."
+)
+@click.option("--objective", "rule", default="balanced", show_default=True,
+              help="How the chosen design is picked from the front: balanced, fault-error, false-alarm or ftc.")  # fmt: skip
+@click.option("--paths", type=int, help="Brownian paths per candidate (default: the scenario's).")
+@click.option(
+    "--scheduler", help="Address of a dask.distributed scheduler: run the candidates on its workers."
+)
+@click.option("--out", "out_dir", default="fte-tune", show_default=True, type=click.Path(file_okay=False),
+              help="Directory of tuned.json, tune.json, pareto.png and designs/.")  # fmt: skip
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print the front (JSON list) on stdout; the tables go to stderr."
+)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@_guard
+def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
+    """Multi-objective search over the design's knobs (gamma, gamma1, sigma, alpha, kappa, sliding gain,
+    boundary layer): each candidate designed, certified and simulated with the same random numbers;
+    the Pareto front, and the chosen design in DIR/tuned.json (see docs/tune.md for the rule)."""
+    from .errors import MissingDependencyError
+    from .plants.loader import load_plant, load_scenario
+    from .tune.output import comparison, dominates, fmt_rows, front_documents, write_outputs
+    from .tune.search import RULES
+    from .tune.search import tune as run_tune
+
+    if trials < 2:
+        raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "
+                             f"got {trials}")  # fmt: skip
+    if seed < 0:
+        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    if rule not in RULES:
+        raise ParameterError(f"unknown --objective {rule!r}: choose one of {', '.join(RULES)} (docs/tune.md says "
+                             "what each picks)")  # fmt: skip
+    if paths is not None and paths < 1:
+        raise ParameterError(f"--paths must be a positive integer; got {paths}")
+    try:
+        import optuna  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError("fte tune needs optuna: pip install 'fte_casadi[tune]'") from None
+    _tune_target(out_dir)
+    given = target.endswith(".json") or Path(target).is_file()
+    d = _design_or_plant(target, progress=not quiet)
+    plant = load_plant(d.plant_spec)
+    try:
+        scenario = load_scenario(d.plant_spec)
+    except FteError as exc:
+        raise ParameterError(f"fte tune simulates every candidate on the plant's scenario, and {d.plant_spec} has "
+                             f"none ({exc}); add a scenario() beside the plant function") from None  # fmt: skip
+    with tqdm(total=trials, desc=f"tune {plant.name}", unit=" trials", file=sys.stderr, disable=quiet,
+              delay=1.0) as bar:  # fmt: skip
+        result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths, scheduler=scheduler,
+                          base_is_given=given, progress=lambda k, n: bar.update(k - bar.n))  # fmt: skip
+    files = write_outputs(result, out_dir)
+    say = functools.partial(click.echo, err=as_json)
+    failed = [r for r in result.records if r.state != "ok"]
+    say(f"{plant.name}: {len(result.records)} trials ({len(failed)} failed: not designed or not certified), "
+        f"{result.paths} paths each, seed {seed}, {result.wall_s:.1f} s; Pareto front of {len(result.front)} over "
+        f"{len(result.objectives)} objectives (* chosen by rule {rule}, d the base design):")  # fmt: skip
+    for line in _tune_table(result):
+        say("  " + line)
+    rows = comparison(result.baseline.metrics, result.record(result.chosen).metrics, list(plant.fault_names),
+                      list(plant.input_names))  # fmt: skip
+    say(f"default (trial 0) vs chosen (trial {result.chosen}; {result.tier}):")
+    for line in fmt_rows(rows):
+        say("  " + line)
+    say("  the chosen design is " + ("at least as good as the default on every fault metric" if dominates(rows)
+        else "NOT better than the default on every fault metric (a trade-off: see the rows marked worse)"))  # fmt: skip
+    reasons: dict[str, int] = {}
+    for r in failed:
+        key = (r.reason or "").split(":")[0] + ": " + " ".join((r.reason or "").split(":")[1:2]).strip()[:60]
+        reasons[key] = reasons.get(key, 0) + 1
+    for why, k in sorted(reasons.items(), key=lambda t: -t[1]):
+        say(f"  failed trials: {k} x {why}")
+    for line in result.limits:
+        click.echo(textwrap.fill("fte: " + line, width=100), err=True)
+    say(f"wrote {files['tuned']} (the chosen design), {files['record']}, {files['figure']} and the front's designs in "
+        f"{files['designs']}")  # fmt: skip
+    if as_json:
+        click.echo(json.dumps(front_documents(result, out_dir), indent=1))

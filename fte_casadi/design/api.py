@@ -93,6 +93,7 @@ def design(
     gamma2: float | None = None,
     alpha: float | None = None,
     sample_time: float | None = None,
+    kappa: float | None = None,
     initial_state=None,
     allow_uncertified: bool = False,
     accept_assumptions=(),
@@ -108,7 +109,9 @@ def design(
     solves them as printed (:mod:`fte_casadi.design.paper`). ``alpha`` is the observer decay rate
     of the conditioned variant (default: a fraction of the largest feasible one, lowered so that
     ``ts_max >= 2 sample_time`` when ``sample_time`` is given); ``gamma2`` the d2 attenuation of
-    Theorem 5 (default gamma). ``initial_state`` is the nominal x(0) the simulations start from
+    Theorem 5 (default gamma). ``kappa`` bounds cond(X') and cond(Pbar) in the conditioned variant
+    (default :data:`~fte_casadi.design.conditioned.KAPPA`; recorded in ``params`` when given).
+    ``initial_state`` is the nominal x(0) the simulations start from
     (default: the plant's), recorded as ``x0`` for the generated C's start from a first measurement.
     Raises :class:`~fte_casadi.errors.InfeasibleDesignError` when an
     LMI is infeasible (with the bounds that are feasible, when ``diagnose``) or a certificate
@@ -141,6 +144,17 @@ def design(
         params["gamma2"] = _params(
             ts, {"gamma": gamma2, "gamma1": None, "sigma": None, "delta": None, "epsilon": None}, []
         )["gamma"]
+    if kappa is not None:
+        if (
+            isinstance(kappa, bool)
+            or not isinstance(kappa, (int, float))
+            or not math.isfinite(kappa)
+            or kappa <= 1
+        ):
+            raise ParameterError(
+                f"kappa (the bound on cond(Pbar)) must be a finite number above 1; got {kappa!r}"
+            )
+        params["kappa"] = float(kappa)
     for name, v in (("alpha", alpha), ("sample_time", sample_time)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0
                               or (name == "sample_time" and v == 0)):  # fmt: skip
@@ -160,7 +174,8 @@ def design(
     if not all(c.holds for c in checks_a):
         generic = set()  # a plant that fails an assumption gets the bounds, not a search over parameters
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
-                 gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions)  # fmt: skip
+                 gamma2=gamma2, alpha=alpha, sample_time=sample_time, kappa=kappa,
+                 accept_assumptions=accept_assumptions)  # fmt: skip
     if variant == "paper":
         s3, K = paper.step3(aug, params, solver)
         s5 = paper.step5(aug, params, s3.X, K, T, solver)
@@ -177,7 +192,7 @@ def design(
         except InfeasibleDesignError as exc:
             chosen = _choose(ts, aug, params, solver, retry, generic, "45", exc) if diagnose else None
             if chosen is not None:
-                return chosen
+                return _as_asked(chosen, ts, plant_spec, initial_state)
             raise (explain_45(ts, aug, params, solver, retry) if diagnose else exc) from None
         K = [s3.K] * aug.r
         try:
@@ -190,7 +205,7 @@ def design(
             if diagnose and "alpha" not in str(exc) and "sample time" not in str(exc):
                 chosen = _choose(ts, aug, params, solver, retry, generic, "46", exc)
                 if chosen is not None:
-                    return chosen
+                    return _as_asked(chosen, ts, plant_spec, initial_state)
                 raise explain_46(ts, aug, params, solver, retry, exc) from None
             raise
     status += s3.notes + s5.notes
@@ -361,6 +376,16 @@ def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: 
             notes = [f"{k} = {c['value']:g} chosen by the tool: {c['why']}" for k, c in chosen.items()]
             return dataclasses.replace(d, params_chosen=chosen, status=notes + list(d.status))
     return None
+
+
+def _as_asked(d: Design, ts, plant_spec, initial_state) -> Design:
+    """A design found by :func:`_choose` with the caller's plant spec and initial state (its trials
+    ran without them)."""
+    import dataclasses
+
+    return dataclasses.replace(
+        d, plant_spec=plant_spec or d.plant_spec, x0=_initial_state(ts.plant, initial_state)
+    )
 
 
 def _named(checks: list, aug, plant) -> list:
