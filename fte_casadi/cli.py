@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import sys
 import textwrap
 import time
@@ -449,7 +450,8 @@ def _why(d, m: dict) -> list[str]:
     alarms (:func:`fte_casadi.design.limits.explain_metrics`)."""
     from .design.limits import explain_metrics
 
-    return ["why: " + s for s in explain_metrics(d, m)]
+    return ["why (the plant's structure, at this design; `fte tune` searches for a design that does better): " + s
+            for s in explain_metrics(d, m)]  # fmt: skip
 
 
 @main.command()
@@ -734,7 +736,9 @@ def _tune_table(result) -> list[str]:
 )
 @click.option("--objective", "rule", default="balanced", show_default=True,
               help="How the chosen design is picked from the front: balanced, fault-error, false-alarm or ftc.")  # fmt: skip
-@click.option("--paths", type=int, help="Brownian paths per candidate (default: the scenario's).")
+@click.option(
+    "--paths", type=int, help="Brownian paths per candidate (default: 20, or the scenario's when more)."
+)
 @click.option(
     "--scheduler", help="Address of a dask.distributed scheduler: run the candidates on its workers."
 )
@@ -799,7 +803,9 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
         else "NOT better than the default on every fault metric (a trade-off: see the rows marked worse)"))  # fmt: skip
     reasons: dict[str, int] = {}
     for r in failed:
-        key = (r.reason or "").split(":")[0] + ": " + " ".join((r.reason or "").split(":")[1:2]).strip()[:60]
+        key = re.sub(r"-?\d+\.\d+(e[-+]?\d+)?|\d+e[-+]?\d+", "#", ":".join((r.reason or "").split(":")[:2]))[
+            :110
+        ]
         reasons[key] = reasons.get(key, 0) + 1
     for why, k in sorted(reasons.items(), key=lambda t: -t[1]):
         say(f"  failed trials: {k} x {why}")

@@ -52,6 +52,8 @@ __all__ = ["tune", "TuneResult", "Record", "choose", "pareto_front", "RULES", "B
 
 #: trials asked from the sampler before any of them is told (also the tasks sent to a cluster at once)
 BATCH = 4
+#: paths per candidate unless asked (or the scenario's, when more)
+DEFAULT_PATHS = 20
 #: the rules of :func:`choose`
 RULES = ("balanced", "fault-error", "false-alarm", "ftc")
 #: objective values for a metric a candidate leaves undefined
@@ -271,7 +273,7 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     rule : str
         One of :data:`RULES`: how the chosen design is picked from the front.
     paths : int, optional
-        Monte Carlo paths per candidate (default: the scenario's).
+        Monte Carlo paths per candidate (default: :data:`DEFAULT_PATHS`, or the scenario's when more).
     scheduler : str or distributed.Client, optional
         Run the candidates on a dask.distributed cluster.
     sigma_sup : float, optional
@@ -292,7 +294,7 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
         raise ParameterError(f"--seed must be a non-negative integer; got {seed!r}")
     if rule not in RULES:
         raise ParameterError(f"unknown --objective {rule!r}; choose one of {', '.join(RULES)}")
-    paths = int(paths or scenario.paths)
+    paths = int(paths or max(scenario.paths, DEFAULT_PATHS))
     if paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
     t0 = time.perf_counter()
