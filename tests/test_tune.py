@@ -228,3 +228,39 @@ def test_cluster_gives_the_in_process_front(small, result):
             on = tune(base, plant, scenario, trials=10, seed=3, paths=2, scheduler=client)
     assert [r.values for r in on.records] == [r.values for r in result.records]
     assert on.front == result.front and on.chosen == result.chosen
+
+
+def test_trial_zero_of_a_design_file_is_that_design(small, tmp_path):
+    """Tuning from a DESIGN.json evaluates that design as it is (common random numbers: its metrics
+    are those of fte simulate at the same seed and paths), with a user's alpha kept."""
+    from fte_casadi.sim import simulate
+
+    plant, scenario, ts, _ = small
+    own = design(ts, sample_time=scenario.dt, initial_state=scenario.x0, plant_spec=SPEC, alpha=0.5)
+    res = tune(own, plant, scenario, trials=2, seed=5, paths=2, base_is_given=True)
+    direct = simulate(own, plant, scenario, paths=2, seed=5, progress=False, record_paths=0).metrics
+    m0 = res.records[0].metrics
+    assert m0["fault_rel_rms_error"] == direct["fault_rel_rms_error"]
+    assert m0["windows"] == direct["windows"]
+    assert res.records[0].params["alpha"] == 0.5
+
+
+def test_limits_named_when_no_candidate_helps(small):
+    from fte_casadi.tune.search import _limits
+
+    plant, _, _, base = small
+    doc = base.to_json()
+
+    def rec(k, ratios, fa):
+        m = {"windows": [{"fault": "fa", "start": 1.5, "stop": 3.0, "ftc_deviation_ratio": ratios[0]},
+                         {"fault": "fs", "start": 3.5, "stop": 5.0, "ftc_deviation_ratio": ratios[1]}],
+             "false_alarm_rel_rms": fa}  # fmt: skip
+        return Record(k, {}, "ok", {}, m, doc, (0.0,))
+
+    done = [rec(0, (1.2, 0.5), [0.3, 1.4]), rec(1, (1.1, 0.6), [0.2, 1.1])]
+    lines = _limits(done, done, plant)
+    # the fa window (no candidate below 1, the best is trial 1) and fs's false alarms (best 1.1)
+    assert len(lines) == 2
+    assert "best: trial 1" in lines[0] and "window of fa" in lines[0] and "FTC ratio 1.1" in lines[0]
+    assert "false alarms of fs (ratio 1.1)" in lines[1]
+    assert _limits([rec(0, (0.9, 0.5), [0.3, 0.4])], [rec(0, (0.9, 0.5), [0.3, 0.4])], plant) == []
