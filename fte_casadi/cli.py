@@ -198,6 +198,13 @@ def _design_summary(d) -> str:
             + ("proven stable" if disc["holds"] else "NOT proven stable")
             + f" for any blending of the rules (Pbar decreases for Ts < {disc['ts_max_lyapunov']:.4g})"
         )
+    fb = (d.bounds or {}).get("fault_error")
+    if fb and fb.get("holds"):
+        lines.append("  certified bound on the fault-estimation error: E int |f - fhat|^2 dt <= "
+                     + " + ".join(f"{g:.3g}^2 t" if c == "const" else f"{g:.3g}^2 E int |{c}|^2" for c, g in fb["gains"].items())
+                     + " + E xi0' P xi0 (docs/tune.md)")  # fmt: skip
+    elif fb:
+        lines.append(f"  no bound on the fault-estimation error: {fb.get('why')}")
     if obs.get("alpha") is not None:
         lines.append(f"  observer decay rate alpha = {obs['alpha']:.4g}: {obs.get('why', '')}")
     solves = f", {d.solves.get('total')} conic solves" if d.solves else ""

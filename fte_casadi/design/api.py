@@ -302,7 +302,26 @@ def design(
         observer=observer,
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
+        bounds=_bounds(certified, R, K, Kf, Kf_rules, H, T, s5, ts, u_ref, params),
     )
+
+
+def _bounds(certified, R, K, Kf, Kf_rules, H, T, s5, ts, u_ref, params) -> dict:
+    """The certified bound on the fault-estimation error at the returned design (issue #18 item 1;
+    :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
+    if not certified:
+        return {}
+    from types import SimpleNamespace
+
+    from .bounds import fault_error_bound
+
+    lms = tuple(
+        {k: getattr(lm, k) for k in ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M")}
+        for lm in ts.local_models
+    )
+    view = SimpleNamespace(dims={"n": ts.n, "lf": ts.lf}, T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
+                           local_models=lms, R=R, K=K)  # fmt: skip
+    return {"fault_error": fault_error_bound(view)}
 
 
 def _other_solver(ts, retry: dict, solver: str, exc: Exception, where: str, *, retried, **kw) -> Design:

@@ -130,6 +130,8 @@ class Design:
     #: the nominal initial state x0 the simulation starts the observer from (its scenario's, else the
     #: plant's); the generated C's ``init_from_y`` starts there: z0 = [x0; 0; 0] - H y0. None: zeros
     x0: np.ndarray | None = None
+    #: certified performance bounds at the design (:mod:`fte_casadi.design.bounds`): {"fault_error": {...}}
+    bounds: dict = field(default_factory=dict)
 
     # -- convenience ---------------------------------------------------------------------
     @property
@@ -220,6 +222,8 @@ class Design:
             out["x0"] = _arr(self.x0).tolist()
         if self.params_chosen:
             out["params_chosen"] = _jsonable(self.params_chosen)
+        if self.bounds:
+            out["bounds"] = _jsonable(self.bounds)
         if self.Kf_rules is not None:
             out["Kf_rules"] = [_arr(M).tolist() for M in self.Kf_rules]
         out["scheduling"] = self.scheduling
@@ -303,6 +307,7 @@ class Design:
             u_ref=u_ref,
             x_ref=None if doc.get("x_ref") is None else _arr(doc["x_ref"]),
             params_chosen=dict(doc.get("params_chosen", {})),
+            bounds=dict(doc.get("bounds") or {}),
             x0=None if doc.get("x0") is None else _finite(source, "x0", doc["x0"]),
             Kf_rules=None
             if doc.get("Kf_rules") is None
