@@ -710,25 +710,6 @@ def _tune_target(out_dir: str) -> None:
                                  "untouched; choose another --out directory, or move that file away first")  # fmt: skip
 
 
-def _tune_table(result) -> list[str]:
-    cols = [("gamma", "gamma"), ("gamma1", "gamma1"), ("sigma", "sigma"), ("alpha", "alpha"), ("kappa", "kappa"),
-            ("epsilon", "eps"), ("boundary_layer", "phi")]  # fmt: skip
-    short = [n.replace("fault_error", "err").replace("false_alarm", "fa")
-             .replace("input_peak", "u_peak").replace("input_saturation", "u_sat") for n in result.objectives]  # fmt: skip
-    w = max(8, *(len(s) for s in short))
-    lines = [
-        f"{'trial':>6} " + " ".join(f"{h:>8}" for _, h in cols) + " " + " ".join(f"{s:>{w}}" for s in short)
-    ]
-    order = [result.chosen] + [k for k in result.front if k != result.chosen]
-    for k in order:
-        r = result.record(k)
-        tag = ("*" if k == result.chosen else "") + ("d" if k == 0 else "")
-        cells = ["-" if r.params.get(c) is None else format(r.params[c], ".3g") for c, _ in cols]
-        lines.append(f"{str(k) + tag:>6} " + " ".join(f"{c:>8}" for c in cells) + " "
-                     + " ".join(f"{v:>{w}.3g}" for v in r.values))  # fmt: skip
-    return lines
-
-
 @main.command()
 @click.argument("target", metavar="PLANT|DESIGN.json")
 @click.option(
@@ -762,7 +743,7 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
     the Pareto front, and the chosen design in DIR/tuned.json (see docs/tune.md for the rule)."""
     from .errors import MissingDependencyError
     from .plants.loader import load_plant, load_scenario
-    from .tune.output import comparison, dominates, fmt_rows, front_documents, write_outputs
+    from .tune.output import comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
     from .tune.search import RULES
     from .tune.search import tune as run_tune
 
@@ -799,7 +780,7 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
     say(f"{plant.name}: {len(result.records)} trials ({len(failed)} failed: not designed or not certified), "
         f"{result.paths} paths each, seed {seed}, {result.wall_s:.1f} s; Pareto front of {len(result.front)} over "
         f"{len(result.objectives)} objectives (* chosen by rule {rule}, d the base design):")  # fmt: skip
-    for line in _tune_table(result):
+    for line in front_table(result):
         say("  " + line)
     rows = comparison(result.baseline.metrics, result.record(result.chosen).metrics, list(plant.fault_names),
                       list(plant.input_names))  # fmt: skip

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..design.record import Design, atomic_write_text
 
-__all__ = ["MARKER", "is_tune_record", "write_outputs", "front_documents", "comparison"]
+__all__ = ["MARKER", "is_tune_record", "write_outputs", "front_documents", "front_table", "comparison"]
 
 #: the key that marks a tune.json as written by fte tune
 MARKER = "fte_tune"
@@ -131,3 +131,23 @@ def fmt_rows(rows) -> list[str]:
         mark = "" if b is None or c is None else (" better" if c < b else (" worse" if c > b else ""))
         out.append(f"{name:<{width}} {_fmt(b):>10} {_fmt(c):>10}{mark}")
     return out
+
+
+def front_table(result) -> list[str]:
+    """The front as table rows (the chosen design first, marked *; the base marked d)."""
+    cols = [("gamma", "gamma"), ("gamma1", "gamma1"), ("sigma", "sigma"), ("alpha", "alpha"), ("kappa", "kappa"),
+            ("epsilon", "eps"), ("boundary_layer", "phi")]  # fmt: skip
+    short = [n.replace("fault_error", "err").replace("false_alarm", "fa")
+             .replace("input_peak", "u_peak").replace("input_saturation", "u_sat") for n in result.objectives]  # fmt: skip
+    w = max(8, *(len(s) for s in short))
+    lines = [
+        f"{'trial':>6} " + " ".join(f"{h:>8}" for _, h in cols) + " " + " ".join(f"{s:>{w}}" for s in short)
+    ]
+    order = [result.chosen] + [k for k in result.front if k != result.chosen]
+    for k in order:
+        r = result.record(k)
+        tag = ("*" if k == result.chosen else "") + ("d" if k == 0 else "")
+        cells = ["-" if r.params.get(c) is None else format(r.params[c], ".3g") for c, _ in cols]
+        lines.append(f"{str(k) + tag:>6} " + " ".join(f"{c:>8}" for c in cells) + " "
+                     + " ".join(f"{v:>{w}.3g}" for v in r.values))  # fmt: skip
+    return lines
