@@ -110,7 +110,7 @@ def _positive(name: str, value, allow_zero: bool = False):
 def main(debug: bool) -> None:
     """fte: certified fault estimation and fault-tolerant control, from CasADi equations to embedded C.
 
-    PLANT is a built-in name (manipulator, three-tank), path/to/file.py:function or
+    PLANT is a built-in name (manipulator, three-tank, quadruple-tank), path/to/file.py:function or
     package.module:function returning a Plant.
     """
 
@@ -586,7 +586,7 @@ def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
 
 # -- reproduce ----------------------------------------------------------------------------
 @main.command()
-@click.argument("which", type=click.Choice(["manipulator", "three-tank", "all"]), default="all")
+@click.argument("which", type=click.Choice(["manipulator", "three-tank", "quadruple-tank", "all"]), default="all")
 @click.option("--out", "out_dir", default="fte-report", show_default=True, type=click.Path(file_okay=False))
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--paths", type=int, help="At least this many paths (default: the paper's counts).")

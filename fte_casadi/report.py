@@ -63,13 +63,15 @@ def _g(v, fmt: str = ".3g") -> str:
     return "n/a" if v is None else format(v, fmt)
 
 
-def _derive_section(ts, printed: dict) -> list[str]:
+def _derive_section(ts, printed: dict | None) -> list[str]:
     out = ["### Derived T-S model", ""]
     out.append(
         f"Method: **{ts.method}**, {ts.r} rules. Premises: "
         + "; ".join(f"`{p.name} = {p.expr}` in [{p.min:.6g}, {p.max:.6g}]" for p in ts.premises)
         + "."
     )
+    if printed is None:  # not a plant of the paper: nothing printed to compare with
+        return out + [""] + _fidelity_lines(ts)
     out += [
         "",
         "| rule | max abs(A - printed A) | max abs(B - printed B) | max abs(W - printed W) |",
@@ -89,8 +91,12 @@ def _derive_section(ts, printed: dict) -> list[str]:
         out.append(
             "The printed W_2[3,2] = 0.005 is a rounding of 0.006 - 0.003 x 0.2172 = 0.00535, which the derivation gives."
         )
+    return out + _fidelity_lines(ts)
+
+
+def _fidelity_lines(ts) -> list[str]:
     f = ts.fidelity
-    out += [
+    return [
         "",
         f"Fidelity: largest |T-S - nonlinear| over {f.samples} samples of the region: drift "
         f"{f.drift_max_abs_error:.3g} ({100 * f.drift_max_rel_error:.3g} % of the largest drift), diffusion "
@@ -99,10 +105,9 @@ def _derive_section(ts, printed: dict) -> list[str]:
         + (f" (stopped early: {f.trajectory_stop})." if f.trajectory_stop else "."),
         "",
     ]
-    return out
 
 
-def _design_rows(designs: dict, printed: dict) -> list[str]:
+def _design_rows(designs: dict, printed: dict | None) -> list[str]:
     out = [
         "| variant | certified | theta | cond(Pbar) | max abs(L_i1) | max abs(K_j) | max Re eig(R_i) | max Re eig(A_i+B_iK_j) | ts_max | LMI max eig (45) / (46) / (55) / (64) | time |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -120,6 +125,8 @@ def _design_rows(designs: dict, printed: dict) -> list[str]:
             + " / ".join(f"{lmi[k]:.2g}" for k in ("45", "46", "55", "64"))
             + f" | {d.timings['total_s']:.2f} s |"
         )
+    if printed is None:
+        return out
     K = np.asarray(printed["K"])
     out.append(
         f"| paper (printed) | - | {printed['theta']:.3g} | - | {printed['max_abs_L1']:.3g} | {np.max(np.abs(K)):.4g} | - | - | - | - | - |"
@@ -149,6 +156,8 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
             f[0] = -0.4 * float(u[0]) if d.plant == "manipulator" and t >= 0.25 * steps * ts else 0.0
             if d.plant == "three-tank" and t >= 0.3 * steps * ts:
                 f[0] = -10.0
+            if d.plant == "quadruple-tank" and t >= 0.25 * steps * ts:  # pump 1 delivers 70 % of v0 + dv1
+                f[0] = -0.3 * (3.0 + float(u[0]))
             return f
 
         err, _ = closed_loop_compare(d, CStep(lib, d), ts, steps, plant=BUILTIN[d.plant](), fault=fault)
@@ -233,14 +242,14 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
     from .sim import metrics as sim_metrics
     from .sim import save_result, simulate
 
-    printed = PRINTED[name]
+    printed = PRINTED.get(name)  # None for a plant that is not the paper's (the quadruple tank)
     plant = BUILTIN[name]()
     t0 = time.perf_counter()
     log(f"[{name}] derive T-S model")
     ts = derive(plant)
     sec = [f"## {name}", ""] + _derive_section(ts, printed)
     designs: dict = {}
-    for variant in ("conditioned", "paper"):
+    for variant in ("conditioned", "paper") if printed is not None else ("conditioned",):
         log(f"[{name}] design, variant {variant}")
         try:
             designs[variant] = run_design(
@@ -254,26 +263,27 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         raise InfeasibleDesignError(f"{name}: the conditioned design failed: {d}")
     dpath = out / f"{name}-design.json"
     d.save(dpath)
-    if not isinstance(designs["paper"], str):
+    if not isinstance(designs.get("paper", ""), str):
         designs["paper"].save(out / f"{name}-design-paper.json")
-    dH = float(np.max(np.abs(d.H - np.asarray(printed["H"]))))
-    sec += [
-        "### Unknown-input gain H (17)",
-        "",
-        _mat(d.H, 7),
-        f"largest difference to the printed H: {dH:.2g}",
-        "",
-    ]
+    sec += ["### Unknown-input gain H (17)", "", _mat(d.H, 7)]
+    if printed is not None:
+        sec.append(
+            f"largest difference to the printed H: {float(np.max(np.abs(d.H - np.asarray(printed['H'])))):.2g}"
+        )
+    sec.append("")
     sec += ["### Designs", ""] + _design_rows(designs, printed) + [""]
     sec += [
         f"Conditioned gains K_j (u = u_ref + sum_j h_j (K_j xhat + Kf fhat), u_ref = {np.round(d.u_ref, 6).tolist()}):",
         "",
     ]
-    for j, K in enumerate(d.K):
-        sec += [f"K_{j + 1}", _mat(K)]
+    if all(np.array_equal(K, d.K[0]) for K in d.K):
+        sec += [f"K_j = K for every rule j = 1..{len(d.K)}", _mat(d.K[0])]
+    else:
+        for j, K in enumerate(d.K):
+            sec += [f"K_{j + 1}", _mat(K)]
     sec += ["Kf", _mat(d.Kf), ""]
     notes = [s for s in d.status]
-    if not isinstance(designs["paper"], str):
+    if not isinstance(designs.get("paper", ""), str):
         notes += [f"paper variant: {s}" for s in designs["paper"].status]
     if notes:
         sec += ["Notes from the design:", ""] + [f"- {s}" for s in notes] + [""]
@@ -284,8 +294,8 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
     res = simulate(d, plant, sc, paths=npaths, seed=seed, progress=False)
     m = sim_metrics(res)
     save_result(res, out / f"{name}-simulation.npz")
-    figdir = out / "figures"
-    figs = write_figures(res, figdir)
+    sub = "figures" if printed is not None else f"figures/{name}"  # the paper's figure numbers, or a folder
+    figs = write_figures(res, out / sub)
     sec += [
         "### Monte Carlo (conditioned design, nonlinear plant)",
         "",
@@ -308,7 +318,7 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         )
         sec += _saturation_section(m, free.metrics, d, plant)
     for f in figs:
-        sec.append(f"![{f.stem}](figures/{f.name})")
+        sec.append(f"![{f.stem}]({sub}/{f.name})")
     sec.append("")
     log(f"[{name}] generate, compile and check the embedded C")
     cdir = out / "c" / name.replace("-", "_")

@@ -42,7 +42,7 @@ from . import template
 __all__ = ["generate_c", "default_ts", "c_name", "output_files", "BUILTIN_DIRS", "write_files", "file_mode"]
 
 #: directory name under ``generated/`` of each built-in plant
-BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank"}
+BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank", "quadruple-tank": "quadruple_tank"}
 
 _REALS = ("double", "float")
 _REAL_BYTES = {"double": 8, "float": 4}
@@ -97,7 +97,7 @@ def _ts_max(design: Design) -> float:
 
 
 #: simulation time step of the built-in plants' paper scenarios (``fte_casadi.plants.SCENARIOS``)
-BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2}
+BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2, "quadruple-tank": 0.1}
 
 
 def default_ts(design: Design) -> float:
