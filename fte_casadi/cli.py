@@ -314,7 +314,9 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 @click.option("--delta", type=float, help="bound on the second derivative of the faults.")
 @click.option("--epsilon", type=float, help="sliding gain margin eps.")
 @click.option(
-    "--alpha", type=float, help="observer decay rate (default: the largest the plant allows, see README)."
+    "--alpha",
+    type=float,
+    help="observer decay rate (default: the largest the plant allows, see docs/design.md).",
 )
 @click.option(
     "--sample-time", "sample_time", type=float,

@@ -86,7 +86,10 @@ def _derive_section(ts, printed: dict | None) -> list[str]:
     for i, lm in enumerate(ts.local_models):
         out += [f"Rule {i + 1}: derived A_{i + 1}", _mat(lm.A), f"printed A_{i + 1}", _mat(printed["A"][i])]
         if np.any(lm.a):
-            out += [f"affine offset a_{i + 1} (kept by the observer, see README)", _mat(lm.a[None, :])]
+            out += [
+                f"affine offset a_{i + 1} (kept by the observer, see docs/method.md)",
+                _mat(lm.a[None, :]),
+            ]
     if "W" in printed:
         out.append(
             "The printed W_2[3,2] = 0.005 is a rounding of 0.006 - 0.003 x 0.2172 = 0.00535, which the derivation gives."
@@ -362,7 +365,7 @@ def reproduce(
         "",
         "Every LMI eigenvalue below is recomputed with numpy at the solver's returned point (negative = the LMI "
         "holds); `certified` means every one of them holds together with the stability checks. `conditioned` is "
-        "the design fte_casadi uses; `paper` is the problem as printed (with SPEC.md's corrections), reported "
+        "the design fte_casadi uses; `paper` is the problem as printed (with the corrections of docs/method.md), reported "
         "with its true numbers.",
         "",
     ]

@@ -1,4 +1,4 @@
-"""The discrete observer/controller step as ONE CasADi Function (SPEC.md, "The discrete-time step").
+"""The discrete observer/controller step as ONE CasADi Function (docs/method.md, "The discrete step").
 
 This Function is the single source of truth: the Monte Carlo engine maps it over paths and the
 C generator exports it, so simulation and embedded code cannot drift apart. At sample k, with

@@ -93,7 +93,7 @@ def test_bilinear_and_saturation_derive_with_four_rules():
     bounds = {p.expr: (p.min, p.max) for p in ts.premises}
     assert bounds["x1"] == pytest.approx((-2.0, 2.0), abs=1e-9)
     assert bounds["tanh(x1)/x1"] == pytest.approx((np.tanh(2.0) / 2.0, 1.0), abs=1e-6)
-    # rule 1: x1 at its max and tanh(x1)/x1 at its max (CONTRACT.md's order)
+    # rule 1: x1 at its max and tanh(x1)/x1 at its max (the rule order of docs/interface.md)
     assert ts.local_models[0].A[1].tolist() == pytest.approx([-2.0, -2.5], abs=1e-12)
     assert ts.local_models[3].A[1].tolist() == pytest.approx([-np.tanh(2.0), 1.5], abs=1e-9)
 

@@ -5,7 +5,7 @@ For each design :func:`bench_c_step` reports
 - ``c_ns``: nanoseconds per ``fte_NAME_step`` call, from a C timing loop (``clock_gettime``,
   ``-O2``, the strict flags) over varying measurements; best of several repetitions;
 - ``hand_ns``: the same arithmetic written as plain C loops over the design's dense matrices
-  (the expanded sum over rules of SPEC.md; memberships by the same CasADi-generated scheduling
+  (the expanded sum over rules of docs/method.md, "The discrete step"; memberships by the same CasADi-generated scheduling
   function), generated here from the design as a baseline, and ``ratio = c_ns / hand_ns``;
 - ``casadi_us``: microseconds per call of the same step as a CasADi Function from Python;
 - ``state_bytes`` (``sizeof(fte_NAME_state)``), the README's constant-data counts, and the

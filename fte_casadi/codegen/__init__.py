@@ -1,4 +1,4 @@
-"""Embedded C of the discrete observer/controller step (CONTRACT.md, "Generated C")."""
+"""Embedded C of the discrete observer/controller step (docs/interface.md, "Generated C")."""
 
 from .build import compile_program as compile_program
 from .build import compile_shared as compile_shared

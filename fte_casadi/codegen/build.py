@@ -1,4 +1,4 @@
-"""Compile generated C with the strict flags of CONTRACT.md (for ctypes tests, examples, benchmarks)."""
+"""Compile generated C with the strict flags of docs/interface.md (for ctypes tests, examples, benchmarks)."""
 
 from __future__ import annotations
 

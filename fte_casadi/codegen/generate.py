@@ -3,7 +3,7 @@
 CasADi's :class:`casadi.CodeGenerator` writes the maths of :func:`fte_casadi.step.step_function`
 (the single source of truth that the simulator uses too) into ``fte_NAME_casadi.c``/``.h``;
 :mod:`fte_casadi.codegen.template` writes the human-facing wrapper ``fte_NAME.h``/``.c`` of
-CONTRACT.md and a README. What the CasADi output is made to satisfy, and how:
+docs/interface.md and a README. What the CasADi output is made to satisfy, and how:
 
 - no heap, no static mutable data: an ``SX`` Function is generated as straight-line code on
   scalar locals (``casadi_real a0, a1, ...``); the only statics are ``const`` sparsity tables.

@@ -165,7 +165,7 @@ def design(
         s3, K = paper.step3(aug, params, solver)
         s5 = paper.step5(aug, params, s3.X, K, T, solver)
         status.append(
-            "paper variant: problem as printed (with SPEC.md's corrections); expect an ill-conditioned Pbar"
+            "paper variant: problem as printed (with the corrections of docs/method.md); expect an ill-conditioned Pbar"
         )
     else:
         try:

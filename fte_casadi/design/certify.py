@@ -6,7 +6,7 @@ solver that reports "optimal" at a point where an LMI does not hold is caught.
 
 The builders are written once for Theorem 5 (diffusion ``W_i x + G_i u + Gf_i f + M_i d2``);
 with ``G = Gf = 0`` and no ``d2`` they are exactly (45), (46) of Theorem 3. Corrections of the
-printed formulas (SPEC.md): block (1,4) of (45)/(78) is ``Bd_i`` (not ``P Bd_i``);
+printed formulas (docs/method.md, "The paper's misprints"): block (1,4) of (45)/(78) is ``Bd_i`` (not ``P Bd_i``);
 ``Psi = A X + X A^T + B Y + Y^T B^T + sigma I``; block (3,3) of (45) is ``-I_p``. In (79) the
 term ``(Wbar_i + Gbar_i K_j)^T T^T Pbar T Gbar_eij`` of Theta_13 enters with a minus sign: it
 is the cross term of the error diffusion ``T (Wbar + Gbar K) x - T Gbar_e e``, exactly like

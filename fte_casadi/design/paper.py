@@ -1,4 +1,4 @@
-"""The paper variant: Section 4.3 exactly as printed (with SPEC.md's corrections), one solve per step.
+"""The paper variant: Section 4.3 exactly as printed (with the corrections of docs/method.md), one solve per step.
 
 Step 3 is the feasibility problem (45) for ``X > 0`` and one ``Y_j`` per rule, with no objective;
 step 5 is ``min theta`` subject to (46) for every ``(i, j)``, (55), (64) and ``Pbar > 0`` with ``Q_i``
@@ -6,7 +6,7 @@ and ``N`` free. Strict inequalities become ``<= -1e-7 I``. The solver's point is
 (no centring: this variant shows what the printed problem gives), and only ever reported with
 its certificate recomputed at that point. Because ``Cbar J1 = 0``, (20) forces
 ``J1^T Pbar J1 = 0`` and ``min theta`` drives Pbar towards singular: expect a huge cond(Pbar)
-and huge gains, or an infeasibility report (SPEC.md, "A numerical fact...").
+and huge gains, or an infeasibility report (docs/method.md, "Equality (20) is never exactly feasible").
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""The design record: a frozen object with atomic JSON save/load exactly as CONTRACT.md.
+"""The design record: a frozen object with atomic JSON save/load exactly as docs/interface.md describes it.
 
-Every key of CONTRACT.md's design document is here under its contract name. Extra keys
+Every key of the design document (docs/interface.md) is here under its contract name. Extra keys
 (all additions, none renamed) carry what the simulator and the C generator need to rebuild
 the step without the plant's Python code: the affine offsets ``a`` of each local model, the
 reference input, the scheduling map (y, xhat) -> h as a serialised CasADi Function, signal
@@ -182,7 +182,7 @@ class Design:
         the affine offsets of linearised models and the actuator limits (the model is linear). Its
         poles are ``eig(A_i + B_i K_j)`` and ``eig(R_i)`` (the observer error decouples). With
         ``dt``: the loop as the generated C runs it, the plant by zero-order hold and the observer
-        by the explicit Euler step of SPEC.md. Needs python-control (``fte_casadi[control]``).
+        by the explicit Euler step of docs/method.md. Needs python-control (``fte_casadi[control]``).
         """
         from ..interop import closed_loop_ss
 

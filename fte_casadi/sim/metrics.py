@@ -1,4 +1,4 @@
-"""The metrics document of ``fte simulate`` (CONTRACT.md), computed from a SimulationResult."""
+"""The metrics document of ``fte simulate`` (docs/interface.md), computed from a SimulationResult."""
 
 from __future__ import annotations
 
@@ -102,7 +102,7 @@ def windows(result: SimulationResult) -> list[dict]:
 
 
 def metrics_from_arrays(result: SimulationResult) -> dict:
-    """CONTRACT.md's metrics document recomputed from the recorded arrays (the reference).
+    """The metrics document (docs/interface.md) recomputed from the recorded arrays (the reference).
 
     Over the recorded paths and samples only: equal to the streamed document of the run when every
     path and every sample was recorded (``record_all=True, record_every=1``)."""
@@ -125,6 +125,6 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
 
 
 def metrics(result: SimulationResult) -> dict:
-    """CONTRACT.md's metrics document of a run: the one the engine streamed over all its paths, or,
+    """The metrics document (docs/interface.md) of a run: the one the engine streamed over all its paths, or,
     for a result without it (the per-path engine), :func:`metrics_from_arrays`."""
     return dict(result.metrics) if result.metrics is not None else metrics_from_arrays(result)

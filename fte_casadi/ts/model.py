@@ -151,7 +151,7 @@ class TSModel:
         ]
 
     def to_dict(self) -> dict:
-        """The derive document of CONTRACT.md (plus a few extra keys)."""
+        """The derive document (docs/interface.md)."""
         return {
             "plant": self.plant.name,
             "method": self.method,
