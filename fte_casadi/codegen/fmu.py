@@ -205,7 +205,6 @@ def _model_description(design, variables, ts, deps, guid, sources, mid) -> str:
             ET.SubElement(ud, "Unit", {"name": u})
     cats = ET.SubElement(root, "LogCategories")
     ET.SubElement(cats, "Category", {"name": "logStatusError", "description": "errors (always logged)"})
-    ET.SubElement(cats, "Category", {"name": "logAll", "description": "everything, with debug logging on"})
     ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stepSize": repr(float(ts))})
     mv = ET.SubElement(root, "ModelVariables")
     for v in variables:

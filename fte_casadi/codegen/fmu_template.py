@@ -235,7 +235,8 @@ typedef struct {
   fmi2CallbackFreeMemory free_memory;
 } instance;
 
-/* The logger treats the message as a printf format: format here, then double every '%'. */
+/* Errors are always logged (category logStatusError); OK-status messages only with debug logging on.
+ * The logger treats the message as a printf format: format here, then double every '%'. */
 static void log_msg(const instance *c, fmi2Status status, const char *fmt, ...) {
   char buf[600], safe[1200];
   size_t i, k = 0;
@@ -250,7 +251,7 @@ static void log_msg(const instance *c, fmi2Status status, const char *fmt, ...) 
     safe[k++] = buf[i];
   }
   safe[k] = '\\0';
-  c->logger(c->env, c->name, status, status == fmi2OK ? "logAll" : "logStatusError", safe);
+  c->logger(c->env, c->name, status, "logStatusError", safe);
 }
 
 static int is_finite(fmi2Real v) { return v - v == 0; } /* NaN and +-inf fail (IEEE) */
