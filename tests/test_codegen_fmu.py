@@ -401,3 +401,21 @@ def test_fmpy_rebuilds_the_binary_from_the_sources(fmus, tmp_path):
                             input=signal, output=names[2:])  # fmt: skip
     got = np.column_stack([res[n] for n in names[2:]])
     assert _worst(got, np.vstack([ref[:1], ref[:200]]), _groups(d)) <= C_DOUBLE
+
+
+@needs_cc
+def test_the_fmpy_snippet_of_the_docs_runs(fmus, tmp_path, monkeypatch):
+    """docs/fmu.md's Python block, run as written (from a directory holding gen/ and the measurements)."""
+    import re
+
+    block = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "fmu.md").read_text(), re.S)
+    assert len(block) == 1
+    (tmp_path / "gen").mkdir()
+    shutil.copy(fmus["manipulator"][1], tmp_path / "gen" / "manipulator.fmu")
+    (tmp_path / "examples" / "embedded").mkdir(parents=True)
+    shutil.copy(ROOT / "examples/embedded/measurements.txt", tmp_path / "examples/embedded")
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(block[0], "docs/fmu.md", "exec"), scope)
+    assert len(scope["res"]) == len(scope["y"]) + 1
+    assert -1.2 < scope["res"]["fa_hat"][-1] < -0.8  # "about -1.0": the 40 % actuator loss of the recording
