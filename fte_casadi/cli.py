@@ -392,14 +392,18 @@ def _design_or_plant(target: str, progress: bool = True):
 )  # fmt: skip
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
+@click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
 @_guard
-def codegen(target, out_dir, ts, real, boundary_layer):
+def codegen(target, out_dir, ts, real, boundary_layer, fmu):
     """Generate the embedded C of the observer/controller step."""
     from .codegen import default_ts, generate_c
+    from .codegen.fmu import check_fmu_target, generate_fmu
 
     _positive("ts", ts)
     _positive("boundary-layer", boundary_layer)
     d = _design_or_plant(target)
+    if fmu:
+        check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
     files = generate_c(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
     step = ts if ts is not None else default_ts(d)
     how = "--ts" if ts is not None else "the design's sample time, the step fte simulate runs"
@@ -408,6 +412,9 @@ def codegen(target, out_dir, ts, real, boundary_layer):
     click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
     click.echo(f"sample time Ts = {step:g} ({how})")
     click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")
+    if fmu:
+        path = generate_fmu(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
+        click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {step:g} (docs/fmu.md)")
 
 
 # -- simulate -----------------------------------------------------------------------------
