@@ -595,7 +595,9 @@ def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
 
 # -- reproduce ----------------------------------------------------------------------------
 @main.command()
-@click.argument("which", type=click.Choice(["manipulator", "three-tank", "quadruple-tank", "all"]), default="all")
+@click.argument(
+    "which", type=click.Choice(["manipulator", "three-tank", "quadruple-tank", "all"]), default="all"
+)
 @click.option("--out", "out_dir", default="fte-report", show_default=True, type=click.Path(file_okay=False))
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--paths", type=int, help="At least this many paths (default: the paper's counts).")

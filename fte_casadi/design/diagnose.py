@@ -31,7 +31,9 @@ __all__ = ["gamma_min", "sigma_max", "nice_ceil", "nice_floor", "FrontierPoint"]
 def nice_ceil(v: float) -> float:
     """``v`` rounded up to two significant digits."""
     e = math.floor(math.log10(v)) - 1
-    return float(f"{math.ceil(v / 10.0**e * (1 - 1e-12))}e{e}")  # an exact decimal: 2.4, not 2.4000000000000004
+    return float(
+        f"{math.ceil(v / 10.0**e * (1 - 1e-12))}e{e}"
+    )  # an exact decimal: 2.4, not 2.4000000000000004
 
 
 def nice_floor(v: float) -> float:
