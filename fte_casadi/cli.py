@@ -619,46 +619,11 @@ def bench(as_json, paths):
     """Speed of design, Monte Carlo and the C step, against baselines run in the same process."""
     if paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    from .bench import run_all
+    from .checkout import load_benchmarks
 
-    out = run_all(paths, log=lambda msg: click.echo(msg, err=True))
+    benchmarks = load_benchmarks()
+    out = benchmarks.run_all(paths, log=lambda msg: click.echo(msg, err=True))
     if as_json:
         click.echo(json.dumps(out, indent=1, default=str))
         return
-    click.echo(
-        "design (conditioned, wall time incl. certificates; baseline: the 0.1 formulation, same process):"
-    )
-    for name, row in out["design"].items():
-        cells = []
-        for key in ("CLARABEL", "SCS", "legacy_0.1"):
-            v = row.get(key, {})
-            cells.append(f"{key}: " + (f"{v['wall_s']:.3f} s" if "wall_s" in v else "failed"))
-        extra = f", {row['speedup_vs_legacy']:.1f}x faster than 0.1" if "speedup_vs_legacy" in row else ""
-        if "max_rel_diff_clarabel_scs" in row:
-            extra += f", Clarabel and SCS designs equal to {row['max_rel_diff_clarabel_scs']:.1e}"
-        click.echo(f"  {name:12s} " + ", ".join(cells) + extra)
-    mc = out["monte_carlo"]
-    e, pp = mc["engine"], mc["per_path_engine"]
-    click.echo(
-        f"Monte Carlo ({mc['scenario']}): {e['paths']} paths in {e['wall_s']:.2f} s "
-        f"({e['path_steps_per_s'] / 1e6:.2f} M path-steps/s; first call incl. compile {e['first_call_wall_s']:.2f} s)\n"
-        f"  per-path engine of 0.1: {pp['wall_s']:.2f} s ({pp['path_steps_per_s'] / 1e6:.2f} M path-steps/s) -> "
-        f"vectorised engine is {mc['speedup_vs_per_path']:.1f}x faster\n"
-        f"  {e['flops_per_path_step']} flops per path-step: {100 * e['fraction_of_peak']:.1f} % of the assumed peak "
-        f"({e['peak_assumed']['cores']} cores x {e['peak_assumed']['ghz']:.2f} GHz x {e['peak_assumed']['doubles_per_vector']} "
-        f"doubles x 2 FMA units x 2)\n"
-        f"  one thread: {e['one_thread']['ns_per_path_step']:.1f} ns per path-step, "
-        f"{e['one_thread']['ns_per_path_step_without_libm']:.1f} ns without its "
-        f"{e['operations_per_path_step']['libm_calls']} scalar C library calls: "
-        f"{100 * e['one_thread']['libm_share']:.0f} % of the time is in those calls\n"
-        f"  sdeint itoEuler: {mc['sdeint_itoEuler']['path_steps_per_s']:.3g} path-steps/s -> engine is {mc['speedup_vs_sdeint']:.0f}x faster\n"
-        f"  plain Python loop: {mc['python_loop']['path_steps_per_s']:.3g} path-steps/s -> engine is "
-        f"{mc['speedup_vs_python_loop']:.0f}x faster (same trajectories to {mc['max_abs_diff_engine_vs_sdeint']:.1g})"
-    )
-    click.echo("generated C step (double, -O2):")
-    for name, b in out["c_step"].items():
-        click.echo(
-            f"  {name:12s} {b.get('c_ns') or float('nan'):.1f} ns/step vs hand-written {b.get('hand_ns') or float('nan'):.1f} ns "
-            f"(ratio {b.get('ratio') or float('nan'):.2f}); through CasADi from Python {b['casadi_us']:.1f} us; "
-            f"state {b['state_bytes']} B, constants {b['const_bytes']} B"
-        )
+    click.echo("\n".join(benchmarks.summary_lines(out)))

@@ -6,12 +6,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from benchmarks.perpath import monte_carlo
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.plants import SCENARIOS
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate
 from fte_casadi.sim import rng as frng
 from fte_casadi.sim.engine import auto_chunk, closed_loop_sample
-from fte_casadi.sim.perpath import monte_carlo
 from fte_casadi.sim.scenario import fault_schedule
 
 GBM_A, GBM_B = 0.5, 0.8  # dX = a X dt + b X dW

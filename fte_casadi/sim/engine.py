@@ -18,7 +18,8 @@ counter-based generator of :mod:`.rng`, so path i's noise depends only on (seed,
 bounded: each path keeps its state and its metric sums; full trajectories are recorded only for
 the example paths the figures use (all paths with ``record_all``). Chunks of paths run on threads
 or, with ``scheduler``, on the workers of a dask.distributed cluster (:mod:`.cluster`); the metrics
-are the same either way. The per-path engine of fte_casadi 0.1 is :mod:`.perpath`.
+are the same either way. The per-path engine it is tested against lives in the repository's
+benchmarks/perpath.py, not in the package.
 """
 
 from __future__ import annotations

@@ -1,10 +1,11 @@
-"""The design formulation of fte_casadi 0.1, kept only as the baseline of ``fte bench``.
+"""The 0.1 design: the design formulation of fte_casadi 0.1, kept only as the baseline of ``fte bench``.
 
 It was replaced by :mod:`fte_casadi.design.conditioned` (issue #9): the formulation below is not
 unique (N, Q_i, Y_j are free at its optimum, so different machines land on different points),
 needs about 30 solves (a grid over scales of Pbar x decay rates x a bisection on theta) and
-takes seconds. ``fte bench`` runs :func:`legacy_design` beside today's design in the same process
-so that the speed-up it reports is measured, not remembered. Nothing else uses this module.
+takes seconds. ``fte bench`` runs :func:`design_01` beside today's design in the same process
+so that the speed-up it reports is measured, not remembered (the numbers measured are also kept in
+``benchmarks/RECORDED.md``). Nothing else uses this module; it is not part of the package.
 
 Corrections of the printed LMIs are listed in :mod:`fte_casadi.design.certify`.
 
@@ -58,11 +59,11 @@ from dataclasses import dataclass, field
 import cvxpy as cp
 import numpy as np
 
-from ..errors import InfeasibleDesignError
-from .augment import Augmented
-from .certify import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64, ts_max
+from fte_casadi.design.augment import Augmented
+from fte_casadi.design.certify import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64, ts_max
+from fte_casadi.errors import InfeasibleDesignError
 
-__all__ = ["legacy_design"]
+__all__ = ["design_01"]
 
 #: solver settings, passed explicitly to every solve
 SOLVER_SETTINGS = {
@@ -490,11 +491,11 @@ def _default_alpha_step5(ts, aug, params, P, K, T, solver):
     return best
 
 
-def legacy_design(ts, solver: str = "CLARABEL") -> dict:
+def design_01(ts, solver: str = "CLARABEL") -> dict:
     """The 0.1 conditioned design of a T-S model with the plant's default parameters, and its certificate."""
-    from .augment import augment
-    from .certify import certificate
-    from .uio import uio_gain
+    from fte_casadi.design.augment import augment
+    from fte_casadi.design.certify import certificate
+    from fte_casadi.design.uio import uio_gain
 
     defaults = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}
     params = {k: float(ts.plant.design_defaults.get(k, v)) for k, v in defaults.items()}
