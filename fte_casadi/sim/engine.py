@@ -24,6 +24,8 @@ benchmarks/perpath.py, not in the package.
 
 from __future__ import annotations
 
+import functools
+import json
 import math
 import os
 import sys
@@ -38,9 +40,12 @@ from ..design.record import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
 from ..step import step_function
+from .cluster import plant_from_bytes, run_on_cluster
 from .reduce import finalize, increments, masks
 from .result import RUNS, RunData, SimulationResult
 from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, UniformNoise, fault_schedule
+from .vector import CHUNK as CHUNK
+from .vector import auto_chunk as auto_chunk
 
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
@@ -50,8 +55,6 @@ __all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", 
 
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
-#: at most this many paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
-CHUNK = 256
 #: the factors a sweep may vary, and their defaults
 SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0}
 
@@ -364,14 +367,6 @@ class Prepared:
         return state
 
 
-def auto_chunk(paths: int, threads: int) -> int:
-    """Paths per chunk: about four chunks per thread (load balance), whole lane vectors, at most CHUNK."""
-    from .vector import LANES
-
-    per = math.ceil(paths / (4 * max(int(threads), 1)))
-    return max(LANES, min(CHUNK, LANES * math.ceil(per / LANES)))
-
-
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
     """Paths ``path0 .. path0 + count - 1``: ``(ACC, DIV, REC)`` (REC only when ``every > 0``)."""
     paths = np.arange(path0, path0 + count)
@@ -379,6 +374,24 @@ def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0)
     _, acc, div, rec = prep.engine.run(path0, S0, seed, prep.SH, prep.sqdt, prep.damp,
                                        prep.scenario.divergence_bound, every)  # fmt: skip
     return acc, div, rec
+
+
+@functools.lru_cache(maxsize=8)
+def _prepared(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str):
+    """The engine of a run, built once per worker process and run description."""
+    design = Design.from_dict(json.loads(design_json), source="design sent to a worker")
+    plant = plant_from_bytes(plant_blob)
+    scenario = Scenario.from_dict(json.loads(scenario_json))
+    nsteps = int(round(scenario.T / dt))
+    return Prepared(design, plant, scenario, dt, nsteps, json.loads(scales_json))
+
+
+def chunk_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str, seed: int,
+               path0: int, count: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """One chunk on a worker: the per-path metric sums and divergence marks of ``path0 .. path0 + count - 1``."""
+    prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json)
+    acc, div, _ = run_paths(prep, path0, count, seed)
+    return acc, div
 
 
 def simulate(
@@ -470,9 +483,7 @@ def simulate(
     )
     try:
         if scheduler is not None:
-            from .cluster import run_on_cluster
-
-            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk,
+            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk, chunk_task,
                                                on_done=lambda k: bar.update(k)):  # fmt: skip
                 acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
         else:

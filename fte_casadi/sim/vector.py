@@ -43,10 +43,21 @@ from ..errors import SimulationError
 from . import rng
 from .compile import cache_dir
 
-__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS"]
+__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS", "CHUNK",
+           "auto_chunk"]  # fmt: skip
 
 #: paths per lane vector (8 doubles: one AVX-512 register, two AVX2 ones)
 LANES = 8
+#: at most this many paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
+CHUNK = 256
+
+
+def auto_chunk(paths: int, threads: int) -> int:
+    """Paths per chunk: about four chunks per thread (load balance), whole lane vectors, at most CHUNK."""
+    per = math.ceil(paths / (4 * max(int(threads), 1)))
+    return max(LANES, min(CHUNK, LANES * math.ceil(per / LANES)))
+
+
 #: compiler flags: IEEE semantics kept (no -ffast-math); -ffp-contract=off: no fused multiply-adds, so
 #: every operation rounds as in CasADi's own C and the numbers do not depend on whether a CPU has FMA
 FLAGS = ("-O3", "-fno-trapping-math", "-fno-math-errno", "-ffp-contract=off", "-march=native", "-shared", "-fPIC")  # fmt: skip
