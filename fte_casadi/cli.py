@@ -17,7 +17,7 @@ import click
 import numpy as np
 from tqdm import tqdm
 
-from .errors import FteError, InfeasibleDesignError, ParameterError
+from .errors import FteError, InfeasibleDesignError, ParameterError, SolverFailedError
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -71,7 +71,7 @@ def _guard(fn):
         debug = click.get_current_context().find_root().params.get("debug", False)
         try:
             return fn(*args, **kwargs)
-        except InfeasibleDesignError as exc:
+        except (InfeasibleDesignError, SolverFailedError) as exc:
             if debug:
                 raise
             _fail(str(exc), EXIT_FAILED)

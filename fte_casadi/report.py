@@ -22,7 +22,7 @@ import numpy as np
 
 from .design import design as run_design
 from .design.record import atomic_write_text
-from .errors import InfeasibleDesignError
+from .errors import InfeasibleDesignError, SolverFailedError
 from .plants import BUILTIN, SCENARIOS
 from .plants.paper import PRINTED
 from .ts import derive
@@ -252,7 +252,7 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
             designs[variant] = run_design(
                 ts, variant=variant, plant_spec=name, sample_time=SCENARIOS[name]().dt
             )
-        except InfeasibleDesignError as exc:
+        except (InfeasibleDesignError, SolverFailedError) as exc:
             designs[variant] = " ".join(str(exc).split())
             log(f"[{name}]   variant {variant} failed: {designs[variant][:160]}")
     d = designs["conditioned"]

@@ -50,12 +50,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InfeasibleDesignError
+from ..errors import CentringError, InfeasibleDesignError
+from ..errors import SolverFailedError as SolverFailedError
 from .augment import Augmented
 from .certify import diffusion_coupling, lmi45, lmi46, lyapunov_ts_max, sliding_mismatch, ts_max
 from .sdp import (
     AffineLMI,
-    CentringError,
     ConicProblem,
     Layout,
     MarginLMI,
@@ -83,10 +83,6 @@ TS_FACTOR = 2.0
 ALPHA_RTOL = 0.1
 #: phase 1 bounds the gains by rho_i <= RHO_CAP kappa max ||T Abar_i|| / sigma_min(Cbar)^2 (never active in a design)
 RHO_CAP = 1e3
-
-
-class SolverFailedError(InfeasibleDesignError):
-    """The SDP solver failed numerically (twice: as posed and on rescaled data); not an infeasibility."""
 
 
 @dataclass
@@ -198,7 +194,7 @@ def _start(res: SolveResult, layout: Layout, name: str, soft, hard, note: list) 
     return out
 
 
-def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError:
+def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError | SolverFailedError:
     if res.infeasible:
         return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
     other = "SCS" if solver == "CLARABEL" else "CLARABEL"

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from ..errors import CentringError as CentringError
+
 __all__ = [
     "Var",
     "Layout",
@@ -283,10 +285,6 @@ class ConicProblem:
                 res2.status, res2.v, res.seconds + res2.seconds, True, res.warned + res2.warned
             )
         return res
-
-
-class CentringError(ArithmeticError):
-    """The Newton centring could not start (no strictly feasible point) or did not converge."""
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..errors import SimulationError
+from ..errors import UnsupportedOperation
 from . import rng
 from .compile import cache_dir
 
@@ -61,10 +61,6 @@ def auto_chunk(paths: int, threads: int) -> int:
 #: compiler flags: IEEE semantics kept (no -ffast-math); -ffp-contract=off: no fused multiply-adds, so
 #: every operation rounds as in CasADi's own C and the numbers do not depend on whether a CPU has FMA
 FLAGS = ("-O3", "-fno-trapping-math", "-fno-math-errno", "-ffp-contract=off", "-march=native", "-shared", "-fPIC")  # fmt: skip
-
-
-class UnsupportedOperation(SimulationError):
-    """The Function cannot be emitted (an operation the emitter does not know), or not compiled."""
 
 
 #: vector expressions of CasADi's SX operations; ``{a}``, ``{b}`` the operands (``fte_vd`` values)
