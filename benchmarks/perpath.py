@@ -29,9 +29,8 @@ from tqdm import tqdm
 from fte_casadi.design.record import Design
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.model import Plant
-from fte_casadi.sim.compile import cache_dir
 from fte_casadi.sim.engine import (
-    Layout,
+    PathLayout,
     _check_settings,
     closed_loop_sample,
     plant_schedule,
@@ -40,6 +39,7 @@ from fte_casadi.sim.engine import (
 )
 from fte_casadi.sim.result import RUNS, SimulationResult
 from fte_casadi.sim.scenario import Scenario, Sinusoid, UniformNoise
+from fte_casadi.toolchain import cache_dir, find_compiler
 
 __all__ = ["simulate_per_path", "monte_carlo"]
 
@@ -49,16 +49,9 @@ _RECORD_BUDGET = 500_000
 _RECORD_PER_PATH = 20_001
 
 
-def _compiler() -> str | None:
-    for cc in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if cc and shutil.which(cc):
-            return cc
-    return None
-
-
 def compiled(fn: ca.Function, *, flags: tuple[str, ...] = ("-O2",)) -> tuple[ca.Function, bool]:
     """Return ``(function, is_compiled)``: ``fn`` as C in a shared library, or ``fn`` itself."""
-    cc = _compiler()
+    cc = find_compiler()
     if cc is None:
         warnings.warn(
             "no C compiler found (cc, gcc, clang or $CC): the Monte Carlo runs interpreted, "
@@ -324,7 +317,7 @@ def monte_carlo(
     return rec_all[:, :nrec, :], is_compiled
 
 
-def _check_divergence(rec: np.ndarray, lay: Layout, bound: float, t: np.ndarray, plant: str) -> None:
+def _check_divergence(rec: np.ndarray, lay: PathLayout, bound: float, t: np.ndarray, plant: str) -> None:
     """Stop with a message naming the first diverging path and time (rec: (paths, samples, nrec))."""
     bad_run = []
     for r in range(3):

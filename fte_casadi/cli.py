@@ -413,9 +413,8 @@ def _fmt_list(v) -> str:
     return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
 
 
-def _window_lines(m: dict, inputs) -> list[str]:
-    """Per fault window: its two numbers; warnings where tolerant control is worse than none (ratio > 1)
-    and where an input sits at a limit for more than 5 % of the window."""
+def _window_lines(m: dict) -> list[str]:
+    """Per fault window: its fault relative RMS error and FTC deviation ratio."""
     out = []
     for w in m.get("windows", []):
         out.append(
@@ -427,18 +426,22 @@ def _window_lines(m: dict, inputs) -> list[str]:
 
 
 def _warnings(m: dict, inputs, faults=()) -> list[str]:
+    """Where tolerant control is worse than none, a fault estimate raises false alarms, or an input
+    sits at a limit (the thresholds of :mod:`fte_casadi.sim.metrics`)."""
+    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+
     out = []
     for name, v in zip(faults, m.get("false_alarm_rel_rms") or ()):
-        if v is not None and v > 1:
+        if v is not None and v > FALSE_ALARM:
             out.append(f"warning: the estimate of {name} outside its fault windows is as large as the fault itself "
-                       f"(relative RMS {v:.3g} > 1): false alarms, e.g. cross-talk from another fault; see the figures")  # fmt: skip
+                       f"(relative RMS {v:.3g} > {FALSE_ALARM:g}): false alarms, e.g. cross-talk from another fault; see the figures")  # fmt: skip
     for w in m.get("windows", []):
         r = w.get("ftc_deviation_ratio")
-        if r is not None and r > 1:
+        if r is not None and r > WORSE_THAN_NONE:
             out.append(f"warning: in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) tolerant control makes "
-                       f"the outputs worse than none (FTC deviation ratio {r:.3g} > 1)")  # fmt: skip
+                       f"the outputs worse than none (FTC deviation ratio {r:.3g} > {WORSE_THAN_NONE:g})")  # fmt: skip
         for i, frac in enumerate(w.get("input_saturation", [])):
-            if frac > 0.05:
+            if frac > SATURATED:
                 out.append(f"warning: input {inputs[i]} is at a limit for {100 * frac:.0f} % of the window of "
                            f"{w['fault']} [{w['start']:g}, {w['stop']:g}): tolerance is that of a saturated actuator")  # fmt: skip
     return out
@@ -513,7 +516,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
             f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}\n"
             f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}"
         )
-        for line in _window_lines(m, plant.input_names):
+        for line in _window_lines(m):
             click.echo(line)
         for note in getattr(res, "notes", ()) or ():
             click.echo(f"  note: {note}")

@@ -178,13 +178,17 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
 
 def _windows_section(m: dict, plant) -> list[str]:
     """One row per fault window; a window where tolerant control is worse than none is marked."""
+    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+
     out = ["Per fault window (FTC run, all paths pooled; **bold**: tolerant control worse than none there):", "",
            f"| fault | window | fault relative RMS error | FTC deviation ratio | inputs at a limit ({', '.join(plant.input_names)}) |",
            "|---|---|---|---|---|"]  # fmt: skip
     for w in m["windows"]:
         r = w["ftc_deviation_ratio"]
-        rs = _g(r) if r is None or r <= 1 else f"**{r:.3g} (worse than none)**"
-        sat = ", ".join(_g(v) + (" (> 5 %)" if v > 0.05 else "") for v in w["input_saturation"])
+        rs = _g(r) if r is None or r <= WORSE_THAN_NONE else f"**{r:.3g} (worse than none)**"
+        sat = ", ".join(
+            _g(v) + (f" (> {100 * SATURATED:g} %)" if v > SATURATED else "") for v in w["input_saturation"]
+        )
         out.append(
             f"| {w['fault']} | [{w['start']:g}, {w['stop']:g}) | {_g(w['fault_rel_rms_error'])} | {rs} | {sat} |"
         )
@@ -192,7 +196,7 @@ def _windows_section(m: dict, plant) -> list[str]:
     if fa:
         out += ["", "Each fault's estimate outside its own windows (t >= 1 s), where the fault is zero, as RMS relative to "
                 "the fault's RMS in its windows (false alarms: cross-talk from the other faults, noise, the decay after "
-                "a window): " + ", ".join(f"{nm} {_g(v)}" + (" (**as large as the fault**)" if v is not None and v > 1 else "")
+                "a window): " + ", ".join(f"{nm} {_g(v)}" + (" (**as large as the fault**)" if v is not None and v > FALSE_ALARM else "")
                                           for nm, v in zip(plant.fault_names, fa)) + "."]  # fmt: skip
     return out + [""]
 

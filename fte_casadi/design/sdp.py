@@ -32,6 +32,7 @@ import cvxpy as cp
 import numpy as np
 
 from ..errors import CentringError as CentringError
+from .linalg import sym as _sym
 
 __all__ = [
     "Var",
@@ -42,6 +43,7 @@ __all__ = [
     "margin_lmi",
     "ConicProblem",
     "SolveResult",
+    "SOLVED",
     "Centred",
     "CentringError",
     "centre",
@@ -100,10 +102,6 @@ class Layout:
     def index(self, name: str) -> slice:
         k = [v.name for v in self.vars].index(name)
         return slice(int(self.offsets[k]), int(self.offsets[k + 1]))
-
-
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + M.T)
 
 
 @dataclass(frozen=True)
@@ -195,6 +193,10 @@ def margin_lmi(
     return MarginLMI(base, unit)
 
 
+#: the solver statuses that come with a point (which the design then checks in numpy)
+SOLVED = ("optimal", "optimal_inaccurate")
+
+
 @dataclass(frozen=True)
 class SolveResult:
     status: str  # cvxpy's status, or "solver_error (...)"
@@ -214,9 +216,7 @@ class SolveResult:
     @property
     def failed(self) -> bool:
         """Neither a point nor a certificate of infeasibility: a numerical failure of the solver."""
-        return not self.infeasible and (
-            self.v is None or self.status not in ("optimal", "optimal_inaccurate")
-        )
+        return not self.infeasible and (self.v is None or self.status not in SOLVED)
 
 
 class ConicProblem:

@@ -39,6 +39,7 @@ from tqdm import tqdm
 from ..design.record import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
+from ..rounding import series_floor
 from ..step import step_function
 from .cluster import plant_from_bytes, run_on_cluster
 from .reduce import finalize, increments, masks
@@ -50,7 +51,7 @@ from .vector import auto_chunk as auto_chunk
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
 
-__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_step", "SCALES",
+__all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_step", "SCALES",
            "auto_chunk"]  # fmt: skip
 
 #: at most about this many recorded samples per example path
@@ -59,7 +60,7 @@ _RECORD_PER_PATH = 20_001
 SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0}
 
 
-class Layout:
+class PathLayout:
     """Sizes and offsets of the closed-loop state and record of one path."""
 
     def __init__(self, n: int, nbar: int, lf: int, m: int, p: int, ld: int):
@@ -86,14 +87,14 @@ class Layout:
 
 def closed_loop_sample(
     design: Design, plant: Plant, dt: float, sched: FaultSchedule
-) -> tuple[ca.Function, Layout]:
+) -> tuple[ca.Function, PathLayout]:
     """``(state, w, fp) -> (state_next, record)``: one sample of all three runs for one path.
 
     ``w = [dW; d]``, ``fp`` the fault coefficients of this sample (:meth:`FaultSchedule.stacked`).
     """
     n, m, p, lf, ld = plant.n, plant.m, plant.p, plant.lf, plant.ld
     nbar = int(design.dims["nbar"])
-    lay = Layout(n, nbar, lf, m, p, ld)
+    lay = PathLayout(n, nbar, lf, m, p, ld)
     drift = plant.drift_function()
     diff = plant.diffusion_function()
     steps = {
@@ -170,15 +171,6 @@ def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, see
         )
 
 
-def _nice_below(v: float) -> float:
-    """Largest 1, 2 or 5 times a power of ten not above ``v``."""
-    e = math.floor(math.log10(v))
-    for mant in (5.0, 2.0, 1.0):
-        if mant * 10.0**e <= v:
-            return mant * 10.0**e
-    return 10.0 ** (e - 1) * 5.0
-
-
 def _lm(design: Design, key: str) -> np.ndarray:
     return np.asarray(design.local_models[0][key], dtype=float)
 
@@ -222,9 +214,9 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
     if dt is None:
         dt = design_step(design, scenario)
         if dt > ts_max:
-            new = _nice_below(ts_max / 2)
+            new = series_floor(ts_max / 2)
             while abs(scenario.T / new - round(scenario.T / new)) > 1e-9 * scenario.T / new:
-                new = _nice_below(new * 0.999)
+                new = series_floor(new * 0.999)
             notes.append(
                 f"the design's sample time {dt:g} exceeds its ts_max = {ts_max:.4g}; using dt = {new:g}"
             )

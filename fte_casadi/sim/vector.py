@@ -40,8 +40,8 @@ import casadi as ca
 import numpy as np
 
 from ..errors import UnsupportedOperation
+from ..toolchain import cache_dir, find_compiler
 from . import rng
-from .compile import cache_dir
 
 __all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS", "CHUNK",
            "auto_chunk"]  # fmt: skip
@@ -286,13 +286,6 @@ def _cpu_tag() -> str:
     return platform.machine() + platform.processor() + flags
 
 
-def _compiler() -> str | None:
-    for cc in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if cc and shutil.which(cc):
-            return cc
-    return None
-
-
 class VectorEngine:
     """The compiled lane engine of one closed-loop sample Function (compiled once, cached on disk).
 
@@ -321,7 +314,7 @@ class VectorEngine:
         src = emit(F, x_slots, name, casadi_c=casadi_c)
         if source_filter is not None:  # the benchmark's anatomy: the same engine with parts left out
             src = source_filter(src)
-        cc = _compiler()
+        cc = find_compiler()
         if cc is None:
             raise UnsupportedOperation("no C compiler found (cc, gcc, clang or $CC)")
         key = hashlib.sha256((src + cc + " ".join(FLAGS) + _cpu_tag()).encode()).hexdigest()[:20]
