@@ -94,3 +94,29 @@ def test_the_wheel_holds_no_benchmarks_nor_history():
     files = {p.name for p in (root / "fte_casadi").rglob("*.py")}
     assert not files & {"legacy.py", "perpath.py", "mc.py", "cstep.py"}
     assert not any("legacy" in p.read_text() for p in (root / "fte_casadi").rglob("*.py"))
+
+
+def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeypatch, tmp_path):
+    """`fte reproduce` from a wheel: the C table keeps the sizes and says where the timings come from."""
+    import pytest
+
+    from fte_casadi import checkout
+    from fte_casadi.codegen import find_compiler
+    from fte_casadi.codegen.generate import memory_report
+    from fte_casadi.errors import MissingDependencyError
+    from fte_casadi.report import _c_section
+
+    if find_compiler() is None:
+        pytest.skip("no C compiler")
+
+    def missing():
+        raise MissingDependencyError("no benchmarks (test)")
+
+    monkeypatch.setattr(checkout, "load_benchmarks", missing)
+    d = real_designs["three-tank"]
+    lines, info = _c_section(d, tmp_path / "c", lambda s: None)
+    row = next(ln for ln in lines if ln.startswith("| n/a ns | n/a ns | n/a |"))
+    mem = memory_report(d, ts=info["ts"])
+    assert f"{mem['state_bytes']} B" in row and f"{mem['const_bytes']} B" in row
+    assert "(timings: run from a source checkout.)" in lines
+    assert info["max_diff"] < 1e-9 and info["bench"]["casadi_us"] is None
