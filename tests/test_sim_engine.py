@@ -228,7 +228,7 @@ def test_builtin_scenarios():
 
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_vectorised_engine_equals_the_per_path_engine(plants, real_designs, name):
-    """Issue #11: the same trajectories as today's per-path engine (compiled blocks mapped over paths)
+    """Issue #11: the same trajectories as the per-path engine (benchmarks/perpath.py: compiled blocks mapped over paths)
     when both get the same random numbers (the numpy twin of the generator the C draws from): bit for
     bit, since the lane engine rounds every operation as CasADi's C does (no FMA contraction)."""
     from fte_casadi.sim.engine import SCALES, Prepared, resolve_dt
