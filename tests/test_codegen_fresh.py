@@ -78,9 +78,17 @@ def test_a_margin_inside_the_roundoff_is_not_a_certificate():
     point = dict(X=d.X, K=list(d.K), P=d.P, T=d.T, Pbar=d.Pbar, Q=list(d.Q), N=d.N, theta=d.theta,
                  R=list(d.R), L1=list(d.L1))  # fmt: skip
     checks = certificate(aug, point, d.params)
-    eps = checks["lmi_roundoff"]["46"]
+    eps, beps = checks["lmi_roundoff"]["46"], checks["lmi_balanced_roundoff"]["46"]
     checks["lmi_max_eig"]["46"] = -0.5 * eps
+    checks["lmi_balanced_max_eig"]["46"] = -0.5 * beps
     bad = failures(checks)
     assert len(bad) == 1 and bad[0].startswith("LMI (46)") and "round-off" in bad[0]
     checks["lmi_max_eig"]["46"] = -2 * eps
     assert not failures(checks)
+    # a margin beyond the round-off of the balanced form D L D (same definiteness) certifies too
+    checks["lmi_max_eig"]["46"] = -0.5 * eps
+    checks["lmi_balanced_max_eig"]["46"] = -2 * beps
+    assert not failures(checks)
+    # without the balanced keys (a document written before them) the raw bound decides alone
+    del checks["lmi_balanced_max_eig"], checks["lmi_balanced_roundoff"]
+    assert failures(checks)

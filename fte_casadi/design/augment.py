@@ -13,11 +13,11 @@ Theorem 5 (Section 5) adds ``Gbar_i = [G_i; 0; 0]``, ``Gfbar_i = [Gf_i; 0; 0]`` 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Augmented", "augment", "pad_rows"]
+__all__ = ["Augmented", "augment", "pad_rows", "time_scale", "time_scaled"]
 
 
 def pad_rows(M: np.ndarray, lf: int) -> np.ndarray:
@@ -117,3 +117,37 @@ def _optional(lm, key: str, shape: tuple[int, int]) -> np.ndarray:
     if v.size == 0:
         return np.zeros((shape[0], 0))
     return v.reshape(shape[0], -1)
+
+
+def time_scale(aug: Augmented) -> float:
+    """The plant's characteristic time ``tau``: the power of two nearest ``1 / max_i ||A_i||_2``.
+
+    A power of two, so that multiplying data by it is exact; 1 when every A_i is zero.
+    """
+    rho = max(float(np.linalg.norm(A[: aug.n, : aug.n], 2)) for A in aug.Abar)
+    if not (rho > 0 and np.isfinite(rho)):
+        return 1.0
+    return float(2.0 ** round(-np.log2(rho)))
+
+
+def time_scaled(aug: Augmented, tau: float) -> Augmented:
+    """(8) in the time ``t' = t / tau``: drift and input matrices times ``tau``, diffusion times ``sqrt(tau)``.
+
+    With ``sigma' = tau^2 sigma`` and ``alpha' = tau alpha``, LMI (45) of the scaled data at
+    ``X' = tau X`` (the same gain K) is a congruence of (45) at ``X``, and (46) at
+    ``(P', Pbar', Q') = (P / tau, Pbar / tau, Q)`` a congruence of (46) at ``(P, Pbar, Q)``: the
+    same problem in numbers of order one for a plant whose rates are far from 1/s.
+    """
+    if tau == 1.0:
+        return aug
+    rt = float(np.sqrt(tau))
+    return replace(
+        aug,
+        Abar=tuple(tau * A for A in aug.Abar),
+        Bbar=tuple(tau * B for B in aug.Bbar),
+        Bdbar=tuple(tau * B for B in aug.Bdbar),
+        Wbar=tuple(rt * W for W in aug.Wbar),
+        Gbar=tuple(rt * G for G in aug.Gbar),
+        Gfbar=tuple(rt * G for G in aug.Gfbar),
+        Mbar=tuple(rt * M for M in aug.Mbar),
+    )

@@ -26,7 +26,7 @@ from .augment import Augmented
 from .linalg import sym as _sym
 
 __all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "sliding_mismatch", "diffusion_coupling", "certificate", "ts_max",
-           "lyapunov_ts_max", "discrete_certificate",
+           "lyapunov_ts_max", "discrete_certificate", "balanced",
            "block_sizes", "failures"]  # fmt: skip
 
 
@@ -165,6 +165,19 @@ def eig_roundoff(L: np.ndarray) -> float:
     return float(8 * L.shape[0] * np.finfo(float).eps * np.linalg.norm(L, 2)) if L.size else 0.0
 
 
+def balanced(L: np.ndarray) -> np.ndarray:
+    """``D L D`` with ``D = diag(|L_kk|^-1/2)`` (1 where ``L_kk = 0``): the same definiteness as ``L``.
+
+    An LMI whose blocks live on different scales (``-theta I`` with theta = 1e14 beside ``-I``, as in
+    (55) for a slow plant, whose Pbar is large in seconds) has a largest eigenvalue far below the
+    round-off bound of its largest entries although its sign is not in doubt; after this congruence
+    every diagonal entry is -1 or +1 and the round-off bound measures what matters.
+    """
+    d = np.abs(np.diag(L))
+    D = np.where(d > 0, 1.0 / np.sqrt(np.where(d > 0, d, 1.0)), 1.0)
+    return (L * D).T * D
+
+
 def _block_max(L: np.ndarray, sizes) -> list[float]:
     out, k = [], 0
     for b in sizes:
@@ -252,9 +265,13 @@ def certificate(aug, d: dict, params: dict) -> dict:
     lm = {"45": -np.inf, "46": -np.inf, "55": -np.inf, "64": -np.inf}
     blocks = {k: [-np.inf] * len(v) for k, v in sizes.items()}
     roundoff = dict.fromkeys(lm, 0.0)
+    lm_bal, roundoff_bal = dict(lm), dict(roundoff)
     for key, L in lmi_matrices(aug, d, params):
         lm[key] = max(lm[key], _maxeig(L))
         roundoff[key] = max(roundoff[key], eig_roundoff(L))
+        Lb = balanced(L)
+        lm_bal[key] = max(lm_bal[key], _maxeig(Lb))
+        roundoff_bal[key] = max(roundoff_bal[key], eig_roundoff(Lb))
         blocks[key] = [max(a, b) for a, b in zip(blocks[key], _block_max(L, sizes[key]))]
     r = aug.r
     cl = max(float(np.max(np.linalg.eigvals(aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ K[j]).real))
@@ -266,6 +283,8 @@ def certificate(aug, d: dict, params: dict) -> dict:
         "lmi_max_eig": dict(lm),
         "lmi_block_max_eig": blocks,
         "lmi_roundoff": roundoff,
+        "lmi_balanced_max_eig": lm_bal,
+        "lmi_balanced_roundoff": roundoff_bal,
         "X_min_eig": float(ev_X[0]),
         "Pbar_min_eig": float(ev_P[0]),
         "R_max_real_eig": float(max(np.max(np.linalg.eigvals(Ri).real) for Ri in R)),
@@ -281,6 +300,8 @@ def certificate(aug, d: dict, params: dict) -> dict:
         for a, b in (("45", "78"), ("46", "79"), ("55", "80"), ("64", "81")):
             checks["lmi_max_eig"][b] = lm[a]
             checks["lmi_roundoff"][b] = roundoff[a]
+            checks["lmi_balanced_max_eig"][b] = lm_bal[a]
+            checks["lmi_balanced_roundoff"][b] = roundoff_bal[a]
     else:
         checks["theorem"] = 3
     return checks
@@ -293,12 +314,20 @@ def failures(checks: dict) -> list[str]:
     if checks.get("theorem") == 5:
         names = {"45": "LMI (78)", "46": "LMI (79)", "55": "LMI (80)", "64": "LMI (81)"}
     roundoff = checks.get("lmi_roundoff", {})
+    bal, bal_eps = checks.get("lmi_balanced_max_eig", {}), checks.get("lmi_balanced_roundoff", {})
     for k, v in names.items():
         lam, eps = checks["lmi_max_eig"][k], roundoff.get(k, 0.0)
+        # the sign is certain when the margin exceeds the round-off of the matrix as computed, or of its
+        # balanced form D L D (the same definiteness; see balanced())
+        beyond = lam < -eps or (k in bal and bal[k] < -bal_eps.get(k, 0.0))
+        if beyond:
+            continue
         if not lam < 0:
             bad.append(f"{v} (largest eigenvalue {lam:.3g})")
-        elif not lam < -eps:
-            bad.append(f"{v} (largest eigenvalue {lam:.3g} is within the round-off {eps:.3g} of its matrix)")
+        else:
+            bad.append(f"{v} (largest eigenvalue {lam:.3g} is within the round-off {eps:.3g} of its matrix"
+                       + (f", and {bal[k]:.3g} of its balanced form within {bal_eps.get(k, 0.0):.3g}" if k in bal else "")
+                       + ")")  # fmt: skip
     if not checks["X_min_eig"] > 0:
         bad.append(f"X > 0 (smallest eigenvalue {checks['X_min_eig']:.3g})")
     if not checks["Pbar_min_eig"] > 0:

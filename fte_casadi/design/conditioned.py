@@ -53,7 +53,7 @@ import numpy as np
 from ..errors import CentringError, InfeasibleDesignError
 from ..errors import SolverFailedError as SolverFailedError
 from ..rounding import nice_floor
-from .augment import Augmented
+from .augment import Augmented, time_scale, time_scaled
 from .certify import diffusion_coupling, lmi45, lmi46, lyapunov_ts_max, sliding_mismatch, ts_max
 from .sdp import (
     SOLVED,
@@ -225,6 +225,30 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
     return layout, lmis, c
 
 
+def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: Layout, Su: np.ndarray):
+    """The feasibility solve of step 3, posed in the time ``t / tau`` (:func:`~fte_casadi.design.augment.time_scaled`),
+    its point mapped back exactly to the unknowns of the unscaled problem (``X = X_tau / tau``, the same K).
+
+    Only the starting point comes from here: the centring that follows runs on the unscaled LMIs, and
+    Newton's method is invariant under such changes of variables, so the design does not depend on tau.
+    """
+    aug_s = time_scaled(aug, tau)
+    params_s = dict(params, sigma=params["sigma"] * tau**2)
+    Su_s = input_scaling(aug_s)
+    layout_s, family_s, _ = _step3_problem(aug_s, params_s, Su_s)
+    prob = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in family_s[:-1]])  # without the epigraph of t
+    res = prob.solve(solver)
+    if tau == 1.0 or res.v is None or not np.all(np.isfinite(res.v)):
+        return prob, res
+    u = layout_s.unpack(res.v)
+    try:
+        K = Su_s @ u["Y"] @ np.linalg.inv(u["X"])
+    except np.linalg.LinAlgError:
+        return prob, SolveResult(res.status, None, res.seconds, res.rescaled, res.warned)
+    v = layout.pack(X=u["X"], Y=np.linalg.solve(Su, K @ u["X"]), s=tau * u["s"], t=0.0)
+    return prob, SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+
+
 def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
 
@@ -233,8 +257,8 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     """
     Su = input_scaling(aug)
     layout, family, c = _step3_problem(aug, params, Su)
-    prob = ConicProblem(layout, [L.at(2 * MARGIN) for L in family[:-1]])  # without the epigraph of t
-    res = prob.solve(solver)
+    tau = time_scale(aug)
+    prob, res = _step3_conic(aug, params, solver, tau, layout, Su)
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
     lmis = [L.at(MARGIN) for L in family]
     repaired: list[str] = []
@@ -330,6 +354,7 @@ class _Step5:
 
     def __init__(self, aug, params, X, K, T, solver):
         self.aug, self.T, self.solver = aug, T, solver
+        self.params, self.X, self.K, self.tau = params, X, K, time_scale(aug)
         self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T)
         r = aug.r
         self.feas = ConicProblem(self.layout, [L.at(2 * MARGIN) for L in feas])
@@ -358,9 +383,28 @@ class _Step5:
     def seconds(self) -> float:
         return self.feas.seconds
 
+    def _conic(self) -> SolveResult:
+        """The feasibility solve of (46) with the normalisation at alpha = 0, posed in the time ``t / tau``
+        (:func:`~fte_casadi.design.augment.time_scaled`: ``Pbar' = Pbar / tau``, ``P' = P / tau``, the same
+        Q_i) and mapped back exactly to the unknowns of the unscaled problem. Only the starting point
+        comes from here; the centring runs on the unscaled LMIs."""
+        if self.tau == 1.0:
+            return self.feas.solve(self.solver, 0.0)
+        tau = self.tau
+        aug_s = time_scaled(self.aug, tau)
+        params_s = dict(self.params, sigma=self.params["sigma"] * tau**2)
+        layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T)
+        self.feas = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in feas_s])
+        res = self.feas.solve(self.solver, 0.0)
+        if res.v is None or not np.all(np.isfinite(res.v)):
+            return res
+        u = layout_s.unpack(res.v)
+        v = self.layout.pack(Pt=u["Pt"], s=u["s"] / tau, rho=u["rho"] / tau, tau=0.0)
+        return SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+
     def first(self) -> SolveResult:
         """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else."""
-        res = self.feas.solve(self.solver, 0.0)
+        res = self._conic()
         if res.v is not None and np.all(np.isfinite(res.v)):
             v = res.v.copy()
             ir = self.layout.index("rho")

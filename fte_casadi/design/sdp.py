@@ -99,6 +99,16 @@ class Layout:
                 out[var.name] = chunk.reshape(var.shape)
         return out
 
+    def pack(self, **values) -> np.ndarray:
+        """The vector holding ``values`` (the inverse of :meth:`unpack`; missing names are zero)."""
+        v = np.zeros(self.size)
+        for var, a in zip(self.vars, self.offsets[:-1]):
+            if var.name not in values:
+                continue
+            x = np.asarray(values[var.name], dtype=float)
+            v[a : a + var.size] = x[np.triu_indices(var.shape[0])] if var.symmetric else x.ravel()
+        return v
+
     def index(self, name: str) -> slice:
         k = [v.name for v in self.vars].index(name)
         return slice(int(self.offsets[k]), int(self.offsets[k + 1]))
