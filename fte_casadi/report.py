@@ -22,7 +22,7 @@ import numpy as np
 
 from .design import design as run_design
 from .design.record import atomic_write_text
-from .errors import InfeasibleDesignError
+from .errors import InfeasibleDesignError, SolverFailedError
 from .plants import BUILTIN, SCENARIOS
 from .plants.paper import PRINTED
 from .ts import derive
@@ -138,10 +138,11 @@ def _design_rows(designs: dict, printed: dict | None) -> list[str]:
 
 
 def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
-    from .bench.cstep import bench_c_step
+    from .checkout import load_benchmarks
     from .codegen import compile_shared, find_compiler, generate_c
     from .codegen.ctypes_step import CStep, closed_loop_compare
-    from .codegen.generate import default_ts
+    from .codegen.generate import default_ts, memory_report
+    from .errors import MissingDependencyError
 
     ts = default_ts(d)
     files = generate_c(d, folder, ts=ts)
@@ -166,7 +167,10 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
         err, _ = closed_loop_compare(d, CStep(lib, d), ts, steps, plant=BUILTIN[d.plant](), fault=fault)
     info["max_diff"] = max(err.values())
     info["steps"] = steps
-    b = bench_c_step(d, ts=ts, iters=100_000, reps=3)
+    try:  # the timings need the checkout's benchmarks/ (not in the wheel); the sizes do not
+        b = load_benchmarks().bench_c_step(d, ts=ts, iters=100_000, reps=3)
+    except MissingDependencyError:
+        b = {"casadi_us": None, **memory_report(d, ts=ts), "note": "timings: run from a source checkout"}
     info["bench"] = b
     out += [
         f"Compiled with `cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic`; over a {steps}-sample closed loop on the "
@@ -176,21 +180,27 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
         "| C step | hand-written C loop | ratio | CasADi from Python | state | constants | stack locals |",
         "|---|---|---|---|---|---|---|",
         f"| {_g(b.get('c_ns'), '.1f')} ns | {_g(b.get('hand_ns'), '.1f')} ns | {_g(b.get('ratio'), '.2f')} | "
-        f"{b['casadi_us']:.1f} us | {b['state_bytes']} B | {b['const_bytes']} B (+{b['sparsity_bytes']} B sparsity) | "
+        f"{_g(b['casadi_us'], '.1f')} us | {b['state_bytes']} B | {b['const_bytes']} B (+{b['sparsity_bytes']} B sparsity) | "
         f"{b['locals_bytes']} B |",
     ]
+    if b.get("note"):
+        out += ["", f"({b['note']}.)"]
     return out, info
 
 
 def _windows_section(m: dict, plant) -> list[str]:
     """One row per fault window; a window where tolerant control is worse than none is marked."""
+    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+
     out = ["Per fault window (FTC run, all paths pooled; **bold**: tolerant control worse than none there):", "",
            f"| fault | window | fault relative RMS error | FTC deviation ratio | inputs at a limit ({', '.join(plant.input_names)}) |",
            "|---|---|---|---|---|"]  # fmt: skip
     for w in m["windows"]:
         r = w["ftc_deviation_ratio"]
-        rs = _g(r) if r is None or r <= 1 else f"**{r:.3g} (worse than none)**"
-        sat = ", ".join(_g(v) + (" (> 5 %)" if v > 0.05 else "") for v in w["input_saturation"])
+        rs = _g(r) if r is None or r <= WORSE_THAN_NONE else f"**{r:.3g} (worse than none)**"
+        sat = ", ".join(
+            _g(v) + (f" (> {100 * SATURATED:g} %)" if v > SATURATED else "") for v in w["input_saturation"]
+        )
         out.append(
             f"| {w['fault']} | [{w['start']:g}, {w['stop']:g}) | {_g(w['fault_rel_rms_error'])} | {rs} | {sat} |"
         )
@@ -198,7 +208,7 @@ def _windows_section(m: dict, plant) -> list[str]:
     if fa:
         out += ["", "Each fault's estimate outside its own windows (t >= 1 s), where the fault is zero, as RMS relative to "
                 "the fault's RMS in its windows (false alarms: cross-talk from the other faults, noise, the decay after "
-                "a window): " + ", ".join(f"{nm} {_g(v)}" + (" (**as large as the fault**)" if v is not None and v > 1 else "")
+                "a window): " + ", ".join(f"{nm} {_g(v)}" + (" (**as large as the fault**)" if v is not None and v > FALSE_ALARM else "")
                                           for nm, v in zip(plant.fault_names, fa)) + "."]  # fmt: skip
     return out + [""]
 
@@ -258,7 +268,7 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
             designs[variant] = run_design(
                 ts, variant=variant, plant_spec=name, sample_time=SCENARIOS[name]().dt
             )
-        except InfeasibleDesignError as exc:
+        except (InfeasibleDesignError, SolverFailedError) as exc:
             designs[variant] = " ".join(str(exc).split())
             log(f"[{name}]   variant {variant} failed: {designs[variant][:160]}")
     d = designs["conditioned"]

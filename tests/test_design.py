@@ -390,3 +390,26 @@ def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeyp
     failing.add("SCS")
     with pytest.raises(conditioned.SolverFailedError, match="both solvers failed numerically.*CLARABEL.*SCS"):
         run_design(ts_models["manipulator"], solver="CLARABEL")
+
+
+def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(monkeypatch):
+    """Issue #20: SolverFailedError is no InfeasibleDesignError; `fte design` still fails with exit 1
+    and the one-paragraph message (no traceback, not 'internal error')."""
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import EXIT_FAILED, main
+    from fte_casadi.design import conditioned
+    from fte_casadi.errors import FteError, SolverFailedError
+
+    assert issubclass(SolverFailedError, FteError)
+    assert not issubclass(SolverFailedError, InfeasibleDesignError)
+    assert conditioned.SolverFailedError is SolverFailedError
+
+    def step3(aug, params, solver):
+        raise SolverFailedError(f"{solver} stalled (test)")
+
+    monkeypatch.setattr(conditioned, "step3", step3)
+    r = CliRunner().invoke(main, ["design", "manipulator"])
+    assert r.exit_code == EXIT_FAILED, r.output
+    assert "both solvers failed numerically" in r.output and "stalled (test)" in r.output
+    assert "internal error" not in r.output and "Traceback" not in r.output

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
+from ..rounding import series_floor
 from ..step import step_function
 from . import template
 
@@ -72,16 +73,6 @@ def output_files(plant: str) -> list[str]:
     return [f"fte_{nm}.h", f"fte_{nm}.c", f"fte_{nm}_casadi.h", f"fte_{nm}_casadi.c", "README.md"]
 
 
-def _nice_floor(v: float) -> float:
-    """Largest 1, 2 or 5 times a power of ten not above ``v``."""
-    e = math.floor(math.log10(v))
-    for mant in (5.0, 2.0, 1.0):
-        c = float(f"{mant}e{e}")
-        if c <= v * (1 + 1e-12):
-            return c
-    return float(f"1e{e - 1}")
-
-
 def _ts_max(design: Design) -> float:
     tsm = design.checks.get("ts_max") if isinstance(design.checks, dict) else None
     try:
@@ -108,7 +99,7 @@ def default_ts(design: Design) -> float:
     st = design.observer.get("sample_time") if isinstance(design.observer, dict) else None
     if st is not None and math.isfinite(float(st)) and 0 < float(st) < _ts_max(design):
         return float(st)
-    ts = _nice_floor(0.1 * _ts_max(design))
+    ts = series_floor(0.1 * _ts_max(design))
     return min(ts, BUILTIN_DT.get(design.plant, ts))
 
 

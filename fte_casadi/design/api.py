@@ -9,11 +9,12 @@ import casadi as ca
 import numpy as np
 
 from ..errors import FteError, InfeasibleDesignError, ParameterError
+from ..rounding import nice_ceil, nice_floor
 from ..ts import TSModel, scheduling_from_measurements
 from . import conditioned, paper
 from .augment import augment
 from .certify import certificate, discrete_certificate, failures
-from .diagnose import FrontierPoint, gamma_min, nice_ceil, nice_floor, sigma_max
+from .diagnose import FrontierPoint, gamma_min, sigma_max
 from .record import Design
 from .uio import check_assumptions, enforce, uio_gain
 

@@ -23,17 +23,14 @@ from __future__ import annotations
 import numpy as np
 
 from .augment import Augmented
+from .linalg import sym as _sym
 
 __all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "sliding_mismatch", "diffusion_coupling", "certificate", "ts_max",
            "lyapunov_ts_max", "discrete_certificate", "balanced",
            "block_sizes", "failures"]  # fmt: skip
 
 
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + M.T)
-
-
-def _parts(aug: Augmented, i: int, K: np.ndarray, Kf_unused=None):
+def _parts(aug: Augmented, i: int):
     n, lf = aug.n, aug.lf
     A = aug.Abar[i][:n, :n]
     B = aug.Bbar[i][:n]
@@ -53,7 +50,7 @@ def lmi45(
     ``const`` multiplies every term that involves neither X nor Y (see the module docstring).
     """
     n, p, ld = aug.n, aug.p, aug.ld
-    A, B, _, W, G, _, _ = _parts(aug, i, None)
+    A, B, _, W, G, _, _ = _parts(aug, i)
     C = aug.Cbar[:, :n]
     Bd = aug.Bdbar[i][:n]
     Psi = A @ X + X @ A.T + B @ Y + Y.T @ B.T + const * sigma * np.eye(n)
@@ -68,10 +65,10 @@ def lmi45(
     return _sym(L)
 
 
-def lmi46_terms(aug: Augmented, i: int, K: np.ndarray, P: np.ndarray, T: np.ndarray):
+def lmi46_terms(aug: Augmented, i: int, K: np.ndarray):
     """The constant pieces of (46)/(79) for rule i, gain K = K_j (everything but Pbar and Q_i)."""
     n, lf = aug.n, aug.lf
-    _, B, Bf, W, G, Gf, M = _parts(aug, i, K)
+    _, B, Bf, W, G, Gf, M = _parts(aug, i)
     J0, J2 = aug.J0, aug.J2
     De = aug.Cbar[:, n + lf :] @ J2
     Be = B @ K @ J0 - Bf @ J2
@@ -89,7 +86,7 @@ def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0, const=
     conditioned variant's design constraint); the recorded certificate uses ``alpha = 0``.
     ``const`` multiplies every term that involves neither Pbar nor Q (module docstring).
     """
-    t = lmi46_terms(aug, i, K, P, T)
+    t = lmi46_terms(aug, i, K)
     Ab, Cb = aug.Abar[i], aug.Cbar
     TPT = T.T @ Pbar @ T
     C, De, Be, Ge, Wk, Wbk, Gbe, M, Mb = (

@@ -50,12 +50,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InfeasibleDesignError
+from ..errors import CentringError, InfeasibleDesignError
+from ..errors import SolverFailedError as SolverFailedError
+from ..rounding import nice_floor
 from .augment import Augmented, time_scale, time_scaled
 from .certify import diffusion_coupling, lmi45, lmi46, lyapunov_ts_max, sliding_mismatch, ts_max
 from .sdp import (
+    SOLVED,
     AffineLMI,
-    CentringError,
     ConicProblem,
     Layout,
     MarginLMI,
@@ -83,10 +85,6 @@ TS_FACTOR = 2.0
 ALPHA_RTOL = 0.1
 #: phase 1 bounds the gains by rho_i <= RHO_CAP kappa max ||T Abar_i|| / sigma_min(Cbar)^2 (never active in a design)
 RHO_CAP = 1e3
-
-
-class SolverFailedError(InfeasibleDesignError):
-    """The SDP solver failed numerically (twice: as posed and on rescaled data); not an infeasibility."""
 
 
 @dataclass
@@ -150,7 +148,7 @@ def _balanced_margin(tau, a: int, b: int) -> np.ndarray:
 def _accept(res: SolveResult, lmis, p: float) -> bool:
     """A solver's point counts when it is strictly inside ``lmis`` (the LMIs with the centring's
     margins, half the conic solve's), checked with numpy, whatever the solver's status says."""
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate") or not np.all(np.isfinite(res.v)):
+    if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
         return False
     for L in lmis:
         try:
@@ -182,7 +180,7 @@ def _start(res: SolveResult, layout: Layout, name: str, soft, hard, note: list) 
     SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.sdp.phase1`
     decides, in numpy, from there. A status that is neither a point nor infeasibility is a failure.
     """
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate") or not np.all(np.isfinite(res.v)):
+    if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
         return None
     if _accept(res, list(soft) + list(hard), 0.0):
         return res.v
@@ -198,7 +196,7 @@ def _start(res: SolveResult, layout: Layout, name: str, soft, hard, note: list) 
     return out
 
 
-def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError:
+def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError | SolverFailedError:
     if res.infeasible:
         return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
     other = "SCS" if solver == "CLARABEL" else "CLARABEL"
@@ -551,7 +549,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         raise InfeasibleDesignError(
             f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which (46) is "
             f"feasible with cond(Pbar) <= {KAPPA:g} is about {lo:.4g}; lower alpha to <= "
-            f"{_nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
+            f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
         )
     if pt is None:
         raise SolverFailedError(
@@ -607,14 +605,6 @@ def _cap_for_sample_time(prob: _Step5, a: float, pt: dict, why: str, sample_time
     raise InfeasibleDesignError(
         f"no certified design runs at the sample time {sample_time:g}: over the observer decay rates tried "
         f"(0 to {a:.3g}) the discrete step z+ = z + Ts (...) is proven stable at best for Ts < {fastest:.3g}{limit}. "
-        f"Run the observer at a sample time <= {_nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
+        f"Run the observer at a sample time <= {nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
         "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)"
     )
-
-
-def _nice_floor(v: float) -> float:
-    """Two significant digits, rounded down."""
-    if not v > 0:
-        return 0.0
-    e = int(np.floor(np.log10(v))) - 1
-    return float(np.floor(v / 10.0**e) * 10.0**e)

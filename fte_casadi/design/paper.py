@@ -17,7 +17,7 @@ from ..errors import InfeasibleDesignError
 from .augment import Augmented
 from .certify import lmi45, lmi46, lmi55, lmi64
 from .conditioned import Step3, Step5
-from .sdp import ConicProblem, Layout, Var, affine_lmi
+from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
 __all__ = ["step3", "step5", "STRICT"]
 
@@ -36,7 +36,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.nda
     lmis.append(affine_lmi("X > 0", layout, lambda **u: STRICT * np.eye(n) - u["X"]))
     prob = ConicProblem(layout, lmis)
     res = prob.solve(solver)
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+    if res.v is None or res.status not in SOLVED:
         kind = "infeasible" if res.infeasible else f"not solved ({res.status})"
         raise InfeasibleDesignError(
             f"LMI (45) as printed is {kind} for gamma = {g:g}, gamma1 = {g1:g}, sigma = {sg:g} ({solver}: {res.status}); "
@@ -78,7 +78,7 @@ def step5(aug: Augmented, params: dict, X, K: list, T, solver: str) -> Step5:
     c[layout.index("theta")] = 1.0
     prob = ConicProblem(layout, lmis, c)
     res = prob.solve(solver)
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+    if res.v is None or res.status not in SOLVED:
         kind = "infeasible" if res.infeasible else f"not solved ({res.status})"
         raise InfeasibleDesignError(
             f"LMI (46) with (55), (64) as printed is {kind} ({solver}: {res.status}); the paper variant is "

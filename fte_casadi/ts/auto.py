@@ -51,10 +51,10 @@ import warnings
 import casadi as ca
 import numpy as np
 
-from ..errors import DerivationError
+from ..errors import BoundsError, DerivationError
 from ..model import Plant
 from .auto_checks import check_term, expr_text
-from .bounds import BoundsError, premise_bounds
+from .bounds import premise_bounds
 
 __all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYLOR_BAND"]
 

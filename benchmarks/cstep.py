@@ -27,10 +27,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..codegen import build
-from ..codegen.generate import _void_unused, c_name, default_ts, generate_c, memory_report
-from ..design.record import Design
-from ..step import step_function
+from fte_casadi.codegen import build
+from fte_casadi.codegen.generate import _void_unused, c_name, default_ts, generate_c, memory_report
+from fte_casadi.design.record import Design
+from fte_casadi.step import step_function
 
 __all__ = ["bench_c_step", "hand_written_c"]
 
