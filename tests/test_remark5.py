@@ -169,7 +169,7 @@ def test_rule_dependent_bd_is_named_and_remark5_used():
     assert "assumption (4) fails" in msg and "s = 0" in msg
     assert 'rule-dependent Bd_i: unknown input "tau"' in msg and "rules [1, 2]" in msg
     assert '"vel" from 0.3624 to 1' in msg  # cos(theta) over |theta| <= 1.2
-    assert "--accept-assumption 4" not in msg and "accepting (4) cannot succeed" in msg
+    assert "--accept-assumption 4" not in msg and "Accepting (4) cannot succeed" in msg
     assert "Remark 5's attenuation, which makes (3) and (4) hold here" in msg
     d = design(ts, sample_time=TS)
     _certified_beyond_roundoff(d)

@@ -13,11 +13,11 @@ When it applies (:func:`fallback`)
 
 What the sliding gain bounds
     The paper's ``u_s = (delta + eps) sgn(s)`` dominates ``f''`` (``|f''| <= delta``); Remark 5 puts
-    ``df = [d; f'']`` in place of ``f''``, so read literally the same delta bounds d. That is the
-    default here: every sliding component gets ``delta + eps``. With ``d_bound`` (``--d-bound``), a
-    bound on ``|d_j|``, each undecoupled direction k gets ``sum_j max_i |M_i[k, j]| d_bound_j + eps``
-    instead (``T Bdbar_i = Bdbar_u M_i``; :meth:`~fte_casadi.design.uio.Remark5.gains`), the gain the
-    Lyapunov argument asks for. That argument also needs (20) for the widened ``J``, and where H leaves
+    ``df = [d; f'']`` in place of ``f''``, so read literally the same delta bounds d. Each undecoupled
+    direction k gets ``sum_j max_i |M_i[k, j]| d_bound_j + eps`` (``T Bdbar_i = Bdbar_u M_i``;
+    :meth:`~fte_casadi.design.uio.Remark5.gains`), a bound on ``|(M(h) d)_k|``, with ``d_bound = delta``
+    by default (Remark 5 as printed) or a bound on ``|d_j|`` given as ``d_bound`` (``--d-bound``), the
+    gain the Lyapunov argument asks for. That argument also needs (20) for the widened ``J``, and where H leaves
     a direction the outputs do not see (``Cbar Bdbar_u = 0``, always so when assumption (1) fails) (20)
     cannot hold for it, exactly as for ``J1`` (SPEC.md): a relay of the full bound then competes with the
     fault estimate for the same residual. docs/remark5.md measures both choices on the test plants; the
@@ -146,7 +146,7 @@ def resolve_d_bound(d_bound, ld: int, input_names, delta: float) -> tuple[np.nda
     """``d_bound`` as one non-negative bound per unknown input (``delta`` for each when None: Remark 5 read
     literally), and where it came from; a ParameterError saying what to give when it is malformed."""
     if d_bound is None:
-        return np.full(ld, float(delta)), "delta (Remark 5 as printed: delta bounds [d; f''])"
+        return np.full(ld, float(delta)), "delta, as Remark 5 prints it (delta bounds [d; f''])"
     a = np.atleast_1d(np.asarray(d_bound, dtype=float)).ravel()
     if a.size == 1:
         a = np.full(ld, float(a[0]))
@@ -155,7 +155,7 @@ def resolve_d_bound(d_bound, ld: int, input_names, delta: float) -> tuple[np.nda
             f"d_bound must be one non-negative finite number, or one per unknown input ({ld}: "
             f"{', '.join(input_names)}); got {d_bound!r}"
         )
-    return a, "d_bound given"
+    return a, "as given (d_bound)"
 
 
 def record(r5: Remark5, d_bound, params: dict, input_names) -> dict:
@@ -171,7 +171,7 @@ def record(r5: Remark5, d_bound, params: dict, input_names) -> dict:
             + ", ".join(f'"{n}"' for n in covered)
             + f" along {r5.Bdu.shape[1]} direction(s) H leaves (J1 -> [Bdbar_u J1], f'' -> [M(h) d; f'']), "
             f"with gains {', '.join(f'{g:.4g}' for g in r5.gains(d_bound, epsilon))} for |d| <= "
-            f"{', '.join(f'{v:g}' for v in d_bound)} ({source})"
+            f"{', '.join(f'{v:g}' for v in d_bound)}, {source}"
         ),
         "why": r5.why,
         "decoupled_directions": int(r5.D.shape[1]),

@@ -179,7 +179,7 @@ def check_decoupling(aug: Augmented) -> AssumptionCheck:
     ok = r1 == r2
     msg = (f"assumption (1) holds: rank(Cbar Bdbar) = rank(Bdbar) = {r2}" if ok else
            f"assumption (1) fails: rank(Cbar Bdbar) = {r1} < rank(Bdbar) = {r2}; the unknown input cannot be "
-           "decoupled by H. Remark 5's fallback: replace J1 by [Bdbar_u J1] so that the sliding term attenuates the "
+           "decoupled by H. Remark 5's fallback (applied by default; --no-remark5 / remark5=False turned it off): replace J1 by [Bdbar_u J1] so that the sliding term attenuates the "
            "part of d that H cannot decouple, or measure more outputs")  # fmt: skip
     return AssumptionCheck("(1)", ok, msg, {"rank_CBd": r1, "rank_Bd": r2})
 
@@ -361,8 +361,8 @@ def enforce(checks: Iterable[AssumptionCheck], accept: bool | Iterable[str] = ()
         )
         if hopeless:
             hint += (
-                (". " if not names else "; ")
-                + f"accepting {', '.join(hopeless)} cannot succeed (an unobservable mode that does not decay stays "
+                (". Accepting " if not names else "; accepting ")
+                + f"{', '.join(hopeless)} cannot succeed (an unobservable mode that does not decay stays "
                 "in every R_i, whatever the observer gain): change the plant's model or measurements"
             )
         raise AssumptionError("; ".join(refused) + hint + ".")
