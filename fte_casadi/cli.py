@@ -100,7 +100,7 @@ def _positive(name: str, value, allow_zero: bool = False):
     if value is None:
         return None
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-        raise ParameterError(f"--{name} must be a positive finite number; got {value}")
+        raise ParameterError(f"--{name.replace('_', '-')} must be a positive finite number; got {value}")
     return value
 
 
@@ -211,7 +211,7 @@ def _check_params(**kw) -> dict:
     out = {}
     for k, v in kw.items():
         if v is not None:
-            _positive(k, v, allow_zero=(k == "alpha"))
+            _positive(k, v, allow_zero=(k in ("alpha", "d_bound")))
             out[k] = v
     return out
 
@@ -330,6 +330,16 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
     help="Design even though assumption N of Section 3 fails (repeatable; the document records it).",
 )  # fmt: skip
 @click.option(
+    "--no-remark5",
+    "no_remark5",
+    is_flag=True,
+    help="Refuse a plant whose unknown inputs H cannot decouple (assumption (1)) instead of applying Remark 5.",
+)
+@click.option(
+    "--d-bound", "d_bound", type=float,
+    help="With Remark 5: a bound on |d| for the sliding gain of the undecoupled unknown inputs (default: delta).",
+)  # fmt: skip
+@click.option(
     "-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here."
 )
 @click.option(
@@ -339,10 +349,12 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
               help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
 def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, allow_uncertified, accept,
-           output, explore, out_dir):  # fmt: skip
+           no_remark5, d_bound, output, explore, out_dir):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
-                           sample_time=sample_time)  # fmt: skip
+                           sample_time=sample_time, d_bound=d_bound)  # fmt: skip
+    if no_remark5:
+        params["remark5"] = False
     if explore:
         _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore")
         return

@@ -294,6 +294,7 @@ def _wrapper(
         "iw_arg": "s->iw" if sizes["SZ_IW"] else "0",
         "w_arg": "s->w" if sizes["SZ_W"] else "0",
         "sliding": "sgn(s)" if boundary_layer is None else f"sat(s / {_fmt(boundary_layer)})",
+        **_sliding_text(design),
         "affine": " + T abar_i" if affine else "",
         "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
         "saturation_text": _saturation_text(design),
@@ -316,6 +317,23 @@ def _wrapper(
         files[1]: template.SOURCE.substitute(sub),
         files[4]: template.README.substitute(sub),
     }, mem
+
+
+def _sliding_text(design: Design) -> dict:
+    """The sliding variables' count and gains: ``(delta + eps)`` per fault, and with Remark 5 first the
+    gains of the unknown inputs H does not decouple."""
+    lf = int(design.dims["lf"])
+    r5 = design.remark5 or {}
+    if not r5.get("used"):
+        return {"ns": lf, "ns_text": "", "sliding_gain": "(delta + eps)"}
+    k = len(r5["gain"])
+    names = ", ".join(r5.get("unknown_inputs", []))
+    gains = ", ".join(f"{v:.6g}" for v in design.sliding_gain())
+    return {
+        "ns": lf + k,
+        "ns_text": f": {k} for the unknown inputs H does not decouple ({names}; Remark 5), then {lf} for the faults",
+        "sliding_gain": f"diag({gains}) (Remark 5: first the gains bounding the undecoupled {names})",
+    }
 
 
 def _saturation_text(design: Design) -> str:

@@ -33,7 +33,7 @@ typedef ${real} fte_real;
 #define FTE_${NAME}_NXBAR ${nxbar}   /* xbarhat = [xhat (${n}); fdothat (${lf}); fhat (${lf})] */
 #define FTE_${NAME}_NX ${n}      /* states: ${x_names} */
 #define FTE_${NAME}_NF ${lf}      /* faults: ${f_names} */
-#define FTE_${NAME}_NS ${lf}      /* sliding variables s */
+#define FTE_${NAME}_NS ${ns}      /* sliding variables s${ns_text} */
 #define FTE_${NAME}_TS ${ts_c}   /* sample time the step was generated for */
 
 /* All memory the step needs: the observer state z and CasADi's work arrays. */
@@ -154,7 +154,7 @@ ${file_table}
 One sample of the discrete step of fte_casadi's docs/method.md at the fixed sample time
 **Ts = ${ts_text} ${time_unit}** (the design's observer is stable for Ts < ${ts_max_text} ${time_unit}):
 `xbarhat = z + H y`; memberships from measured signals; `s = N (y - Cbar xbarhat)`;
-`us = (delta + eps) ${sliding}`; `u = u_ref + sum_j h_j K_j xhat + Kf fhat` (tolerant control
+`us = ${sliding_gain} ${sliding}`; `u = u_ref + sum_j h_j K_j xhat + Kf fhat` (tolerant control
 always on); `yc = y - Df fhat`; `z+ = z + Ts sum_i h_i (R_i z + T Bbar_i u + (L_i1 + L_i2) y + Ls us${affine})`.
 `u_ref = ${u_ref}` is fixed in the code. Real type: `${real}`.
 Actuator limits: ${saturation_text}

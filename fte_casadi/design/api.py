@@ -16,6 +16,9 @@ from .augment import augment
 from .certify import certificate, discrete_certificate, failures
 from .diagnose import FrontierPoint, gamma_min, sigma_max
 from .record import Design
+from .remark5 import explain_causes, with_remark5
+from .remark5 import fallback as remark5_fallback
+from .remark5 import record as remark5_record
 from .uio import check_assumptions, enforce, uio_gain
 
 __all__ = ["design", "explore", "GENERIC_DEFAULTS", "explain_45", "explain_46"]
@@ -99,6 +102,8 @@ def design(
     accept_assumptions=(),
     plant_spec: str | None = None,
     diagnose: bool = True,
+    remark5: bool = True,
+    d_bound=None,
     _retried: str | None = None,
 ) -> Design:
     """Design the sliding-mode UIO and fault-tolerant controller of ``ts`` (Section 4.3 / Theorem 5).
@@ -111,6 +116,9 @@ def design(
     ``ts_max >= 2 sample_time`` when ``sample_time`` is given); ``gamma2`` the d2 attenuation of
     Theorem 5 (default gamma). ``initial_state`` is the nominal x(0) the simulations start from
     (default: the plant's), recorded as ``x0`` for the generated C's start from a first measurement.
+    ``remark5`` (default True) applies Remark 5's fallback where H cannot decouple the unknown inputs
+    (:mod:`fte_casadi.design.remark5`); ``d_bound`` (one number, or one per unknown input) bounds
+    ``|d|`` in its sliding gain (default: delta, as printed). ``remark5=False`` refuses such a plant.
     Raises :class:`~fte_casadi.errors.InfeasibleDesignError` when an
     LMI is infeasible (with the bounds that are feasible, when ``diagnose``) or a certificate
     fails (unless ``allow_uncertified``), :class:`~fte_casadi.design.conditioned.SolverFailedError`
@@ -156,12 +164,20 @@ def design(
             "Theorem 5: faults/inputs/d2 in the diffusion, LMIs (78)-(81) (keys 45/46/55/64 hold the same values)"
         )
     H, T = uio_gain(aug)
-    checks_a = _named(check_assumptions(aug, T), aug, ts.plant)
+    checks_a = check_assumptions(aug, T)
+    r5 = remark5_fallback(aug, checks_a, remark5)
+    if r5 is not None:  # Remark 5: H decouples what it can, the sliding term attenuates the rest
+        H, T, aug = r5.H, r5.T, with_remark5(aug, r5)
+        checks_a = check_assumptions(aug, T, remark5=r5)
+    checks_a = explain_causes(_named(checks_a, aug, ts.plant), aug, ts.plant, remark5)
     status += enforce(checks_a, accept_assumptions)
+    r5doc = {} if r5 is None else remark5_record(r5, d_bound, params, ts.plant.unknown_input_names)
+    status += [r5doc["message"]] if r5doc else []
     if not all(c.holds for c in checks_a):
         generic = set()  # a plant that fails an assumption gets the bounds, not a search over parameters
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
-                 gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions)  # fmt: skip
+                 gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions,
+                 remark5=remark5, d_bound=d_bound)  # fmt: skip
     if variant == "paper":
         s3, K = paper.step3(aug, params, solver)
         s5 = paper.step5(aug, params, s3.X, K, T, solver)
@@ -200,7 +216,7 @@ def design(
     L1 = [np.linalg.solve(s5.Pbar, Q) for Q in s5.Q]
     R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
     L2 = [Ri @ H for Ri in R]
-    Ls = T @ aug.J1
+    Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
     Bs = [lm.B for lm in ts.local_models]
     Bfs = [lm.Bf for lm in ts.local_models]
     Kfs = [-np.linalg.pinv(B) @ Bf for B, Bf in zip(Bs, Bfs)]
@@ -288,6 +304,7 @@ def design(
         observer=observer,
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
+        remark5=r5doc,
     )
 
 

@@ -8,6 +8,10 @@ With ``xbar = [x; fdot; f]`` (``nbar = n + 2 lf``)::
 
 Theorem 5 (Section 5) adds ``Gbar_i = [G_i; 0; 0]``, ``Gfbar_i = [Gf_i; 0; 0]`` and
 ``Mbar_i = [M_i; 0; 0]``.
+
+Remark 5 (when H cannot decouple every unknown input) replaces ``J1`` by ``[Bdbar_u J1]`` in the
+sliding term: :attr:`Augmented.Jd` holds the undecoupled directions ``Bdbar_u`` (nbar x k, empty
+without Remark 5) and :attr:`Augmented.Js` the widened ``[Bdbar_u J1]`` that (20), (55), (64) use.
 """
 
 from __future__ import annotations
@@ -47,10 +51,22 @@ class Augmented:
     J0: np.ndarray
     J1: np.ndarray
     J2: np.ndarray
+    #: Remark 5: the directions of d that H does not decouple (nbar x k; k = 0 without Remark 5)
+    Jd: np.ndarray | None = None
 
     @property
     def nbar(self) -> int:
         return self.n + 2 * self.lf
+
+    @property
+    def Js(self) -> np.ndarray:
+        """The sliding directions: ``J1``, or ``[Bdbar_u J1]`` with Remark 5 (nbar x ns)."""
+        return self.J1 if self.Jd is None or self.Jd.shape[1] == 0 else np.hstack([self.Jd, self.J1])
+
+    @property
+    def ns(self) -> int:
+        """Number of sliding variables: ``lf``, plus the undecoupled directions with Remark 5."""
+        return self.Js.shape[1]
 
 
 def _get(lm, key: str):

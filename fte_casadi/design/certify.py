@@ -122,23 +122,26 @@ def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0, const=
 
 
 def sliding_mismatch(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray) -> np.ndarray:
-    """``J1^T T^T Pbar - N Cbar``: how far the sliding surface (20) is from holding (the E of (55))."""
-    return aug.J1.T @ T.T @ Pbar - N @ aug.Cbar
+    """``J1^T T^T Pbar - N Cbar``: how far the sliding surface (20) is from holding (the E of (55)).
+
+    With Remark 5, ``J1`` is ``[Bdbar_u J1]`` (:attr:`~fte_casadi.design.augment.Augmented.Js`)."""
+    return aug.Js.T @ T.T @ Pbar - N @ aug.Cbar
 
 
 def diffusion_coupling(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray) -> np.ndarray:
-    """``J1^T T^T Pbar T Wbar_i``: the diffusion seen by the sliding variable (the E of (64))."""
-    return aug.J1.T @ T.T @ Pbar @ T @ aug.Wbar[i]
+    """``J1^T T^T Pbar T Wbar_i``: the diffusion seen by the sliding variable (the E of (64));
+    ``[Bdbar_u J1]`` in place of ``J1`` with Remark 5."""
+    return aug.Js.T @ T.T @ Pbar @ T @ aug.Wbar[i]
 
 
 def lmi55(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray, theta: float):
     E = sliding_mismatch(aug, T, Pbar, N)
-    return _sym(np.block([[-theta * np.eye(aug.nbar), E.T], [E, -np.eye(aug.lf)]]))
+    return _sym(np.block([[-theta * np.eye(aug.nbar), E.T], [E, -np.eye(aug.ns)]]))
 
 
 def lmi64(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray, theta: float):
     E = diffusion_coupling(aug, i, T, Pbar)
-    return _sym(np.block([[-theta * np.eye(aug.n), E.T], [E, -np.eye(aug.lf)]]))
+    return _sym(np.block([[-theta * np.eye(aug.n), E.T], [E, -np.eye(aug.ns)]]))
 
 
 def block_sizes(aug: Augmented) -> dict:
@@ -146,8 +149,8 @@ def block_sizes(aug: Augmented) -> dict:
     return {
         "45": [aug.n, aug.n, aug.p, aug.ld],
         "46": [aug.n, aug.ld, aug.nbar] + ([l2] if l2 else []),
-        "55": [aug.nbar, aug.lf],
-        "64": [aug.n, aug.lf],
+        "55": [aug.nbar, aug.ns],
+        "64": [aug.n, aug.ns],
     }
 
 

@@ -292,7 +292,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
 # -- step 5 ----------------------------------------------------------------------------------
 def _step5_problem(aug: Augmented, params: dict, X, K, T):
     """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule."""
-    n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.lf
+    n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.ns  # ns = lf (+ Remark 5's directions)
     sg, g1 = params["sigma"], params["gamma1"]
     g2 = params.get("gamma2", params["gamma"])
     P = np.linalg.inv(X)
@@ -327,7 +327,7 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T):
     feas += _normalisation(layout, "Pt", nbar)
 
     def N_of(Pt):
-        return aug.J1.T @ T.T @ Pt @ Cp
+        return aug.Js.T @ T.T @ Pt @ Cp
 
     rest = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf))]  # fmt: skip
@@ -458,7 +458,7 @@ class _Step5:
         v = self.points[min(above)].copy()
         Pt = self.layout.unpack(v)["Pt"]
         aug, T, Cp = self.aug, self.T, np.linalg.pinv(self.aug.Cbar)
-        E = [sliding_mismatch(aug, T, Pt, aug.J1.T @ T.T @ Pt @ Cp)] + [
+        E = [sliding_mismatch(aug, T, Pt, aug.Js.T @ T.T @ Pt @ Cp)] + [
             diffusion_coupling(aug, i, T, Pt) for i in range(aug.r)
         ]
         v[self.layout.index("tau")] = 2.0 * max(np.linalg.norm(e, 2) for e in E) + 1.0
@@ -479,7 +479,7 @@ class _Step5:
         aug, T, s = self.aug, self.T, u["s"]
         Pbar = u["Pt"] / s
         Q = [u["rho"][i] * aug.Cbar.T / (2 * s) for i in range(aug.r)]
-        N = aug.J1.T @ T.T @ Pbar @ np.linalg.pinv(aug.Cbar)
+        N = aug.Js.T @ T.T @ Pbar @ np.linalg.pinv(aug.Cbar)
         L1 = [np.linalg.solve(Pbar, Qi) for Qi in Q]
         R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
         return dict(Pbar=Pbar, Q=Q, N=N, theta=float((u["tau"] / s) ** 2), R=R, ts_max=ts_max(R),

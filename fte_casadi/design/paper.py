@@ -53,7 +53,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.nda
 
 def step5(aug: Augmented, params: dict, X, K: list, T, solver: str) -> Step5:
     """``min theta`` s.t. (46) for every (i, j), (55), (64), Pbar > 0 (Q_i, N free)."""
-    n, p, nbar, lf, r = aug.n, aug.p, aug.nbar, aug.lf, aug.r
+    n, p, nbar, lf, r = aug.n, aug.p, aug.nbar, aug.ns, aug.r  # ns = lf (+ Remark 5's directions)
     sg, g1 = params["sigma"], params["gamma1"]
     g2 = params.get("gamma2", params["gamma"])
     P = np.linalg.inv(X)
