@@ -105,3 +105,12 @@ def test_c_started_from_the_first_measurement_has_no_false_fault_estimate(commit
     cold = run(away, 100.0, noise=False, start_from_y=False).max(axis=0)
     assert np.all(warm <= 1.25 * steady), (warm, steady)  # the residue moves a little with the state
     assert np.all(cold > 20 * steady), (cold, steady)
+
+
+def test_a_design_with_chosen_parameters_keeps_the_plant_and_start(ts):
+    """The parameter search redesigns; the document it returns still names the plant (so that
+    `fte simulate DESIGN.json` finds it) and the nominal start it was asked for."""
+    x0 = (0.5, -0.5, 0.1, -0.1)
+    d = design(ts, sample_time=0.1, plant_spec="quadruple-tank", initial_state=x0)
+    assert d.params_chosen and d.plant_spec == "quadruple-tank"
+    np.testing.assert_array_equal(d.x0, x0)

@@ -177,7 +177,7 @@ def design(
         generic = set()  # a plant that fails an assumption gets the bounds, not a search over parameters
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
                  gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions,
-                 remark5=remark5, d_bound=d_bound)  # fmt: skip
+                 remark5=remark5, d_bound=d_bound, plant_spec=plant_spec, initial_state=initial_state)  # fmt: skip
     if variant == "paper":
         s3, K = paper.step3(aug, params, solver)
         s5 = paper.step5(aug, params, s3.X, K, T, solver)
@@ -188,9 +188,8 @@ def design(
         try:
             s3 = conditioned.step3(aug, params, solver)
         except conditioned.SolverFailedError as exc:
-            return _other_solver(ts, retry, solver, exc, "step 3 (LMI (45))", plant_spec=plant_spec,
-                                 allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
-                                 retried=_retried)  # fmt: skip
+            return _other_solver(ts, retry, solver, exc, "step 3 (LMI (45))", allow_uncertified=allow_uncertified,
+                                 diagnose=diagnose, retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
             chosen = _choose(ts, aug, params, solver, retry, generic, "45", exc) if diagnose else None
             if chosen is not None:
@@ -200,9 +199,8 @@ def design(
         try:
             s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time)
         except conditioned.SolverFailedError as exc:
-            return _other_solver(ts, retry, solver, exc, "step 5 (LMIs (46), (55), (64))", plant_spec=plant_spec,
-                                 allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
-                                 retried=_retried)  # fmt: skip
+            return _other_solver(ts, retry, solver, exc, "step 5 (LMIs (46), (55), (64))", allow_uncertified=allow_uncertified,
+                                 diagnose=diagnose, retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
             if diagnose and "alpha" not in str(exc) and "sample time" not in str(exc):
                 chosen = _choose(ts, aug, params, solver, retry, generic, "46", exc)
