@@ -186,10 +186,15 @@ def design(
         )
     else:
         try:
-            s3 = conditioned.step3(aug, params, solver)
-        except conditioned.SolverFailedError as exc:
-            return _other_solver(ts, retry, solver, exc, "step 3 (LMI (45))", allow_uncertified=allow_uncertified,
-                                 diagnose=diagnose, retried=_retried)  # fmt: skip
+            try:
+                s3 = conditioned.step3(aug, params, solver)
+            except conditioned.SolverFailedError as exc:
+                beyond = _outside_45(aug, params, solver)
+                if beyond is None:
+                    return _other_solver(ts, retry, solver, exc, "step 3 (LMI (45))",
+                                         allow_uncertified=allow_uncertified, diagnose=diagnose,
+                                         retried=_retried)  # fmt: skip
+                raise InfeasibleDesignError(beyond) from None
         except InfeasibleDesignError as exc:
             chosen = _choose(ts, aug, params, solver, retry, generic, "45", exc) if diagnose else None
             if chosen is not None:
@@ -304,6 +309,22 @@ def design(
         x0=_initial_state(plant, initial_state),
         remark5=r5doc,
     )
+
+
+def _outside_45(aug, params: dict, solver: str) -> str | None:
+    """Why (45) is infeasible at ``params`` by its bounds (one SDP each, well posed), or None.
+
+    The conditioned step 3 is homogeneous in its unknowns, so an infeasible (45) can end in a solver's
+    numerical failure rather than a certificate of infeasibility; before the other solver is tried (SCS
+    takes minutes to fail there), the bounds decide whether the parameters lie outside what (45) allows.
+    """
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    smax, _ = sigma_max(aug, g, g1, solver)
+    if smax is None:
+        return f"LMI (45) is infeasible: no sigma > 0 makes it feasible at gamma = {g:g}"
+    if sg >= smax:
+        return f"LMI (45) is infeasible: sigma = {sg:g} is above the largest sigma {smax:.3g} it allows at gamma = {g:g}"
+    return None
 
 
 def _other_solver(ts, retry: dict, solver: str, exc: Exception, where: str, *, retried, **kw) -> Design:

@@ -145,7 +145,7 @@ class Design:
 
     def sliding_gain(self) -> np.ndarray:
         """The gain of each sliding variable: Remark 5's per-direction gains for the undecoupled part of d
-        (first), then ``delta + eps`` for each fault's ``f''`` (SPEC.md (21))."""
+        (first), then ``delta + eps`` for each fault's ``f''`` (docs/method.md, sliding surface (19)-(21))."""
         lf = int(self.dims["lf"])
         base = np.full(lf, float(self.params["delta"]) + float(self.params["epsilon"]))
         if not self.remark5.get("used"):

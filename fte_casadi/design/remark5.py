@@ -19,7 +19,7 @@ What the sliding gain bounds
     by default (Remark 5 as printed) or a bound on ``|d_j|`` given as ``d_bound`` (``--d-bound``), the
     gain the Lyapunov argument asks for. That argument also needs (20) for the widened ``J``, and where H leaves
     a direction the outputs do not see (``Cbar Bdbar_u = 0``, always so when assumption (1) fails) (20)
-    cannot hold for it, exactly as for ``J1`` (SPEC.md): a relay of the full bound then competes with the
+    cannot hold for it, exactly as for ``J1`` (docs/method.md, equality (20)): a relay of the full bound then competes with the
     fault estimate for the same residual. docs/remark5.md measures both choices on the test plants; the
     nominal default estimated the faults better in every case measured.
 """
