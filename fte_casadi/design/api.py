@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
 import casadi as ca
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..errors import FteError, InfeasibleDesignError, ParameterError
 from ..rounding import nice_ceil, nice_floor
@@ -84,6 +86,24 @@ def _u_reference(ts: TSModel, K, status: list):
     return ue - Kx @ xr, xr
 
 
+def _one_blas_thread(fn):
+    """Run ``fn`` with the BLAS limited to one thread (threadpoolctl).
+
+    The design's algebra is many small dense products and factorisations (matrices of tens of rows);
+    a multi-threaded BLAS spends more on waking its threads than on the work, and on a loaded machine
+    the same design took 5.5-44 s with OpenBLAS's default threads against 0.3-6.9 s with one
+    (issue #17). The limit is undone on return, and nested calls keep it.
+    """
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+@_one_blas_thread
 def design(
     ts: TSModel,
     *,
