@@ -18,7 +18,7 @@ import click
 import numpy as np
 from tqdm import tqdm
 
-from .errors import FteError, InfeasibleDesignError, ParameterError
+from .errors import FteError, InfeasibleDesignError, ParameterError, SolverFailedError
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
@@ -72,7 +72,7 @@ def _guard(fn):
         debug = click.get_current_context().find_root().params.get("debug", False)
         try:
             return fn(*args, **kwargs)
-        except InfeasibleDesignError as exc:
+        except (InfeasibleDesignError, SolverFailedError) as exc:
             if debug:
                 raise
             _fail(str(exc), EXIT_FAILED)
@@ -101,7 +101,7 @@ def _positive(name: str, value, allow_zero: bool = False):
     if value is None:
         return None
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-        raise ParameterError(f"--{name} must be a positive finite number; got {value}")
+        raise ParameterError(f"--{name.replace('_', '-')} must be a positive finite number; got {value}")
     return value
 
 
@@ -111,7 +111,7 @@ def _positive(name: str, value, allow_zero: bool = False):
 def main(debug: bool) -> None:
     """fte: certified fault estimation and fault-tolerant control, from CasADi equations to embedded C.
 
-    PLANT is a built-in name (manipulator, three-tank), path/to/file.py:function or
+    PLANT is a built-in name (manipulator, three-tank, quadruple-tank), path/to/file.py:function or
     package.module:function returning a Plant.
     """
 
@@ -219,7 +219,7 @@ def _check_params(**kw) -> dict:
     out = {}
     for k, v in kw.items():
         if v is not None:
-            _positive(k, v, allow_zero=(k == "alpha"))
+            _positive(k, v, allow_zero=(k in ("alpha", "d_bound")))
             out[k] = v
     return out
 
@@ -322,7 +322,9 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 @click.option("--delta", type=float, help="bound on the second derivative of the faults.")
 @click.option("--epsilon", type=float, help="sliding gain margin eps.")
 @click.option(
-    "--alpha", type=float, help="observer decay rate (default: the largest the plant allows, see README)."
+    "--alpha",
+    type=float,
+    help="observer decay rate (default: the largest the plant allows, see docs/design.md).",
 )
 @click.option(
     "--sample-time", "sample_time", type=float,
@@ -336,6 +338,16 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
     help="Design even though assumption N of Section 3 fails (repeatable; the document records it).",
 )  # fmt: skip
 @click.option(
+    "--no-remark5",
+    "no_remark5",
+    is_flag=True,
+    help="Refuse a plant whose unknown inputs H cannot decouple (assumption (1)) instead of applying Remark 5.",
+)
+@click.option(
+    "--d-bound", "d_bound", type=float,
+    help="With Remark 5: a bound on |d| for the sliding gain of the undecoupled unknown inputs (default: delta).",
+)  # fmt: skip
+@click.option(
     "-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here."
 )
 @click.option(
@@ -345,10 +357,12 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
               help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
 def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, allow_uncertified, accept,
-           output, explore, out_dir):  # fmt: skip
+           no_remark5, d_bound, output, explore, out_dir):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
-                           sample_time=sample_time)  # fmt: skip
+                           sample_time=sample_time, d_bound=d_bound)  # fmt: skip
+    if no_remark5:
+        params["remark5"] = False
     if explore:
         _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore")
         return
@@ -398,14 +412,18 @@ def _design_or_plant(target: str, progress: bool = True):
 )  # fmt: skip
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
+@click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
 @_guard
-def codegen(target, out_dir, ts, real, boundary_layer):
+def codegen(target, out_dir, ts, real, boundary_layer, fmu):
     """Generate the embedded C of the observer/controller step."""
     from .codegen import default_ts, generate_c
+    from .codegen.fmu import check_fmu_target, generate_fmu
 
     _positive("ts", ts)
     _positive("boundary-layer", boundary_layer)
     d = _design_or_plant(target)
+    if fmu:
+        check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
     files = generate_c(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
     step = ts if ts is not None else default_ts(d)
     how = "--ts" if ts is not None else "the design's sample time, the step fte simulate runs"
@@ -414,6 +432,9 @@ def codegen(target, out_dir, ts, real, boundary_layer):
     click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
     click.echo(f"sample time Ts = {step:g} ({how})")
     click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")
+    if fmu:
+        path = generate_fmu(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
+        click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {step:g} (docs/fmu.md)")
 
 
 # -- simulate -----------------------------------------------------------------------------
@@ -421,9 +442,8 @@ def _fmt_list(v) -> str:
     return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
 
 
-def _window_lines(m: dict, inputs) -> list[str]:
-    """Per fault window: its two numbers; warnings where tolerant control is worse than none (ratio > 1)
-    and where an input sits at a limit for more than 5 % of the window."""
+def _window_lines(m: dict) -> list[str]:
+    """Per fault window: its fault relative RMS error and FTC deviation ratio."""
     out = []
     for w in m.get("windows", []):
         out.append(
@@ -435,18 +455,22 @@ def _window_lines(m: dict, inputs) -> list[str]:
 
 
 def _warnings(m: dict, inputs, faults=()) -> list[str]:
+    """Where tolerant control is worse than none, a fault estimate raises false alarms, or an input
+    sits at a limit (the thresholds of :mod:`fte_casadi.sim.metrics`)."""
+    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+
     out = []
     for name, v in zip(faults, m.get("false_alarm_rel_rms") or ()):
-        if v is not None and v > 1:
+        if v is not None and v > FALSE_ALARM:
             out.append(f"warning: the estimate of {name} outside its fault windows is as large as the fault itself "
-                       f"(relative RMS {v:.3g} > 1): false alarms, e.g. cross-talk from another fault; see the figures")  # fmt: skip
+                       f"(relative RMS {v:.3g} > {FALSE_ALARM:g}): false alarms, e.g. cross-talk from another fault; see the figures")  # fmt: skip
     for w in m.get("windows", []):
         r = w.get("ftc_deviation_ratio")
-        if r is not None and r > 1:
+        if r is not None and r > WORSE_THAN_NONE:
             out.append(f"warning: in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) tolerant control makes "
-                       f"the outputs worse than none (FTC deviation ratio {r:.3g} > 1)")  # fmt: skip
+                       f"the outputs worse than none (FTC deviation ratio {r:.3g} > {WORSE_THAN_NONE:g})")  # fmt: skip
         for i, frac in enumerate(w.get("input_saturation", [])):
-            if frac > 0.05:
+            if frac > SATURATED:
                 out.append(f"warning: input {inputs[i]} is at a limit for {100 * frac:.0f} % of the window of "
                            f"{w['fault']} [{w['start']:g}, {w['stop']:g}): tolerance is that of a saturated actuator")  # fmt: skip
     return out
@@ -531,7 +555,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
             f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}\n"
             f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}"
         )
-        for line in _window_lines(m, plant.input_names):
+        for line in _window_lines(m):
             click.echo(line)
         for note in getattr(res, "notes", ()) or ():
             click.echo(f"  note: {note}")
@@ -604,7 +628,9 @@ def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
 
 # -- reproduce ----------------------------------------------------------------------------
 @main.command()
-@click.argument("which", type=click.Choice(["manipulator", "three-tank", "all"]), default="all")
+@click.argument(
+    "which", type=click.Choice(["manipulator", "three-tank", "quadruple-tank", "all"]), default="all"
+)
 @click.option("--out", "out_dir", default="fte-report", show_default=True, type=click.Path(file_okay=False))
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--paths", type=int, help="At least this many paths (default: the paper's counts).")
@@ -637,49 +663,14 @@ def bench(as_json, paths):
     """Speed of design, Monte Carlo and the C step, against baselines run in the same process."""
     if paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    from .bench import run_all
+    from .checkout import load_benchmarks
 
-    out = run_all(paths, log=lambda msg: click.echo(msg, err=True))
+    benchmarks = load_benchmarks()
+    out = benchmarks.run_all(paths, log=lambda msg: click.echo(msg, err=True))
     if as_json:
         click.echo(json.dumps(out, indent=1, default=str))
         return
-    click.echo(
-        "design (conditioned, wall time incl. certificates; baseline: the 0.1 formulation, same process):"
-    )
-    for name, row in out["design"].items():
-        cells = []
-        for key in ("CLARABEL", "SCS", "legacy_0.1"):
-            v = row.get(key, {})
-            cells.append(f"{key}: " + (f"{v['wall_s']:.3f} s" if "wall_s" in v else "failed"))
-        extra = f", {row['speedup_vs_legacy']:.1f}x faster than 0.1" if "speedup_vs_legacy" in row else ""
-        if "max_rel_diff_clarabel_scs" in row:
-            extra += f", Clarabel and SCS designs equal to {row['max_rel_diff_clarabel_scs']:.1e}"
-        click.echo(f"  {name:12s} " + ", ".join(cells) + extra)
-    mc = out["monte_carlo"]
-    e, pp = mc["engine"], mc["per_path_engine"]
-    click.echo(
-        f"Monte Carlo ({mc['scenario']}): {e['paths']} paths in {e['wall_s']:.2f} s "
-        f"({e['path_steps_per_s'] / 1e6:.2f} M path-steps/s; first call incl. compile {e['first_call_wall_s']:.2f} s)\n"
-        f"  per-path engine of 0.1: {pp['wall_s']:.2f} s ({pp['path_steps_per_s'] / 1e6:.2f} M path-steps/s) -> "
-        f"vectorised engine is {mc['speedup_vs_per_path']:.1f}x faster\n"
-        f"  {e['flops_per_path_step']} flops per path-step: {100 * e['fraction_of_peak']:.1f} % of the assumed peak "
-        f"({e['peak_assumed']['cores']} cores x {e['peak_assumed']['ghz']:.2f} GHz x {e['peak_assumed']['doubles_per_vector']} "
-        f"doubles x 2 FMA units x 2)\n"
-        f"  one thread: {e['one_thread']['ns_per_path_step']:.1f} ns per path-step, "
-        f"{e['one_thread']['ns_per_path_step_without_libm']:.1f} ns without its "
-        f"{e['operations_per_path_step']['libm_calls']} scalar C library calls: "
-        f"{100 * e['one_thread']['libm_share']:.0f} % of the time is in those calls\n"
-        f"  sdeint itoEuler: {mc['sdeint_itoEuler']['path_steps_per_s']:.3g} path-steps/s -> engine is {mc['speedup_vs_sdeint']:.0f}x faster\n"
-        f"  plain Python loop: {mc['python_loop']['path_steps_per_s']:.3g} path-steps/s -> engine is "
-        f"{mc['speedup_vs_python_loop']:.0f}x faster (same trajectories to {mc['max_abs_diff_engine_vs_sdeint']:.1g})"
-    )
-    click.echo("generated C step (double, -O2):")
-    for name, b in out["c_step"].items():
-        click.echo(
-            f"  {name:12s} {b.get('c_ns') or float('nan'):.1f} ns/step vs hand-written {b.get('hand_ns') or float('nan'):.1f} ns "
-            f"(ratio {b.get('ratio') or float('nan'):.2f}); through CasADi from Python {b['casadi_us']:.1f} us; "
-            f"state {b['state_bytes']} B, constants {b['const_bytes']} B"
-        )
+    click.echo("\n".join(benchmarks.summary_lines(out)))
 
 
 # -- tune ---------------------------------------------------------------------------------

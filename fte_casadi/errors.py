@@ -24,6 +24,16 @@ class DerivationError(FteError, ValueError):
     """A T-S model cannot be derived (uncovered nonlinearity, unbounded premise...)."""
 
 
+class BoundsError(DerivationError):
+    """A premise cannot be bounded: ``kind`` is ``"not finite"``, ``"unbounded"`` or ``"constant"``;
+    ``where`` names the point (``"x1 = 0"``) for ``"not finite"``, else ``""``."""
+
+    def __init__(self, message: str, kind: str, where: str = ""):
+        super().__init__(message)
+        self.kind = kind
+        self.where = where
+
+
 class AssumptionError(FteError, ValueError):
     """One of the paper's assumptions (Section 3) fails; the message names it."""
 
@@ -36,12 +46,29 @@ class InfeasibleDesignError(FteError, ValueError):
         self.result = result
 
 
+class SolverFailedError(FteError, RuntimeError):
+    """The SDP solver failed numerically (as posed and on rescaled data, with both solvers when the
+    design retries); not a proof of infeasibility, so not an :class:`InfeasibleDesignError`. The
+    CLI reports it with the same exit status as an infeasible design."""
+
+
+class CentringError(ArithmeticError):
+    """The Newton centring of :mod:`fte_casadi.design.sdp` could not start (no strictly feasible
+    point) or did not converge. Internal: the design catches it and reports a
+    :class:`SolverFailedError` or a note, so it never reaches a user."""
+
+
 class DesignFileError(FteError, ValueError):
     """A design document is missing, truncated, corrupt or inconsistent."""
 
 
 class SimulationError(FteError, ValueError):
     """A simulation setting is invalid or a path diverged."""
+
+
+class UnsupportedOperation(SimulationError):
+    """The vectorised Monte Carlo engine cannot emit a Function (an operation the emitter does not
+    know), or cannot compile it."""
 
 
 class CodegenError(FteError, ValueError):

@@ -28,15 +28,17 @@ def builtin_design(plant_name: str) -> Design:
                       sample_time=sc.dt, initial_state=sc.x0)  # fmt: skip
 
 
-def regenerate_builtin(root: str | os.PathLike) -> dict[str, list[Path]]:
-    """Regenerate ``root/manipulator`` and ``root/three_tank`` (``root`` is the ``generated/`` folder).
+def regenerate_builtin(root: str | os.PathLike, names=None) -> dict[str, list[Path]]:
+    """Regenerate ``root/manipulator``, ``root/three_tank`` and ``root/quadruple_tank`` (``root`` is ``generated/``).
 
     Each folder gets ``design.json`` (the design the code was made from, so that the code can
     be regenerated bit for bit) and the files of :func:`generate_c` with the default sample
-    time and ``double``.
+    time and ``double``. ``names`` limits it to some plants (default: all).
     """
     out = {}
     for plant_name, sub in BUILTIN_DIRS.items():
+        if names is not None and plant_name not in names:
+            continue
         d = builtin_design(plant_name)
         folder = Path(root) / sub
         prepare_dir(folder)

@@ -1,4 +1,4 @@
-"""The discrete observer/controller step as ONE CasADi Function (SPEC.md, "The discrete-time step").
+"""The discrete observer/controller step as ONE CasADi Function (docs/method.md, "The discrete step").
 
 This Function is the single source of truth: the Monte Carlo engine maps it over paths and the
 C generator exports it, so simulation and embedded code cannot drift apart. At sample k, with
@@ -6,7 +6,8 @@ measurement ``y`` and observer state ``z``::
 
     xbarhat = z + H y                                   = [xhat; fdothat; fhat]
     h       = h(y, xhat)                                memberships from measured signals
-    s       = N (y - Cbar xbarhat),  us = (delta + eps) sgn(s)   (or a boundary layer)
+    s       = N (y - Cbar xbarhat),  us = g .* sgn(s)   (or a boundary layer); g = delta + eps,
+                                                         with Remark 5 first the gains of the undecoupled d
     u       = sat(u_ref + sum_j h_j (K_j xhat + Kf_j fhat))   (no Kf term without tolerant control;
                                                          Kf_j = Kf unless the rules' Kf_i differ;
                                                          sat: the actuator limits, if any)
@@ -99,7 +100,8 @@ def step_function(
 
     Cbar = np.hstack([design.C, np.zeros((p, lf)), design.Df])
     s = ca.mtimes(_dm(design.N), y - ca.mtimes(_dm(Cbar), xbh))
-    gain = float(design.params["delta"]) + float(design.params["epsilon"])
+    g = design.sliding_gain()  # delta + eps per fault; with Remark 5 first one gain per undecoupled direction
+    gain = float(g[0]) if np.all(g == g[0]) else _dm(g)
     if boundary_layer is None:
         us = gain * ca.sign(s)
     else:
@@ -121,7 +123,7 @@ def step_function(
     u = saturate(u, design.input_limits)
 
     T = np.asarray(design.T)
-    rhs = ca.mtimes(_dm(design.Ls), us)  # Ls = T J1 for every rule, and sum_i h_i = 1
+    rhs = ca.mtimes(_dm(design.Ls), us)  # Ls = T J1 (T [Bdbar_u J1]) for every rule, and sum_i h_i = 1
     for i in range(r):
         lm = design.local_models[i]
         Bbar = np.vstack([np.asarray(lm["B"]), np.zeros((2 * lf, m))])

@@ -1,6 +1,6 @@
 """Shared fixtures: built-in plants, their T-S models and designs.
 
-``lqr_design`` builds a Design record *without* the LMI machinery (H and T by SPEC.md's
+``lqr_design`` builds a Design record *without* the LMI machinery (H and T by docs/method.md's
 (17)-(18), K_j and L1_i by LQR, N = 0) so that simulation and plotting can be tested on a
 stable closed loop independently of the design code; ``real_designs`` are the conditioned
 LMI designs, made once per session.

@@ -20,9 +20,10 @@ from tolerances import C_DOUBLE, C_FLOAT_REL
 
 from fte_casadi.codegen import build
 from fte_casadi.codegen.ctypes_step import CStep, closed_loop_compare
-from fte_casadi.codegen.generate import _nice_floor, c_name, default_ts, generate_c, output_files
+from fte_casadi.codegen.generate import c_name, default_ts, generate_c, output_files
 from fte_casadi.errors import CodegenError, DesignFileError, ParameterError
 from fte_casadi.plants.loader import load_plant
+from fte_casadi.rounding import series_floor
 from fte_casadi.step import step_function
 
 PLANTS = ("manipulator", "three-tank")
@@ -328,21 +329,21 @@ def test_default_ts(designs):
         bare = dataclasses.replace(d, observer={k: v for k, v in d.observer.items() if k != "sample_time"})
         ts = default_ts(bare)
         assert ts <= 0.1 * tsm and f"{ts:e}"[0] in "125"
-        assert ts == min(BUILTIN_DT[plant], _nice_floor(0.1 * tsm))
+        assert ts == min(BUILTIN_DT[plant], series_floor(0.1 * tsm))
         assert BUILTIN_DT[plant] == SCENARIOS[plant]().dt  # kept in step with the simulator
     d = designs["three-tank"]
     user = dataclasses.replace(
         d, plant="my-tank", observer={k: v for k, v in d.observer.items() if k != "sample_time"}
     )
-    assert default_ts(user) == _nice_floor(0.1 * user.checks["ts_max"])
+    assert default_ts(user) == series_floor(0.1 * user.checks["ts_max"])
     assert 0.04 * user.checks["ts_max"] < default_ts(user) <= 0.1 * user.checks["ts_max"]
     motor = dataclasses.replace(d, plant="motor", observer=dict(d.observer, sample_time=1e-3))
     assert default_ts(motor) == 1e-3  # the simulated rate, not a tenth of ts_max
     too_slow = dataclasses.replace(
         d, plant="motor", observer=dict(d.observer, sample_time=2 * d.checks["ts_max"])
     )
-    assert default_ts(too_slow) == _nice_floor(0.1 * d.checks["ts_max"])  # never an unstable default
-    assert [_nice_floor(v) for v in (0.0999, 0.1, 0.35, 7.0, 1.99e-3)] == [0.05, 0.1, 0.2, 5.0, 1e-3]
+    assert default_ts(too_slow) == series_floor(0.1 * d.checks["ts_max"])  # never an unstable default
+    assert [series_floor(v) for v in (0.0999, 0.1, 0.35, 7.0, 1.99e-3)] == [0.05, 0.1, 0.2, 5.0, 1e-3]
 
 
 def test_missing_ts_max_refused(designs, tmp_path):
@@ -366,7 +367,7 @@ def test_no_compiler_is_reported(monkeypatch, tmp_path):
 @needs_cc
 def test_bench_measures_and_baseline_agrees(designs):
     """The benchmark runs; its hand-written baseline computes the same step; no mutable globals."""
-    from fte_casadi.bench.cstep import bench_c_step
+    from benchmarks.cstep import bench_c_step
 
     res = bench_c_step(designs["three-tank"], iters=2000, reps=1)
     assert res["c_ns"] > 0 and res["hand_ns"] > 0 and res["casadi_us"] > 0

@@ -11,8 +11,9 @@ from plant_tight import tight
 
 from fte_casadi.cli import main
 from fte_casadi.design import augment, design, explore
-from fte_casadi.design.diagnose import gamma_min, nice_ceil, nice_floor, sigma_max
+from fte_casadi.design.diagnose import gamma_min, sigma_max
 from fte_casadi.errors import InfeasibleDesignError
+from fte_casadi.rounding import nice_ceil, nice_floor
 from fte_casadi.ts import derive
 
 HERE = Path(__file__).resolve().parent

@@ -11,7 +11,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from fte_casadi.sim import simulate  # noqa: E402
-from fte_casadi.sim.cluster import chunk_task  # noqa: E402
+from fte_casadi.sim.engine import chunk_task  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +66,9 @@ def test_a_lost_worker_is_retried_without_changing_the_result(cluster, plants, r
 
     got = dict(run_on_cluster(cluster.scheduler_address, d, p, sc, dt, dict(SCALES), 3, 24, 8, task=task))
     assert os.path.exists(marker)  # a worker was lost
-    ref = dict(run_on_cluster(cluster.scheduler_address, d, p, sc, dt, dict(SCALES), 3, 24, 8))
+    ref = dict(
+        run_on_cluster(cluster.scheduler_address, d, p, sc, dt, dict(SCALES), 3, 24, 8, task=chunk_task)
+    )
     for a in ref:
         assert (got[a][0] == ref[a][0]).all() and (got[a][1] == ref[a][1]).all()
 

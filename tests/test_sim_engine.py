@@ -6,12 +6,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from benchmarks.perpath import monte_carlo
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.plants import SCENARIOS
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate
 from fte_casadi.sim import rng as frng
 from fte_casadi.sim.engine import auto_chunk, closed_loop_sample
-from fte_casadi.sim.perpath import monte_carlo
 from fte_casadi.sim.scenario import fault_schedule
 
 GBM_A, GBM_B = 0.5, 0.8  # dX = a X dt + b X dW
@@ -228,7 +228,7 @@ def test_builtin_scenarios():
 
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_vectorised_engine_equals_the_per_path_engine(plants, real_designs, name):
-    """Issue #11: the same trajectories as today's per-path engine (compiled blocks mapped over paths)
+    """Issue #11: the same trajectories as the per-path engine (benchmarks/perpath.py: compiled blocks mapped over paths)
     when both get the same random numbers (the numpy twin of the generator the C draws from): bit for
     bit, since the lane engine rounds every operation as CasADi's C does (no FMA contraction)."""
     from fte_casadi.sim.engine import SCALES, Prepared, resolve_dt

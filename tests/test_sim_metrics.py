@@ -1,4 +1,4 @@
-"""Metrics document (CONTRACT.md) on hand-made arrays, and the .npz round trip."""
+"""Metrics document (docs/interface.md) on hand-made arrays, and the .npz round trip."""
 
 import dataclasses
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck
-from fte_casadi.sim.engine import Layout
+from fte_casadi.sim.engine import PathLayout
 from fte_casadi.sim.reduce import finalize, increments, masks
 
 
@@ -15,7 +15,7 @@ def _setup():
     )
     t = np.arange(101) * 0.01
     mk = masks(t, sc, ["fa", "fs"])
-    lay = Layout(n=4, nbar=8, lf=2, m=1, p=3, ld=1)
+    lay = PathLayout(n=4, nbar=8, lf=2, m=1, p=3, ld=1)
     _, names = increments(lay, mk, np.array([[-1.0, 1.0]]))
     return mk, names
 

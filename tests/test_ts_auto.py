@@ -34,7 +34,8 @@ def plain_and_builtin(ts_models):
 
 def test_plain_manipulator_gives_the_paper_model(plain_and_builtin):
     ts, ref = plain_and_builtin
-    assert ts.r == 2 and len(ts.premises) == 1 and "automatically" in ts.method
+    assert ts.r == 2 and len(ts.premises) == 1 and "automatically" in ts.method and ts.kind == "sector_auto"
+    assert ts.to_dict()["premises_found_automatically"] is True
     pr = ts.premises[0]
     assert pr.expr == ref.premises[0].expr == "sin(theta_l)/theta_l"  # the built-in premise, same text
     assert (pr.min, pr.max) == (ref.premises[0].min, ref.premises[0].max)  # the same global bound search
@@ -81,7 +82,8 @@ def test_plain_pendulum_equals_the_premise_form():
     for a, b in zip(plain.local_models, hand.local_models):
         for k in ("A", "B", "Bd", "Bf", "W"):
             np.testing.assert_allclose(getattr(a, k), getattr(b, k), rtol=0, atol=1e-12)
-    assert hand.notes == () and hand.method == "sector"
+    assert hand.notes == () and hand.method == "sector" and hand.kind == "sector"
+    assert hand.to_dict()["premises_found_automatically"] is False
 
 
 def test_bilinear_and_saturation_derive_with_four_rules():
@@ -93,7 +95,7 @@ def test_bilinear_and_saturation_derive_with_four_rules():
     bounds = {p.expr: (p.min, p.max) for p in ts.premises}
     assert bounds["x1"] == pytest.approx((-2.0, 2.0), abs=1e-9)
     assert bounds["tanh(x1)/x1"] == pytest.approx((np.tanh(2.0) / 2.0, 1.0), abs=1e-6)
-    # rule 1: x1 at its max and tanh(x1)/x1 at its max (CONTRACT.md's order)
+    # rule 1: x1 at its max and tanh(x1)/x1 at its max (the rule order of docs/interface.md)
     assert ts.local_models[0].A[1].tolist() == pytest.approx([-2.0, -2.5], abs=1e-12)
     assert ts.local_models[3].A[1].tolist() == pytest.approx([-np.tanh(2.0), 1.5], abs=1e-9)
 
@@ -200,7 +202,7 @@ def test_singular_fill_is_exact_near_zero():
 
 def test_linear_plant_is_one_rule_with_a_certified_design_simulation_and_working_c(tmp_path):
     ts = derive(linear())
-    assert ts.r == 1 and ts.premises == () and ts.method == "linear (one rule)"
+    assert ts.r == 1 and ts.premises == () and ts.method == "linear (one rule)" and ts.kind == "linear"
     assert ts.fidelity.max_abs_error <= ROUNDOFF and ts.notes == (
         "no nonlinear term in the states: one rule (the plant is linear)",
     )

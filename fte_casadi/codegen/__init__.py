@@ -1,8 +1,9 @@
-"""Embedded C of the discrete observer/controller step (CONTRACT.md, "Generated C")."""
+"""Embedded C of the discrete observer/controller step (docs/interface.md, "Generated C")."""
 
 from .build import compile_program as compile_program
 from .build import compile_shared as compile_shared
 from .build import find_compiler as find_compiler
+from .fmu import generate_fmu as generate_fmu
 from .generate import default_ts as default_ts
 from .generate import generate_c as generate_c
 from .generate import output_files as output_files
@@ -11,6 +12,7 @@ __all__ = [
     "generate_c",
     "default_ts",
     "output_files",
+    "generate_fmu",
     "find_compiler",
     "compile_shared",
     "compile_program",

@@ -1,34 +1,19 @@
-"""Compile generated C with the strict flags of CONTRACT.md (for ctypes tests, examples, benchmarks)."""
+"""Compile generated C with the strict flags of docs/interface.md (for ctypes tests, examples, benchmarks)."""
 
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 from ..errors import CodegenError
+from ..toolchain import find_compiler as find_compiler
 
 __all__ = ["STRICT_FLAGS", "find_compiler", "compile_shared", "compile_program", "run_program"]
 
 #: the flags every generated file must compile under, with no warning
 STRICT_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic")
-_CANDIDATES = ("cc", "gcc", "clang")
-
-
-def find_compiler() -> str | None:
-    """Path of a C compiler: ``$CC`` when set, else the first of cc, gcc, clang on PATH; None if none."""
-    env = os.environ.get("CC")
-    if env:
-        found = shutil.which(env)
-        if found:
-            return found
-    for name in _CANDIDATES:
-        found = shutil.which(name)
-        if found:
-            return found
-    return None
 
 
 def _require_compiler() -> str:

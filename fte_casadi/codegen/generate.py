@@ -3,7 +3,7 @@
 CasADi's :class:`casadi.CodeGenerator` writes the maths of :func:`fte_casadi.step.step_function`
 (the single source of truth that the simulator uses too) into ``fte_NAME_casadi.c``/``.h``;
 :mod:`fte_casadi.codegen.template` writes the human-facing wrapper ``fte_NAME.h``/``.c`` of
-CONTRACT.md and a README. What the CasADi output is made to satisfy, and how:
+docs/interface.md and a README. What the CasADi output is made to satisfy, and how:
 
 - no heap, no static mutable data: an ``SX`` Function is generated as straight-line code on
   scalar locals (``casadi_real a0, a1, ...``); the only statics are ``const`` sparsity tables.
@@ -36,13 +36,14 @@ import numpy as np
 
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
+from ..rounding import series_floor
 from ..step import step_function
 from . import template
 
 __all__ = ["generate_c", "default_ts", "c_name", "output_files", "BUILTIN_DIRS", "write_files", "file_mode"]
 
 #: directory name under ``generated/`` of each built-in plant
-BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank"}
+BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank", "quadruple-tank": "quadruple_tank"}
 
 _REALS = ("double", "float")
 _REAL_BYTES = {"double": 8, "float": 4}
@@ -72,16 +73,6 @@ def output_files(plant: str) -> list[str]:
     return [f"fte_{nm}.h", f"fte_{nm}.c", f"fte_{nm}_casadi.h", f"fte_{nm}_casadi.c", "README.md"]
 
 
-def _nice_floor(v: float) -> float:
-    """Largest 1, 2 or 5 times a power of ten not above ``v``."""
-    e = math.floor(math.log10(v))
-    for mant in (5.0, 2.0, 1.0):
-        c = float(f"{mant}e{e}")
-        if c <= v * (1 + 1e-12):
-            return c
-    return float(f"1e{e - 1}")
-
-
 def _ts_max(design: Design) -> float:
     tsm = design.checks.get("ts_max") if isinstance(design.checks, dict) else None
     try:
@@ -97,7 +88,7 @@ def _ts_max(design: Design) -> float:
 
 
 #: simulation time step of the built-in plants' paper scenarios (``fte_casadi.plants.SCENARIOS``)
-BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2}
+BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2, "quadruple-tank": 0.1}
 
 
 def default_ts(design: Design) -> float:
@@ -108,7 +99,7 @@ def default_ts(design: Design) -> float:
     st = design.observer.get("sample_time") if isinstance(design.observer, dict) else None
     if st is not None and math.isfinite(float(st)) and 0 < float(st) < _ts_max(design):
         return float(st)
-    ts = _nice_floor(0.1 * _ts_max(design))
+    ts = series_floor(0.1 * _ts_max(design))
     return min(ts, BUILTIN_DT.get(design.plant, ts))
 
 
@@ -303,6 +294,7 @@ def _wrapper(
         "iw_arg": "s->iw" if sizes["SZ_IW"] else "0",
         "w_arg": "s->w" if sizes["SZ_W"] else "0",
         "sliding": "sgn(s)" if boundary_layer is None else f"sat(s / {_fmt(boundary_layer)})",
+        **_sliding_text(design),
         "affine": " + T abar_i" if affine else "",
         "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
         "saturation_text": _saturation_text(design),
@@ -325,6 +317,23 @@ def _wrapper(
         files[1]: template.SOURCE.substitute(sub),
         files[4]: template.README.substitute(sub),
     }, mem
+
+
+def _sliding_text(design: Design) -> dict:
+    """The sliding variables' count and gains: ``(delta + eps)`` per fault, and with Remark 5 first the
+    gains of the unknown inputs H does not decouple."""
+    lf = int(design.dims["lf"])
+    r5 = design.remark5 or {}
+    if not r5.get("used"):
+        return {"ns": lf, "ns_text": "", "sliding_gain": "(delta + eps)"}
+    k = len(r5["gain"])
+    names = ", ".join(r5.get("unknown_inputs", []))
+    gains = ", ".join(f"{v:.6g}" for v in design.sliding_gain())
+    return {
+        "ns": lf + k,
+        "ns_text": f": {k} for the unknown inputs H does not decouple ({names}; Remark 5), then {lf} for the faults",
+        "sliding_gain": f"diag({gains}) (Remark 5: first the gains bounding the undecoupled {names})",
+    }
 
 
 def _saturation_text(design: Design) -> str:

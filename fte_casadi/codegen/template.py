@@ -1,4 +1,4 @@
-"""Templates of the human-facing C wrapper (CONTRACT.md, "Generated C") and its README.
+"""Templates of the human-facing C wrapper (docs/interface.md, "Generated C") and its README.
 
 CasADi writes the maths into ``fte_NAME_casadi.c``/``.h``; these templates write ``fte_NAME.h``
 (types, sizes, the two calls) and ``fte_NAME.c`` (input check, argument plumbing, state
@@ -33,7 +33,7 @@ typedef ${real} fte_real;
 #define FTE_${NAME}_NXBAR ${nxbar}   /* xbarhat = [xhat (${n}); fdothat (${lf}); fhat (${lf})] */
 #define FTE_${NAME}_NX ${n}      /* states: ${x_names} */
 #define FTE_${NAME}_NF ${lf}      /* faults: ${f_names} */
-#define FTE_${NAME}_NS ${lf}      /* sliding variables s */
+#define FTE_${NAME}_NS ${ns}      /* sliding variables s${ns_text} */
 #define FTE_${NAME}_TS ${ts_c}   /* sample time the step was generated for */
 
 /* All memory the step needs: the observer state z and CasADi's work arrays. */
@@ -58,7 +58,8 @@ void fte_${name}_init(fte_${name}_state *s, const fte_real *z0);
  * infinity; returns -1 (state untouched) when s or y0 is NULL. */
 int fte_${name}_init_from_y(fte_${name}_state *s, const fte_real *y0, const fte_real *xbar0);
 
-/* One sample of the discrete step (SPEC.md): from y_k (FTE_${NAME}_NY values) compute
+/* One sample of the discrete step (fte_casadi's docs/method.md, "The discrete step"):
+ * from y_k (FTE_${NAME}_NY values) compute
  * u_k (FTE_${NAME}_NU), xbarhat_k (FTE_${NAME}_NXBAR) and the compensated output yc_k
  * (FTE_${NAME}_NY), and advance the state to z_{k+1}. Any output pointer may be NULL.
  * Returns 0; returns 1 and leaves the state and outputs untouched when y holds a NaN or an
@@ -150,10 +151,10 @@ ${file_table}
 
 ## What it computes
 
-One sample of the discrete step of SPEC.md at the fixed sample time
+One sample of the discrete step of fte_casadi's docs/method.md at the fixed sample time
 **Ts = ${ts_text} ${time_unit}** (the design's observer is stable for Ts < ${ts_max_text} ${time_unit}):
 `xbarhat = z + H y`; memberships from measured signals; `s = N (y - Cbar xbarhat)`;
-`us = (delta + eps) ${sliding}`; `u = u_ref + sum_j h_j K_j xhat + Kf fhat` (tolerant control
+`us = ${sliding_gain} ${sliding}`; `u = u_ref + sum_j h_j K_j xhat + Kf fhat` (tolerant control
 always on); `yc = y - Df fhat`; `z+ = z + Ts sum_i h_i (R_i z + T Bbar_i u + (L_i1 + L_i2) y + Ls us${affine})`.
 `u_ref = ${u_ref}` is fixed in the code. Real type: `${real}`.
 Actuator limits: ${saturation_text}

@@ -2,19 +2,25 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 
 import casadi as ca
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..errors import FteError, InfeasibleDesignError, ParameterError
+from ..rounding import nice_ceil, nice_floor
 from ..ts import TSModel, scheduling_from_measurements
 from . import conditioned, paper
 from .augment import augment
 from .certify import certificate, discrete_certificate, failures
-from .diagnose import FrontierPoint, gamma_min, nice_ceil, nice_floor, sigma_max
+from .diagnose import FrontierPoint, gamma_min, sigma_max
 from .record import Design
+from .remark5 import explain_causes, with_remark5
+from .remark5 import fallback as remark5_fallback
+from .remark5 import record as remark5_record
 from .uio import check_assumptions, enforce, uio_gain
 
 __all__ = ["design", "explore", "GENERIC_DEFAULTS", "explain_45", "explain_46"]
@@ -80,6 +86,24 @@ def _u_reference(ts: TSModel, K, status: list):
     return ue - Kx @ xr, xr
 
 
+def _one_blas_thread(fn):
+    """Run ``fn`` with the BLAS limited to one thread (threadpoolctl).
+
+    The design's algebra is many small dense products and factorisations (matrices of tens of rows);
+    a multi-threaded BLAS spends more on waking its threads than on the work, and on a loaded machine
+    the same design took 5.5-44 s with OpenBLAS's default threads against 0.3-6.9 s with one
+    (issue #17). The limit is undone on return, and nested calls keep it.
+    """
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+@_one_blas_thread
 def design(
     ts: TSModel,
     *,
@@ -99,6 +123,8 @@ def design(
     accept_assumptions=(),
     plant_spec: str | None = None,
     diagnose: bool = True,
+    remark5: bool = True,
+    d_bound=None,
     _retried: str | None = None,
 ) -> Design:
     """Design the sliding-mode UIO and fault-tolerant controller of ``ts`` (Section 4.3 / Theorem 5).
@@ -113,6 +139,9 @@ def design(
     (default :data:`~fte_casadi.design.conditioned.KAPPA`; recorded in ``params`` when given).
     ``initial_state`` is the nominal x(0) the simulations start from
     (default: the plant's), recorded as ``x0`` for the generated C's start from a first measurement.
+    ``remark5`` (default True) applies Remark 5's fallback where H cannot decouple the unknown inputs
+    (:mod:`fte_casadi.design.remark5`); ``d_bound`` (one number, or one per unknown input) bounds
+    ``|d|`` in its sliding gain (default: delta, as printed). ``remark5=False`` refuses such a plant.
     Raises :class:`~fte_casadi.errors.InfeasibleDesignError` when an
     LMI is infeasible (with the bounds that are feasible, when ``diagnose``) or a certificate
     fails (unless ``allow_uncertified``), :class:`~fte_casadi.design.conditioned.SolverFailedError`
@@ -169,43 +198,53 @@ def design(
             "Theorem 5: faults/inputs/d2 in the diffusion, LMIs (78)-(81) (keys 45/46/55/64 hold the same values)"
         )
     H, T = uio_gain(aug)
-    checks_a = _named(check_assumptions(aug, T), aug, ts.plant)
+    checks_a = check_assumptions(aug, T)
+    r5 = remark5_fallback(aug, checks_a, remark5)
+    if r5 is not None:  # Remark 5: H decouples what it can, the sliding term attenuates the rest
+        H, T, aug = r5.H, r5.T, with_remark5(aug, r5)
+        checks_a = check_assumptions(aug, T, remark5=r5)
+    checks_a = explain_causes(_named(checks_a, aug, ts.plant), aug, ts.plant, remark5)
     status += enforce(checks_a, accept_assumptions)
+    r5doc = {} if r5 is None else remark5_record(r5, d_bound, params, ts.plant.unknown_input_names)
+    status += [r5doc["message"]] if r5doc else []
     if not all(c.holds for c in checks_a):
         generic = set()  # a plant that fails an assumption gets the bounds, not a search over parameters
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
-                 gamma2=gamma2, alpha=alpha, sample_time=sample_time, kappa=kappa,
-                 accept_assumptions=accept_assumptions)  # fmt: skip
+                 gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions,
+                 kappa=kappa, remark5=remark5, d_bound=d_bound, plant_spec=plant_spec, initial_state=initial_state)  # fmt: skip
     if variant == "paper":
         s3, K = paper.step3(aug, params, solver)
         s5 = paper.step5(aug, params, s3.X, K, T, solver)
         status.append(
-            "paper variant: problem as printed (with SPEC.md's corrections); expect an ill-conditioned Pbar"
+            "paper variant: problem as printed (with the corrections of docs/method.md); expect an ill-conditioned Pbar"
         )
     else:
         try:
-            s3 = conditioned.step3(aug, params, solver)
-        except conditioned.SolverFailedError as exc:
-            return _other_solver(ts, retry, solver, exc, "step 3 (LMI (45))", plant_spec=plant_spec,
-                                 allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
-                                 retried=_retried)  # fmt: skip
+            try:
+                s3 = conditioned.step3(aug, params, solver)
+            except conditioned.SolverFailedError as exc:
+                beyond = _outside_45(aug, params, solver)
+                if beyond is None:
+                    return _other_solver(ts, retry, solver, exc, "step 3 (LMI (45))",
+                                         allow_uncertified=allow_uncertified, diagnose=diagnose,
+                                         retried=_retried)  # fmt: skip
+                raise InfeasibleDesignError(beyond) from None
         except InfeasibleDesignError as exc:
             chosen = _choose(ts, aug, params, solver, retry, generic, "45", exc) if diagnose else None
             if chosen is not None:
-                return _as_asked(chosen, ts, plant_spec, initial_state)
+                return chosen
             raise (explain_45(ts, aug, params, solver, retry) if diagnose else exc) from None
         K = [s3.K] * aug.r
         try:
             s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time)
         except conditioned.SolverFailedError as exc:
-            return _other_solver(ts, retry, solver, exc, "step 5 (LMIs (46), (55), (64))", plant_spec=plant_spec,
-                                 allow_uncertified=allow_uncertified, diagnose=diagnose, initial_state=initial_state,
-                                 retried=_retried)  # fmt: skip
+            return _other_solver(ts, retry, solver, exc, "step 5 (LMIs (46), (55), (64))", allow_uncertified=allow_uncertified,
+                                 diagnose=diagnose, retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
             if diagnose and "alpha" not in str(exc) and "sample time" not in str(exc):
                 chosen = _choose(ts, aug, params, solver, retry, generic, "46", exc)
                 if chosen is not None:
-                    return _as_asked(chosen, ts, plant_spec, initial_state)
+                    return chosen
                 raise explain_46(ts, aug, params, solver, retry, exc) from None
             raise
     status += s3.notes + s5.notes
@@ -214,7 +253,7 @@ def design(
     L1 = [np.linalg.solve(s5.Pbar, Q) for Q in s5.Q]
     R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
     L2 = [Ri @ H for Ri in R]
-    Ls = T @ aug.J1
+    Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
     Bs = [lm.B for lm in ts.local_models]
     Bfs = [lm.Bf for lm in ts.local_models]
     Kfs = [-np.linalg.pinv(B) @ Bf for B, Bf in zip(Bs, Bfs)]
@@ -302,15 +341,18 @@ def design(
         observer=observer,
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
-        bounds=_bounds(certified, R, K, Kf, Kf_rules, H, T, s5, ts, u_ref, params),
+        bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc),
+        remark5=r5doc,
     )
 
 
-def _bounds(certified, R, K, Kf, Kf_rules, H, T, s5, ts, u_ref, params) -> dict:
+def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc) -> dict:
     """The certified bound on the fault-estimation error at the returned design (issue #18 item 1;
     :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
     if not certified:
         return {}
+    if r5doc and r5doc.get("used"):
+        return {"fault_error": {"holds": False, "why": "not computed where Remark 5's fallback is used"}}
     from types import SimpleNamespace
 
     from .bounds import fault_error_bound
@@ -322,6 +364,22 @@ def _bounds(certified, R, K, Kf, Kf_rules, H, T, s5, ts, u_ref, params) -> dict:
     view = SimpleNamespace(dims={"n": ts.n, "lf": ts.lf}, T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
                            local_models=lms, R=R, K=K)  # fmt: skip
     return {"fault_error": fault_error_bound(view)}
+
+
+def _outside_45(aug, params: dict, solver: str) -> str | None:
+    """Why (45) is infeasible at ``params`` by its bounds (one SDP each, well posed), or None.
+
+    The conditioned step 3 is homogeneous in its unknowns, so an infeasible (45) can end in a solver's
+    numerical failure rather than a certificate of infeasibility; before the other solver is tried (SCS
+    takes minutes to fail there), the bounds decide whether the parameters lie outside what (45) allows.
+    """
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    smax, _ = sigma_max(aug, g, g1, solver)
+    if smax is None:
+        return f"LMI (45) is infeasible: no sigma > 0 makes it feasible at gamma = {g:g}"
+    if sg >= smax:
+        return f"LMI (45) is infeasible: sigma = {sg:g} is above the largest sigma {smax:.3g} it allows at gamma = {g:g}"
+    return None
 
 
 def _other_solver(ts, retry: dict, solver: str, exc: Exception, where: str, *, retried, **kw) -> Design:
@@ -395,16 +453,6 @@ def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: 
             notes = [f"{k} = {c['value']:g} chosen by the tool: {c['why']}" for k, c in chosen.items()]
             return dataclasses.replace(d, params_chosen=chosen, status=notes + list(d.status))
     return None
-
-
-def _as_asked(d: Design, ts, plant_spec, initial_state) -> Design:
-    """A design found by :func:`_choose` with the caller's plant spec and initial state (its trials
-    ran without them)."""
-    import dataclasses
-
-    return dataclasses.replace(
-        d, plant_spec=plant_spec or d.plant_spec, x0=_initial_state(ts.plant, initial_state)
-    )
 
 
 def _named(checks: list, aug, plant) -> list:

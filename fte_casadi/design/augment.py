@@ -8,16 +8,20 @@ With ``xbar = [x; fdot; f]`` (``nbar = n + 2 lf``)::
 
 Theorem 5 (Section 5) adds ``Gbar_i = [G_i; 0; 0]``, ``Gfbar_i = [Gf_i; 0; 0]`` and
 ``Mbar_i = [M_i; 0; 0]``.
+
+Remark 5 (when H cannot decouple every unknown input) replaces ``J1`` by ``[Bdbar_u J1]`` in the
+sliding term: :attr:`Augmented.Jd` holds the undecoupled directions ``Bdbar_u`` (nbar x k, empty
+without Remark 5) and :attr:`Augmented.Js` the widened ``[Bdbar_u J1]`` that (20), (55), (64) use.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Augmented", "augment", "pad_rows"]
+__all__ = ["Augmented", "augment", "pad_rows", "time_scale", "time_scaled"]
 
 
 def pad_rows(M: np.ndarray, lf: int) -> np.ndarray:
@@ -47,10 +51,22 @@ class Augmented:
     J0: np.ndarray
     J1: np.ndarray
     J2: np.ndarray
+    #: Remark 5: the directions of d that H does not decouple (nbar x k; k = 0 without Remark 5)
+    Jd: np.ndarray | None = None
 
     @property
     def nbar(self) -> int:
         return self.n + 2 * self.lf
+
+    @property
+    def Js(self) -> np.ndarray:
+        """The sliding directions: ``J1``, or ``[Bdbar_u J1]`` with Remark 5 (nbar x ns)."""
+        return self.J1 if self.Jd is None or self.Jd.shape[1] == 0 else np.hstack([self.Jd, self.J1])
+
+    @property
+    def ns(self) -> int:
+        """Number of sliding variables: ``lf``, plus the undecoupled directions with Remark 5."""
+        return self.Js.shape[1]
 
 
 def _get(lm, key: str):
@@ -117,3 +133,37 @@ def _optional(lm, key: str, shape: tuple[int, int]) -> np.ndarray:
     if v.size == 0:
         return np.zeros((shape[0], 0))
     return v.reshape(shape[0], -1)
+
+
+def time_scale(aug: Augmented) -> float:
+    """The plant's characteristic time ``tau``: the power of two nearest ``1 / max_i ||A_i||_2``.
+
+    A power of two, so that multiplying data by it is exact; 1 when every A_i is zero.
+    """
+    rho = max(float(np.linalg.norm(A[: aug.n, : aug.n], 2)) for A in aug.Abar)
+    if not (rho > 0 and np.isfinite(rho)):
+        return 1.0
+    return float(2.0 ** round(-np.log2(rho)))
+
+
+def time_scaled(aug: Augmented, tau: float) -> Augmented:
+    """(8) in the time ``t' = t / tau``: drift and input matrices times ``tau``, diffusion times ``sqrt(tau)``.
+
+    With ``sigma' = tau^2 sigma`` and ``alpha' = tau alpha``, LMI (45) of the scaled data at
+    ``X' = tau X`` (the same gain K) is a congruence of (45) at ``X``, and (46) at
+    ``(P', Pbar', Q') = (P / tau, Pbar / tau, Q)`` a congruence of (46) at ``(P, Pbar, Q)``: the
+    same problem in numbers of order one for a plant whose rates are far from 1/s.
+    """
+    if tau == 1.0:
+        return aug
+    rt = float(np.sqrt(tau))
+    return replace(
+        aug,
+        Abar=tuple(tau * A for A in aug.Abar),
+        Bbar=tuple(tau * B for B in aug.Bbar),
+        Bdbar=tuple(tau * B for B in aug.Bdbar),
+        Wbar=tuple(rt * W for W in aug.Wbar),
+        Gbar=tuple(rt * G for G in aug.Gbar),
+        Gfbar=tuple(rt * G for G in aug.Gfbar),
+        Mbar=tuple(rt * M for M in aug.Mbar),
+    )

@@ -6,7 +6,7 @@ solver that reports "optimal" at a point where an LMI does not hold is caught.
 
 The builders are written once for Theorem 5 (diffusion ``W_i x + G_i u + Gf_i f + M_i d2``);
 with ``G = Gf = 0`` and no ``d2`` they are exactly (45), (46) of Theorem 3. Corrections of the
-printed formulas (SPEC.md): block (1,4) of (45)/(78) is ``Bd_i`` (not ``P Bd_i``);
+printed formulas (docs/method.md, "The paper's misprints"): block (1,4) of (45)/(78) is ``Bd_i`` (not ``P Bd_i``);
 ``Psi = A X + X A^T + B Y + Y^T B^T + sigma I``; block (3,3) of (45) is ``-I_p``. In (79) the
 term ``(Wbar_i + Gbar_i K_j)^T T^T Pbar T Gbar_eij`` of Theta_13 enters with a minus sign: it
 is the cross term of the error diffusion ``T (Wbar + Gbar K) x - T Gbar_e e``, exactly like
@@ -23,17 +23,14 @@ from __future__ import annotations
 import numpy as np
 
 from .augment import Augmented
+from .linalg import sym as _sym
 
 __all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "sliding_mismatch", "diffusion_coupling", "certificate", "ts_max",
-           "lyapunov_ts_max", "discrete_certificate",
+           "lyapunov_ts_max", "discrete_certificate", "balanced",
            "block_sizes", "failures"]  # fmt: skip
 
 
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + M.T)
-
-
-def _parts(aug: Augmented, i: int, K: np.ndarray, Kf_unused=None):
+def _parts(aug: Augmented, i: int):
     n, lf = aug.n, aug.lf
     A = aug.Abar[i][:n, :n]
     B = aug.Bbar[i][:n]
@@ -53,7 +50,7 @@ def lmi45(
     ``const`` multiplies every term that involves neither X nor Y (see the module docstring).
     """
     n, p, ld = aug.n, aug.p, aug.ld
-    A, B, _, W, G, _, _ = _parts(aug, i, None)
+    A, B, _, W, G, _, _ = _parts(aug, i)
     C = aug.Cbar[:, :n]
     Bd = aug.Bdbar[i][:n]
     Psi = A @ X + X @ A.T + B @ Y + Y.T @ B.T + const * sigma * np.eye(n)
@@ -68,10 +65,10 @@ def lmi45(
     return _sym(L)
 
 
-def lmi46_terms(aug: Augmented, i: int, K: np.ndarray, P: np.ndarray, T: np.ndarray):
+def lmi46_terms(aug: Augmented, i: int, K: np.ndarray):
     """The constant pieces of (46)/(79) for rule i, gain K = K_j (everything but Pbar and Q_i)."""
     n, lf = aug.n, aug.lf
-    _, B, Bf, W, G, Gf, M = _parts(aug, i, K)
+    _, B, Bf, W, G, Gf, M = _parts(aug, i)
     J0, J2 = aug.J0, aug.J2
     De = aug.Cbar[:, n + lf :] @ J2
     Be = B @ K @ J0 - Bf @ J2
@@ -89,7 +86,7 @@ def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0, const=
     conditioned variant's design constraint); the recorded certificate uses ``alpha = 0``.
     ``const`` multiplies every term that involves neither Pbar nor Q (module docstring).
     """
-    t = lmi46_terms(aug, i, K, P, T)
+    t = lmi46_terms(aug, i, K)
     Ab, Cb = aug.Abar[i], aug.Cbar
     TPT = T.T @ Pbar @ T
     C, De, Be, Ge, Wk, Wbk, Gbe, M, Mb = (
@@ -125,23 +122,26 @@ def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0, const=
 
 
 def sliding_mismatch(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray) -> np.ndarray:
-    """``J1^T T^T Pbar - N Cbar``: how far the sliding surface (20) is from holding (the E of (55))."""
-    return aug.J1.T @ T.T @ Pbar - N @ aug.Cbar
+    """``J1^T T^T Pbar - N Cbar``: how far the sliding surface (20) is from holding (the E of (55)).
+
+    With Remark 5, ``J1`` is ``[Bdbar_u J1]`` (:attr:`~fte_casadi.design.augment.Augmented.Js`)."""
+    return aug.Js.T @ T.T @ Pbar - N @ aug.Cbar
 
 
 def diffusion_coupling(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray) -> np.ndarray:
-    """``J1^T T^T Pbar T Wbar_i``: the diffusion seen by the sliding variable (the E of (64))."""
-    return aug.J1.T @ T.T @ Pbar @ T @ aug.Wbar[i]
+    """``J1^T T^T Pbar T Wbar_i``: the diffusion seen by the sliding variable (the E of (64));
+    ``[Bdbar_u J1]`` in place of ``J1`` with Remark 5."""
+    return aug.Js.T @ T.T @ Pbar @ T @ aug.Wbar[i]
 
 
 def lmi55(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray, theta: float):
     E = sliding_mismatch(aug, T, Pbar, N)
-    return _sym(np.block([[-theta * np.eye(aug.nbar), E.T], [E, -np.eye(aug.lf)]]))
+    return _sym(np.block([[-theta * np.eye(aug.nbar), E.T], [E, -np.eye(aug.ns)]]))
 
 
 def lmi64(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray, theta: float):
     E = diffusion_coupling(aug, i, T, Pbar)
-    return _sym(np.block([[-theta * np.eye(aug.n), E.T], [E, -np.eye(aug.lf)]]))
+    return _sym(np.block([[-theta * np.eye(aug.n), E.T], [E, -np.eye(aug.ns)]]))
 
 
 def block_sizes(aug: Augmented) -> dict:
@@ -149,8 +149,8 @@ def block_sizes(aug: Augmented) -> dict:
     return {
         "45": [aug.n, aug.n, aug.p, aug.ld],
         "46": [aug.n, aug.ld, aug.nbar] + ([l2] if l2 else []),
-        "55": [aug.nbar, aug.lf],
-        "64": [aug.n, aug.lf],
+        "55": [aug.nbar, aug.ns],
+        "64": [aug.n, aug.ns],
     }
 
 
@@ -166,6 +166,19 @@ def eig_roundoff(L: np.ndarray) -> float:
     A largest eigenvalue within this bound of zero certifies nothing.
     """
     return float(8 * L.shape[0] * np.finfo(float).eps * np.linalg.norm(L, 2)) if L.size else 0.0
+
+
+def balanced(L: np.ndarray) -> np.ndarray:
+    """``D L D`` with ``D = diag(|L_kk|^-1/2)`` (1 where ``L_kk = 0``): the same definiteness as ``L``.
+
+    An LMI whose blocks live on different scales (``-theta I`` with theta = 1e14 beside ``-I``, as in
+    (55) for a slow plant, whose Pbar is large in seconds) has a largest eigenvalue far below the
+    round-off bound of its largest entries although its sign is not in doubt; after this congruence
+    every diagonal entry is -1 or +1 and the round-off bound measures what matters.
+    """
+    d = np.abs(np.diag(L))
+    D = np.where(d > 0, 1.0 / np.sqrt(np.where(d > 0, d, 1.0)), 1.0)
+    return (L * D).T * D
 
 
 def _block_max(L: np.ndarray, sizes) -> list[float]:
@@ -255,9 +268,13 @@ def certificate(aug, d: dict, params: dict) -> dict:
     lm = {"45": -np.inf, "46": -np.inf, "55": -np.inf, "64": -np.inf}
     blocks = {k: [-np.inf] * len(v) for k, v in sizes.items()}
     roundoff = dict.fromkeys(lm, 0.0)
+    lm_bal, roundoff_bal = dict(lm), dict(roundoff)
     for key, L in lmi_matrices(aug, d, params):
         lm[key] = max(lm[key], _maxeig(L))
         roundoff[key] = max(roundoff[key], eig_roundoff(L))
+        Lb = balanced(L)
+        lm_bal[key] = max(lm_bal[key], _maxeig(Lb))
+        roundoff_bal[key] = max(roundoff_bal[key], eig_roundoff(Lb))
         blocks[key] = [max(a, b) for a, b in zip(blocks[key], _block_max(L, sizes[key]))]
     r = aug.r
     cl = max(float(np.max(np.linalg.eigvals(aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ K[j]).real))
@@ -269,6 +286,8 @@ def certificate(aug, d: dict, params: dict) -> dict:
         "lmi_max_eig": dict(lm),
         "lmi_block_max_eig": blocks,
         "lmi_roundoff": roundoff,
+        "lmi_balanced_max_eig": lm_bal,
+        "lmi_balanced_roundoff": roundoff_bal,
         "X_min_eig": float(ev_X[0]),
         "Pbar_min_eig": float(ev_P[0]),
         "R_max_real_eig": float(max(np.max(np.linalg.eigvals(Ri).real) for Ri in R)),
@@ -284,6 +303,8 @@ def certificate(aug, d: dict, params: dict) -> dict:
         for a, b in (("45", "78"), ("46", "79"), ("55", "80"), ("64", "81")):
             checks["lmi_max_eig"][b] = lm[a]
             checks["lmi_roundoff"][b] = roundoff[a]
+            checks["lmi_balanced_max_eig"][b] = lm_bal[a]
+            checks["lmi_balanced_roundoff"][b] = roundoff_bal[a]
     else:
         checks["theorem"] = 3
     return checks
@@ -296,12 +317,20 @@ def failures(checks: dict) -> list[str]:
     if checks.get("theorem") == 5:
         names = {"45": "LMI (78)", "46": "LMI (79)", "55": "LMI (80)", "64": "LMI (81)"}
     roundoff = checks.get("lmi_roundoff", {})
+    bal, bal_eps = checks.get("lmi_balanced_max_eig", {}), checks.get("lmi_balanced_roundoff", {})
     for k, v in names.items():
         lam, eps = checks["lmi_max_eig"][k], roundoff.get(k, 0.0)
+        # the sign is certain when the margin exceeds the round-off of the matrix as computed, or of its
+        # balanced form D L D (the same definiteness; see balanced())
+        beyond = lam < -eps or (k in bal and bal[k] < -bal_eps.get(k, 0.0))
+        if beyond:
+            continue
         if not lam < 0:
             bad.append(f"{v} (largest eigenvalue {lam:.3g})")
-        elif not lam < -eps:
-            bad.append(f"{v} (largest eigenvalue {lam:.3g} is within the round-off {eps:.3g} of its matrix)")
+        else:
+            bad.append(f"{v} (largest eigenvalue {lam:.3g} is within the round-off {eps:.3g} of its matrix"
+                       + (f", and {bal[k]:.3g} of its balanced form within {bal_eps.get(k, 0.0):.3g}" if k in bal else "")
+                       + ")")  # fmt: skip
     if not checks["X_min_eig"] > 0:
         bad.append(f"X > 0 (smallest eigenvalue {checks['X_min_eig']:.3g})")
     if not checks["Pbar_min_eig"] > 0:

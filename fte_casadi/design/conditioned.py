@@ -50,12 +50,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InfeasibleDesignError
-from .augment import Augmented
+from ..errors import CentringError, InfeasibleDesignError
+from ..errors import SolverFailedError as SolverFailedError
+from ..rounding import nice_floor
+from .augment import Augmented, time_scale, time_scaled
 from .certify import diffusion_coupling, lmi45, lmi46, lyapunov_ts_max, sliding_mismatch, ts_max
 from .sdp import (
+    SOLVED,
     AffineLMI,
-    CentringError,
     ConicProblem,
     Layout,
     MarginLMI,
@@ -88,10 +90,6 @@ RHO_CAP = 1e3
 def _kappa(params: dict) -> float:
     """The bound on cond(X') and cond(Pt): ``params["kappa"]`` when the design was asked for one, else KAPPA."""
     return float(params.get("kappa", KAPPA))
-
-
-class SolverFailedError(InfeasibleDesignError):
-    """The SDP solver failed numerically (twice: as posed and on rescaled data); not an infeasibility."""
 
 
 @dataclass
@@ -155,7 +153,7 @@ def _balanced_margin(tau, a: int, b: int) -> np.ndarray:
 def _accept(res: SolveResult, lmis, p: float) -> bool:
     """A solver's point counts when it is strictly inside ``lmis`` (the LMIs with the centring's
     margins, half the conic solve's), checked with numpy, whatever the solver's status says."""
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate") or not np.all(np.isfinite(res.v)):
+    if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
         return False
     for L in lmis:
         try:
@@ -189,7 +187,7 @@ def _start(
     SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.sdp.phase1`
     decides, in numpy, from there. A status that is neither a point nor infeasibility is a failure.
     """
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate") or not np.all(np.isfinite(res.v)):
+    if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
         return None
     if _accept(res, list(soft) + list(hard), 0.0):
         return res.v
@@ -205,7 +203,7 @@ def _start(
     return out
 
 
-def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError:
+def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError | SolverFailedError:
     if res.infeasible:
         return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
     other = "SCS" if solver == "CLARABEL" else "CLARABEL"
@@ -234,6 +232,30 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
     return layout, lmis, c
 
 
+def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: Layout, Su: np.ndarray):
+    """The feasibility solve of step 3, posed in the time ``t / tau`` (:func:`~fte_casadi.design.augment.time_scaled`),
+    its point mapped back exactly to the unknowns of the unscaled problem (``X = X_tau / tau``, the same K).
+
+    Only the starting point comes from here: the centring that follows runs on the unscaled LMIs, and
+    Newton's method is invariant under such changes of variables, so the design does not depend on tau.
+    """
+    aug_s = time_scaled(aug, tau)
+    params_s = dict(params, sigma=params["sigma"] * tau**2)
+    Su_s = input_scaling(aug_s)
+    layout_s, family_s, _ = _step3_problem(aug_s, params_s, Su_s)
+    prob = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in family_s[:-1]])  # without the epigraph of t
+    res = prob.solve(solver)
+    if tau == 1.0 or res.v is None or not np.all(np.isfinite(res.v)):
+        return prob, res
+    u = layout_s.unpack(res.v)
+    try:
+        K = Su_s @ u["Y"] @ np.linalg.inv(u["X"])
+    except np.linalg.LinAlgError:
+        return prob, SolveResult(res.status, None, res.seconds, res.rescaled, res.warned)
+    v = layout.pack(X=u["X"], Y=np.linalg.solve(Su, K @ u["X"]), s=tau * u["s"], t=0.0)
+    return prob, SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+
+
 def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
 
@@ -242,8 +264,8 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     """
     Su = input_scaling(aug)
     layout, family, c = _step3_problem(aug, params, Su)
-    prob = ConicProblem(layout, [L.at(2 * MARGIN) for L in family[:-1]])  # without the epigraph of t
-    res = prob.solve(solver)
+    tau = time_scale(aug)
+    prob, res = _step3_conic(aug, params, solver, tau, layout, Su)
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
     lmis = [L.at(MARGIN) for L in family]
     repaired: list[str] = []
@@ -277,7 +299,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
 # -- step 5 ----------------------------------------------------------------------------------
 def _step5_problem(aug: Augmented, params: dict, X, K, T):
     """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule."""
-    n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.lf
+    n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.ns  # ns = lf (+ Remark 5's directions)
     sg, g1 = params["sigma"], params["gamma1"]
     g2 = params.get("gamma2", params["gamma"])
     P = np.linalg.inv(X)
@@ -312,7 +334,7 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T):
     feas += _normalisation(layout, "Pt", nbar, _kappa(params))
 
     def N_of(Pt):
-        return aug.J1.T @ T.T @ Pt @ Cp
+        return aug.Js.T @ T.T @ Pt @ Cp
 
     rest = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf))]  # fmt: skip
@@ -339,6 +361,7 @@ class _Step5:
 
     def __init__(self, aug, params, X, K, T, solver):
         self.aug, self.T, self.solver, self.kappa = aug, T, solver, _kappa(params)
+        self.params, self.X, self.K, self.tau = params, X, K, time_scale(aug)
         self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T)
         r = aug.r
         self.feas = ConicProblem(self.layout, [L.at(2 * MARGIN) for L in feas])
@@ -367,9 +390,28 @@ class _Step5:
     def seconds(self) -> float:
         return self.feas.seconds
 
+    def _conic(self) -> SolveResult:
+        """The feasibility solve of (46) with the normalisation at alpha = 0, posed in the time ``t / tau``
+        (:func:`~fte_casadi.design.augment.time_scaled`: ``Pbar' = Pbar / tau``, ``P' = P / tau``, the same
+        Q_i) and mapped back exactly to the unknowns of the unscaled problem. Only the starting point
+        comes from here; the centring runs on the unscaled LMIs."""
+        if self.tau == 1.0:
+            return self.feas.solve(self.solver, 0.0)
+        tau = self.tau
+        aug_s = time_scaled(self.aug, tau)
+        params_s = dict(self.params, sigma=self.params["sigma"] * tau**2)
+        layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T)
+        self.feas = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in feas_s])
+        res = self.feas.solve(self.solver, 0.0)
+        if res.v is None or not np.all(np.isfinite(res.v)):
+            return res
+        u = layout_s.unpack(res.v)
+        v = self.layout.pack(Pt=u["Pt"], s=u["s"] / tau, rho=u["rho"] / tau, tau=0.0)
+        return SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+
     def first(self) -> SolveResult:
         """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else."""
-        res = self.feas.solve(self.solver, 0.0)
+        res = self._conic()
         if res.v is not None and np.all(np.isfinite(res.v)):
             v = res.v.copy()
             ir = self.layout.index("rho")
@@ -425,7 +467,7 @@ class _Step5:
         v = self.points[min(above)].copy()
         Pt = self.layout.unpack(v)["Pt"]
         aug, T, Cp = self.aug, self.T, np.linalg.pinv(self.aug.Cbar)
-        E = [sliding_mismatch(aug, T, Pt, aug.J1.T @ T.T @ Pt @ Cp)] + [
+        E = [sliding_mismatch(aug, T, Pt, aug.Js.T @ T.T @ Pt @ Cp)] + [
             diffusion_coupling(aug, i, T, Pt) for i in range(aug.r)
         ]
         v[self.layout.index("tau")] = 2.0 * max(np.linalg.norm(e, 2) for e in E) + 1.0
@@ -446,7 +488,7 @@ class _Step5:
         aug, T, s = self.aug, self.T, u["s"]
         Pbar = u["Pt"] / s
         Q = [u["rho"][i] * aug.Cbar.T / (2 * s) for i in range(aug.r)]
-        N = aug.J1.T @ T.T @ Pbar @ np.linalg.pinv(aug.Cbar)
+        N = aug.Js.T @ T.T @ Pbar @ np.linalg.pinv(aug.Cbar)
         L1 = [np.linalg.solve(Pbar, Qi) for Qi in Q]
         R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
         return dict(Pbar=Pbar, Q=Q, N=N, theta=float((u["tau"] / s) ** 2), R=R, ts_max=ts_max(R),
@@ -516,7 +558,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         raise InfeasibleDesignError(
             f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which (46) is "
             f"feasible with cond(Pbar) <= {prob.kappa:g} is about {lo:.4g}; lower alpha to <= "
-            f"{_nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
+            f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
         )
     if pt is None:
         raise SolverFailedError(
@@ -572,14 +614,6 @@ def _cap_for_sample_time(prob: _Step5, a: float, pt: dict, why: str, sample_time
     raise InfeasibleDesignError(
         f"no certified design runs at the sample time {sample_time:g}: over the observer decay rates tried "
         f"(0 to {a:.3g}) the discrete step z+ = z + Ts (...) is proven stable at best for Ts < {fastest:.3g}{limit}. "
-        f"Run the observer at a sample time <= {_nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
+        f"Run the observer at a sample time <= {nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
         "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)"
     )
-
-
-def _nice_floor(v: float) -> float:
-    """Two significant digits, rounded down."""
-    if not v > 0:
-        return 0.0
-    e = int(np.floor(np.log10(v))) - 1
-    return float(np.floor(v / 10.0**e) * 10.0**e)

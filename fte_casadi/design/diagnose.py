@@ -23,21 +23,9 @@ import numpy as np
 from .augment import Augmented
 from .certify import lmi45
 from .conditioned import MARGIN, input_scaling
-from .sdp import ConicProblem, Layout, Var, affine_lmi
+from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
-__all__ = ["gamma_min", "sigma_max", "nice_ceil", "nice_floor", "FrontierPoint"]
-
-
-def nice_ceil(v: float) -> float:
-    """``v`` rounded up to two significant digits."""
-    e = math.floor(math.log10(v)) - 1
-    return float(math.ceil(v / 10.0**e * (1 - 1e-12)) * 10.0**e)
-
-
-def nice_floor(v: float) -> float:
-    """``v`` rounded down to two significant digits."""
-    e = math.floor(math.log10(v)) - 1
-    return float(math.floor(v / 10.0**e * (1 + 1e-12)) * 10.0**e)
+__all__ = ["gamma_min", "sigma_max", "FrontierPoint"]
 
 
 def _blocks(aug: Augmented) -> tuple[int, int, int, int]:
@@ -87,7 +75,7 @@ def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple
     """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status."""
     layout, lmis, c = _problem(aug, sigma, None, gamma1)
     res = ConicProblem(layout, lmis, c).solve(solver)
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+    if res.v is None or res.status not in SOLVED:
         return None, res.status
     g2 = layout.unpack(res.v)["q"]
     return float(math.sqrt(max(g2, gamma1**2))), res.status
@@ -99,7 +87,7 @@ def sigma_max(aug: Augmented, gamma: float | None, gamma1: float, solver: str) -
     None when (45) is infeasible even at sigma -> 0 (then no sigma helps: gamma must rise)."""
     layout, lmis, c = _problem(aug, None, gamma, gamma1)
     res = ConicProblem(layout, lmis, c).solve(solver)
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+    if res.v is None or res.status not in SOLVED:
         return None, res.status
     s = layout.unpack(res.v)["q"]
     return (float(s) if s > 0 else None), res.status

@@ -1,4 +1,4 @@
-"""The paper variant: Section 4.3 exactly as printed (with SPEC.md's corrections), one solve per step.
+"""The paper variant: Section 4.3 exactly as printed (with the corrections of docs/method.md), one solve per step.
 
 Step 3 is the feasibility problem (45) for ``X > 0`` and one ``Y_j`` per rule, with no objective;
 step 5 is ``min theta`` subject to (46) for every ``(i, j)``, (55), (64) and ``Pbar > 0`` with ``Q_i``
@@ -6,7 +6,7 @@ and ``N`` free. Strict inequalities become ``<= -1e-7 I``. The solver's point is
 (no centring: this variant shows what the printed problem gives), and only ever reported with
 its certificate recomputed at that point. Because ``Cbar J1 = 0``, (20) forces
 ``J1^T Pbar J1 = 0`` and ``min theta`` drives Pbar towards singular: expect a huge cond(Pbar)
-and huge gains, or an infeasibility report (SPEC.md, "A numerical fact...").
+and huge gains, or an infeasibility report (docs/method.md, "Equality (20) is never exactly feasible").
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from ..errors import InfeasibleDesignError
 from .augment import Augmented
 from .certify import lmi45, lmi46, lmi55, lmi64
 from .conditioned import Step3, Step5
-from .sdp import ConicProblem, Layout, Var, affine_lmi
+from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
 __all__ = ["step3", "step5", "STRICT"]
 
@@ -36,7 +36,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.nda
     lmis.append(affine_lmi("X > 0", layout, lambda **u: STRICT * np.eye(n) - u["X"]))
     prob = ConicProblem(layout, lmis)
     res = prob.solve(solver)
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+    if res.v is None or res.status not in SOLVED:
         kind = "infeasible" if res.infeasible else f"not solved ({res.status})"
         raise InfeasibleDesignError(
             f"LMI (45) as printed is {kind} for gamma = {g:g}, gamma1 = {g1:g}, sigma = {sg:g} ({solver}: {res.status}); "
@@ -53,7 +53,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.nda
 
 def step5(aug: Augmented, params: dict, X, K: list, T, solver: str) -> Step5:
     """``min theta`` s.t. (46) for every (i, j), (55), (64), Pbar > 0 (Q_i, N free)."""
-    n, p, nbar, lf, r = aug.n, aug.p, aug.nbar, aug.lf, aug.r
+    n, p, nbar, lf, r = aug.n, aug.p, aug.nbar, aug.ns, aug.r  # ns = lf (+ Remark 5's directions)
     sg, g1 = params["sigma"], params["gamma1"]
     g2 = params.get("gamma2", params["gamma"])
     P = np.linalg.inv(X)
@@ -78,7 +78,7 @@ def step5(aug: Augmented, params: dict, X, K: list, T, solver: str) -> Step5:
     c[layout.index("theta")] = 1.0
     prob = ConicProblem(layout, lmis, c)
     res = prob.solve(solver)
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+    if res.v is None or res.status not in SOLVED:
         kind = "infeasible" if res.infeasible else f"not solved ({res.status})"
         raise InfeasibleDesignError(
             f"LMI (46) with (55), (64) as printed is {kind} ({solver}: {res.status}); the paper variant is "

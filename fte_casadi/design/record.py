@@ -1,6 +1,6 @@
-"""The design record: a frozen object with atomic JSON save/load exactly as CONTRACT.md.
+"""The design record: a frozen object with atomic JSON save/load exactly as docs/interface.md describes it.
 
-Every key of CONTRACT.md's design document is here under its contract name. Extra keys
+Every key of the design document (docs/interface.md) is here under its contract name. Extra keys
 (all additions, none renamed) carry what the simulator and the C generator need to rebuild
 the step without the plant's Python code: the affine offsets ``a`` of each local model, the
 reference input, the scheduling map (y, xhat) -> h as a serialised CasADi Function, signal
@@ -130,6 +130,9 @@ class Design:
     #: the nominal initial state x0 the simulation starts the observer from (its scenario's, else the
     #: plant's); the generated C's ``init_from_y`` starts there: z0 = [x0; 0; 0] - H y0. None: zeros
     x0: np.ndarray | None = None
+    #: Remark 5's fallback (:mod:`fte_casadi.design.remark5`): {"used": True, "unknown_inputs": [...],
+    #: "gain": [one per undecoupled direction], "d_bound", "Bdu", "M", ...}; empty when not used
+    remark5: dict = field(default_factory=dict)
     #: certified performance bounds at the design (:mod:`fte_casadi.design.bounds`): {"fault_error": {...}}
     bounds: dict = field(default_factory=dict)
 
@@ -141,6 +144,15 @@ class Design:
     @property
     def nbar(self) -> int:
         return int(self.dims["nbar"])
+
+    def sliding_gain(self) -> np.ndarray:
+        """The gain of each sliding variable: Remark 5's per-direction gains for the undecoupled part of d
+        (first), then ``delta + eps`` for each fault's ``f''`` (docs/method.md, sliding surface (19)-(21))."""
+        lf = int(self.dims["lf"])
+        base = np.full(lf, float(self.params["delta"]) + float(self.params["epsilon"]))
+        if not self.remark5.get("used"):
+            return base
+        return np.concatenate([_arr(self.remark5["gain"]).ravel(), base])
 
     def kf(self, i: int) -> np.ndarray:
         """Rule ``i``'s fault-compensation gain: its own where the rules differ, else the common Kf."""
@@ -184,7 +196,7 @@ class Design:
         the affine offsets of linearised models and the actuator limits (the model is linear). Its
         poles are ``eig(A_i + B_i K_j)`` and ``eig(R_i)`` (the observer error decouples). With
         ``dt``: the loop as the generated C runs it, the plant by zero-order hold and the observer
-        by the explicit Euler step of SPEC.md. Needs python-control (``fte_casadi[control]``).
+        by the explicit Euler step of docs/method.md. Needs python-control (``fte_casadi[control]``).
         """
         from ..interop import closed_loop_ss
 
@@ -226,6 +238,8 @@ class Design:
             out["bounds"] = _jsonable(self.bounds)
         if self.Kf_rules is not None:
             out["Kf_rules"] = [_arr(M).tolist() for M in self.Kf_rules]
+        if self.remark5.get("used"):
+            out["remark5"] = _jsonable(self.remark5)
         out["scheduling"] = self.scheduling
         out["names"] = self.names
         out["certified"] = bool(self.certified)
@@ -319,6 +333,7 @@ class Design:
             solves=dict(doc.get("solves", {})),
             observer=dict(doc.get("observer", {})),
             input_limits=_limits(source, doc.get("input_limits"), int(doc["dims"]["m"])),
+            remark5=_remark5(source, doc.get("remark5"), kw["Ls"].shape[1] - int(doc["dims"]["lf"])),
             **kw,
         )
 
@@ -358,6 +373,24 @@ def _limits(source: str, value, m: int) -> np.ndarray | None:
             f"{source}: 'input_limits' must hold {m} pairs [lower, upper] with lower < upper"
         )
     return a
+
+
+def _remark5(source: str, value, k: int) -> dict:
+    """``remark5`` of a document: absent or {"used": false} (then Ls has lf columns), or the fallback with
+    one gain per undecoupled direction (Ls has lf + that many columns)."""
+    if not value or not value.get("used"):
+        if k != 0:
+            raise DesignFileError(
+                f"{source}: 'Ls' has {k} more columns than faults but 'remark5' is not used"
+            )
+        return {}
+    gain = _finite(source, "remark5.gain", value.get("gain", [])).ravel()
+    if gain.size != k or np.any(gain < 0):
+        raise DesignFileError(
+            f"{source}: 'remark5.gain' must hold {k} non-negative numbers, one per undecoupled direction (the "
+            "columns of 'Ls' beyond the faults')"
+        )
+    return dict(value)
 
 
 def _reject_constant(name: str):

@@ -31,6 +31,9 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from ..errors import CentringError as CentringError
+from .linalg import sym as _sym
+
 __all__ = [
     "Var",
     "Layout",
@@ -40,6 +43,7 @@ __all__ = [
     "margin_lmi",
     "ConicProblem",
     "SolveResult",
+    "SOLVED",
     "Centred",
     "CentringError",
     "centre",
@@ -95,13 +99,19 @@ class Layout:
                 out[var.name] = chunk.reshape(var.shape)
         return out
 
+    def pack(self, **values) -> np.ndarray:
+        """The vector holding ``values`` (the inverse of :meth:`unpack`; missing names are zero)."""
+        v = np.zeros(self.size)
+        for var, a in zip(self.vars, self.offsets[:-1]):
+            if var.name not in values:
+                continue
+            x = np.asarray(values[var.name], dtype=float)
+            v[a : a + var.size] = x[np.triu_indices(var.shape[0])] if var.symmetric else x.ravel()
+        return v
+
     def index(self, name: str) -> slice:
         k = [v.name for v in self.vars].index(name)
         return slice(int(self.offsets[k]), int(self.offsets[k + 1]))
-
-
-def _sym(M: np.ndarray) -> np.ndarray:
-    return 0.5 * (M + M.T)
 
 
 @dataclass(frozen=True)
@@ -193,6 +203,10 @@ def margin_lmi(
     return MarginLMI(base, unit)
 
 
+#: the solver statuses that come with a point (which the design then checks in numpy)
+SOLVED = ("optimal", "optimal_inaccurate")
+
+
 @dataclass(frozen=True)
 class SolveResult:
     status: str  # cvxpy's status, or "solver_error (...)"
@@ -212,9 +226,7 @@ class SolveResult:
     @property
     def failed(self) -> bool:
         """Neither a point nor a certificate of infeasibility: a numerical failure of the solver."""
-        return not self.infeasible and (
-            self.v is None or self.status not in ("optimal", "optimal_inaccurate")
-        )
+        return not self.infeasible and (self.v is None or self.status not in SOLVED)
 
 
 class ConicProblem:
@@ -283,10 +295,6 @@ class ConicProblem:
                 res2.status, res2.v, res.seconds + res2.seconds, True, res.warned + res2.warned
             )
         return res
-
-
-class CentringError(ArithmeticError):
-    """The Newton centring could not start (no strictly feasible point) or did not converge."""
 
 
 @dataclass(frozen=True)

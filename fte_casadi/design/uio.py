@@ -19,6 +19,14 @@ Assumption checks (each returns an :class:`AssumptionCheck`; :func:`enforce` rai
     but stable eigenvalue (detectable pair) is a warning, an unstable one a failure;
 (5) ``rank [B_i Bf_i] = rank B_i`` (checked at every rule), so ``Kf = -pinv(B_h) Bf_h``
     cancels the actuator faults.
+
+Remark 5 (:func:`remark5_split`): when H cannot decouple every direction of d, H decouples the
+directions ``D`` it can, and the rest, ``T Bdbar_i = Bdbar_u M_i`` (``Bdbar_u`` orthonormal, common
+to the rules), joins the sliding term: ``J1`` becomes ``[Bdbar_u J1]`` and ``f''`` becomes
+``[M(h) d; f'']``. The paper's ``Bdbar_u_i`` is ``Bdbar_i`` in a rule where (1) fails; through
+``T`` only ``T Bdbar_i`` of it acts on the error, and a common basis of those gives one sliding
+variable for every rule (the paper's per-rule ``L_si = T [Bdbar_u_i J1]`` factor through it).
+Assumption (3) is then asked of the decoupled directions ``D`` only; (2) of every unknown input.
 """
 
 from __future__ import annotations
@@ -44,6 +52,9 @@ __all__ = [
     "check_assumptions",
     "enforce",
     "invariant_zeros",
+    "Remark5",
+    "remark5_split",
+    "decoupling_gain",
 ]
 
 #: relative tolerance of every numerical rank decision (singular values below it times the largest are zero)
@@ -59,6 +70,8 @@ class AssumptionCheck:
     message: str
     numbers: dict = field(default_factory=dict)
     warning: bool = False  # holds only in a weaker sense (e.g. detectable, not observable)
+    #: whether designing with this failure accepted can succeed (False: no hint to accept it is offered)
+    acceptable: bool = True
 
     def to_dict(self) -> dict:
         return {"name": self.name, "holds": self.holds, "warning": self.warning, "message": self.message,
@@ -98,13 +111,75 @@ def uio_gain(aug: Augmented, rtol: float = RANK_RTOL) -> tuple[np.ndarray, np.nd
     return H, np.eye(nbar) - H @ aug.Cbar
 
 
+def decoupling_gain(aug: Augmented, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(H, T)`` decoupling the directions ``D`` (nbar x q, ``Cbar D`` of full column rank):
+    ``H = D ((Cbar D)^T (Cbar D))^-1 (Cbar D)^T``, (17) with ``B_U = D``; ``T = I - H Cbar``."""
+    if D.shape[1] == 0:
+        H = np.zeros((aug.nbar, aug.p))
+    else:
+        CD = aug.Cbar @ D
+        H = D @ np.linalg.solve(CD.T @ CD, CD.T)
+    return H, np.eye(aug.nbar) - H @ aug.Cbar
+
+
+@dataclass(frozen=True)
+class Remark5:
+    """Remark 5's split of the unknown inputs: what H decouples, and what the sliding term attenuates.
+
+    ``D`` (nbar x q): the directions H decouples. ``Bdu`` (nbar x k, orthonormal columns): the
+    directions left, with ``T Bdbar_i = Bdu M_i`` for every rule (``M`` holds the k x ld ``M_i``).
+    ``inputs``: indices of the unknown inputs with an undecoupled part. ``why``: which assumption
+    made it necessary, in words."""
+
+    D: np.ndarray
+    Bdu: np.ndarray
+    M: tuple
+    inputs: tuple
+    H: np.ndarray
+    T: np.ndarray
+    why: str
+
+    def gains(self, d_bound: np.ndarray, epsilon: float) -> np.ndarray:
+        """The sliding gain of each undecoupled direction: a bound on ``|(M(h) d)_k|`` plus ``epsilon``,
+        ``sum_j max_i |M_i[k, j]| d_bound_j + epsilon`` (``|d_j| <= d_bound_j``; any memberships)."""
+        A = np.max(np.abs(np.stack(self.M)), axis=0)  # k x ld
+        return A @ np.asarray(d_bound, dtype=float) + float(epsilon)
+
+
+def remark5_split(aug: Augmented, D: np.ndarray | None = None, why: str = "",
+                  rtol: float = RANK_RTOL) -> Remark5 | None:  # fmt: skip
+    """Remark 5's split (module docstring). ``D`` default: the directions of ``[Bdbar_1 ... Bdbar_r]``
+    that the outputs see (``B_U V1``, ``V1`` the right singular vectors of ``Cbar B_U`` with a
+    nonzero singular value), which gives the same H as :func:`uio_gain`. None when nothing is left
+    undecoupled."""
+    BU = column_compress(np.hstack(aug.Bdbar), rtol)
+    if BU.shape[1] == 0:
+        return None
+    if D is None:
+        _, sv, Vt = np.linalg.svd(aug.Cbar @ BU)
+        q = int(np.sum(sv > rtol * max(sv[0], 1e-300))) if sv.size and sv[0] > 0 else 0
+        D = BU @ Vt[:q].T
+    H, T = decoupling_gain(aug, D)
+    left = np.hstack([T @ B for B in aug.Bdbar])
+    U, sv, _ = np.linalg.svd(left, full_matrices=False)
+    scale = max(np.linalg.norm(np.hstack(aug.Bdbar), 2), 1e-300)
+    k = int(np.sum(sv > rtol * scale))
+    if k == 0:
+        return None
+    Bdu = U[:, :k]
+    M = tuple(Bdu.T @ T @ B for B in aug.Bdbar)  # exact: T Bdbar_i lies in range(Bdu), Bdu orthonormal
+    tol = rtol * scale
+    inputs = tuple(j for j in range(aug.ld) if any(np.linalg.norm(Mi[:, j]) > tol for Mi in M))
+    return Remark5(D, Bdu, M, inputs, H, T, why)
+
+
 def check_decoupling(aug: Augmented) -> AssumptionCheck:
     Bd = np.hstack(aug.Bdbar)
     r1, r2 = rank(aug.Cbar @ Bd), rank(Bd)
     ok = r1 == r2
     msg = (f"assumption (1) holds: rank(Cbar Bdbar) = rank(Bdbar) = {r2}" if ok else
            f"assumption (1) fails: rank(Cbar Bdbar) = {r1} < rank(Bdbar) = {r2}; the unknown input cannot be "
-           "decoupled by H. Remark 5's fallback: replace J1 by [Bdbar_u J1] so that the sliding term attenuates the "
+           "decoupled by H. Remark 5's fallback (applied by default; --no-remark5 / remark5=False turned it off): replace J1 by [Bdbar_u J1] so that the sliding term attenuates the "
            "part of d that H cannot decouple, or measure more outputs")  # fmt: skip
     return AssumptionCheck("(1)", ok, msg, {"rank_CBd": r1, "rank_Bd": r2})
 
@@ -222,15 +297,33 @@ def check_fault_matching(aug: Augmented) -> AssumptionCheck:
                            "Kf = -pinv(B_h) Bf_h cannot cancel the actuator faults", {"rules": bad})  # fmt: skip
 
 
-def check_assumptions(aug: Augmented, T: np.ndarray, models=None) -> list[AssumptionCheck]:
-    """All five checks, in order."""
-    return [
-        check_decoupling(aug),
-        check_full_column_rank(aug, models),
-        check_invariant_zeros(aug),
-        check_observability(aug, T),
-        check_fault_matching(aug),
-    ]
+def check_assumptions(
+    aug: Augmented, T: np.ndarray, models=None, remark5: Remark5 | None = None
+) -> list[AssumptionCheck]:
+    """All five checks, in order. With Remark 5, (1) holds by the fallback (its message says what the
+    sliding term attenuates) and (3) is asked of the decoupled directions only; (2) keeps every unknown
+    input: an attenuated input the outputs cannot tell from a fault still biases its estimate."""
+    if remark5 is None:
+        return [
+            check_decoupling(aug),
+            check_full_column_rank(aug, models),
+            check_invariant_zeros(aug),
+            check_observability(aug, T),
+            check_fault_matching(aug),
+        ]
+    import dataclasses
+
+    first = check_decoupling(aug)
+    k, q = remark5.Bdu.shape[1], remark5.D.shape[1]
+    first = dataclasses.replace(first, holds=True, message=(
+        f"assumption (1) {'fails' if not first.holds else 'holds'}: {first.message.split(': ', 1)[1].split(';')[0]}; "
+        f"{remark5.why + '; ' if remark5.why else ''}Remark 5's fallback is used: H decouples {q} direction(s) of d "
+        f"and the sliding term attenuates the {k} it cannot ([Bdbar_u J1] in place of J1)"),
+        numbers=dict(first.numbers, remark5=True, decoupled=q, attenuated=k))  # fmt: skip
+    dec = dataclasses.replace(aug, Bdbar=tuple(remark5.D for _ in range(aug.r)), ld=q)
+    two, three = check_full_column_rank(aug, models), check_invariant_zeros(dec)
+    three = dataclasses.replace(three, message=three.message + " (Remark 5: of the part H decouples)")
+    return [first, two, three, check_observability(aug, T), check_fault_matching(aug)]
 
 
 def enforce(checks: Iterable[AssumptionCheck], accept: bool | Iterable[str] = ()) -> list[str]:
@@ -246,7 +339,7 @@ def enforce(checks: Iterable[AssumptionCheck], accept: bool | Iterable[str] = ()
         if accept is True
         else {a if a.startswith("(") else f"({a})" for a in accept}
     )
-    refused, notes, names = [], [], []
+    refused, notes, names, hopeless = [], [], [], []
     for c in checks:
         if c.holds:
             if c.warning:
@@ -255,16 +348,24 @@ def enforce(checks: Iterable[AssumptionCheck], accept: bool | Iterable[str] = ()
             notes.append("accepted: " + c.message)
         else:
             refused.append(c.message)
-            names.append(c.name)
+            (names if c.acceptable else hopeless).append(c.name)
     if refused:
-        raise AssumptionError(
-            "; ".join(refused)
-            + ". To design anyway (the document records it): "
+        hint = (
+            ". To design anyway (the document records it): "
             + " ".join(f"--accept-assumption {n.strip('()')}" for n in names)
             + " with fte design, or accept_assumptions="
             + repr(names)
-            + " in Python."
+            + " in Python"
+            if names
+            else ""
         )
+        if hopeless:
+            hint += (
+                (". Accepting " if not names else "; accepting ")
+                + f"{', '.join(hopeless)} cannot succeed (an unobservable mode that does not decay stays "
+                "in every R_i, whatever the observer gain): change the plant's model or measurements"
+            )
+        raise AssumptionError("; ".join(refused) + hint + ".")
     return notes
 
 

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import casadi as ca
 import numpy as np
 
 from ..errors import PlantError
-from .plant import Plant, PlantBuilder, _column
+from .record import Plant, _column, _units
+
+if TYPE_CHECKING:
+    from .plant import PlantBuilder
 
 __all__ = ["validate", "triangular_memberships"]
 
@@ -158,8 +163,6 @@ def validate(b: PlantBuilder) -> Plant:
         for k in range(p):
             nz = np.flatnonzero(C[k])
             yu.append(b._xu[nz[0]] if len(nz) == 1 else "")
-    from .plant import _units
-
     yu = _units("output", yu, p)
 
     # region

@@ -62,7 +62,7 @@ def load_plant(spec: str) -> Plant:
 
     if not isinstance(spec, str) or not spec.strip():
         raise PlantLoadError(
-            "no plant given: name a built-in plant (manipulator, three-tank) or FILE.py:FUNCTION"
+            "no plant given: name a built-in plant (manipulator, three-tank, quadruple-tank) or FILE.py:FUNCTION"
         )
     spec = spec.strip()
     if spec in BUILTIN:

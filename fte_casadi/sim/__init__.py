@@ -3,7 +3,6 @@
 from .engine import simulate as simulate
 from .metrics import metrics as metrics
 from .metrics import metrics_from_arrays as metrics_from_arrays
-from .perpath import simulate_per_path as simulate_per_path
 from .result import RunData as RunData
 from .result import SimulationResult as SimulationResult
 from .result import load_result as load_result

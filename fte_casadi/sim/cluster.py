@@ -14,7 +14,6 @@ dask.distributed is an optional extra: ``pip install 'fte_casadi[dask]'``.
 
 from __future__ import annotations
 
-import functools
 import json
 import pickle
 from collections.abc import Callable, Iterator
@@ -22,8 +21,9 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from ..errors import MissingDependencyError, SimulationError
+from .vector import auto_chunk
 
-__all__ = ["run_on_cluster", "chunk_task", "client_for", "plant_bytes"]
+__all__ = ["run_on_cluster", "client_for", "plant_bytes", "plant_from_bytes"]
 
 
 def _require():
@@ -56,31 +56,12 @@ def plant_bytes(plant) -> bytes:
         return pickle.dumps(plant)
 
 
-@functools.lru_cache(maxsize=8)
-def _prepared(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str):
-    """The engine of a run, built once per worker process and run description."""
+def plant_from_bytes(blob: bytes):
+    """The plant of :func:`plant_bytes`."""
     import casadi as ca
 
-    from ..design.record import Design
-    from .engine import Prepared
-    from .scenario import Scenario
-
-    design = Design.from_dict(json.loads(design_json), source="design sent to a worker")
     with ca.global_unpickle_context():
-        plant = pickle.loads(plant_blob)
-    scenario = Scenario.from_dict(json.loads(scenario_json))
-    nsteps = int(round(scenario.T / dt))
-    return Prepared(design, plant, scenario, dt, nsteps, json.loads(scales_json))
-
-
-def chunk_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str, seed: int,
-               path0: int, count: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """One chunk on a worker: the per-path metric sums and divergence marks of ``path0 .. path0 + count - 1``."""
-    from .engine import run_paths
-
-    prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json)
-    acc, div, _ = run_paths(prep, path0, count, seed)
-    return acc, div
+        return pickle.loads(blob)
 
 
 def _threads(client) -> int:
@@ -93,14 +74,12 @@ def _threads(client) -> int:
 
 
 def run_on_cluster(scheduler, design, plant, scenario, dt: float, scales: dict, seed: int, paths: int,
-                   chunk: int | None, on_done: Callable[[int], None] = lambda k: None, task=chunk_task,
+                   chunk: int | None, task: Callable, on_done: Callable[[int], None] = lambda k: None,
                    ) -> Iterator[tuple[int, tuple[np.ndarray, np.ndarray]]]:  # fmt: skip
     """Submit the chunks to the cluster and yield ``(path0, (acc, div))`` in path order.
 
     ``scheduler``: an address (a client is opened and closed here) or a ``distributed.Client``.
     ``chunk``: paths per task; ``None``: about four tasks per worker thread (:func:`.engine.auto_chunk`)."""
-    from .engine import auto_chunk
-
     _require()
     own = isinstance(scheduler, str)
     client = client_for(scheduler) if own else scheduler

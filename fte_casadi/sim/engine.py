@@ -18,11 +18,14 @@ counter-based generator of :mod:`.rng`, so path i's noise depends only on (seed,
 bounded: each path keeps its state and its metric sums; full trajectories are recorded only for
 the example paths the figures use (all paths with ``record_all``). Chunks of paths run on threads
 or, with ``scheduler``, on the workers of a dask.distributed cluster (:mod:`.cluster`); the metrics
-are the same either way. The per-path engine of fte_casadi 0.1 is :mod:`.perpath`.
+are the same either way. The per-path engine it is tested against lives in the repository's
+benchmarks/perpath.py, not in the package.
 """
 
 from __future__ import annotations
 
+import functools
+import json
 import math
 import os
 import sys
@@ -36,26 +39,28 @@ from tqdm import tqdm
 from ..design.record import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
+from ..rounding import series_floor
 from ..step import step_function
+from .cluster import plant_from_bytes, run_on_cluster
 from .reduce import finalize, increments, masks
 from .result import RUNS, RunData, SimulationResult
 from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, UniformNoise, fault_schedule
+from .vector import CHUNK as CHUNK
+from .vector import auto_chunk as auto_chunk
 
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
 
-__all__ = ["simulate", "closed_loop_sample", "Layout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_step", "SCALES",
+__all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_step", "SCALES",
            "auto_chunk"]  # fmt: skip
 
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
-#: at most this many paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
-CHUNK = 256
 #: the factors a sweep may vary, and their defaults
 SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0}
 
 
-class Layout:
+class PathLayout:
     """Sizes and offsets of the closed-loop state and record of one path."""
 
     def __init__(self, n: int, nbar: int, lf: int, m: int, p: int, ld: int):
@@ -82,14 +87,14 @@ class Layout:
 
 def closed_loop_sample(
     design: Design, plant: Plant, dt: float, sched: FaultSchedule
-) -> tuple[ca.Function, Layout]:
+) -> tuple[ca.Function, PathLayout]:
     """``(state, w, fp) -> (state_next, record)``: one sample of all three runs for one path.
 
     ``w = [dW; d]``, ``fp`` the fault coefficients of this sample (:meth:`FaultSchedule.stacked`).
     """
     n, m, p, lf, ld = plant.n, plant.m, plant.p, plant.lf, plant.ld
     nbar = int(design.dims["nbar"])
-    lay = Layout(n, nbar, lf, m, p, ld)
+    lay = PathLayout(n, nbar, lf, m, p, ld)
     drift = plant.drift_function()
     diff = plant.diffusion_function()
     steps = {
@@ -166,15 +171,6 @@ def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, see
         )
 
 
-def _nice_below(v: float) -> float:
-    """Largest 1, 2 or 5 times a power of ten not above ``v``."""
-    e = math.floor(math.log10(v))
-    for mant in (5.0, 2.0, 1.0):
-        if mant * 10.0**e <= v:
-            return mant * 10.0**e
-    return 10.0 ** (e - 1) * 5.0
-
-
 def _lm(design: Design, key: str) -> np.ndarray:
     return np.asarray(design.local_models[0][key], dtype=float)
 
@@ -218,9 +214,9 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
     if dt is None:
         dt = design_step(design, scenario)
         if dt > ts_max:
-            new = _nice_below(ts_max / 2)
+            new = series_floor(ts_max / 2)
             while abs(scenario.T / new - round(scenario.T / new)) > 1e-9 * scenario.T / new:
-                new = _nice_below(new * 0.999)
+                new = series_floor(new * 0.999)
             notes.append(
                 f"the design's sample time {dt:g} exceeds its ts_max = {ts_max:.4g}; using dt = {new:g}"
             )
@@ -363,14 +359,6 @@ class Prepared:
         return state
 
 
-def auto_chunk(paths: int, threads: int) -> int:
-    """Paths per chunk: about four chunks per thread (load balance), whole lane vectors, at most CHUNK."""
-    from .vector import LANES
-
-    per = math.ceil(paths / (4 * max(int(threads), 1)))
-    return max(LANES, min(CHUNK, LANES * math.ceil(per / LANES)))
-
-
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
     """Paths ``path0 .. path0 + count - 1``: ``(ACC, DIV, REC)`` (REC only when ``every > 0``)."""
     paths = np.arange(path0, path0 + count)
@@ -378,6 +366,24 @@ def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0)
     _, acc, div, rec = prep.engine.run(path0, S0, seed, prep.SH, prep.sqdt, prep.damp,
                                        prep.scenario.divergence_bound, every)  # fmt: skip
     return acc, div, rec
+
+
+@functools.lru_cache(maxsize=8)
+def _prepared(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str):
+    """The engine of a run, built once per worker process and run description."""
+    design = Design.from_dict(json.loads(design_json), source="design sent to a worker")
+    plant = plant_from_bytes(plant_blob)
+    scenario = Scenario.from_dict(json.loads(scenario_json))
+    nsteps = int(round(scenario.T / dt))
+    return Prepared(design, plant, scenario, dt, nsteps, json.loads(scales_json))
+
+
+def chunk_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str, seed: int,
+               path0: int, count: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """One chunk on a worker: the per-path metric sums and divergence marks of ``path0 .. path0 + count - 1``."""
+    prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json)
+    acc, div, _ = run_paths(prep, path0, count, seed)
+    return acc, div
 
 
 def simulate(
@@ -469,9 +475,7 @@ def simulate(
     )
     try:
         if scheduler is not None:
-            from .cluster import run_on_cluster
-
-            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk,
+            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk, chunk_task,
                                                on_done=lambda k: bar.update(k)):  # fmt: skip
                 acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
         else:

@@ -1,4 +1,4 @@
-"""The metrics document of ``fte simulate`` (CONTRACT.md), computed from a SimulationResult."""
+"""The metrics document of ``fte simulate`` (docs/interface.md), computed from a SimulationResult."""
 
 from __future__ import annotations
 
@@ -7,9 +7,18 @@ import numpy as np
 from .result import SimulationResult
 
 __all__ = ["metrics", "metrics_from_arrays", "windows", "input_saturation", "fault_windows", "state_rms_error",
-           "fault_rel_rms_error", "false_alarm_rel_rms", "ftc_deviation_ratio"]  # fmt: skip
+           "fault_rel_rms_error", "false_alarm_rel_rms", "ftc_deviation_ratio", "WORSE_THAN_NONE", "FALSE_ALARM",
+           "SATURATED"]  # fmt: skip
 
 from .reduce import SETTLE_FRACTION, SETTLE_T, _mask
+
+#: the verdicts ``fte simulate`` and the report give, in one place:
+#: an FTC deviation ratio above this: tolerant control leaves the outputs worse than none
+WORSE_THAN_NONE = 1.0
+#: a fault estimate outside its windows above this fraction of the fault's RMS: false alarms
+FALSE_ALARM = 1.0
+#: an input at a limit for more than this fraction of a window: the tolerance is that of a saturated actuator
+SATURATED = 0.05
 
 
 def fault_windows(result: SimulationResult) -> list[list[tuple[float, float]]]:
@@ -102,7 +111,7 @@ def windows(result: SimulationResult) -> list[dict]:
 
 
 def metrics_from_arrays(result: SimulationResult) -> dict:
-    """CONTRACT.md's metrics document recomputed from the recorded arrays (the reference).
+    """The metrics document (docs/interface.md) recomputed from the recorded arrays (the reference).
 
     Over the recorded paths and samples only: equal to the streamed document of the run when every
     path and every sample was recorded (``record_all=True, record_every=1``)."""
@@ -125,6 +134,6 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
 
 
 def metrics(result: SimulationResult) -> dict:
-    """CONTRACT.md's metrics document of a run: the one the engine streamed over all its paths, or,
+    """The metrics document (docs/interface.md) of a run: the one the engine streamed over all its paths, or,
     for a result without it (the per-path engine), :func:`metrics_from_arrays`."""
     return dict(result.metrics) if result.metrics is not None else metrics_from_arrays(result)

@@ -1,6 +1,6 @@
 """The metrics document reduced as the Monte Carlo runs: per-path sums, combined exactly.
 
-Every metric of CONTRACT.md is a function of sums over samples of squared errors under masks
+Every metric of the metrics document (docs/interface.md) is a function of sums over samples of squared errors under masks
 that depend on time only (the fault windows, ``t >= 1 s``). :func:`increments` writes those
 summands as a CasADi Function of one sample's record and the masks of that sample, so that the
 engine evaluates it in the same compiled loop as the closed loop and each path accumulates its own

@@ -39,21 +39,28 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..errors import SimulationError
+from ..errors import UnsupportedOperation
+from ..toolchain import cache_dir, find_compiler
 from . import rng
-from .compile import cache_dir
 
-__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS"]
+__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS", "CHUNK",
+           "auto_chunk"]  # fmt: skip
 
 #: paths per lane vector (8 doubles: one AVX-512 register, two AVX2 ones)
 LANES = 8
+#: at most this many paths per call of the compiled engine (the unit of progress, threads and cluster tasks)
+CHUNK = 256
+
+
+def auto_chunk(paths: int, threads: int) -> int:
+    """Paths per chunk: about four chunks per thread (load balance), whole lane vectors, at most CHUNK."""
+    per = math.ceil(paths / (4 * max(int(threads), 1)))
+    return max(LANES, min(CHUNK, LANES * math.ceil(per / LANES)))
+
+
 #: compiler flags: IEEE semantics kept (no -ffast-math); -ffp-contract=off: no fused multiply-adds, so
 #: every operation rounds as in CasADi's own C and the numbers do not depend on whether a CPU has FMA
 FLAGS = ("-O3", "-fno-trapping-math", "-fno-math-errno", "-ffp-contract=off", "-march=native", "-shared", "-fPIC")  # fmt: skip
-
-
-class UnsupportedOperation(SimulationError):
-    """The Function cannot be emitted (an operation the emitter does not know), or not compiled."""
 
 
 #: vector expressions of CasADi's SX operations; ``{a}``, ``{b}`` the operands (``fte_vd`` values)
@@ -279,13 +286,6 @@ def _cpu_tag() -> str:
     return platform.machine() + platform.processor() + flags
 
 
-def _compiler() -> str | None:
-    for cc in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if cc and shutil.which(cc):
-            return cc
-    return None
-
-
 class VectorEngine:
     """The compiled lane engine of one closed-loop sample Function (compiled once, cached on disk).
 
@@ -314,7 +314,7 @@ class VectorEngine:
         src = emit(F, x_slots, name, casadi_c=casadi_c)
         if source_filter is not None:  # the benchmark's anatomy: the same engine with parts left out
             src = source_filter(src)
-        cc = _compiler()
+        cc = find_compiler()
         if cc is None:
             raise UnsupportedOperation("no C compiler found (cc, gcc, clang or $CC)")
         key = hashlib.sha256((src + cc + " ".join(FLAGS) + _cpu_tag()).encode()).hexdigest()[:20]

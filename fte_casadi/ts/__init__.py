@@ -32,13 +32,13 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     >>> ts.r, round(ts.premises[0].min, 4)
     (2, -0.2172)
     """
-    method = plant.method
+    kind = plant.method  # "sector" or "linearisation"
     auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
     notes: tuple[str, ...] = ()
     if auto:
         form = premise_form(plant, seed=seed)
         premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
-        method = "sector (premises found automatically)" if premises else "linear (one rule)"
+        kind = "sector_auto" if premises else "linear"
         notes = form.notes
     elif plant.method == "sector":
         premises, models, premise_fn, membership_fn = sector_local_models(plant)
@@ -46,7 +46,7 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
     tmp = TSModel(
         plant,
-        method,
+        kind,
         premises,
         models,
         plant.C,
@@ -56,7 +56,7 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
         Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
     )
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
-    ts = TSModel(plant, method, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid, notes)
+    ts = TSModel(plant, kind, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid, notes)
     if auto:
         check_exact(ts, seed=seed)  # the proof: exact to round-off, or refused with the row and the point
     return ts

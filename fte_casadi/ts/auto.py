@@ -31,8 +31,8 @@ exactly in the form the sector method needs, ``f = A(z) x + B(z) u + Bd(z) d + B
    scaled (memberships do not change under a positive affine change of the premise, so the
    coefficient itself is the most readable choice). Its sign is chosen so that its value at the
    anchor of the decomposition, the origin (projected onto the region), lies in the upper half
-   of its range; when it lies exactly at the middle the written sign is kept. With CONTRACT.md's
-   rule order (rule 1 at each premise's max) rule 1 is then the rule closest to the origin, the
+   of its range; when it lies exactly at the middle the written sign is kept. With the documented
+   rule order (docs/interface.md: rule 1 at each premise's max) rule 1 is the rule closest to the origin, the
    point about which the sector model is built, and the order does not depend on how a sign was
    written (``3.33 * sin(-theta)`` gives the same rules as ``-3.33 * sin(theta)``). For the
    manipulator the premise is ``sin(theta_l)/theta_l``, 1 at the origin: rule 1 at 1, rule 2 at
@@ -51,10 +51,10 @@ import warnings
 import casadi as ca
 import numpy as np
 
-from ..errors import DerivationError
+from ..errors import BoundsError, DerivationError
 from ..model import Plant
 from .auto_checks import check_term, expr_text
-from .bounds import BoundsError, premise_bounds
+from .bounds import premise_bounds
 
 __all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYLOR_BAND"]
 

@@ -14,9 +14,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..errors import DerivationError
+from ..errors import BoundsError, DerivationError
 from ..model import Plant
-from .bounds import BoundsError, premise_bounds
+from .bounds import premise_bounds
 from .fidelity import blended, sample_box
 
 __all__ = ["check_term", "check_exact", "expr_text", "EXACT_TOL"]

@@ -16,22 +16,12 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
 
-from ..errors import DerivationError
+from ..errors import BoundsError
 
-__all__ = ["premise_bounds", "BoundsError"]
+__all__ = ["premise_bounds"]
 
 _SAMPLES = 200_001
 _MAX_SEARCHES = 200
-
-
-class BoundsError(DerivationError):
-    """A premise cannot be bounded: ``kind`` is ``"not finite"``, ``"unbounded"`` or ``"constant"``;
-    ``where`` names the point (``"x1 = 0"``) for ``"not finite"``, else ``""``."""
-
-    def __init__(self, message: str, kind: str, where: str = ""):
-        super().__init__(message)
-        self.kind = kind
-        self.where = where
 
 
 def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:

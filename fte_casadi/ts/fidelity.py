@@ -93,7 +93,7 @@ def fidelity(
         plant.region_lo,
         plant.region_hi,
     )
-    if ts.premises and ts.method.startswith("sector"):
+    if ts.premises and ts.kind in ("sector", "sector_auto"):
         # a sector model is exact where its premises lie within their bounds (outside, the memberships
         # saturate): compare up to the first point where a premise leaves them
         Z = np.array(ts.premise_fn.map(X.shape[1])(X)).reshape(len(ts.premises), -1)

@@ -12,7 +12,7 @@ __all__ = ["sector_memberships", "rule_vertices", "triangular_membership_fn", "s
 
 
 def rule_vertices(mins, maxs) -> np.ndarray:
-    """Premise values of each rule, in CONTRACT.md's order.
+    """Premise values of each rule, in the documented order (docs/interface.md).
 
     Rule i takes, for each premise, the bound ``max`` then ``min``, the first premise varying
     slowest: for one premise rule 1 is at ``max``, rule 2 at ``min``.

@@ -3,13 +3,26 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import casadi as ca
 import numpy as np
 
 from ..model import Plant
 
-__all__ = ["Premise", "LocalModel", "Fidelity", "TSModel"]
+__all__ = ["Premise", "LocalModel", "Fidelity", "TSModel", "Kind", "METHOD_TEXT"]
+
+#: how a T-S model was derived: the sector method on premises the plant declares (``"sector"``) or
+#: that the toolkit found (``"sector_auto"``), one rule for a plant without nonlinear term
+#: (``"linear"``), or local linearisation at operating points (``"linearisation"``)
+Kind = Literal["sector", "sector_auto", "linear", "linearisation"]
+#: the text that reports and the derive document show for each kind (:attr:`TSModel.method`)
+METHOD_TEXT: dict[str, str] = {
+    "sector": "sector",
+    "sector_auto": "sector (premises found automatically)",
+    "linear": "linear (one rule)",
+    "linearisation": "linearisation",
+}
 
 
 @dataclass(frozen=True)
@@ -90,7 +103,8 @@ class TSModel:
     """A T-S fuzzy model derived from a :class:`~fte_casadi.model.Plant`."""
 
     plant: Plant
-    method: str
+    #: how it was derived (machine-readable; :attr:`method` is the text shown)
+    kind: Kind
     premises: tuple[Premise, ...]
     local_models: tuple[LocalModel, ...]
     C: np.ndarray
@@ -102,6 +116,11 @@ class TSModel:
     fidelity: Fidelity
     #: how the premises were found, for reports (the automatic method's choices; empty otherwise)
     notes: tuple[str, ...] = ()
+
+    @property
+    def method(self) -> str:
+        """How the model was derived, as reports and the derive document show it."""
+        return METHOD_TEXT[self.kind]
 
     @property
     def r(self) -> int:
@@ -151,7 +170,7 @@ class TSModel:
         ]
 
     def to_dict(self) -> dict:
-        """The derive document of CONTRACT.md (plus a few extra keys)."""
+        """The derive document (docs/interface.md)."""
         return {
             "plant": self.plant.name,
             "method": self.method,
@@ -161,7 +180,7 @@ class TSModel:
             "C": self.C.tolist(),
             "Df": self.Df.tolist(),
             "fidelity": self.fidelity.to_dict(),
-            "premises_found_automatically": self.method.startswith("sector (premises found automatically)"),
+            "premises_found_automatically": self.kind == "sector_auto",
             "notes": list(self.notes),
             "states": list(self.plant.state_names),
             "inputs": list(self.plant.input_names),

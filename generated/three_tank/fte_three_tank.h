@@ -43,7 +43,8 @@ void fte_three_tank_init(fte_three_tank_state *s, const fte_real *z0);
  * infinity; returns -1 (state untouched) when s or y0 is NULL. */
 int fte_three_tank_init_from_y(fte_three_tank_state *s, const fte_real *y0, const fte_real *xbar0);
 
-/* One sample of the discrete step (SPEC.md): from y_k (FTE_THREE_TANK_NY values) compute
+/* One sample of the discrete step (fte_casadi's docs/method.md, "The discrete step"):
+ * from y_k (FTE_THREE_TANK_NY values) compute
  * u_k (FTE_THREE_TANK_NU), xbarhat_k (FTE_THREE_TANK_NXBAR) and the compensated output yc_k
  * (FTE_THREE_TANK_NY), and advance the state to z_{k+1}. Any output pointer may be NULL.
  * Returns 0; returns 1 and leaves the state and outputs untouched when y holds a NaN or an

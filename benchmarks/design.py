@@ -1,4 +1,4 @@
-"""Speed of the design against the 0.1 formulation (:mod:`.legacy`), measured in the same process.
+"""Speed of the design against the 0.1 design (:mod:`.design_01`), measured in the same process.
 
 Takes T-S models (the caller derives them).
 """
@@ -9,9 +9,10 @@ import time
 
 import numpy as np
 
-from ..design.api import design
-from ..design.legacy import legacy_design
-from ..errors import FteError
+from fte_casadi.design.api import design
+from fte_casadi.errors import FteError
+
+from .design_01 import design_01
 
 __all__ = ["bench_design"]
 
@@ -25,7 +26,7 @@ def _best(fn, repeats: int) -> tuple[float, object]:
     return best, out
 
 
-def bench_design(ts, *, sample_time: float | None = None, repeats: int = 3, legacy_repeats: int = 1) -> dict:
+def bench_design(ts, *, sample_time: float | None = None, repeats: int = 3, repeats_01: int = 1) -> dict:
     """Wall time of :func:`~fte_casadi.design.design` (Clarabel, then SCS; certificates included,
     best of ``repeats``) and of the 0.1 design (Clarabel), and their ratio; plus the largest relative
     difference between the Clarabel and SCS designs (K, L1, N)."""
@@ -47,15 +48,15 @@ def bench_design(ts, *, sample_time: float | None = None, repeats: int = 3, lega
         except FteError as exc:
             out[solver] = {"error": " ".join(str(exc).split())[:200]}
     try:
-        wall, leg = _best(lambda: legacy_design(ts), legacy_repeats)
-        out["legacy_0.1"] = {
+        wall, old = _best(lambda: design_01(ts), repeats_01)
+        out["design_0.1"] = {
             "wall_s": wall,
-            "certified": not any(v >= 0 for v in leg["checks"]["lmi_max_eig"].values()),
+            "certified": not any(v >= 0 for v in old["checks"]["lmi_max_eig"].values()),
         }
     except FteError as exc:
-        out["legacy_0.1"] = {"error": " ".join(str(exc).split())[:200]}
-    if "wall_s" in out["CLARABEL"] and "wall_s" in out["legacy_0.1"]:
-        out["speedup_vs_legacy"] = out["legacy_0.1"]["wall_s"] / out["CLARABEL"]["wall_s"]
+        out["design_0.1"] = {"error": " ".join(str(exc).split())[:200]}
+    if "wall_s" in out["CLARABEL"] and "wall_s" in out["design_0.1"]:
+        out["speedup_vs_0.1"] = out["design_0.1"]["wall_s"] / out["CLARABEL"]["wall_s"]
     if len(designs) == 2:
         a, b = designs["CLARABEL"], designs["SCS"]
         pairs = list(zip(a.K, b.K)) + list(zip(a.L1, b.L1)) + [(a.N, b.N)]

@@ -1,4 +1,4 @@
-"""Speed of the Monte Carlo engine against today's per-path engine, sdeint and a plain Python loop,
+"""Speed of the Monte Carlo engine against the per-path engine (:mod:`.perpath`), sdeint and a plain Python loop,
 all measured in one process.
 
 A *path-step* is one sample of the closed loop for one path, all three runs (fault-free,
@@ -16,12 +16,13 @@ import time
 import casadi as ca
 import numpy as np
 
-from ..design.record import Design
-from ..errors import SimulationError
-from ..sim.engine import SCALES, Prepared, closed_loop_sample, plant_schedule, resolve_dt, simulate
-from ..sim.perpath import monte_carlo, simulate_per_path
-from ..sim.scenario import UniformNoise
+from fte_casadi.design.record import Design
+from fte_casadi.errors import SimulationError
+from fte_casadi.sim.engine import SCALES, Prepared, closed_loop_sample, plant_schedule, resolve_dt, simulate
+from fte_casadi.sim.scenario import UniformNoise
+
 from .anatomy import libm_share, op_counts, peak_flops
+from .perpath import monte_carlo, simulate_per_path
 
 __all__ = ["bench", "baseline_functions"]
 
@@ -85,7 +86,7 @@ def bench(
     horizon: float | None = None,
 ) -> dict:
     """The manipulator scenario (T = 10 s, dt = 1 ms, three runs; ``horizon`` shortens T for tests):
-    the vectorised engine against today's per-path engine on ``paths`` paths (whole ``simulate``
+    the vectorised engine against the per-path engine on ``paths`` paths (whole ``simulate``
     calls, random numbers included, compilation excluded: each engine runs once first; then both
     ``repeats`` times, interleaved, and the best of each is kept), and the
     sdeint and plain-Python baselines on ``baseline_paths`` paths, scaled to path-steps per second.

@@ -21,8 +21,8 @@ import time
 import casadi as ca
 import numpy as np
 
-from ..sim.rng import TAIL
-from ..sim.vector import _CALL, VectorEngine
+from fte_casadi.sim.rng import TAIL
+from fte_casadi.sim.vector import _CALL, VectorEngine
 
 __all__ = ["op_counts", "peak_flops", "libm_share"]
 

@@ -1,10 +1,11 @@
-"""The design formulation of fte_casadi 0.1, kept only as the baseline of ``fte bench``.
+"""The 0.1 design: the design formulation of fte_casadi 0.1, kept only as the baseline of ``fte bench``.
 
 It was replaced by :mod:`fte_casadi.design.conditioned` (issue #9): the formulation below is not
 unique (N, Q_i, Y_j are free at its optimum, so different machines land on different points),
 needs about 30 solves (a grid over scales of Pbar x decay rates x a bisection on theta) and
-takes seconds. ``fte bench`` runs :func:`legacy_design` beside today's design in the same process
-so that the speed-up it reports is measured, not remembered. Nothing else uses this module.
+takes seconds. ``fte bench`` runs :func:`design_01` beside today's design in the same process
+so that the speed-up it reports is measured, not remembered (the numbers measured are also kept in
+``benchmarks/RECORDED.md``). Nothing else uses this module; it is not part of the package.
 
 Corrections of the printed LMIs are listed in :mod:`fte_casadi.design.certify`.
 
@@ -58,11 +59,13 @@ from dataclasses import dataclass, field
 import cvxpy as cp
 import numpy as np
 
-from ..errors import InfeasibleDesignError
-from .augment import Augmented
-from .certify import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64, ts_max
+from fte_casadi.design.augment import Augmented
+from fte_casadi.design.certify import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64, ts_max
+from fte_casadi.design.linalg import sym as _sym
+from fte_casadi.design.sdp import SOLVED
+from fte_casadi.errors import InfeasibleDesignError
 
-__all__ = ["legacy_design"]
+__all__ = ["design_01"]
 
 #: solver settings, passed explicitly to every solve
 SOLVER_SETTINGS = {
@@ -77,7 +80,6 @@ SOLVER_SETTINGS = {
     # so fail fast (every SCS point is checked by the numpy certificate anyway)
     "SCS": {"max_iters": 20_000, "time_limit_secs": 1.5, "eps_abs": 1e-7, "eps_rel": 1e-7},
 }
-OK = ("optimal", "optimal_inaccurate")
 #: bound on cond(Pbar) in the conditioned variant (c I <= Pbar <= KAPPA c I)
 KAPPA = 1e4
 #: wall-clock budget (s) of one conditioned step 5 per solver; past it no new solve starts
@@ -108,10 +110,6 @@ class Step5:
     solver_s: float
     alpha: float
     notes: list = field(default_factory=list)
-
-
-def _sym(E):
-    return (E + E.T) / 2
 
 
 def _margin(sizes, values):
@@ -188,7 +186,7 @@ def solve_step3(aug: Augmented, params: dict, variant: str, solver: str) -> Step
         b = cp.Variable()
         prob = cp.Problem(cp.Maximize(b), [X >> b * np.eye(n), b <= 2.0] + cons45(D))
         status, dt = _solve(prob, solver, warned)
-        if status in OK and b.value is not None and b.value > 0:
+        if status in SOLVED and b.value is not None and b.value > 0:
             beta = min(0.5 * float(b.value), BETA_CAP)
             t = cp.Variable()
             cons = [X >> beta * np.eye(n)] + cons45(D)
@@ -199,9 +197,9 @@ def solve_step3(aug: Augmented, params: dict, variant: str, solver: str) -> Step
             notes.append(
                 f"step 3: X >= {beta:.4g} I (half the largest feasible, at most {BETA_CAP:g}), min t with ||Y_j||_2 <= t"
             )
-        elif status in OK:
+        elif status in SOLVED:
             status = "infeasible (no X > 0)"
-    if variant != "paper" and status in OK and X.value is not None:
+    if variant != "paper" and status in SOLVED and X.value is not None:
         worst = _check3(aug, X.value, [Yj.value for Yj in Y], s, g, g1)
         if not worst < 0:
             status = f"{status}, but the numpy certificate of (45) fails (largest eigenvalue {worst:.3g})"
@@ -210,7 +208,7 @@ def solve_step3(aug: Augmented, params: dict, variant: str, solver: str) -> Step
         raise InfeasibleDesignError(
             f"LMI (45): {solver} returned a point that does not satisfy it ({status}); use solver='CLARABEL'"
         )
-    if status not in OK or X.value is None:
+    if status not in SOLVED or X.value is None:
         raise InfeasibleDesignError(
             f"LMI (45) is infeasible: gamma = {g:g} is below what the plant allows with gamma1 = {g1:g}, "
             f"sigma = {s:g}; raise gamma or lower gamma1 or sigma ({solver}: {status})"
@@ -259,7 +257,7 @@ class _Step5Problem:
         for i in range(r):
             Ab, Cb = aug.Abar[i], aug.Cbar
             for j in range(r):
-                c = lmi46_terms(aug, i, K[j], P, T)
+                c = lmi46_terms(aug, i, K[j])
                 C, De, Be, Ge, Wk, Wbk, Gbe, M, Mb = (
                     c[k] for k in ("C", "De", "Be", "Ge", "Wk", "Wbk", "Gbe", "M", "Mb")
                 )
@@ -317,7 +315,7 @@ class _Step5Problem:
         self.alpha.value = alpha
         self.Pbar.value = None  # no stale values from an earlier solve after a solver error
         status, dt = _solve(self.prob, solver, self.warned)
-        ok = status in OK and self.Pbar.value is not None
+        ok = status in SOLVED and self.Pbar.value is not None
         return ok, status, dt
 
     def point(self):
@@ -490,11 +488,11 @@ def _default_alpha_step5(ts, aug, params, P, K, T, solver):
     return best
 
 
-def legacy_design(ts, solver: str = "CLARABEL") -> dict:
+def design_01(ts, solver: str = "CLARABEL") -> dict:
     """The 0.1 conditioned design of a T-S model with the plant's default parameters, and its certificate."""
-    from .augment import augment
-    from .certify import certificate
-    from .uio import uio_gain
+    from fte_casadi.design.augment import augment
+    from fte_casadi.design.certify import certificate
+    from fte_casadi.design.uio import uio_gain
 
     defaults = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}
     params = {k: float(ts.plant.design_defaults.get(k, v)) for k, v in defaults.items()}

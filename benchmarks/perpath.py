@@ -1,8 +1,9 @@
-"""Today's per-path engine (fte_casadi 0.1): one compiled block per path, mapped over paths.
+"""The per-path Monte Carlo engine: one compiled block per path, mapped over paths.
 
-Kept as the reference the vectorised engine (:mod:`.engine`) is tested against — the same
-trajectories for the same random numbers — and as the baseline ``fte bench`` measures it against
-in the same process. One CasADi Function computes a sample of the closed loop for one path and
+Not part of the package: it is the reference the vectorised engine (:mod:`fte_casadi.sim.engine`)
+is tested against — the same trajectories for the same random numbers (tests/test_sim_engine.py
+imports it from here) — and the baseline ``fte bench`` measures that engine against in the same
+process. One CasADi Function computes a sample of the closed loop for one path and
 all three runs; it is accumulated over blocks of records (``mapaccum``), compiled once (cached)
 and mapped over paths with CasADi's thread map; Python fills the random numbers path by path
 (child generators ``rng.spawn``) and keeps every recorded sample of every path in memory.
@@ -10,22 +11,35 @@ and mapped over paths with CasADi's thread map; Python fills the random numbers 
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
+import shutil
+import subprocess
 import sys
+import tempfile
 import time
+import warnings
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
 from tqdm import tqdm
 
-from ..design.record import Design
-from ..errors import ParameterError, SimulationError
-from ..model import Plant
-from .compile import compiled
-from .engine import Layout, _check_settings, closed_loop_sample, plant_schedule, resolve_dt, result_names
-from .result import RUNS, SimulationResult
-from .scenario import Scenario, Sinusoid, UniformNoise
+from fte_casadi.design.record import Design
+from fte_casadi.errors import ParameterError, SimulationError
+from fte_casadi.model import Plant
+from fte_casadi.sim.engine import (
+    PathLayout,
+    _check_settings,
+    closed_loop_sample,
+    plant_schedule,
+    resolve_dt,
+    result_names,
+)
+from fte_casadi.sim.result import RUNS, SimulationResult
+from fte_casadi.sim.scenario import Scenario, Sinusoid, UniformNoise
+from fte_casadi.toolchain import cache_dir, find_compiler
 
 __all__ = ["simulate_per_path", "monte_carlo"]
 
@@ -33,6 +47,52 @@ __all__ = ["simulate_per_path", "monte_carlo"]
 _RECORD_BUDGET = 500_000
 #: ... and at most about this many samples per path
 _RECORD_PER_PATH = 20_001
+
+
+def compiled(fn: ca.Function, *, flags: tuple[str, ...] = ("-O2",)) -> tuple[ca.Function, bool]:
+    """Return ``(function, is_compiled)``: ``fn`` as C in a shared library, or ``fn`` itself."""
+    cc = find_compiler()
+    if cc is None:
+        warnings.warn(
+            "no C compiler found (cc, gcc, clang or $CC): the Monte Carlo runs interpreted, "
+            "10-100x slower; install a C compiler for full speed",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        return fn, False
+    name = fn.name()
+    with tempfile.TemporaryDirectory() as tmp:
+        cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
+        cg.add(fn)
+        src_path = Path(tmp) / f"{name}.c"
+        cg.generate(str(Path(tmp)) + os.sep)
+        src = src_path.read_text()
+        key = hashlib.sha256((src + cc + " ".join(flags) + ca.__version__).encode()).hexdigest()[:20]
+        folder = cache_dir()
+        lib = folder / f"{name}_{key}.so"
+        if not lib.exists():
+            folder.mkdir(parents=True, exist_ok=True)
+            out = Path(tmp) / "lib.so"
+            cmd = [cc, *flags, "-shared", "-fPIC", "-o", str(out), str(src_path), "-lm"]
+            try:
+                proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+            except (OSError, subprocess.TimeoutExpired) as exc:
+                proc = None
+                err = str(exc)
+            if proc is None or proc.returncode != 0:
+                err = proc.stderr[-2000:] if proc is not None else err
+                warnings.warn(
+                    f"compiling the closed loop with {cc} failed; running interpreted (slower). Compiler said: {err}",
+                    RuntimeWarning,
+                    stacklevel=3,
+                )
+                return fn, False
+            # atomic publish: parallel runs may compile the same library
+            fd, tmp_lib = tempfile.mkstemp(dir=folder, suffix=".so.tmp")
+            os.close(fd)
+            shutil.copyfile(out, tmp_lib)
+            os.replace(tmp_lib, lib)
+    return ca.external(name, str(lib)), True
 
 
 def _block_function(sample: ca.Function, every: int, records: int) -> ca.Function:
@@ -257,7 +317,7 @@ def monte_carlo(
     return rec_all[:, :nrec, :], is_compiled
 
 
-def _check_divergence(rec: np.ndarray, lay: Layout, bound: float, t: np.ndarray, plant: str) -> None:
+def _check_divergence(rec: np.ndarray, lay: PathLayout, bound: float, t: np.ndarray, plant: str) -> None:
     """Stop with a message naming the first diverging path and time (rec: (paths, samples, nrec))."""
     bad_run = []
     for r in range(3):

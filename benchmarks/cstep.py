@@ -5,7 +5,7 @@ For each design :func:`bench_c_step` reports
 - ``c_ns``: nanoseconds per ``fte_NAME_step`` call, from a C timing loop (``clock_gettime``,
   ``-O2``, the strict flags) over varying measurements; best of several repetitions;
 - ``hand_ns``: the same arithmetic written as plain C loops over the design's dense matrices
-  (the expanded sum over rules of SPEC.md; memberships by the same CasADi-generated scheduling
+  (the expanded sum over rules of docs/method.md, "The discrete step"; memberships by the same CasADi-generated scheduling
   function), generated here from the design as a baseline, and ``ratio = c_ns / hand_ns``;
 - ``casadi_us``: microseconds per call of the same step as a CasADi Function from Python;
 - ``state_bytes`` (``sizeof(fte_NAME_state)``), the README's constant-data counts, and the
@@ -27,10 +27,10 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..codegen import build
-from ..codegen.generate import _void_unused, c_name, default_ts, generate_c, memory_report
-from ..design.record import Design
-from ..step import step_function
+from fte_casadi.codegen import build
+from fte_casadi.codegen.generate import _void_unused, c_name, default_ts, generate_c, memory_report
+from fte_casadi.design.record import Design
+from fte_casadi.step import step_function
 
 __all__ = ["bench_c_step", "hand_written_c"]
 

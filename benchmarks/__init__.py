@@ -1,0 +1,84 @@
+"""``fte bench``: speed of the design, the Monte Carlo engine and the generated C step, each against
+baselines run in the same process.
+
+This package is part of the source repository, not of the ``fte_casadi`` wheel: it holds the
+baselines that are history or test machinery (the 0.1 design, :mod:`.design_01`; the per-path
+Monte Carlo engine, :mod:`.perpath`, also the tests' reference) and the measurements around them.
+``fte bench`` finds it through :func:`fte_casadi.checkout.load_benchmarks`. The 0.1 design's numbers
+as measured are kept in ``benchmarks/RECORDED.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from .cstep import bench_c_step as bench_c_step
+from .design import bench_design as bench_design
+from .mc import bench as bench_monte_carlo
+
+__all__ = ["bench_c_step", "bench_design", "bench_monte_carlo", "run_all", "summary_lines"]
+
+
+def run_all(paths: int = 1000, log: Callable[[str], None] = lambda s: None) -> dict:
+    """Everything ``fte bench`` reports, for the built-in plants."""
+    from fte_casadi.design import design as run_design
+    from fte_casadi.plants import BUILTIN, SCENARIOS
+    from fte_casadi.ts import derive
+
+    out: dict = {"design": {}, "c_step": {}}
+    designs = {}
+    for name in BUILTIN:
+        ts = derive(BUILTIN[name]())
+        dt = SCENARIOS[name]().dt
+        log(f"bench: design {name} (Clarabel, SCS, and the 0.1 design as baseline)")
+        out["design"][name] = bench_design(ts, sample_time=dt)
+        designs[name] = run_design(ts, variant="conditioned", plant_spec=name, sample_time=dt)
+    log(
+        f"bench: Monte Carlo, manipulator, {paths} paths x 3 runs: vectorised engine against the per-path engine"
+    )
+    out["monte_carlo"] = bench_monte_carlo(designs["manipulator"], BUILTIN["manipulator"](),
+                                           SCENARIOS["manipulator"](), paths=paths)  # fmt: skip
+    for name, d in designs.items():
+        log(f"bench: generated C step of {name}")
+        out["c_step"][name] = bench_c_step(d)
+    return out
+
+
+def summary_lines(out: dict) -> list[str]:
+    """The text ``fte bench`` prints for the figures of :func:`run_all`."""
+    lines = ["design (conditioned, wall time incl. certificates; baseline: the 0.1 design, same process):"]
+    for name, row in out["design"].items():
+        cells = []
+        for key in ("CLARABEL", "SCS", "design_0.1"):
+            v = row.get(key, {})
+            cells.append(f"{key}: " + (f"{v['wall_s']:.3f} s" if "wall_s" in v else "failed"))
+        extra = f", {row['speedup_vs_0.1']:.1f}x faster than 0.1" if "speedup_vs_0.1" in row else ""
+        if "max_rel_diff_clarabel_scs" in row:
+            extra += f", Clarabel and SCS designs equal to {row['max_rel_diff_clarabel_scs']:.1e}"
+        lines.append(f"  {name:12s} " + ", ".join(cells) + extra)
+    mc = out["monte_carlo"]
+    e, pp = mc["engine"], mc["per_path_engine"]
+    lines.append(
+        f"Monte Carlo ({mc['scenario']}): {e['paths']} paths in {e['wall_s']:.2f} s "
+        f"({e['path_steps_per_s'] / 1e6:.2f} M path-steps/s; first call incl. compile {e['first_call_wall_s']:.2f} s)\n"
+        f"  per-path engine: {pp['wall_s']:.2f} s ({pp['path_steps_per_s'] / 1e6:.2f} M path-steps/s) -> "
+        f"vectorised engine is {mc['speedup_vs_per_path']:.1f}x faster\n"
+        f"  {e['flops_per_path_step']} flops per path-step: {100 * e['fraction_of_peak']:.1f} % of the assumed peak "
+        f"({e['peak_assumed']['cores']} cores x {e['peak_assumed']['ghz']:.2f} GHz x {e['peak_assumed']['doubles_per_vector']} "
+        f"doubles x 2 FMA units x 2)\n"
+        f"  one thread: {e['one_thread']['ns_per_path_step']:.1f} ns per path-step, "
+        f"{e['one_thread']['ns_per_path_step_without_libm']:.1f} ns without its "
+        f"{e['operations_per_path_step']['libm_calls']} scalar C library calls: "
+        f"{100 * e['one_thread']['libm_share']:.0f} % of the time is in those calls\n"
+        f"  sdeint itoEuler: {mc['sdeint_itoEuler']['path_steps_per_s']:.3g} path-steps/s -> engine is {mc['speedup_vs_sdeint']:.0f}x faster\n"
+        f"  plain Python loop: {mc['python_loop']['path_steps_per_s']:.3g} path-steps/s -> engine is "
+        f"{mc['speedup_vs_python_loop']:.0f}x faster (same trajectories to {mc['max_abs_diff_engine_vs_sdeint']:.1g})"
+    )
+    lines.append("generated C step (double, -O2):")
+    for name, b in out["c_step"].items():
+        lines.append(
+            f"  {name:12s} {b.get('c_ns') or float('nan'):.1f} ns/step vs hand-written {b.get('hand_ns') or float('nan'):.1f} ns "
+            f"(ratio {b.get('ratio') or float('nan'):.2f}); through CasADi from Python {b['casadi_us']:.1f} us; "
+            f"state {b['state_bytes']} B, constants {b['const_bytes']} B"
+        )
+    return lines
