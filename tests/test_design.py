@@ -427,5 +427,7 @@ def test_a_numerical_failure_names_the_worst_scaled_block():
     L = AffineLMI("(45) rule 2", F0, F)
     where, lo, hi = worst_block([L], {4: [("x", 2), ("d", 2)]})
     assert where == "(45) rule 2, d rows" and lo == 1e-6 and hi == 3e3
-    exc = _fail("LMI (45)", SolveResult("solver_error (test)", None, 0.0), "CLARABEL", "try this", (where, lo, hi))
+    exc = _fail(
+        "LMI (45)", SolveResult("solver_error (test)", None, 0.0), "CLARABEL", "try this", (where, lo, hi)
+    )
     assert "(45) rule 2, d rows" in str(exc) and "from 1e-06 to 3e+03, 9 orders of magnitude" in str(exc)
