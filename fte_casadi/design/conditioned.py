@@ -203,13 +203,40 @@ def _start(
     return out
 
 
-def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError | SolverFailedError:
+def worst_block(lmis, blocks: dict[int, list[tuple[str, int]]]) -> tuple[str, float, float] | None:
+    """The diagonal block whose data (constant term and the coefficients of every unknown, in the rows of
+    that block) spans the most orders of magnitude, over ``lmis``: ``(where, smallest, largest)`` of its
+    nonzero magnitudes. ``blocks[k]`` names the blocks of an LMI of size k as ``[(name, rows), ...]``."""
+    worst = None
+    for L in lmis:
+        start = 0
+        for name, rows in blocks.get(L.k, [("", L.k)]):
+            r = slice(start, start + rows)
+            start += rows
+            vals = np.abs(np.concatenate([L.F0[r].ravel(), L.F[:, r].ravel()]))
+            vals = vals[vals > 1e-300]
+            if not vals.size:
+                continue
+            lo, hi = float(vals.min()), float(vals.max())
+            if worst is None or hi / lo > worst[2] / worst[1]:
+                worst = (f"{L.name}, {name} rows" if name else L.name, lo, hi)
+    return worst
+
+
+def _fail(
+    step: str, res: SolveResult, solver: str, hint: str, spread=None
+) -> InfeasibleDesignError | SolverFailedError:
     if res.infeasible:
         return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
     other = "SCS" if solver == "CLARABEL" else "CLARABEL"
+    data = ""
+    if spread is not None:
+        where, lo, hi = spread
+        data = (f" The worst-scaled block the solver saw ({where}) holds numbers from {lo:.2g} to {hi:.2g}, "
+                f"{np.log10(hi / lo):.0f} orders of magnitude.")  # fmt: skip
     return SolverFailedError(
         f"{step}: the solver {solver} failed numerically ({res.status}), also on rescaled data; this is a "
-        f"numerical failure, not a proof of infeasibility: try solver='{other}', or {hint}"
+        f"numerical failure, not a proof of infeasibility: try solver='{other}', or {hint}.{data}"
     )
 
 
@@ -272,7 +299,9 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     v0 = _start(res, layout, "X", lmis[: aug.r], lmis[aug.r : aug.r + 2], repaired, _kappa(params))
     if v0 is None:
         hint = f"see the bounds on gamma and sigma (gamma = {g:g}, gamma1 = {g1:g}, sigma = {sg:g})"
-        raise _fail("LMI (45)", res, solver, hint)
+        n, p, ld = aug.n, aug.p, aug.ld
+        names = {2 * n + p + ld: [("x", n), ("x (diffusion)", n), ("y", p), ("d", ld)]}
+        raise _fail("LMI (45)", res, solver, hint, worst_block(prob.lmis, names))
     v0 = v0.copy()  # t starts well above ||Y'||: the epigraph is then strictly feasible
     v0[layout.index("t")] = 2.0 * np.linalg.norm(layout.unpack(v0)["Y"], 2) + 1.0
     res = SolveResult(res.status, v0, res.seconds, res.rescaled, res.warned)
@@ -534,8 +563,10 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
     prob = _Step5(aug, params, X, K, T, solver)
     res0 = prob.first()
     if not prob.points:
+        l2 = aug.Mbar[0].shape[1]
+        names = {aug.n + aug.nbar + l2: [("x", aug.n), ("e", aug.nbar)] + ([("d2", l2)] if l2 else [])}
         raise _fail(f"LMI (46) with cond(Pbar) <= {prob.kappa:g}", res0, solver,
-                    "raise sigma within what (45) allows")  # fmt: skip
+                    "raise sigma within what (45) allows", worst_block(prob.feas.lmis, names))  # fmt: skip
     n = aug.n
     decays = [
         -float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ K).real))

@@ -1,0 +1,77 @@
+"""How the design's time and memory grow with states and rules (issue #17): the chain family of
+:mod:`.plant_chain` designed at its defaults (no design defaults: the tool finds its parameters), each
+member in a fresh process so that its peak memory is its own."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = ["bench_growth", "MEMBERS", "ISSUE_17"]
+
+#: (n, q): n states, q sin couplings (2^q rules); what ``fte bench`` runs by default
+MEMBERS = ((2, 1), (4, 2), (8, 2), (4, 4), (6, 4))
+
+#: the same family's times as measured when issue #17 was filed (one design at a sigma found by hand;
+#: the defaults were refused, n = 16 and n = 24 failed numerically with Clarabel)
+ISSUE_17 = {(4, 2): 0.33, (4, 4): 1.6, (6, 6): 24.0, (8, 2): 1.1, (12, 2): 4.5}
+
+_CHILD = r"""
+import json, resource, sys, time
+from benchmarks.plant_chain import chain
+from fte_casadi.design import design
+from fte_casadi.errors import FteError
+from fte_casadi.ts import derive
+n, q = int(sys.argv[1]), int(sys.argv[2])
+ts = derive(chain(n, q), fidelity_samples=500)
+out = {"n": n, "q": q, "rules": ts.r}
+t0 = time.perf_counter()
+try:
+    d = design(ts, sample_time=1e-3)
+    out.update(certified=d.certified, sigma=d.params["sigma"], gamma=d.params["gamma"],
+               chosen=sorted(d.params_chosen or {}), solver_s=d.timings["solver_s"])
+    t1 = time.perf_counter()
+    design(ts, sample_time=1e-3, sigma=d.params["sigma"], gamma=d.params["gamma"])
+    out["one_design_s"] = time.perf_counter() - t1
+except FteError as exc:
+    out["error"] = " ".join(str(exc).split())[:300]
+out["wall_s"] = time.perf_counter() - t0 - out.get("one_design_s", 0.0)
+out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps(out))
+"""
+
+
+def bench_growth(members=MEMBERS, log=lambda s: None) -> list[dict]:
+    """One row per member: rules, wall time at the defaults (with the parameter search), the time of one
+    design at the parameters found, peak resident memory of the process, and the issue's time."""
+    root = str(Path(__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
+    rows = []
+    for n, q in members:
+        log(f"bench: design growth, chain n = {n}, {2**q} rules")
+        p = subprocess.run([sys.executable, "-c", _CHILD, str(n), str(q)], capture_output=True, text=True,
+                           env=env, cwd=root)  # fmt: skip
+        try:
+            row = json.loads(p.stdout.strip().splitlines()[-1])
+        except (ValueError, IndexError):
+            row = {"n": n, "q": q, "error": (p.stderr.strip().splitlines() or ["no output"])[-1][:300]}
+        row["issue_17_s"] = ISSUE_17.get((n, q))
+        rows.append(row)
+    return rows
+
+
+def growth_lines(rows: list[dict]) -> list[str]:
+    """The table ``fte bench`` prints."""
+    out = ["design growth (chain family at its defaults, a fresh process each; issue #17's time beside it):",
+           "  states rules  at defaults  one design  peak RSS  certified  issue #17 (one design, sigma by hand)"]  # fmt: skip
+    for r in rows:
+        if "error" in r:
+            out.append(f"  {r['n']:6d} {2 ** r['q']:5d}  failed: {r['error'][:120]}")
+            continue
+        issue = f"{r['issue_17_s']:.2f} s" if r.get("issue_17_s") else "-"
+        out.append(f"  {r['n']:6d} {r['rules']:5d}  {r['wall_s']:9.2f} s  {r['one_design_s']:8.2f} s  "
+                   f"{r['peak_rss_mb']:6.0f} MB  {str(r['certified']):9s}  {issue}")  # fmt: skip
+    return out

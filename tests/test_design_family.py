@@ -1,0 +1,40 @@
+"""The scalable chain family (issue #17), designed at its defaults: no design defaults, so the tool
+finds its own parameters; every member certified, whatever the BLAS's thread count."""
+
+from __future__ import annotations
+
+import pytest
+from threadpoolctl import threadpool_info
+
+from benchmarks.plant_chain import chain
+from fte_casadi.design import design
+from fte_casadi.design.certify import failures
+from fte_casadi.ts import derive
+
+
+@pytest.mark.parametrize(("n", "q"), [(2, 1), (4, 2), (8, 2), (6, 4)])
+def test_a_member_designs_at_its_defaults(n, q):
+    ts = derive(chain(n, q), fidelity_samples=500)
+    assert ts.r == 2**q and not chain(n, q).design_defaults
+    d = design(ts, sample_time=1e-3)
+    assert d.certified and not failures(d.checks)
+    assert d.checks["discrete"]["holds"]
+    # the parameters are the generic ones or ones the tool chose and recorded with why
+    for k, c in (d.params_chosen or {}).items():
+        assert d.params[k] == c["value"] and "certified design" in c["why"]
+
+
+def test_the_design_limits_the_blas_to_one_thread(monkeypatch):
+    """design() runs under threadpoolctl's limit of one BLAS thread (small dense algebra thrashes in many)."""
+    seen = []
+    from fte_casadi.design import conditioned
+
+    step3 = conditioned.step3
+
+    def spy(*a, **k):
+        seen.extend(i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas")
+        return step3(*a, **k)
+
+    monkeypatch.setattr(conditioned, "step3", spy)
+    design(derive(chain(2, 1), fidelity_samples=200), sample_time=1e-3)
+    assert seen and all(t == 1 for t in seen)
