@@ -49,3 +49,16 @@ def test_monte_carlo_stays_below_the_bound(spec, horizon):
     v0 = float(np.mean(np.einsum("pi,ij,pj->p", xi0, P, xi0)))
     rhs = bound_value(fb, _energies(d, scenario), v0)
     assert 0 < lhs <= rhs, (lhs, rhs)
+
+
+def test_one_vertex_per_rule_with_a_common_gain_and_a_size_limit_said(monkeypatch):
+    """With one common gain the r^2 rule pairs are r distinct vertices; beyond the size limit the bound is
+    not computed and the document says why (instead of a conic solve that grows without bound)."""
+    from fte_casadi.design import bounds
+
+    d = Design.load(Path(__file__).resolve().parents[1] / "generated" / "quadruple_tank" / "design.json")
+    verts, Cz = bounds._vertices(d)
+    assert len(verts) == d.r == 16 and Cz.shape[1] == 12
+    monkeypatch.setattr(bounds, "MAX_STATES", 10)
+    out = bounds.fault_error_bound(d)
+    assert out["holds"] is False and "not computed" in out["why"] and "12 states" in out["why"]

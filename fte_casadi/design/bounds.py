@@ -36,6 +36,9 @@ __all__ = ["fault_error_bound", "bound_value", "CHANNELS"]
 
 #: the input channels, in order
 CHANNELS = ("d", "fddot", "u_s", "f", "const")
+#: the analysis is skipped (and says so) beyond these sizes: one conic solve over all vertices, whose cost
+#: grows with vertices x states^4 (a chain of n = 8 states, 4 rules, closed loop of 20 states: 5 s)
+MAX_VERTICES, MAX_STATES = 64, 24
 
 
 def _vertices(design):
@@ -54,8 +57,14 @@ def _vertices(design):
         Wbar = np.vstack([W, np.zeros((2 * lf, n))])
         Wc = np.block([[W, np.zeros((n, nbar))], [T @ Wbar, np.zeros((nbar, nbar))]])
         R = np.asarray(design.R[i], float)
+        seen: list = []
         for j in range(design.r):
             K, Kf = np.asarray(design.K[j], float), np.asarray(Kfs[j], float)
+            # vertex (i, j) depends on j only through K_j and Kf_j: with one common gain (the conditioned
+            # design) the r^2 pairs are r distinct vertices
+            if any(np.array_equal(K, K2) and np.array_equal(Kf, Kf2) for K2, Kf2 in seen):
+                continue
+            seen.append((K, Kf))
             Ac = np.block([[A + B @ K, -B @ (K @ J0 + Kf @ J2)], [np.zeros((nbar, n)), R]])
             chans = {
                 "d": np.vstack([Bd, np.zeros((nbar, Bd.shape[1]))]),
@@ -88,9 +97,12 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
     if any(np.any(np.asarray(lm.get(k, 0.0))) for lm in design.local_models for k in ("G", "Gf", "M")):
         return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
     verts, Cz = _vertices(design)
+    N = Cz.shape[1]
+    if N > MAX_STATES or len(verts) > MAX_VERTICES:
+        return {"holds": False, "why": f"not computed: {len(verts)} vertices of a closed loop of {N} states "
+                f"(the analysis is posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)"}  # fmt: skip
     names = [c for c in CHANNELS if any(np.any(v[3][c]) for v in verts)]
     sizes = {c: verts[0][3][c].shape[1] for c in names}
-    N = Cz.shape[1]
     P = cp.Variable((N, N), symmetric=True)
     g = cp.Variable(len(names))
     cons = [P >> 1e-9 * np.eye(N)]
