@@ -239,3 +239,32 @@ def test_a_path_alone_in_its_chunk_gets_the_same_numbers(plants, real_designs, e
         a, b = dict(r.metrics), dict(runs[0].metrics)
         a.pop("wall_s"), b.pop("wall_s")
         assert a == b
+
+
+@pytest.mark.skipif(not LIBMVEC, reason="the AVX2 and AVX-512 variants are x86-64 only")
+@pytest.mark.parametrize(
+    "isa", [(), ("-mno-avx512f",), ("-mno-avx512f", "-mno-avx2")], ids=["native", "avx2", "no-vmath"]
+)
+def test_every_vector_width_is_close_and_split_free(plants, real_designs, monkeypatch, isa):
+    """The fast engine as compiled for AVX-512 (libmvec's 8-lane variants), AVX2 (two 4-lane calls per
+    lane vector) and without either (the C library lane by lane): each within FAST_REL of the exact
+    mode, and each gives the same numbers for a split of the paths at an odd place."""
+    from fte_casadi.sim import vector
+
+    monkeypatch.setattr(vector, "FAST_FLAGS", vector.FAST_FLAGS + isa)
+    plant, design, sc = plants["manipulator"], real_designs["manipulator"], _short(1.0)
+    dt, nsteps, _ = resolve_dt(design, sc, None)
+    ex = Prepared(design, plant, sc, dt, nsteps, dict(SCALES))
+    fa = Prepared(design, plant, sc, dt, nsteps, dict(SCALES), exact=False)
+    S0 = ex.initial_states(np.arange(21), 5)
+    args = (5, ex.SH, ex.sqdt, ex.damp, 1e6)
+    s_ex, acc_ex, _, _ = ex.engine.run(0, S0, *args)
+    s_fa, acc_fa, div, _ = fa.engine.run(0, S0, *args)
+    assert np.all(div < 0)
+    scale = np.max(np.abs(s_ex), axis=0)
+    assert np.all(np.abs(s_fa - s_ex) <= FAST_REL * scale)
+    assert np.all(np.abs(acc_fa - acc_ex) <= FAST_REL * np.abs(acc_ex))
+    a, acc_a, _, _ = fa.engine.run(0, S0[:7], *args)
+    b, acc_b, _, _ = fa.engine.run(7, S0[7:], *args)
+    np.testing.assert_array_equal(np.vstack([a, b]), s_fa)
+    np.testing.assert_array_equal(np.vstack([acc_a, acc_b]), acc_fa)
