@@ -155,9 +155,16 @@ def _compile_hand(src: str, folder: Path, flags: tuple) -> tuple[ctypes.CDLL, bo
         raise RuntimeError("no C compiler found")
     c = folder / "hand.c"
     c.write_text(src)
-    out = folder / "hand.so"
-    proc = subprocess.run([cc, *flags, "-fopt-info-vec-optimized", "-o", str(out), str(c), "-lmvec", "-lm"],
-                          capture_output=True, text=True, timeout=900)  # fmt: skip
+    obj, out = folder / "hand.o", folder / "hand.so"
+    # compiled and linked apart: linking with -ffast-math would add crtfastmath.o, which switches the
+    # whole process to flush-to-zero when the library is loaded
+    proc = subprocess.run([cc, *(f for f in flags if f != "-shared"), "-fopt-info-vec-optimized", "-c", "-o", str(obj),
+                           str(c)], capture_output=True, text=True, timeout=900)  # fmt: skip
+    if proc.returncode == 0:
+        link = subprocess.run([cc, "-shared", "-o", str(out), str(obj), "-lmvec", "-lm"], capture_output=True,
+                              text=True, timeout=900)  # fmt: skip
+        if link.returncode != 0:
+            proc = link
     if proc.returncode != 0:
         raise RuntimeError(f"compiling the hand loop failed: {proc.stderr[-1500:]}")
     first = src[: src.index("#pragma omp simd")].count("\n") + 1  # the path loop's lines
