@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import sys
 import textwrap
 import time
@@ -197,6 +198,13 @@ def _design_summary(d) -> str:
             + ("proven stable" if disc["holds"] else "NOT proven stable")
             + f" for any blending of the rules (Pbar decreases for Ts < {disc['ts_max_lyapunov']:.4g})"
         )
+    fb = (d.bounds or {}).get("fault_error")
+    if fb and fb.get("holds"):
+        lines.append("  certified bound on the fault-estimation error: E int |f - fhat|^2 dt <= "
+                     + " + ".join(f"{g:.3g}^2 t" if c == "const" else f"{g:.3g}^2 E int |{c}|^2" for c, g in fb["gains"].items())
+                     + " + E xi0' P xi0 (docs/tune.md)")  # fmt: skip
+    elif fb:
+        lines.append(f"  no bound on the fault-estimation error: {fb.get('why')}")
     if obs.get("alpha") is not None:
         lines.append(f"  observer decay rate alpha = {obs['alpha']:.4g}: {obs.get('why', '')}")
     solves = f", {d.solves.get('total')} conic solves" if d.solves else ""
@@ -468,6 +476,15 @@ def _warnings(m: dict, inputs, faults=()) -> list[str]:
     return out
 
 
+def _why(d, m: dict) -> list[str]:
+    """The structural cause behind a window where tolerant control is worse than none, or behind false
+    alarms (:func:`fte_casadi.design.limits.explain_metrics`)."""
+    from .design.limits import explain_metrics
+
+    return ["why (the plant's structure, at this design; `fte tune` searches for a design that does better): " + s
+            for s in explain_metrics(d, m)]  # fmt: skip
+
+
 @main.command()
 @click.argument("target", metavar="DESIGN.json|PLANT")
 @click.option(
@@ -520,6 +537,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
 
         figs = write_figures(res, plots)
     warn = _warnings(m, list(plant.input_names), list(plant.fault_names))
+    warn += _why(d, m)
     change = m.get("dt_change")
     if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
         click.echo(
@@ -659,3 +677,126 @@ def bench(as_json, paths):
         click.echo(json.dumps(out, indent=1, default=str))
         return
     click.echo("\n".join(benchmarks.summary_lines(out)))
+
+
+# -- tune ---------------------------------------------------------------------------------
+def _tune_target(out_dir: str) -> None:
+    """Refuse, before any work, to overwrite in DIR a file fte tune did not write."""
+    from .tune.output import is_tune_record
+
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ParameterError(
+            f"--out {out_dir} is a file; give a directory (fte tune writes tuned.json and more there)"
+        )
+    _writable_target(str(out / "tuned.json"), "--out", "design.json")
+    rec, fig, designs = out / "tune.json", out / "pareto.png", out / "designs"
+    if rec.exists() and not is_tune_record(rec):
+        raise ParameterError(f"{rec} exists and was not written by fte tune: it is left untouched; choose another "
+                             "--out directory, or move that file away first")  # fmt: skip
+    if fig.exists() and not rec.exists():
+        raise ParameterError(f"{fig} exists and the directory holds no tune.json of fte tune: it is left untouched; "
+                             "choose another --out directory, or move that file away first")  # fmt: skip
+    if designs.exists() and not designs.is_dir():
+        raise ParameterError(
+            f"{designs} is a file; fte tune writes the front's designs into that folder: move it away"
+        )
+    for f in designs.glob("trial-*.json") if designs.is_dir() else ():
+        if not _ours(f):
+            raise ParameterError(f"{f} exists and was not written by fte (it is not a design document): it is left "
+                                 "untouched; choose another --out directory, or move that file away first")  # fmt: skip
+
+
+@main.command()
+@click.argument("target", metavar="PLANT|DESIGN.json")
+@click.option(
+    "--trials",
+    type=int,
+    default=60,
+    show_default=True,
+    help="Trials in all, trial 0 (the base design) included.",
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Seed of the sampler and of the Monte Carlo."
+)
+@click.option("--objective", "rule", default="balanced", show_default=True,
+              help="How the chosen design is picked from the front: balanced, fault-error, false-alarm or ftc.")  # fmt: skip
+@click.option(
+    "--paths", type=int, help="Brownian paths per candidate (default: 20, or the scenario's when more)."
+)
+@click.option(
+    "--scheduler", help="Address of a dask.distributed scheduler: run the candidates on its workers."
+)
+@click.option("--out", "out_dir", default="fte-tune", show_default=True, type=click.Path(file_okay=False),
+              help="Directory of tuned.json, tune.json, pareto.png and designs/.")  # fmt: skip
+@click.option(
+    "--json", "as_json", is_flag=True, help="Print the front (JSON list) on stdout; the tables go to stderr."
+)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@_guard
+def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
+    """Multi-objective search over the design's knobs (gamma, gamma1, sigma, alpha, kappa, sliding gain,
+    boundary layer): each candidate designed, certified and simulated with the same random numbers;
+    the Pareto front, and the chosen design in DIR/tuned.json (see docs/tune.md for the rule)."""
+    from .errors import MissingDependencyError
+    from .plants.loader import load_plant, load_scenario
+    from .tune.output import comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
+    from .tune.search import RULES
+    from .tune.search import tune as run_tune
+
+    if trials < 2:
+        raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "
+                             f"got {trials}")  # fmt: skip
+    if seed < 0:
+        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    if rule not in RULES:
+        raise ParameterError(f"unknown --objective {rule!r}: choose one of {', '.join(RULES)} (docs/tune.md says "
+                             "what each picks)")  # fmt: skip
+    if paths is not None and paths < 1:
+        raise ParameterError(f"--paths must be a positive integer; got {paths}")
+    try:
+        import optuna  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError("fte tune needs optuna: pip install 'fte_casadi[tune]'") from None
+    _tune_target(out_dir)
+    given = target.endswith(".json") or Path(target).is_file()
+    d = _design_or_plant(target, progress=not quiet)
+    plant = load_plant(d.plant_spec)
+    try:
+        scenario = load_scenario(d.plant_spec)
+    except FteError as exc:
+        raise ParameterError(f"fte tune simulates every candidate on the plant's scenario, and {d.plant_spec} has "
+                             f"none ({exc}); add a scenario() beside the plant function") from None  # fmt: skip
+    with tqdm(total=trials, desc=f"tune {plant.name}", unit=" trials", file=sys.stderr, disable=quiet,
+              delay=1.0) as bar:  # fmt: skip
+        result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths, scheduler=scheduler,
+                          base_is_given=given, progress=lambda k, n: bar.update(k - bar.n))  # fmt: skip
+    files = write_outputs(result, out_dir)
+    say = functools.partial(click.echo, err=as_json)
+    failed = [r for r in result.records if r.state != "ok"]
+    say(f"{plant.name}: {len(result.records)} trials ({len(failed)} failed: not designed or not certified), "
+        f"{result.paths} paths each, seed {seed}, {result.wall_s:.1f} s; Pareto front of {len(result.front)} over "
+        f"{len(result.objectives)} objectives (* chosen by rule {rule}, d the base design):")  # fmt: skip
+    for line in front_table(result):
+        say("  " + line)
+    rows = comparison(result.baseline.metrics, result.record(result.chosen).metrics, list(plant.fault_names),
+                      list(plant.input_names))  # fmt: skip
+    say(f"default (trial 0) vs chosen (trial {result.chosen}; {result.tier}):")
+    for line in fmt_rows(rows):
+        say("  " + line)
+    say("  the chosen design is " + ("at least as good as the default on every fault metric" if dominates(rows)
+        else "NOT better than the default on every fault metric (a trade-off: see the rows marked worse)"))  # fmt: skip
+    reasons: dict[str, int] = {}
+    for r in failed:
+        key = re.sub(r"-?\d+\.\d+(e[-+]?\d+)?|\d+e[-+]?\d+", "#", ":".join((r.reason or "").split(":")[:2]))[
+            :110
+        ]
+        reasons[key] = reasons.get(key, 0) + 1
+    for why, k in sorted(reasons.items(), key=lambda t: -t[1]):
+        say(f"  failed trials: {k} x {why}")
+    for line in result.limits:
+        click.echo(textwrap.fill("fte: " + line, width=100), err=True)
+    say(f"wrote {files['tuned']} (the chosen design), {files['record']}, {files['figure']} and the front's designs in "
+        f"{files['designs']}")  # fmt: skip
+    if as_json:
+        click.echo(json.dumps(front_documents(result, out_dir), indent=1))

@@ -413,3 +413,21 @@ def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(m
     assert r.exit_code == EXIT_FAILED, r.output
     assert "both solvers failed numerically" in r.output and "stalled (test)" in r.output
     assert "internal error" not in r.output and "Traceback" not in r.output
+
+
+def test_a_numerical_failure_names_the_worst_scaled_block():
+    """Issue #17: the report of a solver's numerical failure says which LMI block was badly scaled, and by how much."""
+    from fte_casadi.design.conditioned import _fail, worst_block
+    from fte_casadi.design.sdp import AffineLMI, SolveResult
+
+    F0 = np.diag([-1.0, -2.0, -1e-6, -3e3])
+    F = np.zeros((2, 4, 4))
+    F[0, :2, :2] = [[1.0, 0.5], [0.5, 2.0]]
+    F[1, 2:, 2:] = [[1e-5, 0.0], [0.0, 1.0]]
+    L = AffineLMI("(45) rule 2", F0, F)
+    where, lo, hi = worst_block([L], {4: [("x", 2), ("d", 2)]})
+    assert where == "(45) rule 2, d rows" and lo == 1e-6 and hi == 3e3
+    exc = _fail(
+        "LMI (45)", SolveResult("solver_error (test)", None, 0.0), "CLARABEL", "try this", (where, lo, hi)
+    )
+    assert "(45) rule 2, d rows" in str(exc) and "from 1e-06 to 3e+03, 9 orders of magnitude" in str(exc)

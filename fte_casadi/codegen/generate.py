@@ -423,7 +423,8 @@ def generate_c(
     real : {"double", "float"}
         The C type of ``fte_real``.
     boundary_layer : float, optional
-        Replace ``sgn(s)`` by ``sat(s / phi)``.
+        Replace ``sgn(s)`` by ``sat(s / phi)``; default the design's ``params["boundary_layer"]``
+        when it has one (a design chosen by ``fte tune``), else ``sgn(s)``.
 
     Returns
     -------
@@ -450,6 +451,8 @@ def generate_c(
         raise ParameterError(f"--real must be one of {list(_REALS)}; got {real!r}")
     tsf = _check_ts(design, ts)
     tsm = _ts_max(design)
+    if boundary_layer is None:  # the design's own (fte tune), as the simulation runs it
+        boundary_layer = design.params.get("boundary_layer")
     name = c_name(design.plant)
     out = Path(out_dir)
     prepare_dir(out)

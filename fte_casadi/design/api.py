@@ -117,6 +117,7 @@ def design(
     gamma2: float | None = None,
     alpha: float | None = None,
     sample_time: float | None = None,
+    kappa: float | None = None,
     initial_state=None,
     allow_uncertified: bool = False,
     accept_assumptions=(),
@@ -134,7 +135,9 @@ def design(
     solves them as printed (:mod:`fte_casadi.design.paper`). ``alpha`` is the observer decay rate
     of the conditioned variant (default: a fraction of the largest feasible one, lowered so that
     ``ts_max >= 2 sample_time`` when ``sample_time`` is given); ``gamma2`` the d2 attenuation of
-    Theorem 5 (default gamma). ``initial_state`` is the nominal x(0) the simulations start from
+    Theorem 5 (default gamma). ``kappa`` bounds cond(X') and cond(Pbar) in the conditioned variant
+    (default :data:`~fte_casadi.design.conditioned.KAPPA`; recorded in ``params`` when given).
+    ``initial_state`` is the nominal x(0) the simulations start from
     (default: the plant's), recorded as ``x0`` for the generated C's start from a first measurement.
     ``remark5`` (default True) applies Remark 5's fallback where H cannot decouple the unknown inputs
     (:mod:`fte_casadi.design.remark5`); ``d_bound`` (one number, or one per unknown input) bounds
@@ -170,6 +173,17 @@ def design(
         params["gamma2"] = _params(
             ts, {"gamma": gamma2, "gamma1": None, "sigma": None, "delta": None, "epsilon": None}, []
         )["gamma"]
+    if kappa is not None:
+        if (
+            isinstance(kappa, bool)
+            or not isinstance(kappa, (int, float))
+            or not math.isfinite(kappa)
+            or kappa <= 1
+        ):
+            raise ParameterError(
+                f"kappa (the bound on cond(Pbar)) must be a finite number above 1; got {kappa!r}"
+            )
+        params["kappa"] = float(kappa)
     for name, v in (("alpha", alpha), ("sample_time", sample_time)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0
                               or (name == "sample_time" and v == 0)):  # fmt: skip
@@ -197,7 +211,7 @@ def design(
         generic = set()  # a plant that fails an assumption gets the bounds, not a search over parameters
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
                  gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions,
-                 remark5=remark5, d_bound=d_bound, plant_spec=plant_spec, initial_state=initial_state)  # fmt: skip
+                 kappa=kappa, remark5=remark5, d_bound=d_bound, plant_spec=plant_spec, initial_state=initial_state)  # fmt: skip
     if variant == "paper":
         s3, K = paper.step3(aug, params, solver)
         s5 = paper.step5(aug, params, s3.X, K, T, solver)
@@ -327,8 +341,29 @@ def design(
         observer=observer,
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
+        bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc),
         remark5=r5doc,
     )
+
+
+def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc) -> dict:
+    """The certified bound on the fault-estimation error at the returned design (issue #18 item 1;
+    :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
+    if not certified:
+        return {}
+    if r5doc and r5doc.get("used"):
+        return {"fault_error": {"holds": False, "why": "not computed where Remark 5's fallback is used"}}
+    from types import SimpleNamespace
+
+    from .bounds import fault_error_bound
+
+    lms = tuple(
+        {k: getattr(lm, k) for k in ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M")}
+        for lm in ts.local_models
+    )
+    view = SimpleNamespace(dims={"n": ts.n, "lf": ts.lf}, T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
+                           local_models=lms, R=R, K=K)  # fmt: skip
+    return {"fault_error": fault_error_bound(view)}
 
 
 def _outside_45(aug, params: dict, solver: str) -> str | None:

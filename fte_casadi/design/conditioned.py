@@ -87,6 +87,11 @@ ALPHA_RTOL = 0.1
 RHO_CAP = 1e3
 
 
+def _kappa(params: dict) -> float:
+    """The bound on cond(X') and cond(Pt): ``params["kappa"]`` when the design was asked for one, else KAPPA."""
+    return float(params.get("kappa", KAPPA))
+
+
 @dataclass
 class Step3:
     X: np.ndarray
@@ -121,15 +126,15 @@ def _diag(sizes, values) -> np.ndarray:
     return np.diag(np.concatenate([np.full(k, float(v)) for k, v in zip(sizes, values)]))
 
 
-def _normalisation(layout: Layout, name: str, size: int) -> list[MarginLMI]:
+def _normalisation(layout: Layout, name: str, size: int, kappa: float = KAPPA) -> list[MarginLMI]:
     eye = np.eye(size)
     return [
         margin_lmi(f"{name} >= I", layout, lambda **u: eye - u[name], margin=lambda **u: eye),
         margin_lmi(
-            f"{name} <= {KAPPA:g} I",
+            f"{name} <= {kappa:g} I",
             layout,
-            lambda **u: u[name] - KAPPA * eye,
-            margin=lambda **u: KAPPA * eye,
+            lambda **u: u[name] - kappa * eye,
+            margin=lambda **u: kappa * eye,
         ),
     ]
 
@@ -158,7 +163,7 @@ def _accept(res: SolveResult, lmis, p: float) -> bool:
     return True
 
 
-def _into_normalisation(layout: Layout, v: np.ndarray, name: str) -> np.ndarray:
+def _into_normalisation(layout: Layout, v: np.ndarray, name: str, kappa: float = KAPPA) -> np.ndarray:
     """``v`` with the eigenvalues of the normalised matrix ``name`` clipped into ``[1 + 3 MARGIN, KAPPA (1 - 3 MARGIN)]``.
 
     A first-order solver's point can miss the normalisation by its tolerance; after this, the
@@ -166,14 +171,16 @@ def _into_normalisation(layout: Layout, v: np.ndarray, name: str) -> np.ndarray:
     """
     u = layout.unpack(v)
     w, V = np.linalg.eigh(u[name])
-    M = (V * np.clip(w, 1 + 3 * MARGIN, KAPPA * (1 - 3 * MARGIN))) @ V.T
+    M = (V * np.clip(w, 1 + 3 * MARGIN, kappa * (1 - 3 * MARGIN))) @ V.T
     out = v.copy()
     n = M.shape[0]
     out[layout.index(name)] = M[np.triu_indices(n)]
     return out
 
 
-def _start(res: SolveResult, layout: Layout, name: str, soft, hard, note: list) -> np.ndarray | None:
+def _start(
+    res: SolveResult, layout: Layout, name: str, soft, hard, note: list, kappa: float = KAPPA
+) -> np.ndarray | None:
     """A strictly feasible point of ``soft`` and ``hard`` from the solver's answer, or None.
 
     The solver's point is taken if it is strictly feasible; otherwise (an approximate point, e.g.
@@ -184,7 +191,7 @@ def _start(res: SolveResult, layout: Layout, name: str, soft, hard, note: list) 
         return None
     if _accept(res, list(soft) + list(hard), 0.0):
         return res.v
-    v = _into_normalisation(layout, res.v, name)
+    v = _into_normalisation(layout, res.v, name, kappa)
     try:
         out = phase1(list(soft), list(hard), v)
     except CentringError:
@@ -196,13 +203,40 @@ def _start(res: SolveResult, layout: Layout, name: str, soft, hard, note: list) 
     return out
 
 
-def _fail(step: str, res: SolveResult, solver: str, hint: str) -> InfeasibleDesignError | SolverFailedError:
+def worst_block(lmis, blocks: dict[int, list[tuple[str, int]]]) -> tuple[str, float, float] | None:
+    """The diagonal block whose data (constant term and the coefficients of every unknown, in the rows of
+    that block) spans the most orders of magnitude, over ``lmis``: ``(where, smallest, largest)`` of its
+    nonzero magnitudes. ``blocks[k]`` names the blocks of an LMI of size k as ``[(name, rows), ...]``."""
+    worst = None
+    for L in lmis:
+        start = 0
+        for name, rows in blocks.get(L.k, [("", L.k)]):
+            r = slice(start, start + rows)
+            start += rows
+            vals = np.abs(np.concatenate([L.F0[r].ravel(), L.F[:, r].ravel()]))
+            vals = vals[vals > 1e-300]
+            if not vals.size:
+                continue
+            lo, hi = float(vals.min()), float(vals.max())
+            if worst is None or hi / lo > worst[2] / worst[1]:
+                worst = (f"{L.name}, {name} rows" if name else L.name, lo, hi)
+    return worst
+
+
+def _fail(
+    step: str, res: SolveResult, solver: str, hint: str, spread=None
+) -> InfeasibleDesignError | SolverFailedError:
     if res.infeasible:
         return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
     other = "SCS" if solver == "CLARABEL" else "CLARABEL"
+    data = ""
+    if spread is not None:
+        where, lo, hi = spread
+        data = (f" The worst-scaled block the solver saw ({where}) holds numbers from {lo:.2g} to {hi:.2g}, "
+                f"{np.log10(hi / lo):.0f} orders of magnitude.")  # fmt: skip
     return SolverFailedError(
         f"{step}: the solver {solver} failed numerically ({res.status}), also on rescaled data; this is a "
-        f"numerical failure, not a proof of infeasibility: try solver='{other}', or {hint}"
+        f"numerical failure, not a proof of infeasibility: try solver='{other}', or {hint}.{data}"
     )
 
 
@@ -217,7 +251,7 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
                    margin=lambda X, Y, s, t: s * D)
         for i in range(aug.r)
     ]  # fmt: skip
-    lmis += _normalisation(layout, "X", n)
+    lmis += _normalisation(layout, "X", n, _kappa(params))
     lmis.append(margin_lmi("||Y'|| <= t", layout, lambda X, Y, s, t: _balanced(Y, t),
                            margin=lambda X, Y, s, t: _balanced_margin(t, m, n)))  # fmt: skip
     c = np.zeros(layout.size)
@@ -262,10 +296,12 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
     lmis = [L.at(MARGIN) for L in family]
     repaired: list[str] = []
-    v0 = _start(res, layout, "X", lmis[: aug.r], lmis[aug.r : aug.r + 2], repaired)
+    v0 = _start(res, layout, "X", lmis[: aug.r], lmis[aug.r : aug.r + 2], repaired, _kappa(params))
     if v0 is None:
         hint = f"see the bounds on gamma and sigma (gamma = {g:g}, gamma1 = {g1:g}, sigma = {sg:g})"
-        raise _fail("LMI (45)", res, solver, hint)
+        n, p, ld = aug.n, aug.p, aug.ld
+        names = {2 * n + p + ld: [("x", n), ("x (diffusion)", n), ("y", p), ("d", ld)]}
+        raise _fail("LMI (45)", res, solver, hint, worst_block(prob.lmis, names))
     v0 = v0.copy()  # t starts well above ||Y'||: the epigraph is then strictly feasible
     v0[layout.index("t")] = 2.0 * np.linalg.norm(layout.unpack(v0)["Y"], 2) + 1.0
     res = SolveResult(res.status, v0, res.seconds, res.rescaled, res.warned)
@@ -281,7 +317,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     K = Su @ u["Y"] @ np.linalg.inv(u["X"])
     notes = [
         f"step 3: one common gain K (K_j = K), inputs scaled by Su = diag({', '.join(f'{v:.4g}' for v in np.diag(Su))}), "
-        f"X = X'/s with I <= X' <= {KAPPA:g} I, min ||Y'||: {prob.solves} feasibility solve ({res.status}"
+        f"X = X'/s with I <= X' <= {_kappa(params):g} I, min ||Y'||: {prob.solves} feasibility solve ({res.status}"
         + (", on rescaled data" if res.rescaled else "") + f"), then {cen.newton_steps} Newton steps to the centred "
         f"point (gap {ETA:g} of the objective)"
     ]  # fmt: skip
@@ -324,7 +360,7 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T):
         return M
 
     feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46) for i in range(r)]
-    feas += _normalisation(layout, "Pt", nbar)
+    feas += _normalisation(layout, "Pt", nbar, _kappa(params))
 
     def N_of(Pt):
         return aug.Js.T @ T.T @ Pt @ Cp
@@ -353,7 +389,7 @@ class _Step5:
     """
 
     def __init__(self, aug, params, X, K, T, solver):
-        self.aug, self.T, self.solver = aug, T, solver
+        self.aug, self.T, self.solver, self.kappa = aug, T, solver, _kappa(params)
         self.params, self.X, self.K, self.tau = params, X, K, time_scale(aug)
         self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T)
         r = aug.r
@@ -362,7 +398,7 @@ class _Step5:
         self.fixed = [L.at(MARGIN) for L in feas[r:]]  # the normalisation of Pt
         self.centring = [L.at(MARGIN) for L in feas + rest]
         # phase 1 needs bounded gains: rho_i <= RHO_CAP (far above any design's; see module docstring)
-        self.rho_cap = RHO_CAP * KAPPA * max(np.linalg.norm(T @ A, 2) for A in aug.Abar) / max(
+        self.rho_cap = RHO_CAP * self.kappa * max(np.linalg.norm(T @ A, 2) for A in aug.Abar) / max(
             np.linalg.svd(aug.Cbar, compute_uv=False)[-1] ** 2, 1e-300)  # fmt: skip
         ir = self.layout.index("rho")
         self.caps = []
@@ -410,7 +446,9 @@ class _Step5:
             ir = self.layout.index("rho")
             v[ir] = np.minimum(v[ir], 0.5 * self.rho_cap)
             res_c = SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
-            start = _start(res_c, self.layout, "Pt", self.soft, self.fixed + self.caps, self.notes)
+            start = _start(
+                res_c, self.layout, "Pt", self.soft, self.fixed + self.caps, self.notes, self.kappa
+            )
             if start is not None:
                 self.points[self.reach(start)] = start
         return res
@@ -525,8 +563,10 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
     prob = _Step5(aug, params, X, K, T, solver)
     res0 = prob.first()
     if not prob.points:
-        raise _fail(f"LMI (46) with cond(Pbar) <= {KAPPA:g}", res0, solver,
-                    "raise sigma within what (45) allows")  # fmt: skip
+        l2 = aug.Mbar[0].shape[1]
+        names = {aug.n + aug.nbar + l2: [("x", aug.n), ("e", aug.nbar)] + ([("d2", l2)] if l2 else [])}
+        raise _fail(f"LMI (46) with cond(Pbar) <= {prob.kappa:g}", res0, solver,
+                    "raise sigma within what (45) allows", worst_block(prob.feas.lmis, names))  # fmt: skip
     n = aug.n
     decays = [
         -float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ K).real))
@@ -538,7 +578,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         lo, hi = alpha_max(prob, start)
         a = ALPHA_FRACTION * lo if np.isfinite(hi) else lo
         observer.update(alpha_max=lo, alpha_max_upper=hi)
-        why = (f"{ALPHA_FRACTION:g} x the largest decay rate for which (46) is feasible with cond(Pbar) <= {KAPPA:g} "
+        why = (f"{ALPHA_FRACTION:g} x the largest decay rate for which (46) is feasible with cond(Pbar) <= {prob.kappa:g} "
                f"(alpha_max in [{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
     else:
         a = float(alpha)
@@ -548,7 +588,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         lo, hi = alpha_max(prob, start)
         raise InfeasibleDesignError(
             f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which (46) is "
-            f"feasible with cond(Pbar) <= {KAPPA:g} is about {lo:.4g}; lower alpha to <= "
+            f"feasible with cond(Pbar) <= {prob.kappa:g} is about {lo:.4g}; lower alpha to <= "
             f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
         )
     if pt is None:
@@ -559,7 +599,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         a, pt, why = _cap_for_sample_time(prob, a, pt, why, sample_time)
     observer.update(alpha=a, why=why, ts_max=pt["ts_max"])
     notes = [
-        f"step 5: Q_i = rho_i Cbar^T / 2 (Finsler), N = J1^T T^T Pbar Cbar^+, Pbar = Pt/s with I <= Pt <= {KAPPA:g} I, "
+        f"step 5: Q_i = rho_i Cbar^T / 2 (Finsler), N = J1^T T^T Pbar Cbar^+, Pbar = Pt/s with I <= Pt <= {prob.kappa:g} I, "
         f"min sum rho_i + tau; observer decay rate alpha = {a:.4g} ({why}); {prob.solves} conic solve "
         f"({res0.status}" + (", on rescaled data" if res0.rescaled else "") + f") at alpha = 0, then "
         f"{prob.decisions} phase-1 decisions and {prob.newton} centring steps in numpy"

@@ -133,6 +133,8 @@ class Design:
     #: Remark 5's fallback (:mod:`fte_casadi.design.remark5`): {"used": True, "unknown_inputs": [...],
     #: "gain": [one per undecoupled direction], "d_bound", "Bdu", "M", ...}; empty when not used
     remark5: dict = field(default_factory=dict)
+    #: certified performance bounds at the design (:mod:`fte_casadi.design.bounds`): {"fault_error": {...}}
+    bounds: dict = field(default_factory=dict)
 
     # -- convenience ---------------------------------------------------------------------
     @property
@@ -232,6 +234,8 @@ class Design:
             out["x0"] = _arr(self.x0).tolist()
         if self.params_chosen:
             out["params_chosen"] = _jsonable(self.params_chosen)
+        if self.bounds:
+            out["bounds"] = _jsonable(self.bounds)
         if self.Kf_rules is not None:
             out["Kf_rules"] = [_arr(M).tolist() for M in self.Kf_rules]
         if self.remark5.get("used"):
@@ -317,6 +321,7 @@ class Design:
             u_ref=u_ref,
             x_ref=None if doc.get("x_ref") is None else _arr(doc["x_ref"]),
             params_chosen=dict(doc.get("params_chosen", {})),
+            bounds=dict(doc.get("bounds") or {}),
             x0=None if doc.get("x0") is None else _finite(source, "x0", doc["x0"]),
             Kf_rules=None
             if doc.get("Kf_rules") is None

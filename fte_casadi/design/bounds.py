@@ -1,0 +1,144 @@
+"""A certified bound on the fault-estimation error of a returned design (issue #18 item 1).
+
+At the design's gains, the closed loop of the T-S model with the observer is, for ``xi = [x; e]``
+(``e = xbar - xbarhat`` the augmented estimation error, ``f - fhat = J2 e``)::
+
+    dx = [(A_i + B_i K_j) x - B_i (K_j J0 + Kf_j J2) e + Bd_i d + (B_i Kf_j + Bf_i) f + v_i] dt + W_i x dw
+    de = [R_i e + J1 (f'' - u_s)] dt + T Wbar_i x dw
+
+blended by ``h_i h_j`` (``v_i = B_i u_ref + a_i`` the constant input; ``T J1 = J1``, ``T Bdbar_i = 0``).
+The error is driven by the fault's second derivative, the sliding term, and — through the state
+— by the unknown input, the fault, the constant input and the diffusion ``W_i x dw``.
+
+With ``w = [d; f''; u_s; f; 1]`` (the channels that are not identically zero), the stochastic
+bounded-real lemma gives, for ``P > 0`` and ``g_k`` with, for every rule pair (i, j)::
+
+    [[A_ij^T P + P A_ij + C^T C,  P B_ij,  W_i^T P],
+     [B_ij^T P,                  -diag(g), 0      ],
+     [P W_i,                      0,       -P     ]]  < 0,      C = [0, J2]
+
+(affine in the vertex matrices, so the vertices cover every blend of the rules), the bound
+
+    E int_0^t |f - fhat|^2 ds  <=  sum_k g_k E int_0^t |w_k|^2 ds + E xi(0)^T P xi(0)
+
+for every t, along the T-S model (the nonlinear plant inside the region where its T-S model is
+exact) without input saturation. ``fault_error_bound`` solves ``min sum_k g_k`` (cvxpy), checks the
+LMIs again with numpy at the returned point and records the per-channel gains ``sqrt(g_k)`` and P.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+__all__ = ["fault_error_bound", "bound_value", "CHANNELS"]
+
+#: the input channels, in order
+CHANNELS = ("d", "fddot", "u_s", "f", "const")
+
+
+def _vertices(design):
+    n, lf = int(design.dims["n"]), int(design.dims["lf"])
+    nbar = n + 2 * lf
+    T = np.asarray(design.T, float)
+    J0 = np.hstack([np.eye(n), np.zeros((n, 2 * lf))])
+    J1 = np.vstack([np.zeros((n, lf)), np.eye(lf), np.zeros((lf, lf))])
+    J2 = np.hstack([np.zeros((lf, n + lf)), np.eye(lf)])
+    u_ref = np.asarray(design.u_ref, float).ravel()
+    Kfs = list(design.Kf_rules) if design.Kf_rules is not None else [design.Kf] * design.r
+    out = []
+    for i, lm in enumerate(design.local_models):
+        A, B, Bd, Bf, W = (np.asarray(lm[k], float) for k in ("A", "B", "Bd", "Bf", "W"))
+        a = np.asarray(lm.get("a", np.zeros(n)), float).ravel()
+        Wbar = np.vstack([W, np.zeros((2 * lf, n))])
+        Wc = np.block([[W, np.zeros((n, nbar))], [T @ Wbar, np.zeros((nbar, nbar))]])
+        R = np.asarray(design.R[i], float)
+        for j in range(design.r):
+            K, Kf = np.asarray(design.K[j], float), np.asarray(Kfs[j], float)
+            Ac = np.block([[A + B @ K, -B @ (K @ J0 + Kf @ J2)], [np.zeros((nbar, n)), R]])
+            chans = {
+                "d": np.vstack([Bd, np.zeros((nbar, Bd.shape[1]))]),
+                "fddot": np.vstack([np.zeros((n, lf)), J1]),
+                "u_s": np.vstack([np.zeros((n, lf)), -J1]),
+                "f": np.vstack([B @ Kf + Bf, np.zeros((nbar, lf))]),
+                "const": np.concatenate([B @ u_ref + a, np.zeros(nbar)])[:, None],
+            }
+            out.append((i, j, Ac, chans, Wc))
+    Cz = np.hstack([np.zeros((lf, n)), J2])
+    return out, Cz
+
+
+def _lmi(Ac, Bc, Wc, Cz, P, G):
+    k = Bc.shape[1]
+    N = Ac.shape[0]
+    return np.block([
+        [Ac.T @ P + P @ Ac + Cz.T @ Cz, P @ Bc, Wc.T @ P],
+        [Bc.T @ P, -G, np.zeros((k, N))],
+        [P @ Wc, np.zeros((N, k)), -P],
+    ])  # fmt: skip
+
+
+def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
+    """The bound of the module docstring at ``design``: ``{"holds", "gains": {channel: sqrt(g)},
+    "channels": {channel: size}, "P": M, "lmi_max_eig", "what"}``; ``{"holds": False, "why"}`` when
+    the analysis LMI is infeasible, fails its numpy check, or the design has Theorem 5 diffusion."""
+    import cvxpy as cp
+
+    if any(np.any(np.asarray(lm.get(k, 0.0))) for lm in design.local_models for k in ("G", "Gf", "M")):
+        return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
+    verts, Cz = _vertices(design)
+    names = [c for c in CHANNELS if any(np.any(v[3][c]) for v in verts)]
+    sizes = {c: verts[0][3][c].shape[1] for c in names}
+    N = Cz.shape[1]
+    P = cp.Variable((N, N), symmetric=True)
+    g = cp.Variable(len(names))
+    cons = [P >> 1e-9 * np.eye(N)]
+    for _, _, Ac, chans, Wc in verts:
+        Bc = np.hstack([chans[c] for c in names])
+        Gd = cp.diag(cp.hstack([g[k] * np.ones(sizes[c]) for k, c in enumerate(names)]))
+        k = Bc.shape[1]
+        M = cp.bmat([
+            [Ac.T @ P + P @ Ac + Cz.T @ Cz, P @ Bc, Wc.T @ P],
+            [Bc.T @ P, -Gd, np.zeros((k, N))],
+            [P @ Wc, np.zeros((N, k)), -P],
+        ])  # fmt: skip
+        cons.append(0.5 * (M + M.T) << -1e-9 * np.eye(M.shape[0]))
+    prob = cp.Problem(cp.Minimize(cp.sum(g)), cons)
+    try:
+        with warnings.catch_warnings():  # "may be inaccurate": the point is checked with numpy below
+            warnings.simplefilter("ignore", UserWarning)
+            prob.solve(solver=solver)
+    except cp.error.SolverError as exc:
+        return {"holds": False, "why": f"the analysis LMI failed in the solver ({exc})"}
+    if P.value is None or g.value is None:
+        return {"holds": False, "why": f"the analysis LMI is {prob.status}"}
+    Pv, gv = 0.5 * (P.value + P.value.T), np.maximum(np.asarray(g.value, float), 0.0)
+    for _ in range(20):  # the solver's point, checked with numpy; a larger g only helps
+        G = np.diag(np.concatenate([np.full(sizes[c], gv[k]) for k, c in enumerate(names)]))
+        worst = max(
+            float(np.linalg.eigvalsh(_lmi(Ac, np.hstack([ch[c] for c in names]), Wc, Cz, Pv, G))[-1])
+            for _, _, Ac, ch, Wc in verts
+        )
+        if worst < 0 and np.linalg.eigvalsh(Pv)[0] > 0:
+            break
+        gv = gv * 1.5 + 1e-12
+    else:
+        return {
+            "holds": False,
+            "why": f"the analysis LMI does not hold at the solver's point (largest eigenvalue {worst:.3g})",
+        }
+    return {
+        "holds": True,
+        "what": "E int |f - fhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
+        "gains": {c: float(np.sqrt(gv[k])) for k, c in enumerate(names)},
+        "channels": sizes,
+        "P": Pv.tolist(),
+        "lmi_max_eig": worst,
+    }
+
+
+def bound_value(bounds: dict, energies: dict, v0: float) -> float:
+    """The right side of the bound: ``sum_k gain_k^2 energies[k] + v0`` (``energies[k]`` the
+    expected ``int |w_k|^2 dt`` of channel k, ``v0 = E xi0' P xi0``)."""
+    return float(sum(bounds["gains"][c] ** 2 * energies.get(c, 0.0) for c in bounds["gains"]) + v0)

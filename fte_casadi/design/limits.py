@@ -1,0 +1,206 @@
+"""What limits every design of a plant: the structure behind a fault estimate no tuning makes good.
+
+When no certified design makes tolerant control better than none in a fault's window, or keeps
+a fault's estimate quiet outside its windows, the cause is often in the plant, not in the knobs.
+This module computes, from the local models and a design, the numbers that name such a cause
+(issue #18 item 4):
+
+- the invariant (transmission) zeros of the fault's channel to the outputs, per rule: the s where
+  ``[[sI - A_i, Bf_ij], [C, Df_j]]`` loses rank, and the same with the unknown inputs beside the
+  fault (``[Bf_ij, Bd_i]``, ``[Df_j, 0]``), which the observer must decouple. A zero in or near the
+  right half plane limits how fast the fault can be recovered from the outputs;
+- the slowest observer mode (the largest real part of the eigenvalues of R_i) against the length of
+  the fault's window: an estimate still settling when the window is over is worse than none;
+- how well the outputs separate the fault from the unknown inputs and from the other faults: the
+  smallest singular value of the rank test of assumption (2) restricted to those columns
+  (``[[A_i, Bf_S, Bd_S], [C, Df_S, 0]]``, columns scaled to unit length so that units do not
+  matter). Near zero means the outputs tell them apart only slowly or under noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+__all__ = ["FaultLimits", "channel_zeros", "fault_limits", "separation", "explain_metrics"]
+
+#: a normalised separation below this is "weak" (the outputs tell the columns apart only slowly)
+WEAK_SEPARATION = 5e-2
+#: the settling time of a mode is taken as SETTLE_TAUS time constants
+SETTLE_TAUS = 3.0
+#: the part of a window the fault error leaves out for settling (metrics' SETTLE_FRACTION)
+WINDOW_SETTLE = 0.2
+
+
+def _rank(M: np.ndarray) -> int:
+    s = np.linalg.svd(M, compute_uv=False)
+    return int(np.sum(s > 1e-9 * max(1.0, s[0] if len(s) else 0.0)))
+
+
+def channel_zeros(A, B, C, D, seed: int = 0) -> np.ndarray | None:
+    """Finite invariant zeros of ``(A, B, C, D)``: the s where ``[[sI - A, B], [C, D]]`` loses rank.
+
+    ``None`` when the pencil loses rank for every s (normal rank below ``n + columns of B``). A tall
+    system (more outputs than inputs) is squared by a random orthonormal projection of its outputs
+    (seeded), and each candidate is kept only when the full, unprojected pencil loses rank there.
+
+    Examples
+    --------
+    >>> A = np.array([[0.0, 1.0], [-2.0, -3.0]]); B = np.array([[0.0], [1.0]])
+    >>> C = np.array([[1.0, 1.0]]); D = np.zeros((1, 1))
+    >>> np.round(channel_zeros(A, B, C, D).real, 6).tolist()
+    [-1.0]
+    """
+    A, B, C, D = (np.atleast_2d(np.asarray(M, dtype=float)) for M in (A, B, C, D))
+    n, k, p = A.shape[0], B.shape[1], C.shape[0]
+    rng = np.random.default_rng(seed)
+    s0 = complex(rng.normal(), rng.normal())
+    if _rank(np.block([[s0 * np.eye(n) - A, B], [C, D]])) < n + k:
+        return None
+    R = np.eye(p) if p == k else np.linalg.qr(rng.normal(size=(p, k)))[0].T
+    Mp = np.block([[A, -B], [-(R @ C), -(R @ D)]])
+    Ep = np.block([[np.eye(n), np.zeros((n, k))], [np.zeros((k, n + k))]])
+    w = sla.eig(Mp, Ep, right=False)
+    scale = max(1.0, *(np.linalg.norm(M, 2) for M in (A, B, C, D)))
+    out = []
+    for s in w[np.isfinite(w)]:
+        Ms = np.block([[s * np.eye(n) - A, B], [C, D]])
+        if np.linalg.svd(Ms, compute_uv=False)[-1] <= 1e-7 * scale * max(1.0, abs(s)):
+            out.append(s)
+    return np.array(out, dtype=complex)
+
+
+def separation(A, B, C, D) -> float:
+    """Smallest singular value of ``[[A, B], [C, D]]`` with every column scaled to unit length
+    (0: the columns of B are not told apart from the outputs at all; assumption (2)'s test)."""
+    M = np.block([[np.atleast_2d(A), np.atleast_2d(B)], [np.atleast_2d(C), np.atleast_2d(D)]])
+    norms = np.linalg.norm(M, axis=0)
+    M = M / np.where(norms > 0, norms, 1.0)
+    return float(np.linalg.svd(M, compute_uv=False)[-1])
+
+
+@dataclass(frozen=True)
+class FaultLimits:
+    """The structural numbers of one fault (see the module docstring)."""
+
+    fault: str
+    #: per rule, the invariant zero of the fault's channel (with the unknown inputs) with the largest
+    #: real part; None where there is none (nan where the pencil loses rank for every s)
+    rightmost_zero: tuple
+    #: per rule: normalised smallest singular value of [[A_i, Bf_j, Bd_i], [C, Df_j, 0]]
+    separation_inputs: tuple
+    #: per rule: the same with the other faults beside it (fault j against faults k != j)
+    separation_faults: tuple
+    #: the largest real part of the eigenvalues of R_i over the rules (the slowest observer mode)
+    slowest_mode: float
+
+    @property
+    def time_constant(self) -> float:
+        return float("inf") if self.slowest_mode >= 0 else -1.0 / self.slowest_mode
+
+
+def fault_limits(design, j: int) -> FaultLimits:
+    """The numbers of fault ``j`` (in the plant's order) from ``design``'s local models and its R_i."""
+    C, Df = np.asarray(design.C, float), np.asarray(design.Df, float)
+    names = list(design.names.get("faults") or [f"f{k + 1}" for k in range(Df.shape[1])])
+    zeros, sep_d, sep_f = [], [], []
+    for lm in design.local_models:
+        A, Bf, Bd = (np.asarray(lm[k], float) for k in ("A", "Bf", "Bd"))
+        ld = Bd.shape[1]
+        B = np.hstack([Bf[:, [j]], Bd])
+        D = np.hstack([Df[:, [j]], np.zeros((C.shape[0], ld))])
+        z = channel_zeros(A, B, C, D)
+        zeros.append(
+            float("nan") if z is None else (None if len(z) == 0 else complex(max(z, key=lambda v: v.real)))
+        )
+        sep_d.append(separation(A, B, C, D))
+        sep_f.append(separation(A, Bf, C, Df) if Bf.shape[1] > 1 else float("inf"))
+    slow = max(float(np.max(np.linalg.eigvals(np.asarray(R, float)).real)) for R in design.R)
+    return FaultLimits(names[j], tuple(zeros), tuple(sep_d), tuple(sep_f), slow)
+
+
+def _zero_text(z) -> str:
+    if z is None:
+        return "none"
+    if isinstance(z, float):
+        return "rank lost for every s"
+    return f"{z.real:.3g}" + (f" {'+-'} {abs(z.imag):.3g}j" if abs(z.imag) > 1e-9 * max(1.0, abs(z)) else "")
+
+
+def causes(lim: FaultLimits, window: float | None) -> tuple[list[str], str]:
+    """The structural causes found for ``lim`` (sentences with numbers) and the numbers looked at."""
+    found = []
+    rule_z = [(i, z) for i, z in enumerate(lim.rightmost_zero) if isinstance(z, complex)]
+    if any(isinstance(z, float) for z in lim.rightmost_zero):
+        rules = [i + 1 for i, z in enumerate(lim.rightmost_zero) if isinstance(z, float)]
+        found.append(f"the channel of {lim.fault} and the unknown inputs to the outputs loses rank for every s "
+                     f"(rules {rules}): the outputs cannot recover {lim.fault} apart from them")  # fmt: skip
+    if rule_z:
+        i, z = max(rule_z, key=lambda t: t[1].real)
+        near = 1.0 / window if window else 0.0
+        if z.real >= 0:
+            found.append(f"its channel to the outputs (with the unknown inputs) has an invariant zero at s = "
+                         f"{_zero_text(z)} (rule {i + 1}) in the right half plane: the outputs respond to "
+                         f"{lim.fault} first the wrong way, and no observer gain removes it")  # fmt: skip
+        elif -z.real < near:
+            found.append(f"its channel to the outputs has an invariant zero at s = {_zero_text(z)} (rule {i + 1}), "
+                         f"slower than the window (1 / {window:g} = {near:.3g}): the outputs show {lim.fault} only "
+                         "after the window is mostly over")  # fmt: skip
+    tau = lim.time_constant
+    if window and SETTLE_TAUS * tau > WINDOW_SETTLE * window:
+        found.append(f"the slowest observer mode decays at rate {-lim.slowest_mode:.3g} (time constant {tau:.3g}): "
+                     f"{SETTLE_TAUS:g} time constants = {SETTLE_TAUS * tau:.3g} against the {WINDOW_SETTLE:.0%} of the "
+                     f"{window:g}-long window left for settling ({WINDOW_SETTLE * window:.3g})")  # fmt: skip
+    k = int(np.argmin(lim.separation_inputs))
+    if lim.separation_inputs[k] < WEAK_SEPARATION:
+        found.append(f"the outputs separate {lim.fault} from the unknown inputs only weakly: smallest singular "
+                     f"value of the column-normalised rank test [[A_i, Bf, Bd], [C, Df, 0]] is "
+                     f"{lim.separation_inputs[k]:.2g} (rule {k + 1})")  # fmt: skip
+    kf = int(np.argmin(lim.separation_faults))
+    if np.isfinite(lim.separation_faults[kf]) and lim.separation_faults[kf] < WEAK_SEPARATION:
+        found.append(f"the outputs separate the faults from one another only weakly: smallest singular value of "
+                     f"the column-normalised [[A_i, Bf], [C, Df]] is {lim.separation_faults[kf]:.2g} "
+                     f"(rule {kf + 1})")  # fmt: skip
+    zs = ", ".join(_zero_text(z) for z in lim.rightmost_zero)
+    seen = (f"rightmost invariant zero per rule: {zs}; slowest observer mode {lim.slowest_mode:.3g} (time "
+            f"constant {tau:.3g}); separation from the unknown inputs {min(lim.separation_inputs):.2g}"
+            + (f", from the other faults {min(lim.separation_faults):.2g}"
+               if np.isfinite(min(lim.separation_faults)) else ""))  # fmt: skip
+    return found, seen
+
+
+def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list[str]:
+    """One sentence per fault window where tolerant control is not better than none (FTC ratio >= 1)
+    and per fault whose false-alarm ratio is >= 1 in ``metrics``, naming the structural cause with
+    numbers, or saying that none was found (then the limit is the tuning or the noise, not the plant).
+
+    ``windows``: indices of ``metrics["windows"]`` to explain (default: those with a ratio >= 1);
+    ``faults``: indices of faults to explain for false alarms (default: those >= 1)."""
+    names = list(design.names.get("faults") or [])
+    out = []
+    wins = metrics.get("windows") or []
+    if windows is None:
+        windows = [k for k, w in enumerate(wins) if (w.get("ftc_deviation_ratio") or 0.0) >= 1.0]
+    for k in windows:
+        w = wins[k]
+        j = names.index(w["fault"]) if w["fault"] in names else 0
+        lim = fault_limits(design, j)
+        found, seen = causes(lim, float(w["stop"]) - float(w["start"]))
+        r = w.get("ftc_deviation_ratio")
+        head = (f"in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) (FTC ratio "
+                f"{'n/a' if r is None else format(r, '.3g')})")  # fmt: skip
+        out.append(head + (": " + "; ".join(found) if found else ": no structural cause found")
+                   + f" ({seen})")  # fmt: skip
+    fa = metrics.get("false_alarm_rel_rms") or []
+    if faults is None:
+        faults = [j for j, v in enumerate(fa) if v is not None and v >= 1.0]
+    for j in faults:
+        lim = fault_limits(design, j)
+        spans = [float(w["stop"]) - float(w["start"]) for w in wins if w["fault"] == lim.fault]
+        found, seen = causes(lim, min(spans) if spans else None)
+        v = fa[j] if j < len(fa) else None
+        out.append(f"false alarms of {lim.fault} (ratio {'n/a' if v is None else format(v, '.3g')})"
+                   + (": " + "; ".join(found) if found else ": no structural cause found") + f" ({seen})")  # fmt: skip
+    return out

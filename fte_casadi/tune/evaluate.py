@@ -1,0 +1,131 @@
+"""One candidate of ``fte tune``: designed, certified and simulated, as a pure function of its task.
+
+A task is a plain dictionary (the plant as CasADi's serialisation of its equations, the scenario
+as its document, the knobs, the seed and path count), so that the same function runs in this
+process or on a dask.distributed worker and returns the same numbers: every candidate is
+simulated with the same seed, hence the same Brownian paths, unknown inputs and initial states
+(common random numbers).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import pickle
+
+import numpy as np
+
+from ..errors import FteError
+
+__all__ = ["evaluate", "design_kwargs", "KNOBS"]
+
+#: the input peak (and the output-error scale of the boundary layer) is read from the first paths, recorded
+PEAK_PATHS = 5
+#: the knobs of the search, in the order of the tables
+KNOBS = ("gamma", "gamma1_ratio", "sigma", "alpha_scale", "kappa", "epsilon", "use_boundary_layer",
+         "boundary_layer_rel")  # fmt: skip
+
+
+@functools.lru_cache(maxsize=4)
+def _plant_ts(blob_hash: str, blob: bytes):
+    """The plant and its T-S model, once per process and plant."""
+    import casadi as ca
+
+    from ..ts import derive
+
+    with ca.global_unpickle_context():
+        plant = pickle.loads(blob)
+    return plant, derive(plant)
+
+
+def design_kwargs(knobs: dict) -> dict:
+    """The arguments of :func:`fte_casadi.design.design` a candidate's knobs give (alpha aside)."""
+    from ..design.conditioned import KAPPA
+
+    g = float(knobs["gamma"])
+    kw = {"gamma": g, "gamma1": float(knobs["gamma1_ratio"]) * g, "sigma": float(knobs["sigma"]),
+          "epsilon": float(knobs["epsilon"])}  # fmt: skip
+    if "delta" in knobs:
+        kw["delta"] = float(knobs["delta"])
+    if abs(float(knobs["kappa"]) / KAPPA - 1.0) > 1e-12:
+        kw["kappa"] = float(knobs["kappa"])
+    return kw
+
+
+def _output_error_scale(res, design) -> float:
+    """RMS over paths, t >= 1 and outputs of ``y - Cbar xbarhat`` in the FTC run (the scale of the
+    sliding variable before N)."""
+    ftc = res.ftc
+    keep = res.t >= 1.0
+    if ftc.y.shape[0] == 0 or not keep.any():
+        return 0.0
+    p = design.C.shape[0]
+    lf = design.Df.shape[1]
+    Cbar = np.hstack([design.C, np.zeros((p, lf)), design.Df])
+    e = ftc.y[:, keep, :] - np.einsum("ij,abj->abi", Cbar, ftc.xbarhat[:, keep, :])
+    return float(np.sqrt(np.mean(e**2)))
+
+
+def evaluate(task: dict) -> dict:
+    """Design, certify and simulate one candidate.
+
+    ``task`` keys: ``plant`` (bytes), ``scenario`` (dict), ``variant``, ``solver``, ``knobs``,
+    ``sample_time``, ``initial_state``, ``plant_spec``, ``paths``, ``seed``, ``e_scale`` (the
+    output-error scale the relative boundary layer multiplies), and ``design`` (a design document
+    as JSON: simulate that one instead of designing; the baseline of a DESIGN.json).
+
+    Returns ``{"state": "ok", "params", "metrics", "design", "e_scale"}`` or
+    ``{"state": "fail", "reason"}``. The metrics document gains ``input_peak``: per input, the
+    largest ``|u_i|`` of the FTC run over the first :data:`PEAK_PATHS` paths (their recorded
+    samples, at most ~2e4 per path). Never raises for a candidate that fails (a failed design, a
+    design that is not certified, a diverging simulation are failed trials with their reason).
+    """
+    import dataclasses
+
+    from ..design import design as run_design
+    from ..design.conditioned import KAPPA
+    from ..design.record import Design
+    from ..sim import Scenario, simulate
+
+    blob = task["plant"]
+    plant, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob)
+    scenario = Scenario.from_dict(task["scenario"])
+    knobs = dict(task["knobs"])
+    try:
+        if task.get("design") is not None:
+            d = Design.from_dict(json.loads(task["design"]), source="the design tuned from")
+        else:
+            common = dict(variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
+                          initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
+                          **design_kwargs(knobs))  # fmt: skip
+            d = run_design(ts, **common)
+            scale = float(knobs["alpha_scale"])
+            if scale < 1.0 - 1e-12 and d.observer.get("alpha") is not None:
+                d = run_design(ts, alpha=scale * float(d.observer["alpha"]), **common)
+            if knobs.get("use_boundary_layer") and task.get("e_scale"):
+                phi = (
+                    float(knobs["boundary_layer_rel"])
+                    * float(np.linalg.norm(d.N, 2))
+                    * float(task["e_scale"])
+                )
+                if phi > 0 and np.isfinite(phi):
+                    d = dataclasses.replace(d, params=dict(d.params) | {"boundary_layer": phi})
+        if not d.certified:
+            return {
+                "state": "fail",
+                "reason": "not certified: " + "; ".join(s for s in d.status if "CERTIF" in s),
+            }
+        res = simulate(d, plant, scenario, paths=int(task["paths"]), seed=int(task["seed"]), progress=False,
+                       record_paths=PEAK_PATHS, threads=task.get("threads"))  # fmt: skip
+    except FteError as exc:
+        return {"state": "fail", "reason": f"{type(exc).__name__}: {' '.join(str(exc).split())}"}
+    m = dict(res.metrics)
+    u = res.ftc.u
+    m["input_peak"] = [float(v) for v in np.max(np.abs(u), axis=(0, 1))] if u.size else [0.0] * plant.m
+    params = {k: float(v) for k, v in d.params.items()}
+    params["alpha"] = None if d.observer.get("alpha") is None else float(d.observer["alpha"])
+    params.setdefault("kappa", KAPPA)
+    params.setdefault("boundary_layer", None)
+    return {"state": "ok", "params": params, "metrics": m, "design": d.to_json(),
+            "e_scale": _output_error_scale(res, d)}  # fmt: skip

@@ -1,0 +1,76 @@
+"""The search space of ``fte tune``: the design's knobs, on scales taken from the plant itself.
+
+Every positive knob is searched on a log scale, around the base design's own value (the plant's
+defaults, or the values the tool chose, or those of the DESIGN.json tuned from), so that the
+ranges follow the plant's units:
+
+============== ============================================================ =========================
+knob           range                                                        base value
+============== ============================================================ =========================
+sigma          [sigma0 / 10, min(10 sigma0, 0.98 sigma_sup)]; sigma_sup the  sigma0
+               largest sigma (45) allows for any gamma (design.diagnose)
+gamma          [gamma0 / 3, 10 gamma0]                                      gamma0
+gamma1_ratio   gamma1 / gamma in [r0 / 30, min(0.95, 30 r0)]                r0 = gamma1_0 / gamma0
+alpha_scale    the observer decay rate as a fraction of the one the design  1
+               takes by default (its largest feasible, capped for the
+               sample time): [0.05, 1]
+kappa          the bound on cond(Pbar) (and cond(X')): [1e2, 1e6]           1e4 (KAPPA)
+epsilon        the sliding gain's margin (gain delta + epsilon):            epsilon0
+               [epsilon0 / 10, 1000 epsilon0]
+boundary layer use_boundary_layer in {no, yes}; phi = boundary_layer_rel    no
+               x ||N|| x the base run's RMS output error, with
+               boundary_layer_rel in [0.01, 100]
+============== ============================================================ =========================
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["Space", "space_for"]
+
+
+@dataclass(frozen=True)
+class Space:
+    """Ranges (low, high) of the float knobs, all log scale, and the base design's knobs."""
+
+    ranges: dict
+    base: dict
+
+    def suggest(self, trial) -> dict:
+        """The knobs of an optuna trial (the same names and order for every trial)."""
+        out = {k: trial.suggest_float(k, lo, hi, log=True) for k, (lo, hi) in self.ranges.items()}
+        out["use_boundary_layer"] = trial.suggest_categorical("use_boundary_layer", [False, True])
+        return out
+
+
+def _around(v: float, lo: float, hi: float) -> tuple[float, float]:
+    """``(lo, hi)`` widened to hold ``v``."""
+    return (min(lo, v), max(hi, v))
+
+
+def space_for(base_design, sigma_sup: float | None) -> Space:
+    """The space around ``base_design`` (see the module docstring)."""
+    from ..design.conditioned import KAPPA
+
+    p = base_design.params
+    g0, s0, e0 = float(p["gamma"]), float(p["sigma"]), float(p["epsilon"])
+    r0 = float(p["gamma1"]) / g0
+    kappa0 = float(p.get("kappa", KAPPA))
+    s_hi = 10 * s0 if not sigma_sup else min(10 * s0, 0.98 * sigma_sup)
+    ranges = {
+        "gamma": _around(g0, g0 / 3, 10 * g0),
+        "gamma1_ratio": _around(r0, r0 / 30, min(0.95, 30 * r0)),
+        "sigma": _around(s0, s0 / 10, max(s_hi, s0)),
+        "alpha_scale": (0.05, 1.0),
+        "kappa": _around(kappa0, 1e2, 1e6),
+        "epsilon": _around(e0, e0 / 10, 1000 * e0),
+        "boundary_layer_rel": (0.01, 100.0),
+    }
+    for k, (lo, hi) in ranges.items():
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
+            raise ValueError(f"search range of {k} is not a positive interval: ({lo}, {hi})")
+    base = {"gamma": g0, "gamma1_ratio": r0, "sigma": s0, "alpha_scale": 1.0, "kappa": kappa0, "epsilon": e0,
+            "boundary_layer_rel": 1.0, "use_boundary_layer": False}  # fmt: skip
+    return Space(ranges, base)
