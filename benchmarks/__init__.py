@@ -18,7 +18,8 @@ from .growth import bench_growth as bench_growth
 from .growth import growth_lines
 from .mc import bench as bench_monte_carlo
 
-__all__ = ["bench_c_step", "bench_design", "bench_growth", "bench_monte_carlo", "run_all", "summary_lines"]
+__all__ = ["bench_c_step", "bench_design", "bench_growth", "bench_monte_carlo", "run_all", "summary_lines",
+           "fast_lines"]  # fmt: skip
 
 
 def run_all(paths: int = 1000, log: Callable[[str], None] = lambda s: None) -> dict:
@@ -46,6 +47,23 @@ def run_all(paths: int = 1000, log: Callable[[str], None] = lambda s: None) -> d
         log(f"bench: generated C step of {name}")
         out["c_step"][name] = bench_c_step(d)
     return out
+
+
+def fast_lines(fm: dict, e: dict) -> list[str]:
+    """The fast mode's lines of the summary: ``fm`` the ``fast_mode`` entry, ``e`` the exact engine's."""
+    h = fm["one_thread_vs_hand_loop"]
+    return [
+        f"  fast mode (--fast-math): {fm['paths']} paths in {fm['wall_s']:.2f} s "
+        f"({fm['path_steps_per_s'] / 1e6:.2f} M path-steps/s; exact mode {e['path_steps_per_s'] / 1e6:.2f} M: "
+        f"{fm['speedup_vs_exact']:.2f}x)",
+        f"  one thread, CPU time, best of {h['repeats']}: fast mode {h['fast_ns_per_path_step']:.1f} ns per path-step, "
+        f"hand-vectorised C loop {h['hand_ns_per_path_step']:.1f} ns (same semantics: FMA, libmvec) -> "
+        f"{h['ratio_fast_vs_hand']:.2f}x its speed; exact mode {h['exact_ns_per_path_step']:.1f} ns -> "
+        f"{h['ratio_exact_vs_hand']:.2f}x",
+        f"    the hand loop with -ffast-math too: {h['hand_fast_math_ns_per_path_step']:.1f} ns -> fast mode "
+        f"{h['ratio_fast_vs_hand_fast_math']:.2f}x its speed (hand loop = engine to "
+        f"{max(h['hand_max_rel_diff_final_state'].values()):.0e} relative)",
+    ]
 
 
 def summary_lines(out: dict) -> list[str]:
@@ -79,6 +97,8 @@ def summary_lines(out: dict) -> list[str]:
         f"  plain Python loop: {mc['python_loop']['path_steps_per_s']:.3g} path-steps/s -> engine is "
         f"{mc['speedup_vs_python_loop']:.0f}x faster (same trajectories to {mc['max_abs_diff_engine_vs_sdeint']:.1g})"
     )
+    if "fast_mode" in mc:
+        lines += fast_lines(mc["fast_mode"], e)
     lines.append("generated C step (double, -O2):")
     for name, b in out["c_step"].items():
         lines.append(

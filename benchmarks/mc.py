@@ -22,6 +22,7 @@ from fte_casadi.sim.engine import SCALES, Prepared, closed_loop_sample, plant_sc
 from fte_casadi.sim.scenario import UniformNoise
 
 from .anatomy import libm_share, op_counts, peak_flops
+from .handloop import bench_fast
 from .perpath import monte_carlo, simulate_per_path
 
 __all__ = ["bench", "baseline_functions"]
@@ -84,6 +85,7 @@ def bench(
     seed: int = 0,
     threads: int | None = None,
     horizon: float | None = None,
+    fast_repeats: int = 15,
 ) -> dict:
     """The manipulator scenario (T = 10 s, dt = 1 ms, three runs; ``horizon`` shortens T for tests):
     the vectorised engine against the per-path engine on ``paths`` paths (whole ``simulate``
@@ -91,6 +93,8 @@ def bench(
     ``repeats`` times, interleaved, and the best of each is kept), and the
     sdeint and plain-Python baselines on ``baseline_paths`` paths, scaled to path-steps per second.
     ``design``, ``plant``, ``scenario``: the caller's (this module does not import the plants).
+    The fast mode (``exact=False``) is timed the same way, and in one thread against a hand-vectorised
+    C loop over the same arithmetic (:func:`.handloop.bench_fast`, ``fast_repeats`` repetitions).
     """
     scen = scenario
     if horizon is not None:
@@ -105,18 +109,21 @@ def bench(
 
     first_vec, _ = timed(lambda: simulate(design, plant, scen, **kw))
     first_pp, _ = timed(lambda: simulate_per_path(design, plant, scen, **kw))
-    # interleaved, best of `repeats` each: the two engines see the same load on a shared machine
-    vec_walls, pp_walls = [], []
+    first_fast, _ = timed(lambda: simulate(design, plant, scen, exact=False, **kw))
+    # interleaved, best of `repeats` each: the engines see the same load on a shared machine
+    vec_walls, pp_walls, fast_walls = [], [], []
     for _ in range(max(1, int(repeats))):
         vec_walls.append(timed(lambda: simulate(design, plant, scen, **kw))[0])
         pp_walls.append(timed(lambda: simulate_per_path(design, plant, scen, **kw))[0])
-    vec_wall, pp_wall = min(vec_walls), min(pp_walls)
+        fast_walls.append(timed(lambda: simulate(design, plant, scen, exact=False, **kw))[0])
+    vec_wall, pp_wall, fast_wall = min(vec_walls), min(pp_walls), min(fast_walls)
     prep = Prepared(design, plant, scen, dt, nsteps, dict(SCALES))
     ops = op_counts(prep.engine_function, plant.ld)
     flops = ops["flops"]
     vec_rate = paths * nsteps / vec_wall
     peak = peak_flops()
     anatomy = libm_share(prep, paths=min(paths, 256), seed=seed)
+    hand = bench_fast(prep, paths=min(paths, 64), seed=seed, repeats=fast_repeats)
     engine_rate = vec_rate
     fn, a, b, s0, D, FP, lay = baseline_functions(design, plant, scen, dt)
     rng = np.random.default_rng(seed)
@@ -193,6 +200,15 @@ def bench(
             "path_steps_per_s": paths * nsteps / pp_wall,
         },
         "speedup_vs_per_path": pp_wall / vec_wall,
+        "fast_mode": {
+            "paths": paths,
+            "wall_s": fast_wall,
+            "wall_s_all_repeats": fast_walls,
+            "first_call_wall_s": first_fast,
+            "path_steps_per_s": paths * nsteps / fast_wall,
+            "speedup_vs_exact": vec_wall / fast_wall,
+            "one_thread_vs_hand_loop": hand,
+        },
         "sdeint_itoEuler": {
             "paths": baseline_paths,
             "wall_s": sde_wall,

@@ -502,10 +502,13 @@ def _why(d, m: dict) -> list[str]:
     help="Save per-path arrays of ALL paths (.npz; memory grows with --paths).",
 )  # fmt: skip
 @click.option("--scheduler", help="Address of a dask.distributed scheduler: run the paths on its workers.")
+@click.option("--fast-math", "fast_math", is_flag=True,
+              help="Fast mode: fused multiply-adds and a vector math library (equal to the default within "
+                   "the tolerance of docs/simulation.md; the same numbers for any split of the paths).")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics document (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @_guard
-def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json, quiet):
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .plants.loader import load_plant, load_scenario
@@ -524,7 +527,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
     plant = load_plant(d.plant_spec)
     scenario = load_scenario(d.plant_spec)
     res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
-                  record_all=bool(save), scheduler=scheduler)  # fmt: skip
+                  record_all=bool(save), scheduler=scheduler, exact=not fast_math)  # fmt: skip
     m = res.metrics
     if save:
         save_result(res, save)
@@ -577,6 +580,9 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
 @click.option("--paths", type=int, help="Brownian paths per point (default: the scenario's).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random generator.")
 @click.option("--scheduler", help="Address of a dask.distributed scheduler: run the paths on its workers.")
+@click.option("--fast-math", "fast_math", is_flag=True,
+              help="Fast mode: fused multiply-adds and a vector math library (equal to the default within "
+                   "the tolerance of docs/simulation.md; the same numbers for any split of the paths).")  # fmt: skip
 @click.option(
     "--out",
     "out_dir",
@@ -586,7 +592,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, as_json, quiet):
 @click.option("--json", "as_json", is_flag=True, help="Print the list of points (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @_guard
-def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
+def sweep(target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet):
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
     from .design.record import atomic_write_text
     from .plants.loader import load_plant, load_scenario
@@ -602,7 +608,7 @@ def sweep(target, vary, paths, seed, scheduler, out_dir, as_json, quiet):
     plant = load_plant(d.plant_spec)
     scenario = load_scenario(d.plant_spec)
     points = run_sweep(d, plant, scenario, grid, paths=paths or scenario.paths, seed=seed, scheduler=scheduler,
-                       progress=not quiet)  # fmt: skip
+                       progress=not quiet, exact=not fast_math)  # fmt: skip
     if out_dir:
         from .plot import sweep_figure
 

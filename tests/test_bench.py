@@ -1,5 +1,7 @@
 """The benchmarks run end to end (speed itself is reported by `fte bench`, not asserted here)."""
 
+import numpy as np
+
 from benchmarks.mc import bench
 from fte_casadi.plants import manipulator
 from fte_casadi.plants.manipulator import scenario
@@ -14,6 +16,7 @@ def test_monte_carlo_bench_smoke(lqr_designs):
         baseline_paths=1,
         horizon=0.5,
         repeats=1,
+        fast_repeats=1,
     )
     e = out["engine"]
     assert e["steps"] == 500 and e["flops_per_path_step"] > 100
@@ -28,6 +31,19 @@ def test_monte_carlo_bench_smoke(lqr_designs):
     assert out["max_abs_diff_engine_vs_sdeint"] < 1e-9  # the baselines integrate the same SDE
     for key in ("speedup_vs_sdeint", "speedup_vs_python_loop"):
         assert out[key] > 0
+    fm = out["fast_mode"]
+    assert fm["path_steps_per_s"] > 0 and fm["speedup_vs_exact"] > 0
+    h = fm["one_thread_vs_hand_loop"]
+    # the hand loop computes the engine's numbers (to rounding) and GCC vectorised its path loop
+    assert max(h["hand_max_rel_diff_final_state"].values()) < 1e-9
+    assert all(h["hand_path_loop_vectorised"].values()), h["hand_path_loop_vectorised"]
+    assert h["ratio_fast_vs_hand"] > 0 and h["ratio_exact_vs_hand"] > 0
+    # the hand loop built with -ffast-math did not switch this process to flush-to-zero (crtfastmath.o)
+    tiny = np.array([2.0e-308])
+    assert (tiny / 4.0)[0] > 0.0
+    from benchmarks import fast_lines
+
+    assert "hand-vectorised C loop" in "\n".join(fast_lines(fm, out["engine"]))
 
 
 def test_layers_do_not_import_the_plants():

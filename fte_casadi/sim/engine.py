@@ -278,12 +278,14 @@ class Prepared:
     the same in-process and on a cluster worker (which rebuilds it from the documents)."""
 
     def __init__(
-        self, design: Design, plant: Plant, scenario: Scenario, dt: float, nsteps: int, scales: dict
-    ):
+        self, design: Design, plant: Plant, scenario: Scenario, dt: float, nsteps: int, scales: dict,
+        exact: bool = True,
+    ):  # fmt: skip
         from .vector import VectorEngine
 
         self.design, self.plant, self.scenario, self.dt, self.nsteps = design, plant, scenario, dt, nsteps
         self.scales = scales
+        self.exact = bool(exact)
         nsamp = nsteps + 1
         self.t = np.arange(nsamp) * dt
         sched = plant_schedule(design, plant, scenario, self.t, dt)
@@ -316,7 +318,7 @@ class Prepared:
         ).expand()
         self.engine_function = F
         xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
-        self.engine = VectorEngine(F, xs, name="fte_mc")
+        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact)
         self.notes = (self.engine.note,) if self.engine.note else ()
 
     def rescaled(self, scales: dict) -> Prepared:
@@ -351,11 +353,15 @@ class Prepared:
         state = np.zeros((len(paths), lay.ns))
         H = np.asarray(self.design.H)
         xb_nom = np.concatenate([x0n, np.zeros(lay.nbar - plant.n)])
+        # a single row would take another BLAS route (a matrix-vector product, rounded differently): a path
+        # alone in its chunk is computed as one of two rows, so its numbers do not depend on the chunk
+        x0b = np.vstack([x0, x0]) if len(x0) == 1 else x0
+        zb = (xb_nom - (x0b @ np.asarray(plant.C).T) @ H.T)[: len(x0)]
         for r in range(3):
             o = r * lay.run_state
             state[:, o : o + plant.n] = x0
             if sc.observer_init == "nominal":
-                state[:, o + plant.n : o + plant.n + lay.nbar] = xb_nom - (x0 @ np.asarray(plant.C).T) @ H.T
+                state[:, o + plant.n : o + plant.n + lay.nbar] = zb
         return state
 
 
@@ -369,19 +375,20 @@ def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0)
 
 
 @functools.lru_cache(maxsize=8)
-def _prepared(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str):
+def _prepared(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str,
+              exact: bool = True):  # fmt: skip
     """The engine of a run, built once per worker process and run description."""
     design = Design.from_dict(json.loads(design_json), source="design sent to a worker")
     plant = plant_from_bytes(plant_blob)
     scenario = Scenario.from_dict(json.loads(scenario_json))
     nsteps = int(round(scenario.T / dt))
-    return Prepared(design, plant, scenario, dt, nsteps, json.loads(scales_json))
+    return Prepared(design, plant, scenario, dt, nsteps, json.loads(scales_json), exact=exact)
 
 
 def chunk_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str, seed: int,
-               path0: int, count: int) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+               path0: int, count: int, exact: bool = True) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """One chunk on a worker: the per-path metric sums and divergence marks of ``path0 .. path0 + count - 1``."""
-    prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json)
+    prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json, bool(exact))
     acc, div, _ = run_paths(prep, path0, count, seed)
     return acc, div
 
@@ -403,6 +410,7 @@ def simulate(
     scheduler: str | distributed.Client | None = None,
     scales: dict | None = None,
     prepared: Prepared | None = None,
+    exact: bool = True,
 ) -> SimulationResult:
     """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
 
@@ -436,6 +444,12 @@ def simulate(
     scales : dict, optional
         ``fault_scale``, ``noise_scale``, ``d_scale`` (default 1): multiply every fault's magnitude,
         the diffusion, the unknown input.
+    exact : bool
+        True (default): IEEE semantics, every operation rounded as in CasADi's own C (bit-equal to
+        the per-path engine). False: the fast mode (docs/simulation.md): the same engine compiled
+        with fused multiply-adds and glibc's vector math library; equal to the exact mode within
+        the documented tolerance, still the same numbers for any chunk size, thread count or
+        cluster. The metrics document records the mode (``exact``).
 
     Returns
     -------
@@ -447,6 +461,14 @@ def simulate(
     paths, seed = int(paths), int(seed)
     if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
+    if not isinstance(exact, (bool, np.bool_)):
+        raise ParameterError(f"exact must be True or False; got {exact!r}")
+    exact = bool(exact)
+    if prepared is not None and prepared.exact != exact:
+        raise ParameterError(
+            f"the prepared engine was built with exact={prepared.exact}, the run asks for exact={exact}; "
+            "prepare the engine in the mode of the run"
+        )
     sc = _scales(scales, scenario)
     given_dt = dt
     dt, nsteps, notes = resolve_dt(design, scenario, dt)
@@ -458,8 +480,11 @@ def simulate(
     nrec_paths = (
         paths if record_all else min(paths, scenario.paths if record_paths is None else int(record_paths))
     )
-    prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc)
+    prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc, exact=exact)
     notes += list(prep.notes)
+    if not exact:
+        notes.append("fast mode: fused multiply-adds and a vector math library; equal to the exact mode within "
+                     "the tolerance of docs/simulation.md, not bit for bit")  # fmt: skip
     acc = np.empty((paths, len(prep.names)))
     div = np.empty(paths, dtype=np.int_)
     # all paths recorded (--save) in-process: the chunks record as they run; else the examples run again below
@@ -475,7 +500,8 @@ def simulate(
     )
     try:
         if scheduler is not None:
-            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk, chunk_task,
+            task = chunk_task if exact else functools.partial(chunk_task, exact=False)
+            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk, task,
                                                on_done=lambda k: bar.update(k)):  # fmt: skip
                 acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
         else:
@@ -510,6 +536,7 @@ def simulate(
     doc = finalize(acc, prep.names, prep.masks, {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed,
                                                  "wall_s": wall, "m": plant.m})  # fmt: skip
     doc["dt_change"] = step_change(design, scenario, dt, given_dt)
+    doc["exact"] = exact
     names = result_names(plant)
     if rec is None:
         rec = np.zeros((0, (nsamp - 1) // record_every + 1, prep.lay.nrec))

@@ -57,14 +57,16 @@ def parse_vary(items) -> dict[str, list[float]]:
 
 
 def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, seed: int, dt=None,
-          scheduler: str | distributed.Client | None = None, threads: int | None = None, progress: bool = True) -> list[dict]:  # fmt: skip
-    """The metrics document of the scenario at every point of the grid ``vary`` (first factor slowest)."""
+          scheduler: str | distributed.Client | None = None, threads: int | None = None, progress: bool = True,
+          exact: bool = True) -> list[dict]:  # fmt: skip
+    """The metrics document of the scenario at every point of the grid ``vary`` (first factor slowest);
+    ``exact=False``: the fast mode of :func:`.engine.simulate`."""
     _check_settings(design, plant, scenario, paths, seed, dt)
     grid = [dict(zip(vary, combo)) for combo in itertools.product(*vary.values())]
     for point in grid:  # every point checked before the first runs
         _scales(point, scenario)
     dt, nsteps, _ = resolve_dt(design, scenario, dt)
-    base = Prepared(design, plant, scenario, dt, nsteps, _scales(None))
+    base = Prepared(design, plant, scenario, dt, nsteps, _scales(None), exact=bool(exact))
     out = []
     client = None
     if isinstance(scheduler, str):  # one client for all points
@@ -77,7 +79,8 @@ def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, 
         for point in grid:
             sc = _scales(point, scenario)
             res = simulate(design, plant, scenario, paths=paths, seed=seed, dt=dt, progress=False, record_paths=0,
-                           threads=threads, scheduler=scheduler, scales=sc, prepared=base.rescaled(sc))  # fmt: skip
+                           threads=threads, scheduler=scheduler, scales=sc, prepared=base.rescaled(sc),
+                           exact=bool(exact))  # fmt: skip
             out.append({"point": dict(point), "metrics": res.metrics})
             bar.update(paths)
     finally:

@@ -19,6 +19,12 @@ library's results (NaN ignored by fmin/fmax, sign(NaN) = NaN). The engine theref
 operation exactly as CasADi's own generated C does: its trajectories equal the per-path engine's
 bit for bit on the same random numbers.
 
+The fast mode (``exact=False``; docs/simulation.md) compiles the same engine with contraction into
+fused multiply-adds (:data:`FAST_FLAGS`), calls glibc's vector math library (libmvec) once per lane
+vector for ``sin``, ``log``, ... (:data:`_VMATH`) and draws the same uniforms on integer lane vectors;
+it stays free of horizontal operations across lanes, so every path runs the same instructions
+whatever lane and chunk it lands in, and the numbers do not depend on how the paths are split.
+
 A Function with an operation the emitter does not know (a lookup table's ``OP_CALL``, say) runs
 through CasADi's own generated C instead, called lane by lane inside the same loop (the same
 numbers, several times slower; :attr:`VectorEngine.note` says so).
@@ -43,7 +49,7 @@ from ..errors import UnsupportedOperation
 from ..toolchain import cache_dir, find_compiler
 from . import rng
 
-__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS", "CHUNK",
+__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS", "FAST_FLAGS", "CHUNK",
            "auto_chunk"]  # fmt: skip
 
 #: paths per lane vector (8 doubles: one AVX-512 register, two AVX2 ones)
@@ -61,6 +67,9 @@ def auto_chunk(paths: int, threads: int) -> int:
 #: compiler flags: IEEE semantics kept (no -ffast-math); -ffp-contract=off: no fused multiply-adds, so
 #: every operation rounds as in CasADi's own C and the numbers do not depend on whether a CPU has FMA
 FLAGS = ("-O3", "-fno-trapping-math", "-fno-math-errno", "-ffp-contract=off", "-march=native", "-shared", "-fPIC")  # fmt: skip
+#: the fast mode's flags (``exact=False``): the same, with contraction into fused multiply-adds allowed;
+#: still no -ffast-math (no reassociation, NaN and infinities kept: the divergence check relies on them)
+FAST_FLAGS = tuple("-ffp-contract=fast" if f == "-ffp-contract=off" else f for f in FLAGS)
 
 
 #: vector expressions of CasADi's SX operations; ``{a}``, ``{b}`` the operands (``fte_vd`` values)
@@ -91,6 +100,15 @@ _CALL = {
     "OP_HYPOT": "hypot",
 }  # fmt: skip
 _BINARY = {"OP_POW", "OP_CONSTPOW", "OP_FMOD", "OP_REMAINDER", "OP_ATAN2", "OP_HYPOT"}
+#: the fast mode's calls into glibc's vector math library (libmvec, x86-64): one call per lane vector
+#: (``_ZGVeN8v_sin`` with AVX-512, two ``_ZGVdN4v_sin`` with AVX2); the rest stay lane by lane (``sqrt``,
+#: ``floor``, ``ceil`` become vector instructions anyway)
+_VMATH = {
+    "OP_EXP": "exp", "OP_LOG": "log", "OP_SIN": "sin", "OP_COS": "cos", "OP_TAN": "tan", "OP_ASIN": "asin",
+    "OP_ACOS": "acos", "OP_ATAN": "atan", "OP_ERF": "erf", "OP_SINH": "sinh", "OP_COSH": "cosh", "OP_TANH": "tanh",
+    "OP_ASINH": "asinh", "OP_ACOSH": "acosh", "OP_ATANH": "atanh", "OP_LOG1P": "log1p", "OP_EXPM1": "expm1",
+    "OP_POW": "pow", "OP_CONSTPOW": "pow", "OP_ATAN2": "atan2", "OP_HYPOT": "hypot",
+}  # fmt: skip
 
 
 def _op_names() -> dict[int, str]:
@@ -105,16 +123,70 @@ def unsupported(F: ca.Function) -> list[str]:
     return sorted(ops - known)
 
 
-def _prelude() -> str:
-    bc = ", ".join(["(c)"] * LANES)
-    return f"""typedef double fte_vd __attribute__((vector_size({8 * LANES})));
-typedef double fte_vdu __attribute__((vector_size({8 * LANES}), aligned(8)));
-typedef long long fte_vl __attribute__((vector_size({8 * LANES})));
+def _prelude(lanes: int = LANES) -> str:
+    bc = ", ".join(["(c)"] * lanes)
+    return f"""typedef double fte_vd __attribute__((vector_size({8 * lanes})));
+typedef double fte_vdu __attribute__((vector_size({8 * lanes}), aligned(8)));
+typedef long long fte_vl __attribute__((vector_size({8 * lanes})));
 #define FTE_BC(c) ((fte_vd){{{bc}}})
 #define FTE_TRUE(m) ((fte_vd)((fte_vl)FTE_BC(1.0) & (m)))
 #define FTE_SEL(m, a, b) ((fte_vd)(((fte_vl)(a) & (m)) | ((fte_vl)(b) & ~(m))))
 #define FTE_LD(p) (*(const fte_vdu *)(p))
 #define FTE_ST(p, v) (*(fte_vdu *)(p) = (v))"""
+
+
+def _vmath_prelude(fns: set[str], vmath: bool) -> str:
+    """``fte_v_NAME(fte_vd[, fte_vd])`` for the functions ``fns``: libmvec's variant for 8 lanes (AVX-512)
+    or two of its 4-lane variant (AVX2) when ``vmath``, else (or on other CPUs) the C library lane by lane.
+    Every lane's result depends on that lane's operands only, whatever the other lanes hold."""
+    out = ["#define FTE_ABS(a) ((fte_vd)((fte_vl)(a) & ~(fte_vl)FTE_BC(-0.0)))"]
+    if vmath:
+        out.append("#if defined(__x86_64__) && defined(__AVX512F__)\n#define FTE_VM 8\n#include <immintrin.h>\n"
+                   "#elif defined(__x86_64__) && defined(__AVX2__)\n#define FTE_VM 4\n#include <immintrin.h>\n"
+                   "#else\n#define FTE_VM 0\n#endif")  # fmt: skip
+    for f in sorted(fns):
+        binary = f in {"pow", "atan2", "hypot"}
+        v = "vv" if binary else "v"
+        par = "fte_vd a, fte_vd b" if binary else "fte_vd a"
+        lane = "a[l], b[l]" if binary else "a[l]"
+        scalar = f"  fte_vd r; int l;\n  for (l = 0; l < V; ++l) r[l] = {f}({lane});\n  return r;\n"
+        if not vmath:
+            out.append(f"static inline fte_vd fte_v_{f}({par}) {{\n{scalar}}}")
+            continue
+        for w, isa, t in ((8, "e", "__m512d"), (4, "d", "__m256d")):
+            args = "ua.h[i], ub.h[i]" if binary else "ua.h[i]"
+            ub = " ub = {b}," if binary else ""
+            out.append(f"""#{"if" if w == 8 else "elif"} FTE_VM == {w}
+{t} _ZGV{isa}N{w}{v}_{f}({", ".join([t] * (2 if binary else 1))});
+static inline fte_vd fte_v_{f}({par}) {{
+  union {{ fte_vd v; {t} h[V / {w}]; }} ua = {{a}},{ub} r;
+  int i;
+  for (i = 0; i < V / {w}; ++i) r.h[i] = _ZGV{isa}N{w}{v}_{f}({args});
+  return r.v;
+}}""")
+        out.append(f"#else\nstatic inline fte_vd fte_v_{f}({par}) {{\n{scalar}}}\n#endif")
+    return "\n".join(out)
+
+
+def _fast_rng(lanes: int) -> str:
+    """rng.py's ``fte_mix``, ``fte_u01`` and ``fte_p01`` on integer lane vectors (the same integers, so
+    the same uniforms: the conversions to double are exact)."""
+    bcu = ", ".join(["(c)"] * lanes)
+    return f"""typedef unsigned long long fte_vu __attribute__((vector_size({8 * lanes})));
+#define FTE_BCU(c) ((fte_vu){{{bcu}}})
+static inline fte_vu fte_mixv(fte_vu z) {{
+  z = (z ^ (z >> 30)) * FTE_BCU(UINT64_C({rng._M1:#x}));
+  z = (z ^ (z >> 27)) * FTE_BCU(UINT64_C({rng._M2:#x}));
+  return z ^ (z >> 31);
+}}
+static inline fte_vd fte_u01v(fte_vu key, uint64_t c) {{
+  fte_vu z = fte_mixv(key + FTE_BCU(c * UINT64_C({rng.GOLDEN:#x})));
+  return __builtin_convertvector((fte_vl)(z >> 11), fte_vd) * FTE_BC(0x1.0p-53);
+}}
+static inline fte_vd fte_p01v(fte_vu key, uint64_t c) {{
+  fte_vu z = fte_mixv(key + FTE_BCU(c * UINT64_C({rng.GOLDEN:#x})));
+  return (__builtin_convertvector((fte_vl)(z >> 12), fte_vd) + FTE_BC(0.5)) * FTE_BC(0x1.0p-52);
+}}"""
 
 
 def _c_double(v: float) -> str:
@@ -126,9 +198,10 @@ def _c_double(v: float) -> str:
     return repr(v)
 
 
-def _body(F: ca.Function) -> list[str]:
+def _body(F: ca.Function, exact: bool = True) -> list[str]:
     """The sample as C statements on lane vectors, one per instruction of ``F``; work slots are
-    CasADi's (``F.sz_w()`` vector variables, reused as CasADi reuses them)."""
+    CasADi's (``F.sz_w()`` vector variables, reused as CasADi reuses them). Not ``exact``: the
+    functions of :data:`_VMATH` one call per lane vector (``fte_v_sin(w3)``)."""
     names = _op_names()
     lines = [f"  fte_vd {', '.join(f'w{i}' for i in range(max(F.sz_w(), 1)))};", "  int l;"]
     for k in range(F.n_instructions()):
@@ -150,6 +223,9 @@ def _body(F: ca.Function) -> list[str]:
         elif nm in _VEC:
             b = f"w{ins[1]}" if len(ins) > 1 else ""
             lines.append(f"  w{outs[0]} = {_VEC[nm].format(a=f'w{ins[0]}', b=b)};")
+        elif nm in _VMATH and not exact:
+            b = f", w{ins[1]}" if nm in _BINARY else ""
+            lines.append(f"  w{outs[0]} = fte_v_{_VMATH[nm]}(w{ins[0]}{b});")
         elif nm in _CALL:
             args = f"w{ins[0]}[l], w{ins[1]}[l]" if nm in _BINARY else f"w{ins[0]}[l]"
             lines.append(f"  for (l = 0; l < V; ++l) w{outs[0]}[l] = {_CALL[nm]}({args});")
@@ -183,32 +259,127 @@ def _casadi_body(F: ca.Function) -> tuple[str, list[str]]:
     return cg.dump(), lines
 
 
-def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool = False) -> str:
+def _driver(exact: bool, ld: int) -> dict[str, str]:
+    """The parts of the sample loop that differ between the modes. Exact: the random numbers drawn
+    lane by lane, the divergence check lane by lane, the next state copied. Fast: the same uniforms
+    computed on integer lane vectors, the normal's tails on the lane vector (through the vector
+    ``log``, when any lane needs them; each lane keeps its own), the check as lane masks, the state
+    buffers swapped."""
+    bc = lambda c: f"FTE_BC({c!r})"  # noqa: E731
+    if exact:
+        return {
+            "decl": "  double st[NS][V] FTE_AL, nx[NS][V] FTE_AL, acc[NINC][V] FTE_AL, rb[NREC][V] FTE_AL, "
+            "dw[V] FTE_AL, dd[LD][V] FTE_AL;",
+            "init": "",
+            "rand": f"""      {{  /* dW = sqrt(dt) N, N by AS 241 (rng.py): the central formula for 8 paths at once, the tail by path */
+        double p[V] FTE_AL;
+        fte_vd q, q_r;
+        for (l = 0; l < V; ++l) p[l] = fte_p01(key[l], cb + 1);
+        q = FTE_LD(p) - FTE_BC(0.5);
+        q_r = FTE_BC(0.180625) - q * q;
+        FTE_ST(dw, {rng.central_c("q", "q_r", bc)});
+        for (l = 0; l < V; ++l)
+          if (!(fabs(p[l] - 0.5) <= {rng.TAIL!r})) dw[l] = fte_ndtri_tail(p[l]);
+        for (l = 0; l < V; ++l) dw[l] = sqdt * dw[l];
+        for (j = 0; j < {ld}; ++j)
+          for (l = 0; l < V; ++l) dd[j][l] = damp * (2.0 * fte_u01(key[l], cb + 2 + j) - 1.0);
+      }}
+""",
+            "after": """      for (j = 0; j < (int)(sizeof(XS) / sizeof(XS[0])); ++j)
+        for (l = 0; l < V; ++l)
+          if (div[l] < 0 && !(fabs(st[XS[j]][l]) <= bound)) div[l] = k;
+      for (j = 0; j < NS; ++j)
+        for (l = 0; l < V; ++l) st[j][l] = nx[j][l];
+""",
+            "final": "",
+        }
+    h = rng._c_horner
+    dd = "".join(
+        f"        FTE_ST(dd[{j}], FTE_BC(damp) * (FTE_BC(2.0) * fte_u01v(kv, cb + {2 + j}) - FTE_BC(1.0)));\n"
+        for j in range(ld)
+    )
+    return {
+        "decl": "  double bufa[NS][V] FTE_AL, bufb[NS][V] FTE_AL, (*st)[V] = bufa, (*nx)[V] = bufb, (*tp)[V];\n"
+        "  double acc[NINC][V] FTE_AL, rb[NREC][V] FTE_AL, dw[V] FTE_AL, dd[LD][V] FTE_AL;\n"
+        "  fte_vu kv;\n  fte_vl dv;",
+        "init": "    for (l = 0; l < V; ++l) kv[l] = key[l];\n    dv = (fte_vl)FTE_BC(0.0) - 1;\n",
+        "rand": f"""      {{  /* dW = sqrt(dt) N, N by AS 241 (rng.py): the same uniforms, drawn on integer lane vectors */
+        fte_vd p = fte_p01v(kv, cb + 1), q, q_r;
+        q = p - FTE_BC(0.5);
+        q_r = FTE_BC(0.180625) - q * q;
+        FTE_ST(dw, {rng.central_c("q", "q_r", bc)});
+        {{  /* the tails on the lane vector, when any lane needs them: each lane selects its own */
+          fte_vl tl = ~(fte_vl)(FTE_ABS(q) <= FTE_BC({rng.TAIL!r}));
+          long long any = 0;
+          for (l = 0; l < V; ++l) any |= tl[l];
+          if (any) {{
+            fte_vd lg = fte_v_log(FTE_SEL(q < FTE_BC(0.0), p, FTE_BC(1.0) - p)), rr, r1, r2, v;
+            for (l = 0; l < V; ++l) rr[l] = sqrt(-lg[l]);
+            r1 = rr - FTE_BC(1.6);
+            r2 = rr - FTE_BC(5.0);
+            v = FTE_SEL(rr <= FTE_BC(5.0), {h(rng._C, "r1", bc)} / {h(rng._D, "r1", bc)},
+                        {h(rng._E, "r2", bc)} / {h(rng._F, "r2", bc)});
+            v = FTE_SEL(q < FTE_BC(0.0), -v, v);
+            FTE_ST(dw, FTE_SEL(tl, v, FTE_LD(dw)));
+          }}
+        }}
+        FTE_ST(dw, FTE_BC(sqdt) * FTE_LD(dw));
+{dd}      }}
+""",
+        "after": """      {  /* the first sample at which a plant state is NaN, infinite or beyond the bound, per lane */
+        fte_vl bad = (fte_vl)FTE_BC(0.0), m;
+        for (j = 0; j < (int)(sizeof(XS) / sizeof(XS[0])); ++j)
+          bad |= ~(fte_vl)(FTE_ABS(FTE_LD(st[XS[j]])) <= FTE_BC(bound));
+        m = bad & (dv < 0);
+        dv = (dv & ~m) | (((fte_vl)FTE_BC(0.0) + k) & m);
+      }
+      tp = st; st = nx; nx = tp;
+""",
+        "final": "    for (l = 0; l < V; ++l) div[l] = dv[l];\n",
+    }
+
+
+def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool = False, exact: bool = True,
+         vmath: bool = True, lanes: int = LANES) -> str:  # fmt: skip
     """C source of the lane engine of ``F: (state, w, sh) -> (next, rec, incr)``.
 
     ``x_slots``: the entries of ``state`` that are plant states (checked for divergence).
     ``casadi_c``: call CasADi's generated C of ``F`` lane by lane instead of emitting lane vectors.
+    ``exact=False``: the fast mode's source (compile it with :data:`FAST_FLAGS`): the C library
+    functions of :data:`_VMATH` and the normal's tails one call per lane vector, through glibc's vector
+    math library when ``vmath`` (link ``-lmvec``), else lane by lane.
     Raises :class:`UnsupportedOperation` on an operation outside the emitter's tables."""
     if not F.is_a("SXFunction"):
         F = F.expand()
     ns, nw, nsh = F.size1_in(0), F.size1_in(1), F.size1_in(2)
     nrec, ninc = F.size1_out(1), F.size1_out(2)
     ld = nw - 1
-    head, body = _casadi_body(F) if casadi_c else ("", _body(F))
+    head, body = _casadi_body(F) if casadi_c else ("", _body(F, exact))
+    vm = ""
+    if not exact:
+        names = _op_names()
+        used = {names.get(F.instruction_id(k)) for k in range(F.n_instructions())} if not casadi_c else set()
+        vm = (
+            "\n"
+            + _vmath_prelude({_VMATH[o] for o in used if o in _VMATH} | {"log"}, vmath)
+            + "\n"
+            + _fast_rng(lanes)
+        )
     xs = ", ".join(str(j) for j in x_slots) or "0"
     nslot = 1 + ld
+    drv = _driver(exact, ld)
     return f"""/* generated by fte_casadi.sim.vector from a CasADi Function: do not edit */
 {head}
 #include <math.h>
 #include <stdint.h>
-#define V {LANES}
+#define V {lanes}
 #define NS {ns}
 #define NREC {max(nrec, 1)}
 #define NINC {max(ninc, 1)}
 #define NSH {nsh}
 #define LD {max(ld, 1)}
-#define FTE_AL __attribute__((aligned({8 * LANES})))
-{_prelude()}
+#define FTE_AL __attribute__((aligned({8 * lanes})))
+{_prelude(lanes)}{vm}
 {rng.C_SOURCE}
 static const int XS[] = {{{xs}}};
 static void fte_sample(double st[NS][V], double nx[NS][V], double acc[NINC][V], double rb[NREC][V],
@@ -221,7 +392,7 @@ static void fte_sample(double st[NS][V], double nx[NS][V], double acc[NINC][V], 
    diverging sample or -1. SH: (nsamp x NSH) shared inputs. Random numbers: rng.py. */
 void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH, double sqdt, double damp,
             const double *S0, double *S1, double *ACC, long every, double *REC, long *DIV, double bound) {{
-  double st[NS][V] FTE_AL, nx[NS][V] FTE_AL, acc[NINC][V] FTE_AL, rb[NREC][V] FTE_AL, dw[V] FTE_AL, dd[LD][V] FTE_AL;
+{drv["decl"]}
   uint64_t key[V];
   long div[V];
   long nrs = every > 0 ? (nsamp - 1) / every + 1 : 0;
@@ -237,35 +408,17 @@ void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH
       key[l] = fte_key(seed, (uint64_t)(path0 + p));
       div[l] = -1;
     }}
-    for (k = 0; k < nsamp; ++k) {{
+{drv["init"]}    for (k = 0; k < nsamp; ++k) {{
       const double *sh = SH + k * NSH;
       int recnow = REC != 0 && k % every == 0;
       uint64_t cb = (uint64_t)k * {nslot};
-      {{  /* dW = sqrt(dt) N, N by AS 241 (rng.py): the central formula for 8 paths at once, the tail by path */
-        double p[V] FTE_AL;
-        fte_vd q, q_r;
-        for (l = 0; l < V; ++l) p[l] = fte_p01(key[l], cb + 1);
-        q = FTE_LD(p) - FTE_BC(0.5);
-        q_r = FTE_BC(0.180625) - q * q;
-        FTE_ST(dw, {rng.central_c("q", "q_r", lambda c: f"FTE_BC({c!r})")});
-        for (l = 0; l < V; ++l)
-          if (!(fabs(p[l] - 0.5) <= {rng.TAIL!r})) dw[l] = fte_ndtri_tail(p[l]);
-        for (l = 0; l < V; ++l) dw[l] = sqdt * dw[l];
-        for (j = 0; j < {ld}; ++j)
-          for (l = 0; l < V; ++l) dd[j][l] = damp * (2.0 * fte_u01(key[l], cb + 2 + j) - 1.0);
-      }}
-      fte_sample(st, nx, acc, rb, sh, dw, dd, recnow);
+{drv["rand"]}      fte_sample(st, nx, acc, rb, sh, dw, dd, recnow);
       if (recnow) {{
         for (l = 0; l < nl; ++l)
           for (j = 0; j < NREC; ++j) REC[((c0 + l) * nrs + k / every) * NREC + j] = rb[j][l];
       }}
-      for (j = 0; j < (int)(sizeof(XS) / sizeof(XS[0])); ++j)
-        for (l = 0; l < V; ++l)
-          if (div[l] < 0 && !(fabs(st[XS[j]][l]) <= bound)) div[l] = k;
-      for (j = 0; j < NS; ++j)
-        for (l = 0; l < V; ++l) st[j][l] = nx[j][l];
-    }}
-    for (l = 0; l < nl; ++l) {{
+{drv["after"]}    }}
+{drv["final"]}    for (l = 0; l < nl; ++l) {{
       for (j = 0; j < NS; ++j) S1[(c0 + l) * NS + j] = st[j][l];
       for (j = 0; j < NINC; ++j) ACC[(c0 + l) * NINC + j] = acc[j][l];
       DIV[c0 + l] = div[l];
@@ -286,20 +439,53 @@ def _cpu_tag() -> str:
     return platform.machine() + platform.processor() + flags
 
 
+def _compiled(src: str, cc: str, flags: tuple, libs: list[str], name: str) -> Path:
+    """The shared library of ``src`` built with ``flags`` and ``libs``: from the cache (keyed by the
+    source, compiler, flags, libraries and CPU), else compiled into it."""
+    # the exact engine's key as before (its cached libraries stay valid)
+    extra = "" if libs == ["-lm"] else " ".join(libs)
+    key = hashlib.sha256((src + cc + " ".join(flags) + extra + _cpu_tag()).encode()).hexdigest()[:20]
+    folder = cache_dir()
+    lib = folder / f"{name}_{key}.so"
+    if lib.exists():
+        return lib
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        c = Path(tmp) / f"{name}.c"
+        c.write_text(src)
+        out = Path(tmp) / "lib.so"
+        try:
+            proc = subprocess.run([cc, *flags, "-o", str(out), str(c), *libs], capture_output=True, text=True,
+                                  timeout=900)  # fmt: skip
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise UnsupportedOperation(f"compiling the vectorised engine with {cc} failed: {exc}") from None
+        if proc.returncode != 0:
+            raise UnsupportedOperation(
+                f"compiling the vectorised engine with {cc} failed: {proc.stderr[-1500:]}"
+            )
+        fd, tmp_lib = tempfile.mkstemp(dir=folder, suffix=".so.tmp")
+        os.close(fd)
+        shutil.copyfile(out, tmp_lib)
+        os.replace(tmp_lib, lib)  # atomic: parallel workers may compile the same engine
+    return lib
+
+
 class VectorEngine:
     """The compiled lane engine of one closed-loop sample Function (compiled once, cached on disk).
 
     An operation the emitter does not know makes it fall back to CasADi's generated C lane by lane
     (``note`` says which; ``casadi_c=True`` asks for it); no C compiler, or a failed compile, raises
     :class:`UnsupportedOperation`. ``source_filter(str) -> str`` edits the C before it is compiled
-    (for measurements only)."""
+    (for measurements only). ``exact=False``: the fast mode (:func:`emit`, :data:`FAST_FLAGS`; ``vmath``
+    says whether it found glibc's vector math library)."""
 
     def __init__(self, F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool | None = None,
-                 source_filter=None):  # fmt: skip
+                 source_filter=None, exact: bool = True, lanes: int = LANES):  # fmt: skip
         if not F.is_a("SXFunction"):
             F = F.expand()
         missing = unsupported(F)
         self.note = None
+        self.exact = bool(exact)
         if casadi_c is None:
             casadi_c = bool(missing)
         elif missing and not casadi_c:
@@ -311,40 +497,27 @@ class VectorEngine:
                 f"the closed loop uses CasADi operation(s) {', '.join(missing)} that the vectorised engine cannot "
                 "write as lane vectors: it runs CasADi's own generated C path by path (same numbers, slower)"
             )
-        src = emit(F, x_slots, name, casadi_c=casadi_c)
-        if source_filter is not None:  # the benchmark's anatomy: the same engine with parts left out
-            src = source_filter(src)
         cc = find_compiler()
         if cc is None:
             raise UnsupportedOperation("no C compiler found (cc, gcc, clang or $CC)")
-        key = hashlib.sha256((src + cc + " ".join(FLAGS) + _cpu_tag()).encode()).hexdigest()[:20]
-        folder = cache_dir()
-        lib = folder / f"{name}_{key}.so"
-        if not lib.exists():
-            folder.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory() as tmp:
-                c = Path(tmp) / f"{name}.c"
-                c.write_text(src)
-                out = Path(tmp) / "lib.so"
-                try:
-                    proc = subprocess.run(
-                        [cc, *FLAGS, "-o", str(out), str(c), "-lm"],
-                        capture_output=True,
-                        text=True,
-                        timeout=900,
-                    )
-                except (OSError, subprocess.TimeoutExpired) as exc:
-                    raise UnsupportedOperation(
-                        f"compiling the vectorised engine with {cc} failed: {exc}"
-                    ) from None
-                if proc.returncode != 0:
-                    raise UnsupportedOperation(
-                        f"compiling the vectorised engine with {cc} failed: {proc.stderr[-1500:]}"
-                    )
-                fd, tmp_lib = tempfile.mkstemp(dir=folder, suffix=".so.tmp")
-                os.close(fd)
-                shutil.copyfile(out, tmp_lib)
-                os.replace(tmp_lib, lib)  # atomic: parallel workers may compile the same engine
+        # the fast mode links glibc's vector math library; where there is none, it calls the C library lane by lane
+        tries = [True] if exact else [True, False]
+        for k, vmath in enumerate(tries):
+            src = emit(F, x_slots, name, casadi_c=casadi_c, exact=exact, vmath=vmath, lanes=lanes)
+            if source_filter is not None:  # the benchmark's anatomy: the same engine with parts left out
+                src = source_filter(src)
+            flags = FLAGS if exact else FAST_FLAGS
+            libs = ["-lm"] if exact or not vmath else ["-Wl,-z,defs", "-lmvec", "-lm"]
+            try:
+                lib = _compiled(src, cc, flags, libs, name)
+                break
+            except UnsupportedOperation:
+                if k + 1 == len(tries):
+                    raise
+        self.vmath = not exact and vmath
+        if not exact and not vmath:
+            note = "the fast mode found no vector math library (glibc's libmvec): it calls the C library lane by lane"
+            self.note = f"{self.note}; {note}" if self.note else note
         self.lib = ctypes.CDLL(str(lib))
         self.fn = getattr(self.lib, name)
         dp = ctypes.POINTER(ctypes.c_double)
