@@ -39,7 +39,7 @@ CHANNELS = ("d", "fddot", "u_s", "f", "const")
 
 
 def _vertices(design):
-    n, lf = int(design.dims["n"]), int(design.dims["lf"])
+    n, lf = int(design.dims.n), int(design.dims.lf)
     nbar = n + 2 * lf
     T = np.asarray(design.T, float)
     J0 = np.hstack([np.eye(n), np.zeros((n, 2 * lf))])
