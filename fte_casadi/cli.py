@@ -174,11 +174,11 @@ def _design_summary(d) -> str:
     c = d.checks
     lmi = c["lmi_max_eig"]
     K = max(float(np.max(np.abs(k))) for k in d.K)
-    obs = d.observer or {}
+    obs = d.observer
     lines = [
         f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
         f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
-        "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.items()),
+        "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.to_dict().items()),
         "  largest eigenvalue of each LMI at the returned point (negative = holds): "
         + ", ".join(f"({k}) {v:.3g}" for k, v in lmi.items())
         + (
@@ -205,8 +205,8 @@ def _design_summary(d) -> str:
                      + " + E xi0' P xi0 (docs/tune.md)")  # fmt: skip
     elif fb:
         lines.append(f"  no bound on the fault-estimation error: {fb.get('why')}")
-    if obs.get("alpha") is not None:
-        lines.append(f"  observer decay rate alpha = {obs['alpha']:.4g}: {obs.get('why', '')}")
+    if obs.alpha is not None:
+        lines.append(f"  observer decay rate alpha = {obs.alpha:.4g}: {obs.why or ''}")
     solves = f", {d.solves.get('total')} conic solves" if d.solves else ""
     lines.append(
         f"  time: {d.timings['total_s']:.2f} s in all, {d.timings['solver_s']:.2f} s in the solver{solves}"

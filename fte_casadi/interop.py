@@ -44,7 +44,7 @@ def closed_loop_ss(design, i: int, j: int, dt: float | None = None):
     """Plant rule ``i``, observer rule ``i`` and controller gain ``K_j`` in closed loop (see Design.to_control)."""
     ct = require_control()
     dims = design.dims
-    n, m, p, lf, nbar, r = (int(dims[k]) for k in ("n", "m", "p", "lf", "nbar", "r"))
+    n, m, p, lf, nbar, r = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.nbar, dims.r))
     for nm, k in (("i", i), ("j", j)):
         if not (isinstance(k, (int, np.integer)) and 0 <= k < r):
             from .errors import ParameterError

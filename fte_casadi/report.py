@@ -153,7 +153,7 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
     with tempfile.TemporaryDirectory(prefix="fte_report_") as tmp:
         lib = compile_shared(folder, Path(tmp) / "libstep.so")
         steps = int(min(20000, round(float(SCENARIOS[d.plant]().T) / ts)))
-        lf = int(d.dims["lf"])
+        lf = int(d.dims.lf)
 
         def fault(t, u):
             f = np.zeros(lf)

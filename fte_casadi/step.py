@@ -77,7 +77,7 @@ def step_function(
     tolerant : bool
         With tolerant control (Kf term and sensor compensation) or without it.
     boundary_layer : float, optional
-        Replace ``sgn(s)`` by ``sat(s / phi)``; ``None``: the design's ``params["boundary_layer"]``
+        Replace ``sgn(s)`` by ``sat(s / phi)``; ``None``: the design's ``params.boundary_layer``
         when it has one, else the discontinuous ``sgn`` with ``sgn(0) = 0``.
     """
     if not (isinstance(ts, (int, float)) and np.isfinite(ts) and ts > 0):
@@ -85,11 +85,11 @@ def step_function(
     if (
         boundary_layer is None
     ):  # a design chosen with one (fte tune) carries it: the simulation and the C follow
-        boundary_layer = design.params.get("boundary_layer")
+        boundary_layer = design.params.boundary_layer
     if boundary_layer is not None and not (np.isfinite(boundary_layer) and boundary_layer > 0):
         raise ParameterError(f"boundary layer must be a positive number; got {boundary_layer!r}")
     dims = design.dims
-    n, m, p, lf, r, nbar = (int(dims[k]) for k in ("n", "m", "p", "lf", "r", "nbar"))
+    n, m, p, lf, r, nbar = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.r, dims.nbar))
     z = ca.SX.sym("z", nbar)
     y = ca.SX.sym("y", p)
 

@@ -29,7 +29,7 @@ class CStep:
         self.lib = ctypes.CDLL(str(lib_path))
         self.real = real
         self.dtype = _NP[real]
-        self.nbar, self.p, self.m = int(design.dims["nbar"]), int(design.dims["p"]), int(design.dims["m"])
+        self.nbar, self.p, self.m = int(design.dims.nbar), int(design.dims.p), int(design.dims.m)
         name = c_name(design.plant)
         self._init = getattr(self.lib, f"fte_{name}_init")
         self._step = getattr(self.lib, f"fte_{name}_step")
@@ -111,7 +111,7 @@ def closed_loop_compare(
             raise CodegenError("the C init_from_y does not give z0 = xbar0 - H y0")
     else:
         x = np.asarray(plant.x0, float).copy()
-        z = np.zeros(int(design.dims["nbar"]))
+        z = np.zeros(int(design.dims.nbar))
         cstep.init(z)
     err = {"z": 0.0, "u": 0.0, "xbarhat": 0.0, "yc": 0.0}
     traj = {"y": [], "u": [], "fhat": []}

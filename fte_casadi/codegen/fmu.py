@@ -110,7 +110,7 @@ def _units(design: Design, key: str, count: int) -> list[str | None]:
 
 def fmu_variables(design: Design) -> list[FmuVariable]:
     """The FMU's variables in value-reference order: y, then u, xbarhat and yc (see the module text)."""
-    n, m, p, lf = (int(design.dims[k]) for k in ("n", "m", "p", "lf"))
+    n, m, p, lf = (int(v) for v in (design.dims.n, design.dims.m, design.dims.p, design.dims.lf))
     ys, us = _names(design, "outputs", p, "y"), _names(design, "inputs", m, "u")
     xs, fs = _names(design, "states", n, "x"), _names(design, "faults", lf, "f")
     y_units, x_units = _units(design, "output_units", p), _units(design, "state_units", n)
@@ -151,7 +151,7 @@ def _dependencies(design: Design, ts: float, boundary_layer) -> list[list[int]]:
     """Per output (u, xbarhat, yc in order): the inputs it depends on structurally (0-based), from the
     CasADi step, in the running observer and at the first sample (z0 = xbar0 - H y0), united."""
     fn = step_function(design, ts, boundary_layer=boundary_layer)
-    nbar, p = int(design.dims["nbar"]), int(design.dims["p"])
+    nbar, p = int(design.dims.nbar), int(design.dims.p)
     z, y = ca.SX.sym("z", nbar), ca.SX.sym("y", p)
     z0 = ca.DM(design.xbar0) - ca.mtimes(ca.DM(np.asarray(design.H, float)), y)
     deps = None
@@ -390,7 +390,7 @@ def generate_fmu(
         c_files = sorted([f for f in generated if f.endswith(".c")] + [wrapper_name])
         md_draft = _model_description(design, variables, tsf, deps, "{GUID}", c_files, mid)
         guid = _guid([md_draft, *generated.values()])
-        p = int(design.dims["p"])
+        p = int(design.dims.p)
         wrapper = WRAPPER.substitute(
             mid=mid,
             name=name,

@@ -96,7 +96,7 @@ def default_ts(design: Design) -> float:
     scenario's step, which ``fte simulate`` runs and the default alpha respects) when it is below
     ``ts_max``; otherwise ``0.1 * ts_max`` rounded down to 1, 2 or 5 times a power of ten, and no
     more than the simulation step of a built-in plant (:data:`BUILTIN_DT`)."""
-    st = design.observer.get("sample_time") if isinstance(design.observer, dict) else None
+    st = design.observer.sample_time
     if st is not None and math.isfinite(float(st)) and 0 < float(st) < _ts_max(design):
         return float(st)
     ts = series_floor(0.1 * _ts_max(design))
@@ -235,7 +235,7 @@ def _wrapper(
     fname = f"fte_{name}_casadi_step"
     sizes = _sizes(h_src, fname)
     dims = design.dims
-    n, m, p, lf, nbar = (int(dims[k]) for k in ("n", "m", "p", "lf", "nbar"))
+    n, m, p, lf, nbar = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.nbar))
     names = design.names or {}
 
     def joined(key, count, stem):
@@ -322,7 +322,7 @@ def _wrapper(
 def _sliding_text(design: Design) -> dict:
     """The sliding variables' count and gains: ``(delta + eps)`` per fault, and with Remark 5 first the
     gains of the unknown inputs H does not decouple."""
-    lf = int(design.dims["lf"])
+    lf = int(design.dims.lf)
     r5 = design.remark5 or {}
     if not r5.get("used"):
         return {"ns": lf, "ns_text": "", "sliding_gain": "(delta + eps)"}
@@ -340,7 +340,7 @@ def _saturation_text(design: Design) -> str:
     """One line saying how u is clipped (the step applies it, and feeds the observer the clipped u)."""
     if design.input_limits is None:
         return "none (u is not clipped)."
-    names = (design.names or {}).get("inputs") or [f"u{k}" for k in range(int(design.dims["m"]))]
+    names = (design.names or {}).get("inputs") or [f"u{k}" for k in range(int(design.dims.m))]
     parts = [
         f"{nm} in [{lo:.17g}, {hi:.17g}]"
         for nm, (lo, hi) in zip(names, np.asarray(design.input_limits, float))
@@ -423,7 +423,7 @@ def generate_c(
     real : {"double", "float"}
         The C type of ``fte_real``.
     boundary_layer : float, optional
-        Replace ``sgn(s)`` by ``sat(s / phi)``; default the design's ``params["boundary_layer"]``
+        Replace ``sgn(s)`` by ``sat(s / phi)``; default the design's ``params.boundary_layer``
         when it has one (a design chosen by ``fte tune``), else ``sgn(s)``.
 
     Returns
@@ -452,7 +452,7 @@ def generate_c(
     tsf = _check_ts(design, ts)
     tsm = _ts_max(design)
     if boundary_layer is None:  # the design's own (fte tune), as the simulation runs it
-        boundary_layer = design.params.get("boundary_layer")
+        boundary_layer = design.params.boundary_layer
     name = c_name(design.plant)
     out = Path(out_dir)
     prepare_dir(out)
@@ -485,4 +485,4 @@ def memory_report(design: Design, *, ts: float | None = None, real: str = "doubl
     name = c_name(design.plant)
     fn = step_function(design, tsf, tolerant=True, name=f"fte_{name}_casadi_step")
     c_src, h_src = _casadi_sources(fn, name, real)
-    return _memory(c_src, real, int(design.dims["nbar"]), _sizes(h_src, f"fte_{name}_casadi_step"))
+    return _memory(c_src, real, int(design.dims.nbar), _sizes(h_src, f"fte_{name}_casadi_step"))

@@ -5,11 +5,14 @@ from .api import explore as explore
 from .augment import Augmented as Augmented
 from .augment import augment as augment
 from .record import Design as Design
+from .records import Dims as Dims
+from .records import Observer as Observer
+from .records import Params as Params
 from .uio import AssumptionCheck as AssumptionCheck
 from .uio import check_assumptions as check_assumptions
 from .uio import enforce as enforce
 from .uio import invariant_zeros as invariant_zeros
 from .uio import uio_gain as uio_gain
 
-__all__ = ["design", "explore", "Design", "Augmented", "augment", "AssumptionCheck", "check_assumptions", "enforce",
+__all__ = ["design", "explore", "Design", "Dims", "Params", "Observer", "Augmented", "augment", "AssumptionCheck", "check_assumptions", "enforce",
            "invariant_zeros", "uio_gain"]  # fmt: skip

@@ -18,6 +18,7 @@ from .augment import augment
 from .certify import certificate, discrete_certificate, failures
 from .diagnose import FrontierPoint, gamma_min, sigma_max
 from .record import Design
+from .records import Dims, Observer, Params
 from .remark5 import explain_causes, with_remark5
 from .remark5 import fallback as remark5_fallback
 from .remark5 import record as remark5_record
@@ -294,8 +295,10 @@ def design(
         plant_spec=plant_spec or plant.name,
         variant=variant,
         solver=solver,
-        params=params,
-        dims={"n": ts.n, "m": ts.m, "p": ts.p, "ld": ts.ld, "lf": ts.lf, "r": ts.r, "nbar": aug.nbar},
+        params=Params.from_mapping(params),
+        dims=Dims.from_mapping(
+            {"n": ts.n, "m": ts.m, "p": ts.p, "ld": ts.ld, "lf": ts.lf, "r": ts.r, "nbar": aug.nbar}
+        ),
         premises=[p.to_dict() for p in ts.premises],
         local_models=tuple(
             {
@@ -338,7 +341,7 @@ def design(
         certified=certified,
         status=status,
         solves={"step3": int(s3.solves), "step5": int(s5.solves), "total": int(s3.solves + s5.solves)},
-        observer=observer,
+        observer=Observer.from_mapping(observer),
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
         bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc),
@@ -361,7 +364,7 @@ def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc) -> dict:
         {k: getattr(lm, k) for k in ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M")}
         for lm in ts.local_models
     )
-    view = SimpleNamespace(dims={"n": ts.n, "lf": ts.lf}, T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
+    view = SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
                            local_models=lms, R=R, K=K)  # fmt: skip
     return {"fault_error": fault_error_bound(view)}
 
@@ -623,7 +626,7 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                         gmin,
                         gt,
                         True,
-                        d.observer.get("alpha"),
+                        d.observer.alpha,
                         d.checks["max_abs_L1"],
                         ts_max=d.checks["ts_max"],
                     )

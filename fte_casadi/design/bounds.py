@@ -42,7 +42,7 @@ MAX_VERTICES, MAX_STATES = 64, 24
 
 
 def _vertices(design):
-    n, lf = int(design.dims["n"]), int(design.dims["lf"])
+    n, lf = int(design.dims.n), int(design.dims.lf)
     nbar = n + 2 * lf
     T = np.asarray(design.T, float)
     J0 = np.hstack([np.eye(n), np.zeros((n, 2 * lf))])

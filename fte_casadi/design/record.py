@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DesignFileError
+from .records import Dims, Observer, Params, _Record
 
-__all__ = ["Design", "REQUIRED_KEYS", "atomic_write_text"]
+__all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "atomic_write_text"]
 
 REQUIRED_KEYS = (
     "plant",
@@ -82,14 +83,21 @@ def _arr(x) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Design:
-    """A certified (or honestly uncertified) observer/controller design for one plant."""
+    """A certified (or honestly uncertified) observer/controller design for one plant.
+
+    ``params``, ``dims`` and ``observer`` are typed frozen records (:class:`~fte_casadi.design.records.Params`,
+    :class:`~fte_casadi.design.records.Dims`, :class:`~fte_casadi.design.records.Observer`), read by attribute:
+    ``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``. Passing plain dicts for them (as older code does)
+    converts them; for a transition the records also answer item access (``d.dims["n"]``,
+    ``d.params.get("gamma2")``). ``checks`` stays a dict (its key set is open; see the records' module).
+    """
 
     plant: str
     plant_spec: str
     variant: str
     solver: str
-    params: dict
-    dims: dict
+    params: Params
+    dims: Dims
     premises: list
     local_models: tuple  # of dicts of numpy arrays: A, B, Bd, Bf, W, a, G, Gf, M
     C: np.ndarray
@@ -119,7 +127,7 @@ class Design:
     #: conic solves per step (the rest of the design is numpy: centring and phase-1 decisions)
     solves: dict = field(default_factory=dict)
     #: the observer decay rate alpha, the largest feasible one, and why alpha is what it is
-    observer: dict = field(default_factory=dict)
+    observer: Observer = field(default_factory=Observer)
     #: actuator limits, (m, 2) rows [lo, hi] with -inf/inf for an open side; None: no limits
     input_limits: np.ndarray | None = None
     #: one Kf_i = -pinv(B_i) Bf_i per rule where they differ (the step then blends them, Kf(h) =
@@ -136,20 +144,27 @@ class Design:
     #: certified performance bounds at the design (:mod:`fte_casadi.design.bounds`): {"fault_error": {...}}
     bounds: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        # dicts (older callers, dataclasses.replace(d, params={...})) become the typed records
+        for name, rec in (("params", Params), ("dims", Dims), ("observer", Observer)):
+            value = getattr(self, name)
+            if not isinstance(value, rec):
+                object.__setattr__(self, name, rec.from_mapping(value))
+
     # -- convenience ---------------------------------------------------------------------
     @property
     def r(self) -> int:
-        return int(self.dims["r"])
+        return int(self.dims.r)
 
     @property
     def nbar(self) -> int:
-        return int(self.dims["nbar"])
+        return int(self.dims.nbar)
 
     def sliding_gain(self) -> np.ndarray:
         """The gain of each sliding variable: Remark 5's per-direction gains for the undecoupled part of d
         (first), then ``delta + eps`` for each fault's ``f''`` (docs/method.md, sliding surface (19)-(21))."""
-        lf = int(self.dims["lf"])
-        base = np.full(lf, float(self.params["delta"]) + float(self.params["epsilon"]))
+        lf = int(self.dims.lf)
+        base = np.full(lf, float(self.params.delta) + float(self.params.epsilon))
         if not self.remark5.get("used"):
             return base
         return np.concatenate([_arr(self.remark5["gain"]).ravel(), base])
@@ -163,7 +178,7 @@ class Design:
         """The nominal augmented initial state ``[x0; 0; 0]`` (zeros when no x0 is recorded)."""
         out = np.zeros(self.nbar)
         if self.x0 is not None:
-            out[: int(self.dims["n"])] = _arr(self.x0)
+            out[: int(self.dims.n)] = _arr(self.x0)
         return out
 
     def observer_start(self, y0, xbar0=None) -> np.ndarray:
@@ -215,8 +230,8 @@ class Design:
             "plant": self.plant,
             "variant": self.variant,
             "solver": self.solver,
-            "params": {k: float(v) for k, v in self.params.items()},
-            "dims": {k: int(v) for k, v in self.dims.items()},
+            "params": self.params.to_dict(),
+            "dims": self.dims.to_dict(),
             "premises": self.premises,
             "local_models": lms,
         }
@@ -245,7 +260,7 @@ class Design:
         out["certified"] = bool(self.certified)
         out["status"] = list(self.status)
         out["solves"] = {k: int(v) for k, v in self.solves.items()}
-        out["observer"] = _jsonable(self.observer)
+        out["observer"] = _jsonable(self.observer.to_dict())
         out["input_limits"] = None if self.input_limits is None else [
             [None if not np.isfinite(v) else float(v) for v in row] for row in np.asarray(self.input_limits, float)
         ]  # fmt: skip
@@ -285,8 +300,20 @@ class Design:
                 f"{source} lacks key(s) {missing}: it is not a complete fte design document; "
                 "make it again with `fte design PLANT -o FILE`"
             )
+        for name, rec in (("params", Params), ("dims", Dims), ("observer", Observer)):
+            entry = doc.get(name) or {}
+            if not isinstance(entry, dict):
+                raise DesignFileError(
+                    f"{source}: {name!r} must be a JSON object; make it again with `fte design`"
+                )
+            lack = rec.missing(entry)
+            if lack:
+                raise DesignFileError(f"{source}: {name!r} lacks {lack}; make it again with `fte design`")
         try:
-            r = int(doc["dims"]["r"])
+            params = Params.from_mapping(doc["params"])
+            dims = Dims.from_mapping(doc["dims"])
+            observer = Observer.from_mapping(doc.get("observer"))
+            r = int(dims.r)
             kw = {k: _finite(source, k, doc[k]) for k in _MATS}
             for k in _LISTS:
                 v = doc[k]
@@ -311,8 +338,8 @@ class Design:
             plant_spec=str(doc.get("plant_spec", doc["plant"])),
             variant=str(doc["variant"]),
             solver=str(doc["solver"]),
-            params=dict(doc["params"]),
-            dims=dict(doc["dims"]),
+            params=params,
+            dims=dims,
             premises=list(doc["premises"]),
             local_models=tuple(lms),
             theta=theta,
@@ -331,9 +358,9 @@ class Design:
             certified=bool(doc.get("certified", True)),
             status=list(doc.get("status", [])),
             solves=dict(doc.get("solves", {})),
-            observer=dict(doc.get("observer", {})),
-            input_limits=_limits(source, doc.get("input_limits"), int(doc["dims"]["m"])),
-            remark5=_remark5(source, doc.get("remark5"), kw["Ls"].shape[1] - int(doc["dims"]["lf"])),
+            observer=observer,
+            input_limits=_limits(source, doc.get("input_limits"), int(dims.m)),
+            remark5=_remark5(source, doc.get("remark5"), kw["Ls"].shape[1] - int(dims.lf)),
             **kw,
         )
 
@@ -405,6 +432,8 @@ def _finite(source: str, key: str, value) -> np.ndarray:
 
 
 def _jsonable(obj):
+    if isinstance(obj, _Record):
+        obj = obj.to_dict()
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

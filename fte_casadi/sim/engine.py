@@ -93,7 +93,7 @@ def closed_loop_sample(
     ``w = [dW; d]``, ``fp`` the fault coefficients of this sample (:meth:`FaultSchedule.stacked`).
     """
     n, m, p, lf, ld = plant.n, plant.m, plant.p, plant.lf, plant.ld
-    nbar = int(design.dims["nbar"])
+    nbar = int(design.dims.nbar)
     lay = PathLayout(n, nbar, lf, m, p, ld)
     drift = plant.drift_function()
     diff = plant.diffusion_function()
@@ -159,7 +159,7 @@ def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, see
         raise SimulationError(f"time step dt must be a positive number; got {dt!r}")
     dims = design.dims
     want = {"n": plant.n, "m": plant.m, "p": plant.p, "lf": plant.lf}
-    bad = {k: (int(dims[k]), v) for k, v in want.items() if int(dims[k]) != v}
+    bad = {k: (int(getattr(dims, k)), v) for k, v in want.items() if int(getattr(dims, k)) != v}
     if bad:
         txt = ", ".join(f"{k}: design {a} vs plant {b}" for k, (a, b) in bad.items())
         raise SimulationError(
@@ -202,7 +202,7 @@ def result_names(plant: Plant) -> dict:
 
 def design_step(design: Design, scenario: Scenario) -> float:
     """The step the design was made (and certified) for: its recorded sample time, else the scenario's."""
-    ts = (design.observer or {}).get("sample_time")
+    ts = design.observer.sample_time
     return float(ts) if ts else float(scenario.dt)
 
 
@@ -245,7 +245,7 @@ def step_change(design: Design, scenario: Scenario, dt: float, given: float | No
         if given is not None
         else "the design's sample time exceeds its ts_max (lowered below it)"
     )
-    if given is not None and "sample_time" not in (design.observer or {}):
+    if given is not None and design.observer.sample_time is None:
         why = "--dt given (the design records no sample time: compared with the scenario's step)"
     return {"from": ts, "to": float(dt), "why": why}
 

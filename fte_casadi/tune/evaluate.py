@@ -101,8 +101,8 @@ def evaluate(task: dict) -> dict:
                           **design_kwargs(knobs))  # fmt: skip
             d = run_design(ts, **common)
             scale = float(knobs["alpha_scale"])
-            if scale < 1.0 - 1e-12 and d.observer.get("alpha") is not None:
-                d = run_design(ts, alpha=scale * float(d.observer["alpha"]), **common)
+            if scale < 1.0 - 1e-12 and d.observer.alpha is not None:
+                d = run_design(ts, alpha=scale * float(d.observer.alpha), **common)
             if knobs.get("use_boundary_layer") and task.get("e_scale"):
                 phi = (
                     float(knobs["boundary_layer_rel"])
@@ -110,7 +110,7 @@ def evaluate(task: dict) -> dict:
                     * float(task["e_scale"])
                 )
                 if phi > 0 and np.isfinite(phi):
-                    d = dataclasses.replace(d, params=dict(d.params) | {"boundary_layer": phi})
+                    d = dataclasses.replace(d, params=d.params.replace(boundary_layer=phi))
         if not d.certified:
             return {
                 "state": "fail",
@@ -123,8 +123,8 @@ def evaluate(task: dict) -> dict:
     m = dict(res.metrics)
     u = res.ftc.u
     m["input_peak"] = [float(v) for v in np.max(np.abs(u), axis=(0, 1))] if u.size else [0.0] * plant.m
-    params = {k: float(v) for k, v in d.params.items()}
-    params["alpha"] = None if d.observer.get("alpha") is None else float(d.observer["alpha"])
+    params = d.params.to_dict()
+    params["alpha"] = None if d.observer.alpha is None else float(d.observer.alpha)
     params.setdefault("kappa", KAPPA)
     params.setdefault("boundary_layer", None)
     return {"state": "ok", "params": params, "metrics": m, "design": d.to_json(),

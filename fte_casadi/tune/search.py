@@ -301,10 +301,10 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     if sigma_sup is None:
         sigma_sup = _sigma_sup(plant, base_design)
     space: Space = space_for(base_design, sigma_sup)
-    fixed = {"delta": float(base_design.params["delta"])}
+    fixed = {"delta": float(base_design.params.delta)}
     common = {
         "plant": plant_bytes(plant), "scenario": scenario.to_dict(), "variant": base_design.variant,
-        "solver": base_design.solver, "sample_time": (base_design.observer or {}).get("sample_time") or scenario.dt,
+        "solver": base_design.solver, "sample_time": base_design.observer.sample_time or scenario.dt,
         "initial_state": None if base_design.x0 is None else [float(v) for v in base_design.x0],
         "plant_spec": base_design.plant_spec, "paths": paths, "seed": seed,
     }  # fmt: skip
@@ -383,7 +383,7 @@ def _sigma_sup(plant, base_design) -> float | None:
     try:
         ts = derive(plant)
         aug = augment(ts.local_models, ts.C, ts.Df)
-        return sigma_max(aug, None, float(base_design.params["gamma1"]), base_design.solver)[0]
+        return sigma_max(aug, None, float(base_design.params.gamma1), base_design.solver)[0]
     except FteError:
         return None
 

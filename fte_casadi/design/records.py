@@ -1,0 +1,213 @@
+"""Typed sub-records of the :class:`~fte_casadi.design.record.Design`: its sizes, parameters and observer.
+
+``Design.dims``, ``Design.params`` and ``Design.observer`` are frozen dataclasses, read by attribute
+(``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``) as diffrax and equinox records are. The design
+document (docs/interface.md) does not change: each record writes back exactly the keys it was read from,
+in the same order (:meth:`to_dict`), and keeps any key it does not know in ``extra`` (a document written by
+a newer version survives a load/save). An optional entry that is absent is ``None``.
+
+For a transition the records also answer item access as the dicts did (``d.dims["n"]``,
+``d.params.get("gamma2")``, ``"alpha" in d.observer``, ``dict(d.params)``, ``d.observer.items()``), so that
+code still written against the dicts keeps working; new code reads attributes.
+
+``Design.checks`` stays a dict: its key set is open (the certificate adds keys with the theorem, the sample
+time and Remark 5's fallback, and :func:`~fte_casadi.design.certify.failures` reads whatever is there), and
+its values are nested reports (``checks["lmi_max_eig"]["46"]``), not scalars a record could type.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator, Mapping
+from dataclasses import MISSING, dataclass, field
+from typing import Any, ClassVar
+
+__all__ = ["Dims", "Params", "Observer"]
+
+
+class _Record:
+    """Shared behaviour: the document's key order, unknown keys kept, and the transitional mapping view."""
+
+    #: fields that are not document keys
+    _META: ClassVar[tuple[str, ...]] = ("extra", "order")
+    #: how one value is written to the document (float for params, int for dims)
+    _CAST: ClassVar[Any] = None
+
+    def _fields(self) -> tuple[str, ...]:
+        return tuple(f.name for f in dataclasses.fields(self) if f.name not in self._META)
+
+    def keys(self) -> tuple[str, ...]:
+        """The document keys this record holds, in the document's order.
+
+        A field is held when the document it came from had it (even as ``null``), or when it is not
+        ``None``; unknown keys (``extra``) come last.
+        """
+        known = self._fields()
+        held = [k for k in self.order if k in known or k in self.extra]
+        held += [k for k in known if k not in held and getattr(self, k) is not None]
+        held += [k for k in self.extra if k not in held]
+        return tuple(held)
+
+    def to_dict(self) -> dict:
+        """The record as the design document writes it (same keys, same order as read)."""
+        cast = self._CAST
+        return {k: (self[k] if cast is None else cast(self[k])) for k in self.keys()}
+
+    # -- transitional mapping view (item access as the dicts had) ------------------------------
+    def __getitem__(self, key: str):
+        if key in self.extra:
+            return self.extra[key]
+        if key in self._fields() and (key in self.order or getattr(self, key) is not None):
+            return getattr(self, key)
+        raise KeyError(key)
+
+    def get(self, key: str, default=None):
+        """``self[key]`` or ``default`` (transitional: new code reads the attribute)."""
+        try:
+            return self[key]
+        except KeyError:
+            return default
+
+    def __contains__(self, key: object) -> bool:
+        return key in self.keys()
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.keys())
+
+    def __len__(self) -> int:
+        return len(self.keys())
+
+    def items(self):
+        """``(key, value)`` pairs in the document's order (transitional)."""
+        return [(k, self[k]) for k in self.keys()]
+
+    def values(self):
+        """The values in the document's order (transitional)."""
+        return [self[k] for k in self.keys()]
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, _Record):
+            return type(self) is type(other) and self.to_dict() == other.to_dict()
+        if isinstance(other, Mapping):
+            return self.to_dict() == dict(other)
+        return NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]  # extra is a dict
+
+    def replace(self, **changes) -> _Record:
+        """A copy with ``changes``; a key the record does not type goes to ``extra``. Keeps the key order."""
+        known = set(self._fields())
+        extra = dict(self.extra)
+        typed = {}
+        for k, v in changes.items():
+            if k in known:
+                typed[k] = v
+            else:
+                extra[k] = v
+        return dataclasses.replace(self, extra=extra, **typed)
+
+    @classmethod
+    def missing(cls, doc: Mapping) -> list[str]:
+        """The required keys (fields without a default) that ``doc`` lacks."""
+        need = [
+            f.name for f in dataclasses.fields(cls) if f.default is MISSING and f.default_factory is MISSING
+        ]
+        return [k for k in need if k not in doc]
+
+    @classmethod
+    def from_mapping(cls, doc: Mapping | _Record | None):
+        """The record of a document's entry (a dict); a record is returned as it is; None: empty.
+
+        Values are kept as read (Params: float, Dims: int), so that :meth:`to_dict` writes them back
+        unchanged. Raises ``KeyError`` naming a required key that ``doc`` lacks.
+        """
+        if isinstance(doc, cls):
+            return doc
+        doc = dict(doc or {})
+        for k in cls.missing(doc):
+            raise KeyError(k)
+        known = {f.name for f in dataclasses.fields(cls)} - set(cls._META)
+        typed = {k: cls._convert(k, v) for k, v in doc.items() if k in known}
+        extra = {k: v for k, v in doc.items() if k not in known}
+        return cls(**typed, extra=extra, order=tuple(doc))
+
+    @classmethod
+    def _convert(cls, key: str, value):
+        return value
+
+
+@dataclass(frozen=True, eq=False)
+class Dims(_Record):
+    """The design's sizes (``Design.dims``): states, inputs, outputs, unknown inputs, faults, rules, and
+    the augmented state ``[x; f'; f'']``.
+
+    Read ``d.dims.n``; ``d.dims["n"]`` still works for a transition (see the module docstring).
+    """
+
+    n: int
+    m: int
+    p: int
+    ld: int
+    lf: int
+    r: int
+    nbar: int
+    extra: dict = field(default_factory=dict, repr=False)
+    order: tuple = field(default=(), repr=False)
+
+    _CAST: ClassVar[Any] = int
+
+    @classmethod
+    def _convert(cls, key, value):
+        return int(value)
+
+
+@dataclass(frozen=True, eq=False)
+class Params(_Record):
+    """The LMI parameters the design was solved at (``Design.params``): the attenuation levels ``gamma``,
+    ``gamma1``, the coupling weight ``sigma``, the sliding gains ``delta``, ``epsilon``; optional ones are
+    ``None`` when not used: ``gamma2`` (Theorem 5's d2 attenuation), ``kappa`` (the bound on cond(Pbar)
+    when asked for one), ``boundary_layer`` (the sliding term's ``sat(s/phi)`` width, set by the tuner).
+
+    Read ``d.params.sigma``; ``d.params["sigma"]`` still works for a transition (see the module docstring).
+    """
+
+    gamma: float
+    gamma1: float
+    sigma: float
+    delta: float
+    epsilon: float
+    gamma2: float | None = None
+    kappa: float | None = None
+    boundary_layer: float | None = None
+    extra: dict = field(default_factory=dict, repr=False)
+    order: tuple = field(default=(), repr=False)
+
+    _CAST: ClassVar[Any] = float
+
+    @classmethod
+    def _convert(cls, key, value):
+        return float(value)
+
+
+@dataclass(frozen=True, eq=False)
+class Observer(_Record):
+    """How the observer's decay rate was chosen (``Design.observer``), every entry optional (``None``):
+
+    ``sample_time`` the sample time the design was made for (``None`` when none was given),
+    ``alpha`` the decay rate used, ``why`` the reason, ``alpha_max`` and ``alpha_max_upper`` the bisection's
+    bracket of the largest feasible rate (absent when the user set ``alpha``), ``ts_max`` the largest
+    sample time at which every R_i's explicit Euler step is stable. The paper variant holds only
+    ``alpha`` (0) and ``why``; documents older than the observer entry hold none.
+
+    Read ``d.observer.alpha``; ``d.observer["alpha"]`` still works for a transition (see the module
+    docstring).
+    """
+
+    sample_time: float | None = None
+    alpha_max: float | None = None
+    alpha_max_upper: float | None = None
+    alpha: float | None = None
+    why: str | None = None
+    ts_max: float | None = None
+    extra: dict = field(default_factory=dict, repr=False)
+    order: tuple = field(default=(), repr=False)

@@ -1,0 +1,119 @@
+"""Issue #20 (the house): the Design record's ``params``, ``dims`` and ``observer`` are typed frozen records,
+and the design document they read and write is byte for byte what it was."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from fte_casadi.design import Design
+from fte_casadi.design.records import Dims, Observer, Params
+from fte_casadi.errors import DesignFileError
+
+ROOT = Path(__file__).resolve().parents[1]
+COMMITTED = sorted((ROOT / "generated").glob("*/design.json"))
+
+
+@pytest.fixture(scope="module", params=COMMITTED, ids=[p.parent.name for p in COMMITTED])
+def committed(request):
+    path = request.param
+    return path, path.read_text(), Design.load(path)
+
+
+def test_there_are_committed_documents():
+    assert len(COMMITTED) >= 3
+
+
+def test_save_of_a_loaded_document_is_the_committed_file_byte_for_byte(committed, tmp_path):
+    path, text, d = committed
+    d.save(tmp_path / "a.json")
+    assert (tmp_path / "a.json").read_text() == text
+    Design.load(tmp_path / "a.json").save(tmp_path / "b.json")
+    assert (tmp_path / "b.json").read_bytes() == path.read_bytes()
+
+
+def test_records_are_typed_and_agree_with_the_document(committed):
+    _, text, d = committed
+    doc = json.loads(text)
+    assert isinstance(d.params, Params) and isinstance(d.dims, Dims) and isinstance(d.observer, Observer)
+    for name in ("params", "dims", "observer"):
+        rec = getattr(d, name)
+        assert list(rec.keys()) == list(doc[name]), name  # the document's key order
+        for k, v in doc[name].items():
+            assert getattr(rec, k) == v == rec[k] == rec.get(k), (name, k)  # attribute and item access
+    assert all(isinstance(getattr(d.dims, k), int) for k in ("n", "m", "p", "ld", "lf", "r", "nbar"))
+    assert d.dims.nbar == d.nbar == d.dims.n + 2 * d.dims.lf and d.dims.r == len(d.K)
+    assert d.params.gamma2 is None and d.params.get("gamma2") is None and "gamma2" not in d.params
+    assert d.observer.alpha > 0 and d.observer.sample_time > 0 and d.observer.ts_max > d.observer.sample_time
+
+
+def test_records_are_frozen(committed):
+    d = committed[2]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        d.dims.n = 3
+    with pytest.raises(TypeError):
+        d.params["sigma"] = 1.0  # no item assignment either
+
+
+def test_an_older_document_without_the_newer_keys_loads_and_saves_as_it_was(committed, tmp_path):
+    doc = json.loads(committed[1])
+    for k in ("observer", "x0", "params_chosen", "bounds", "solves", "certified", "status"):
+        doc.pop(k, None)
+    d = Design.from_dict(doc)
+    assert (
+        not d.observer
+        and len(d.observer) == 0
+        and d.observer.alpha is None
+        and d.observer.get("alpha") is None
+    )
+    out = d.to_dict()
+    assert out["observer"] == {} and out["params"] == doc["params"] and out["dims"] == doc["dims"]
+
+
+def test_keys_a_record_does_not_type_survive_a_round_trip(committed):
+    doc = json.loads(committed[1])
+    doc["params"] = {"kappa": 500.0, **doc["params"], "later_knob": 2.5}
+    doc["observer"] = {**doc["observer"], "sample_time": None, "later_note": "x"}
+    d = Design.from_dict(doc)
+    assert d.params.kappa == 500.0 and d.params["later_knob"] == 2.5 and d.params.extra == {"later_knob": 2.5}
+    assert d.observer.sample_time is None and "sample_time" in d.observer  # held as null, written as null
+    assert d.observer["later_note"] == "x"
+    again = json.loads(d.to_json())
+    for name in ("params", "dims", "observer"):
+        assert list(again[name].items()) == list(doc[name].items()), name
+
+
+def test_a_document_lacking_a_required_size_or_parameter_is_refused_by_name(committed):
+    for entry, key in (("dims", "nbar"), ("params", "sigma")):
+        doc = json.loads(committed[1])
+        del doc[entry][key]
+        with pytest.raises(DesignFileError, match=rf"'{entry}' lacks \['{key}'\]"):
+            Design.from_dict(doc)
+    doc = json.loads(committed[1])
+    doc["observer"] = [1, 2]
+    with pytest.raises(DesignFileError, match="'observer' must be a JSON object"):
+        Design.from_dict(doc)
+
+
+def test_dicts_given_for_the_records_become_records(committed):
+    d = committed[2]
+    e = dataclasses.replace(d, observer={k: v for k, v in d.observer.items() if k != "sample_time"},
+                            params=dict(d.params, sigma=2 * d.params.sigma))  # fmt: skip
+    assert (
+        isinstance(e.observer, Observer)
+        and e.observer.sample_time is None
+        and "sample_time" not in e.observer
+    )
+    assert isinstance(e.params, Params) and e.params.sigma == 2 * d.params.sigma
+    assert list(e.params) == list(d.params)  # the order of the dict given
+
+
+def test_replace_keeps_the_order_and_appends_a_new_key(committed):
+    p = committed[2].params
+    q = p.replace(boundary_layer=0.25, sigma=p.sigma / 2)
+    assert q.boundary_layer == 0.25 and q.sigma == p.sigma / 2 and p.boundary_layer is None
+    assert list(q.to_dict()) == list(p.to_dict()) + ["boundary_layer"]
+    assert q != p and p == dict(p) and p.replace() == p
