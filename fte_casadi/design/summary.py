@@ -1,0 +1,53 @@
+"""The text ``fte design`` prints for a design: its certificate, observer, bound, timings and notes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["design_summary"]
+
+
+def design_summary(d) -> str:
+    """The summary of the Design ``d`` that ``fte design`` prints (one string, lines joined)."""
+    c = d.checks
+    lmi = c["lmi_max_eig"]
+    K = max(float(np.max(np.abs(k))) for k in d.K)
+    obs = d.observer
+    lines = [
+        f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
+        f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
+        "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.to_dict().items()),
+        "  largest eigenvalue of each LMI at the returned point (negative = holds): "
+        + ", ".join(f"({k}) {v:.3g}" for k, v in lmi.items())
+        + (
+            "; round-off of each, 8 dim eps ||M||: "
+            + ", ".join(f"{v:.1g}" for v in c["lmi_roundoff"].values())
+            if c.get("lmi_roundoff")
+            else ""
+        ),
+        f"  theta = {d.theta:.3g}, cond(Pbar) = {c['cond_Pbar']:.3g}, max|L1| = {c['max_abs_L1']:.3g}, max|K| = {K:.3g}",
+        f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
+        f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",
+    ]
+    disc = c.get("discrete")
+    if disc:
+        lines.append(
+            f"  discrete step at the sample time Ts = {disc['sample_time']:g}: "
+            + ("proven stable" if disc["holds"] else "NOT proven stable")
+            + f" for any blending of the rules (Pbar decreases for Ts < {disc['ts_max_lyapunov']:.4g})"
+        )
+    fb = (d.bounds or {}).get("fault_error")
+    if fb and fb.get("holds"):
+        lines.append("  certified bound on the fault-estimation error: E int |f - fhat|^2 dt <= "
+                     + " + ".join(f"{g:.3g}^2 t" if c == "const" else f"{g:.3g}^2 E int |{c}|^2" for c, g in fb["gains"].items())
+                     + " + E xi0' P xi0 (docs/tune.md)")  # fmt: skip
+    elif fb:
+        lines.append(f"  no bound on the fault-estimation error: {fb.get('why')}")
+    if obs.alpha is not None:
+        lines.append(f"  observer decay rate alpha = {obs.alpha:.4g}: {obs.why or ''}")
+    solves = f", {d.solves.get('total')} conic solves" if d.solves else ""
+    lines.append(
+        f"  time: {d.timings['total_s']:.2f} s in all, {d.timings['solver_s']:.2f} s in the solver{solves}"
+    )
+    lines += [f"  note: {s}" for s in d.status]
+    return "\n".join(lines)
