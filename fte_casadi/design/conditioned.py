@@ -326,7 +326,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
 
 
 # -- step 5 ----------------------------------------------------------------------------------
-def _step5_problem(aug: Augmented, params: dict, X, K, T):
+def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
     """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule."""
     n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.ns  # ns = lf (+ Remark 5's directions)
     sg, g1 = params["sigma"], params["gamma1"]
@@ -361,20 +361,22 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T):
 
     feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46) for i in range(r)]
     feas += _normalisation(layout, "Pt", nbar, _kappa(params))
+    if not rest:  # the feasibility solve needs (46) and the normalisation only
+        return layout, feas, [], None
 
     def N_of(Pt):
         return aug.Js.T @ T.T @ Pt @ Cp
 
-    rest = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
+    others = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf))]  # fmt: skip
-    rest += [margin_lmi(f"(64) rule {i + 1}", layout,
+    others += [margin_lmi(f"(64) rule {i + 1}", layout,
                         lambda Pt, s, rho, tau, i=i: _balanced(diffusion_coupling(aug, i, T, Pt), tau),
                         margin=lambda Pt, s, rho, tau: _balanced_margin(tau, n, lf))
              for i in range(r)]  # fmt: skip
     c = np.zeros(layout.size)
     c[layout.index("rho")] = 1.0
     c[layout.index("tau")] = 1.0
-    return layout, feas, rest, c
+    return layout, feas, others, c
 
 
 class _Step5:
@@ -429,7 +431,7 @@ class _Step5:
         tau = self.tau
         aug_s = time_scaled(self.aug, tau)
         params_s = dict(self.params, sigma=self.params["sigma"] * tau**2)
-        layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T)
+        layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T, rest=False)
         self.feas = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in feas_s])
         res = self.feas.solve(self.solver, 0.0)
         if res.v is None or not np.all(np.isfinite(res.v)):
