@@ -418,35 +418,39 @@ def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: 
     if not generic:
         return None
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
-    trials = []
-    if "sigma" in generic:
-        smax, _ = sigma_max(aug, g, g1, solver)
-        if smax is not None:
-            if lmi == "45":
-                cands = [nice_floor(smax * f) for f in SIGMA_TRIALS]
-            else:  # (46) wants sigma large enough to dominate the observer-loop coupling
-                cands = [nice_floor(sg + f * (smax - sg)) for f in (0.2, 0.4, 0.6, 0.8, 0.95) if smax > sg]
-                cands += [nice_floor(smax * f) for f in SIGMA_TRIALS]
-            why = f"the largest sigma for which (45) is feasible at gamma = {g:g}, gamma1 = {g1:g} is {smax:.3g}"
-            trials += [({"sigma": c}, why) for c in dict.fromkeys(cands) if c > 0]
-    if {"sigma", "gamma"} <= generic and sigma_max(aug, g, g1, solver)[0] is None:
-        sup, _ = sigma_max(aug, None, g1, solver)  # no sigma works at this gamma: move both
-        for f in (0.5, 0.2, 0.05) if sup is not None else ():
-            sc = nice_floor(sup * f)
-            gm, _ = gamma_min(aug, sc, g1, solver)
-            if gm is None:
-                continue
-            why = (f"no sigma makes (45) feasible at gamma = {g:g}; any gamma needs sigma < {sup:.3g}, and at "
-                   f"sigma = {sc:g} the smallest feasible gamma is {gm:.3g}")  # fmt: skip
-            trials += [
-                ({"sigma": sc, "gamma": nice_ceil(max(gm * gf, g1 * 1.01))}, why) for gf in (1.25, 2.5)
-            ]
-    if "gamma" in generic:
-        gmin, _ = gamma_min(aug, sg, g1, solver)
-        if gmin is not None:
-            why = f"the smallest gamma for which (45) is feasible at sigma = {sg:g}, gamma1 = {g1:g} is {gmin:.3g}"
-            trials += [({"gamma": nice_ceil(max(gmin * f, g1 * 1.01))}, why) for f in GAMMA_TRIALS]
-    for change, why in trials:
+
+    def trials():  # lazily: each bound is one conic solve, asked for only when the values before it failed
+        if "sigma" in generic:
+            smax, _ = sigma_max(aug, g, g1, solver)
+            if smax is not None:
+                if lmi == "45":
+                    cands = [nice_floor(smax * f) for f in SIGMA_TRIALS]
+                else:  # (46) wants sigma large enough to dominate the observer-loop coupling
+                    cands = [
+                        nice_floor(sg + f * (smax - sg)) for f in (0.2, 0.4, 0.6, 0.8, 0.95) if smax > sg
+                    ]
+                    cands += [nice_floor(smax * f) for f in SIGMA_TRIALS]
+                why = f"the largest sigma for which (45) is feasible at gamma = {g:g}, gamma1 = {g1:g} is {smax:.3g}"
+                yield from (({"sigma": c}, why) for c in dict.fromkeys(cands) if c > 0)
+        if {"sigma", "gamma"} <= generic and sigma_max(aug, g, g1, solver)[0] is None:
+            sup, _ = sigma_max(aug, None, g1, solver)  # no sigma works at this gamma: move both
+            for f in (0.5, 0.2, 0.05) if sup is not None else ():
+                sc = nice_floor(sup * f)
+                gm, _ = gamma_min(aug, sc, g1, solver)
+                if gm is None:
+                    continue
+                why = (f"no sigma makes (45) feasible at gamma = {g:g}; any gamma needs sigma < {sup:.3g}, and at "
+                       f"sigma = {sc:g} the smallest feasible gamma is {gm:.3g}")  # fmt: skip
+                yield from (
+                    ({"sigma": sc, "gamma": nice_ceil(max(gm * gf, g1 * 1.01))}, why) for gf in (1.25, 2.5)
+                )
+        if "gamma" in generic:
+            gmin, _ = gamma_min(aug, sg, g1, solver)
+            if gmin is not None:
+                why = f"the smallest gamma for which (45) is feasible at sigma = {sg:g}, gamma1 = {g1:g} is {gmin:.3g}"
+                yield from (({"gamma": nice_ceil(max(gmin * f, g1 * 1.01))}, why) for f in GAMMA_TRIALS)
+
+    for change, why in trials():
         d = _try(ts, retry, **change)
         if d is not None:
             first = " ".join(str(exc).split())[:160]

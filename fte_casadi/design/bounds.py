@@ -94,6 +94,8 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
     the analysis LMI is infeasible, fails its numpy check, or the design has Theorem 5 diffusion."""
     import cvxpy as cp
 
+    from .sdp import SOLVER_SETTINGS
+
     if any(np.any(np.asarray(lm.get(k, 0.0))) for lm in design.local_models for k in ("G", "Gf", "M")):
         return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
     verts, Cz = _vertices(design)
@@ -120,7 +122,7 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
     try:
         with warnings.catch_warnings():  # "may be inaccurate": the point is checked with numpy below
             warnings.simplefilter("ignore", UserWarning)
-            prob.solve(solver=solver)
+            prob.solve(solver=solver, **SOLVER_SETTINGS.get(solver, {}))
     except cp.error.SolverError as exc:
         return {"holds": False, "why": f"the analysis LMI failed in the solver ({exc})"}
     if P.value is None or g.value is None:

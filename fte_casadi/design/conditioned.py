@@ -429,10 +429,12 @@ class _Step5:
         if self.tau == 1.0:
             return self.feas.solve(self.solver, 0.0)
         tau = self.tau
-        aug_s = time_scaled(self.aug, tau)
-        params_s = dict(self.params, sigma=self.params["sigma"] * tau**2)
-        layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T, rest=False)
-        self.feas = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in feas_s])
+        if self.feas.layout is self.layout:  # not built in the scaled time yet
+            aug_s = time_scaled(self.aug, tau)
+            params_s = dict(self.params, sigma=self.params["sigma"] * tau**2)
+            layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T, rest=False)
+            self.feas = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in feas_s])
+        layout_s = self.feas.layout
         res = self.feas.solve(self.solver, 0.0)
         if res.v is None or not np.all(np.isfinite(res.v)):
             return res
@@ -441,8 +443,23 @@ class _Step5:
         return SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
 
     def first(self) -> SolveResult:
-        """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else."""
+        """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else.
+
+        A numerical failure of the solver is retried here with the other solver: only this point comes
+        from a solver (the decisions and the centring run in numpy), so the design does not change, and
+        steps 1-3 are not run again."""
         res = self._conic()
+        if res.failed:
+            other = "SCS" if self.solver == "CLARABEL" else "CLARABEL"
+            first, self.solver = res, other
+            res = self._conic()
+            res = SolveResult(
+                res.status, res.v, first.seconds + res.seconds, res.rescaled, first.warned + res.warned
+            )
+            self.notes.append(
+                f"step 5: {'SCS' if other == 'CLARABEL' else 'CLARABEL'} failed numerically on the feasibility solve "
+                f"({first.status[:120]}, also on rescaled data); {other}'s point ({res.status}) starts the centring"
+            )
         if res.v is not None and np.all(np.isfinite(res.v)):
             v = res.v.copy()
             ir = self.layout.index("rho")

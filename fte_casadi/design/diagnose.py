@@ -71,6 +71,29 @@ def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: f
     return layout, lmis, c
 
 
+#: the last answers of :func:`gamma_min` and :func:`sigma_max`: one design asks the same question up to three
+#: times (the bound in the refusal, the parameter search, the message), each a conic solve of its own
+_MEMO: dict = {}
+_MEMO_SIZE = 16
+
+
+def _memo(fn):
+    def wrapper(aug: Augmented, a, gamma1: float, solver: str):
+        key = (fn.__name__, id(aug), a, gamma1, solver)
+        hit = _MEMO.get(key)
+        if hit is not None and hit[0] is aug:  # the entry holds aug itself, so its id was not reused
+            return hit[1]
+        out = fn(aug, a, gamma1, solver)
+        while len(_MEMO) >= _MEMO_SIZE:
+            _MEMO.pop(next(iter(_MEMO)))
+        _MEMO[key] = (aug, out)
+        return out
+
+    wrapper.__name__, wrapper.__doc__, wrapper.__wrapped__ = fn.__name__, fn.__doc__, fn
+    return wrapper
+
+
+@_memo
 def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple[float | None, str]:
     """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status."""
     layout, lmis, c = _problem(aug, sigma, None, gamma1)
@@ -81,6 +104,7 @@ def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple
     return float(math.sqrt(max(g2, gamma1**2))), res.status
 
 
+@_memo
 def sigma_max(aug: Augmented, gamma: float | None, gamma1: float, solver: str) -> tuple[float | None, str]:
     """The largest sigma with (45) feasible at ``gamma`` (None: gamma infinite), and the status.
 
