@@ -37,8 +37,9 @@ __all__ = ["fault_error_bound", "bound_value", "CHANNELS"]
 #: the input channels, in order
 CHANNELS = ("d", "fddot", "u_s", "f", "const")
 #: the analysis is skipped (and says so) beyond these sizes: one conic solve over all vertices, whose cost
-#: grows with vertices x states^4 (a chain of n = 8 states, 4 rules, closed loop of 20 states: 5 s)
-MAX_VERTICES, MAX_STATES = 64, 24
+#: grows with vertices x states^4 (a chain of n = 8 states, 4 rules, closed loop of 20 states: 5 s; n = 6
+#: with 64 rules, 11 s of a design's 12 s, so 64 vertices are beyond it)
+MAX_VERTICES, MAX_STATES = 16, 24
 
 
 def _vertices(design):

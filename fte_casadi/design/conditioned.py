@@ -248,7 +248,7 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
     D = _diag([n, n, p, ld], [sg, 0.0, 1.0, g**2 - g1**2])
     lmis = [
         margin_lmi(f"(45) rule {i + 1}", layout, lambda X, Y, s, t, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
-                   margin=lambda X, Y, s, t: s * D)
+                   margin=lambda X, Y, s, t: s * D, support=layout.support("X", "Y", "s"))
         for i in range(aug.r)
     ]  # fmt: skip
     lmis += _normalisation(layout, "X", n, _kappa(params))
@@ -359,7 +359,8 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
         M[n : n + nbar, n : n + nbar] = 2 * Pt
         return M
 
-    feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46) for i in range(r)]
+    feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46, support=layout.support("Pt", "s", ("rho", i)))
+            for i in range(r)]  # fmt: skip
     feas += _normalisation(layout, "Pt", nbar, _kappa(params))
     if not rest:  # the feasibility solve needs (46) and the normalisation only
         return layout, feas, [], None

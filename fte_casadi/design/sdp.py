@@ -124,6 +124,18 @@ class Layout:
         k = [v.name for v in self.vars].index(name)
         return slice(int(self.offsets[k]), int(self.offsets[k + 1]))
 
+    def support(self, *parts) -> np.ndarray:
+        """Indices of ``v`` for ``parts``: a variable's name (all of it) or ``(name, i)`` (its entry i)."""
+        out = []
+        for part in parts:
+            if isinstance(part, str):
+                sl = self.index(part)
+                out.extend(range(sl.start, sl.stop))
+            else:
+                name, i = part
+                out.append(self.index(name).start + int(i))
+        return np.asarray(sorted(set(out)), dtype=int)
+
 
 @dataclass(frozen=True)
 class AffineLMI:
@@ -151,12 +163,12 @@ class AffineLMI:
         return M
 
 
-def _basis(layout: Layout, builder: Callable[..., np.ndarray]):
+def _basis(layout: Layout, builder: Callable[..., np.ndarray], support: np.ndarray | None = None):
     zero = builder(**layout.unpack(np.zeros(layout.size)))
     F0 = _sym(np.asarray(zero, dtype=float))
-    F = np.empty((layout.size, *F0.shape))
+    F = np.zeros((layout.size, *F0.shape))
     e = np.zeros(layout.size)
-    for l in range(layout.size):
+    for l in range(layout.size) if support is None else support:
         e[l] = 1.0
         F[l] = _sym(np.asarray(builder(**layout.unpack(e)), dtype=float)) - F0
         e[l] = 0.0
@@ -168,20 +180,24 @@ def affine_lmi(
     layout: Layout,
     builder: Callable[..., np.ndarray],
     param: Callable[..., np.ndarray] | None = None,
+    support: np.ndarray | None = None,
 ) -> AffineLMI:
     """The affine map of ``builder(**unknowns)`` (and of the parameter's coefficient ``param``).
 
     The builder must be affine in the unknowns; this is checked at a random point, so a builder
-    that is not (a bug) fails loudly instead of giving a wrong LMI.
+    that is not (a bug) fails loudly instead of giving a wrong LMI. ``support`` (indices of ``v``)
+    names the only unknowns the builder depends on (e.g. rule i's own gain scale among r of them):
+    the others are not evaluated, and the random check (every unknown nonzero) fails loudly when
+    the builder depends on one outside it.
     """
-    F0, F = _basis(layout, builder)
+    F0, F = _basis(layout, builder, support)
     v = np.random.default_rng(12345).standard_normal(layout.size)
     direct = _sym(np.asarray(builder(**layout.unpack(v)), dtype=float))
     if not np.allclose(direct, F0 + np.tensordot(v, F, 1), rtol=1e-9, atol=1e-9 * (1 + np.abs(direct).max())):
         raise RuntimeError(f"internal error: the builder of {name} is not affine in its unknowns")
     G = None
     if param is not None:
-        G0, G = _basis(layout, param)
+        G0, G = _basis(layout, param, support)
         if np.any(G0):
             raise RuntimeError(f"internal error: the parameter term of {name} has a constant part")
     return AffineLMI(name, F0, F, G)
@@ -205,11 +221,14 @@ def margin_lmi(
     builder: Callable[..., np.ndarray],
     param: Callable[..., np.ndarray] | None = None,
     margin: Callable[..., np.ndarray] | None = None,
+    support: np.ndarray | None = None,
 ) -> MarginLMI:
     """``builder(**unknowns) + m * margin(**unknowns)``: one extraction of each serves every margin ``m``."""
-    base = affine_lmi(name, layout, builder, param)
+    base = affine_lmi(name, layout, builder, param, support)
     unit = (
-        affine_lmi(name, layout, margin) if margin is not None else AffineLMI(name, 0 * base.F0, 0 * base.F)
+        affine_lmi(name, layout, margin, support=support)
+        if margin is not None
+        else AffineLMI(name, 0 * base.F0, 0 * base.F)
     )
     return MarginLMI(base, unit)
 
@@ -319,29 +338,34 @@ class Centred:
 class _Barrier:
     """``-sum_k log det(-F_k(v))`` of LMIs given as ``(F0, F)``, with the unknowns it involves.
 
-    LMIs of equal size are stacked, so that one batched Cholesky factorisation, inverse and
-    product serves them all (these problems have a handful of small LMIs; Python overhead per
-    LMI would otherwise dominate a Newton step).
+    LMIs of equal size and equal number of unknowns they depend on (their support) are stacked,
+    so that one batched Cholesky factorisation, inverse and product serves them all (these
+    problems have a handful of small LMIs, or many alike, one per rule; Python overhead per LMI
+    would otherwise dominate a Newton step). Each LMI's derivatives are formed over its own
+    support only and added into the gradient and Hessian there: rule i's (46) holds rule i's
+    gain scale among r of them, and a dense Hessian over all of them grew like r^3.
     """
 
     def __init__(self, lmis: Sequence[AffineLMI], nv: int):
         self.nu = float(sum(L.k for L in lmis))
         self.nv = nv
-        allF = np.concatenate([L.F.reshape(nv, -1) for L in lmis], axis=1)
+        supports = [np.flatnonzero(np.any(L.F.reshape(nv, -1), axis=1)) for L in lmis]
         #: unknowns some LMI depends on (the others are left where they are)
-        self.free = np.flatnonzero(np.any(allF, axis=1))
+        self.free = np.unique(np.concatenate(supports)) if supports else np.zeros(0, dtype=int)
+        pos = np.full(nv, -1)
+        pos[self.free] = np.arange(len(self.free))
         self.groups = []
-        for k in sorted({L.k for L in lmis}):
-            members = [L for L in lmis if L.k == k]
-            F0 = np.stack([L.F0 for L in members])  # (g, k, k)
-            Fm = np.stack([L.F.reshape(nv, -1) for L in members], axis=1)  # (nv, g, k*k)
-            Ff = np.stack([L.F[self.free] for L in members])  # (g, nf, k, k)
-            self.groups.append((k, F0, Fm.reshape(nv, -1), Ff))
+        for key in sorted({(L.k, len(sp)) for L, sp in zip(lmis, supports)}):
+            members = [(L, sp) for L, sp in zip(lmis, supports) if (L.k, len(sp)) == key]
+            F0 = np.stack([L.F0 for L, _ in members])  # (g, k, k)
+            idx = np.stack([sp for _, sp in members])  # (g, ns): the unknowns of each
+            Fs = np.stack([L.F[sp] for L, sp in members])  # (g, ns, k, k)
+            self.groups.append((key[0], F0, idx, Fs, pos[idx]))
 
     def factors(self, v):
         out = []
-        for _, F0, Fm, _ in self.groups:
-            M = -(F0 + (v @ Fm).reshape(F0.shape))
+        for _, F0, idx, Fs, _ in self.groups:
+            M = -(F0 + np.einsum("gs,gskl->gkl", v[idx], Fs))
             try:
                 out.append(np.linalg.cholesky(M))
             except np.linalg.LinAlgError:
@@ -356,18 +380,24 @@ class _Barrier:
         nf = len(self.free)
         g = np.zeros(nf)
         Hm = np.zeros((nf, nf))
-        for Lc, (_, _, _, Ff) in zip(fac, self.groups):
+        for Lc, (_, _, _, Fs, ip) in zip(fac, self.groups):
             Li = np.linalg.inv(Lc)  # (g, k, k)
-            W = Li[:, None] @ Ff @ np.swapaxes(Li, -1, -2)[:, None]  # W_l = L^-1 F_l L^-T
-            g += np.trace(W, axis1=-2, axis2=-1).sum(axis=0)  # grad_l = tr(W_l)
-            W2 = np.swapaxes(W, 0, 1).reshape(nf, -1)
-            Hm += W2 @ W2.T  # Hess_lm = tr(W_l W_m), summed over the group
+            W = Li[:, None] @ Fs @ np.swapaxes(Li, -1, -2)[:, None]  # W_l = L^-1 F_l L^-T, (g, ns, k, k)
+            g += np.bincount(ip.ravel(), weights=np.trace(W, axis1=-2, axis2=-1).ravel(), minlength=nf)  # tr(W_l)
+            if ip.shape[0] > 1 and np.all(ip == ip[0]):  # one support for all (e.g. Pt in (55) and (64))
+                W2 = np.swapaxes(W, 0, 1).reshape(ip.shape[1], -1)
+                Hm[np.ix_(ip[0], ip[0])] += W2 @ W2.T
+            else:
+                W2 = W.reshape(*ip.shape, -1)
+                Hl = W2 @ np.swapaxes(W2, -1, -2)  # Hess_lm = tr(W_l W_m) per LMI, over its support
+                flat = (ip[:, :, None] * nf + ip[:, None, :]).ravel()  # added where the supports overlap
+                Hm += np.bincount(flat, weights=Hl.ravel(), minlength=nf * nf).reshape(nf, nf)
         return g, Hm
 
     def slack(self, v) -> float:
         return min(
-            float(np.linalg.eigvalsh(-(F0 + (v @ Fm).reshape(F0.shape))).min())
-            for _, F0, Fm, _ in self.groups
+            float(np.linalg.eigvalsh(-(F0 + np.einsum("gs,gskl->gkl", v[idx], Fs))).min())
+            for _, F0, idx, Fs, _ in self.groups
         )
 
 
@@ -426,6 +456,26 @@ def _newton(bar: _Barrier, c: np.ndarray, v: np.ndarray, fac, mu: float, tol: fl
             return v, fac
 
 
+def _fit_mu(bar: _Barrier, c: np.ndarray, fac) -> float:
+    """The ``mu`` for which the point is closest to central: the minimiser over ``x = 1/mu`` of the Newton
+    decrement ``lambda^2(x) = a x^2 + 2 b x + d`` of ``c^T v / mu + barrier(v)`` at the point (``a = c^T H^-1 c``,
+    ``b = c^T H^-1 g``). When the objective does not pull the point (``b >= 0``), the ``mu`` at which it adds
+    ``1/4`` to ``lambda^2``. A path followed from there needs a few Newton steps per stage; started from
+    ``mu`` set by the final gap instead, the first stage crossed the whole path in hundreds of damped steps.
+    Only the path changes, not the point it ends at (inf when ``c`` vanishes on the free unknowns)."""
+    gb, Hm = bar.derivatives(fac)
+    cf = c[bar.free]
+    dscale = 1.0 / np.sqrt(np.maximum(np.diag(Hm), 1e-300))
+    try:
+        sol = dscale[:, None] * np.linalg.solve(Hm * dscale[:, None] * dscale[None, :], np.c_[cf, gb] * dscale[:, None])
+    except np.linalg.LinAlgError:
+        return 0.0
+    a, b = float(cf @ sol[:, 0]), float(cf @ sol[:, 1])
+    if not (a > 0 and np.isfinite(a) and np.isfinite(b)):
+        return 0.0
+    return a / -b if b < 0 else 2.0 * np.sqrt(a)
+
+
 def centre(
     lmis: Sequence[AffineLMI],
     c: np.ndarray,
@@ -455,6 +505,7 @@ def centre(
         raise CentringError(
             f"the objective plus floor must be positive at the start (got {float(c @ v) + floor:g})"
         )
+    mu = max(mu, _fit_mu(bar, c, fac))
     budget = [0, max_steps]
     prev = None  # (mu, h(mu)) of the stage before, for the secant step
     for _stage in range(200):
@@ -467,7 +518,10 @@ def centre(
         if prev is not None and h != prev[1]:
             sec = mu - h * (mu - prev[0]) / (h - prev[1])  # secant on h: superlinear near the fixed point
             if sec > 0:
-                nxt = sec
+                # not below half the target: the objective flattens near the optimum, so the secant
+                # overshoots there, and a point closer to the optimal face than the fixed point takes
+                # hundreds of damped steps to leave again
+                nxt = max(sec, 0.5 * target)
         prev = (mu, h)
         # follow the central path at most eightfold per stage (a far start converges in a few damped
         # steps per stage), and never further than halfway to zero
