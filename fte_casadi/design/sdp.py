@@ -383,7 +383,9 @@ class _Barrier:
         for Lc, (_, _, _, Fs, ip) in zip(fac, self.groups):
             Li = np.linalg.inv(Lc)  # (g, k, k)
             W = Li[:, None] @ Fs @ np.swapaxes(Li, -1, -2)[:, None]  # W_l = L^-1 F_l L^-T, (g, ns, k, k)
-            g += np.bincount(ip.ravel(), weights=np.trace(W, axis1=-2, axis2=-1).ravel(), minlength=nf)  # tr(W_l)
+            g += np.bincount(
+                ip.ravel(), weights=np.trace(W, axis1=-2, axis2=-1).ravel(), minlength=nf
+            )  # tr(W_l)
             if ip.shape[0] > 1 and np.all(ip == ip[0]):  # one support for all (e.g. Pt in (55) and (64))
                 W2 = np.swapaxes(W, 0, 1).reshape(ip.shape[1], -1)
                 Hm[np.ix_(ip[0], ip[0])] += W2 @ W2.T
@@ -467,7 +469,9 @@ def _fit_mu(bar: _Barrier, c: np.ndarray, fac) -> float:
     cf = c[bar.free]
     dscale = 1.0 / np.sqrt(np.maximum(np.diag(Hm), 1e-300))
     try:
-        sol = dscale[:, None] * np.linalg.solve(Hm * dscale[:, None] * dscale[None, :], np.c_[cf, gb] * dscale[:, None])
+        sol = dscale[:, None] * np.linalg.solve(
+            Hm * dscale[:, None] * dscale[None, :], np.c_[cf, gb] * dscale[:, None]
+        )
     except np.linalg.LinAlgError:
         return 0.0
     a, b = float(cf @ sol[:, 0]), float(cf @ sol[:, 1])
