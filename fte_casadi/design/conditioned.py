@@ -322,6 +322,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
         f"point (gap {ETA:g} of the objective)"
     ]  # fmt: skip
     notes += [f"step 3: {solver} warned: {w!r}" for w in res.warned] + [f"step 3: {r}" for r in repaired]
+    notes += [f"step 3: {x}" for x in prob.notes]
     return Step3(X, K, res.status, prob.solves, prob.seconds, notes)
 
 
@@ -623,7 +624,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         f"min sum rho_i + tau; observer decay rate alpha = {a:.4g} ({why}); {prob.solves} conic solve "
         f"({res0.status}" + (", on rescaled data" if res0.rescaled else "") + f") at alpha = 0, then "
         f"{prob.decisions} phase-1 decisions and {prob.newton} centring steps in numpy"
-    ] + prob.notes + [f"step 5: {solver} warned: {w!r}" for w in res0.warned]  # fmt: skip
+    ] + prob.notes + [f"step 5: {solver} warned: {w!r}" for w in res0.warned] + [f"step 5: {x}" for x in prob.feas.notes]  # fmt: skip
     return Step5(
         pt["Pbar"], pt["Q"], pt["N"], pt["theta"], a, res0.status, prob.solves, prob.seconds, observer, notes
     )
