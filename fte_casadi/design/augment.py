@@ -167,3 +167,36 @@ def time_scaled(aug: Augmented, tau: float) -> Augmented:
         Gfbar=tuple(rt * G for G in aug.Gfbar),
         Mbar=tuple(rt * M for M in aug.Mbar),
     )
+
+
+def output_scale(aug: Augmented) -> float:
+    """The outputs' characteristic size ``sy``: the power of two nearest the largest row norm of C (1 when C is zero).
+
+    Outputs measured in mm of a state in m give ``sy = 1024``; LMI (45) holds ``C X`` beside ``-I``, so a
+    feasible X is ``sy^2`` times smaller than for the same plant measured in m, and sigma with it.
+    """
+    c = float(np.max(np.linalg.norm(aug.Cbar[:, : aug.n], axis=1), initial=0.0))
+    if not (c > 0 and np.isfinite(c)):
+        return 1.0
+    return float(2.0 ** round(np.log2(c)))
+
+
+def units_scaled(aug: Augmented, tau: float, sy: float) -> Augmented:
+    """(8) in the time ``t / tau`` (:func:`time_scaled`) with outputs divided by ``sy``: ``Cbar / sy``.
+
+    LMI (45) of these data at ``(sigma tau^2 sy^2, gamma / sy, gamma1 / sy)`` and ``X~ = tau sy^2 X`` (the same
+    gain K) is a congruence of (45) at ``(sigma, gamma, gamma1)`` and X, times ``sy^2``: multiply (45) by
+    ``sy^2``, then take the congruence ``diag(I, I, I / sy, I / sy^2)`` of its (x, x, y, d) blocks (the
+    time's part as in :func:`time_scaled`). Both scale factors are powers of two, so the map is exact.
+    """
+    out = time_scaled(aug, tau)
+    return out if sy == 1.0 else replace(out, Cbar=aug.Cbar / sy)
+
+
+def units_params(params: dict, tau: float, sy: float) -> dict:
+    """The parameters of (45) in the units of :func:`units_scaled` (sigma, gamma, gamma1; the rest as given)."""
+    out = dict(params, sigma=params["sigma"] * tau**2 * sy**2)
+    for k in ("gamma", "gamma1", "gamma2"):
+        if out.get(k) is not None:
+            out[k] = out[k] / sy
+    return out
