@@ -21,7 +21,7 @@ from tolerances import C_DOUBLE
 from fte_casadi.cli import main
 from fte_casadi.codegen import build
 from fte_casadi.codegen.fmu import fmu_variables, generate_fmu, is_fte_fmu
-from fte_casadi.codegen.generate import default_ts
+from fte_casadi.codegen.generate import default_sample_time
 from fte_casadi.design.record import Design
 from fte_casadi.errors import CodegenError
 from fte_casadi.plants.loader import load_plant
@@ -56,15 +56,15 @@ def _recorded(plant: str, design: Design):
     the measurements y_k and the step's (u_k, xbarhat_k, yc_k) at each sample."""
     model = load_plant(plant)
     F = model.drift_function()
-    ts = default_ts(design)
-    fn = step_function(design, ts)
+    sample_time = default_sample_time(design)
+    fn = step_function(design, sample_time)
     horizon, fault = _fault(plant)
     x = design.xbar0[: model.n].copy()
     u = np.zeros(model.m)
     ys, ref = [], []
     z = None
-    for k in range(int(round(horizon / ts))):
-        t = k * ts
+    for k in range(int(round(horizon / sample_time))):
+        t = k * sample_time
         f = fault(t, u)
         d = np.full(model.ld, 0.05 * np.sin(3.0 * t))  # a deterministic unknown input
         y = design.C @ x + design.Df @ f
@@ -73,9 +73,9 @@ def _recorded(plant: str, design: Design):
         zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
         ys.append(y)
         ref.append(np.concatenate([u, xb, yc]))
-        x = x + ts * np.asarray(F(x, u, d, f)).ravel()
+        x = x + sample_time * np.asarray(F(x, u, d, f)).ravel()
         z = zn
-    return ts, np.array(ys), np.array(ref)
+    return sample_time, np.array(ys), np.array(ref)
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +112,7 @@ def test_fmpy_validates_the_fmu(plant, fmus):
     md = fmpy.read_model_description(str(path))
     assert md.fmiVersion == "2.0" and md.coSimulation is not None and md.modelExchange is None
     assert md.coSimulation.canHandleVariableCommunicationStepSize is False
-    assert float(md.defaultExperiment.stepSize) == default_ts(d)
+    assert float(md.defaultExperiment.stepSize) == default_sample_time(d)
     names = d.names or {}
     inputs = [v.name for v in md.modelVariables if v.causality == "input"]
     assert inputs == names["outputs"]
@@ -227,14 +227,18 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
 @pytest.mark.parametrize("factor", [2.0, 0.5, 1.001])
 def test_a_step_other_than_ts_is_refused(factor, fmus, tmp_path):
     d, path = fmus["three-tank"]
-    ts = default_ts(d)
+    sample_time = default_sample_time(d)
     messages: list = []
     s = _slave(path, tmp_path, messages)
     with pytest.raises(FMICallException) as err:
-        s.doStep(currentCommunicationPoint=0.0, communicationStepSize=factor * ts)
+        s.doStep(currentCommunicationPoint=0.0, communicationStepSize=factor * sample_time)
     assert err.value.status == 3  # fmi2Error
-    assert any(st == 3 and "refused" in msg and f"Ts = {ts!r}" in msg for st, msg in messages), messages
-    s.doStep(currentCommunicationPoint=0.0, communicationStepSize=ts * (1 + 1e-12))  # round-off: accepted
+    assert any(st == 3 and "refused" in msg and f"Ts = {sample_time!r}" in msg for st, msg in messages), (
+        messages
+    )
+    s.doStep(
+        currentCommunicationPoint=0.0, communicationStepSize=sample_time * (1 + 1e-12)
+    )  # round-off: accepted
     s.freeInstance()
 
 

@@ -62,10 +62,10 @@ def test_step_blends_kf_with_the_memberships(kf_design):
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_c_and_simulation_run_the_scheduled_term(kf_design, tmp_path):
     d = kf_design
-    ts = scenario().dt
-    generate_c(d, tmp_path, ts=ts)
+    sample_time = scenario().dt
+    generate_c(d, tmp_path, sample_time=sample_time)
     c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), d, "double")
-    fn = step_function(d, ts)
+    fn = step_function(d, sample_time)
     rng = np.random.default_rng(5)
     z = d.observer_start(np.zeros(d.dims["p"]))
     c.init(z)

@@ -127,7 +127,7 @@ def test_step_applies_each_sliding_gain(r5_bound):
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_c_equals_the_step_with_the_widened_sliding_term(r5_bound, tmp_path):
     d = r5_bound
-    generate_c(d, tmp_path, ts=TS)
+    generate_c(d, tmp_path, sample_time=TS)
     header = (tmp_path / "fte_remark5.h").read_text()
     assert "#define FTE_REMARK5_NS 2" in header and "Remark 5" in header
     c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), d, "double")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..deprecation import renamed_keyword
 from ..errors import DesignFileError
 from .records import Dims, Observer, Params, _Record
 
@@ -202,7 +203,8 @@ class Design:
 
         return ca.Function.deserialize(self.scheduling)
 
-    def to_control(self, i: int = 0, j: int = 0, dt: float | None = None):
+    @renamed_keyword("dt", "sample_time")
+    def to_control(self, i: int = 0, j: int = 0, sample_time: float | None = None):
         """The closed loop of plant rule ``i``, observer rule ``i`` and gain ``K_j`` as a ``control.StateSpace``.
 
         States ``[x; z]``; inputs ``[u_ref; d; f]`` (the reference input, unknown inputs, faults);
@@ -210,12 +212,13 @@ class Design:
         Kf fhat`` with ``xbarhat = z + H y``. Left out: the sliding term ``Ls us`` (discontinuous),
         the affine offsets of linearised models and the actuator limits (the model is linear). Its
         poles are ``eig(A_i + B_i K_j)`` and ``eig(R_i)`` (the observer error decouples). With
-        ``dt``: the loop as the generated C runs it, the plant by zero-order hold and the observer
+        ``sample_time``: the loop as the generated C runs it, the plant by zero-order hold and the observer
         by the explicit Euler step of docs/method.md. Needs python-control (``fte_casadi[control]``).
+        The former keyword ``dt`` still works, with a ``DeprecationWarning``.
         """
         from ..interop import closed_loop_ss
 
-        return closed_loop_ss(self, i, j, dt)
+        return closed_loop_ss(self, i, j, sample_time)
 
     def affine(self, i: int) -> np.ndarray:
         """Affine offset ``a_i`` of rule ``i`` (zeros for sector models)."""

@@ -51,7 +51,7 @@ from .vector import auto_chunk as auto_chunk
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
 
-__all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_step", "SCALES",
+__all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_sample_time", "SCALES",
            "auto_chunk"]  # fmt: skip
 
 #: at most about this many recorded samples per example path
@@ -200,10 +200,10 @@ def result_names(plant: Plant) -> dict:
     }
 
 
-def design_step(design: Design, scenario: Scenario) -> float:
-    """The step the design was made (and certified) for: its recorded sample time, else the scenario's."""
-    ts = design.observer.sample_time
-    return float(ts) if ts else float(scenario.dt)
+def design_sample_time(design: Design, scenario: Scenario) -> float:
+    """The sample time the design was made (and certified) for: its recorded one, else the scenario's step."""
+    sample_time = design.observer.sample_time
+    return float(sample_time) if sample_time else float(scenario.dt)
 
 
 def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[float, int, list[str]]:
@@ -212,7 +212,7 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
     notes = []
     ts_max = float(design.checks.get("ts_max", math.inf) or math.inf)
     if dt is None:
-        dt = design_step(design, scenario)
+        dt = design_sample_time(design, scenario)
         if dt > ts_max:
             new = series_floor(ts_max / 2)
             while abs(scenario.T / new - round(scenario.T / new)) > 1e-9 * scenario.T / new:
@@ -237,8 +237,8 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
 
 def step_change(design: Design, scenario: Scenario, dt: float, given: float | None) -> dict | None:
     """``{"from", "to", "why"}`` when the step run differs from the design's sample time, else None."""
-    ts = design_step(design, scenario)
-    if abs(dt - ts) <= 1e-12 * ts:
+    sample_time = design_sample_time(design, scenario)
+    if abs(dt - sample_time) <= 1e-12 * sample_time:
         return None
     why = (
         "--dt given"
@@ -247,7 +247,7 @@ def step_change(design: Design, scenario: Scenario, dt: float, given: float | No
     )
     if given is not None and design.observer.sample_time is None:
         why = "--dt given (the design records no sample time: compared with the scenario's step)"
-    return {"from": ts, "to": float(dt), "why": why}
+    return {"from": sample_time, "to": float(dt), "why": why}
 
 
 def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
