@@ -65,8 +65,8 @@ def hand_written_c(design: Design, sample_time: float) -> str:
     src.append(_arr("UREF", design.u_ref))
     for i in range(r):
         lm = design.local_models[i]
-        Bbar = np.vstack([np.asarray(lm["B"]), np.zeros((2 * lf, m))])
-        abar = np.concatenate([np.asarray(lm.get("a", np.zeros(n)), float).ravel(), np.zeros(2 * lf)])
+        Bbar = np.vstack([lm.B, np.zeros((2 * lf, m))])
+        abar = np.concatenate([lm.a.ravel(), np.zeros(2 * lf)])
         src.append(_arr(f"R{i}", design.R[i]))
         src.append(_arr(f"TB{i}", T @ Bbar))
         src.append(_arr(f"LY{i}", np.asarray(design.L1[i]) + np.asarray(design.L2[i])))

@@ -51,7 +51,7 @@ def closed_loop_ss(design, i: int, j: int, sample_time: float | None = None):
 
             raise ParameterError(f"rule index {nm} must be an integer in 0..{r - 1}; got {k!r}")
     lm = design.local_models[i]
-    A, B, Bd, Bf = (np.asarray(lm[k], float) for k in ("A", "B", "Bd", "Bf"))
+    A, B, Bd, Bf = lm.A, lm.B, lm.Bd, lm.Bf
     C, Df, H, T = (np.asarray(a, float) for a in (design.C, design.Df, design.H, design.T))
     ld = Bd.shape[1]
     R = np.asarray(design.R[i], float)

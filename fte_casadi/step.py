@@ -129,8 +129,8 @@ def step_function(
     rhs = ca.mtimes(_dm(design.Ls), us)  # Ls = T J1 (T [Bdbar_u J1]) for every rule, and sum_i h_i = 1
     for i in range(r):
         lm = design.local_models[i]
-        Bbar = np.vstack([np.asarray(lm["B"]), np.zeros((2 * lf, m))])
-        abar = np.concatenate([np.asarray(lm["a"], dtype=float).ravel(), np.zeros(2 * lf)])
+        Bbar = np.vstack([lm.B, np.zeros((2 * lf, m))])
+        abar = np.concatenate([lm.a.ravel(), np.zeros(2 * lf)])
         TB = T @ Bbar
         Ly = np.asarray(design.L1[i]) + np.asarray(design.L2[i])
         Ta = T @ abar

@@ -26,8 +26,8 @@ def kf_design():
 def test_rules_keep_their_own_kf(kf_design, tmp_path):
     d = kf_design
     assert d.certified and d.Kf_rules is not None and len(d.Kf_rules) == d.r == 2
-    B = [np.asarray(lm["B"]) for lm in d.local_models]
-    Bf = [np.asarray(lm["Bf"]) for lm in d.local_models]
+    B = [lm.B for lm in d.local_models]
+    Bf = [lm.Bf for lm in d.local_models]
     for i in range(d.r):
         np.testing.assert_allclose(d.Kf_rules[i], -np.linalg.pinv(B[i]) @ Bf[i], rtol=1e-14)
     assert abs(float(d.Kf_rules[0][0, 0] - d.Kf_rules[1][0, 0])) > 0.05  # 1/(2 + cos x1) over [-1, 1]

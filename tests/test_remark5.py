@@ -71,7 +71,7 @@ def test_fallback_designs_and_certifies_with_the_widened_sliding_term(r5):
     Cbar = np.hstack([d.C, np.zeros((p, lf)), d.Df])
     assert np.max(np.abs(Cbar @ Bdu)) < 1e-12  # the outputs do not see it: that is why (1) fails
     for i, lm in enumerate(d.local_models):  # T Bdbar_i = Bdu M_i: all of d that reaches the error
-        Bdbar = np.vstack([np.asarray(lm["Bd"]), np.zeros((2 * lf, 1))])
+        Bdbar = np.vstack([lm.Bd, np.zeros((2 * lf, 1))])
         np.testing.assert_allclose(d.T @ Bdbar, Bdu @ np.array(rk["M"][i]), atol=1e-14)
     J1 = np.vstack([np.zeros((d.dims["n"], lf)), np.eye(lf), np.zeros((lf, lf))])
     np.testing.assert_allclose(d.Ls, d.T @ np.hstack([Bdu, J1]), atol=1e-14)
@@ -119,7 +119,7 @@ def test_step_applies_each_sliding_gain(r5_bound):
         h = np.asarray(sched(y, xb[:n])).ravel()
         rhs = d.Ls @ (g * np.sign(s))
         for i, lm in enumerate(d.local_models):
-            TB = d.T @ np.vstack([np.asarray(lm["B"]), np.zeros((2 * lf, m))])
+            TB = d.T @ np.vstack([lm.B, np.zeros((2 * lf, m))])
             rhs = rhs + h[i] * (d.R[i] @ z + TB @ u + (d.L1[i] + d.L2[i]) @ y)
         np.testing.assert_allclose(zn, z + TS * rhs, rtol=0, atol=1e-13)
 

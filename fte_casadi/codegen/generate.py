@@ -291,7 +291,7 @@ def _wrapper(
     setup += [f"res[{k}] = 0;" for k in range(5, sizes["SZ_RES"])]
     mem = _memory(c_src, real, nbar, sizes)
     certified = "certified" if design.certified else "NOT certified"
-    affine = any(np.any(np.asarray(lm.get("a", 0.0))) for lm in design.local_models)
+    affine = any(np.any(lm.a) for lm in design.local_models)
     sub = {
         "name": name,
         "NAME": NAME,

@@ -53,8 +53,8 @@ def _vertices(design):
     Kfs = list(design.Kf_rules) if design.Kf_rules is not None else [design.Kf] * design.r
     out = []
     for i, lm in enumerate(design.local_models):
-        A, B, Bd, Bf, W = (np.asarray(lm[k], float) for k in ("A", "B", "Bd", "Bf", "W"))
-        a = np.asarray(lm.get("a", np.zeros(n)), float).ravel()
+        A, B, Bd, Bf, W = lm.A, lm.B, lm.Bd, lm.Bf, lm.W
+        a = lm.a.ravel()
         Wbar = np.vstack([W, np.zeros((2 * lf, n))])
         Wc = np.block([[W, np.zeros((n, nbar))], [T @ Wbar, np.zeros((nbar, nbar))]])
         R = np.asarray(design.R[i], float)
@@ -97,7 +97,7 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
 
     from .sdp import SOLVER_SETTINGS
 
-    if any(np.any(np.asarray(lm.get(k, 0.0))) for lm in design.local_models for k in ("G", "Gf", "M")):
+    if any(lm.has_diffusion_extension for lm in design.local_models):
         return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
     verts, Cz = _vertices(design)
     N = Cz.shape[1]

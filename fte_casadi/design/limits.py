@@ -107,7 +107,7 @@ def fault_limits(design, j: int) -> FaultLimits:
     names = list(design.names.get("faults") or [f"f{k + 1}" for k in range(Df.shape[1])])
     zeros, sep_d, sep_f = [], [], []
     for lm in design.local_models:
-        A, Bf, Bd = (np.asarray(lm[k], float) for k in ("A", "Bf", "Bd"))
+        A, Bf, Bd = lm.A, lm.Bf, lm.Bd
         ld = Bd.shape[1]
         B = np.hstack([Bf[:, [j]], Bd])
         D = np.hstack([Df[:, [j]], np.zeros((C.shape[0], ld))])

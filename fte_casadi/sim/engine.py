@@ -171,16 +171,12 @@ def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, see
         )
 
 
-def _lm(design: Design, key: str) -> np.ndarray:
-    return np.asarray(design.local_models[0][key], dtype=float)
-
-
 def plant_schedule(
     design: Design, plant: Plant, scenario: Scenario, t: np.ndarray, dt: float
 ) -> FaultSchedule:
     """The scenario's fault profiles resolved against this plant and design, sampled at ``t``."""
     return fault_schedule(
-        scenario, plant.fault_names, plant.fault_kinds, _lm(design, "B"), _lm(design, "Bf"),
+        scenario, plant.fault_names, plant.fault_kinds, design.local_models[0].B, design.local_models[0].Bf,
         np.asarray(plant.Df), plant.input_names, t, dt,
         u_operating=getattr(plant, "u_operating", None), u_ref=design.u_ref,
     )  # fmt: skip
