@@ -417,7 +417,7 @@ def _window_lines(m: dict) -> list[str]:
 def _warnings(m: dict, inputs, faults=()) -> list[str]:
     """Where tolerant control is worse than none, a fault estimate raises false alarms, or an input
     sits at a limit (the thresholds of :mod:`fte_casadi.sim.metrics`)."""
-    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+    from .verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
 
     out = []
     for name, v in zip(faults, m.get("false_alarm_rel_rms") or ()):

@@ -198,7 +198,7 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
 
 def _windows_section(m: dict, plant) -> list[str]:
     """One row per fault window; a window where tolerant control is worse than none is marked."""
-    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+    from .verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
 
     out = ["Per fault window (FTC run, all paths pooled; **bold**: tolerant control worse than none there):", "",
            f"| fault | window | fault relative RMS error | FTC deviation ratio | inputs at a limit ({', '.join(plant.input_names)}) |",

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ParameterError
+from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 from .evaluate import evaluate
 from .space import Space, space_for
 
@@ -189,13 +190,13 @@ def _within_inputs(values: tuple, base: tuple, names: tuple) -> bool:
 
 
 def _admissible(m: dict) -> tuple[bool, bool]:
-    """(every window's FTC ratio < 1, every false-alarm ratio < 1)."""
+    """(every window's FTC ratio < 1, every false-alarm ratio < 1): the thresholds of :mod:`fte_casadi.verdicts`."""
     ftc = all(
-        w["ftc_deviation_ratio"] < 1
+        w["ftc_deviation_ratio"] < WORSE_THAN_NONE
         for w in m.get("windows") or []
         if w.get("ftc_deviation_ratio") is not None
     )
-    fa = all(v < 1 for v in m.get("false_alarm_rel_rms") or [] if v is not None)
+    fa = all(v < FALSE_ALARM for v in m.get("false_alarm_rel_rms") or [] if v is not None)
     return ftc, fa
 
 
@@ -401,7 +402,7 @@ def _limits(records, done, plant) -> list[str]:
     out = []
     for k in range(nwin):
         best = min(done, key=lambda r: r.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf)
-        if (best.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf) >= 1:
+        if (best.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf) >= WORSE_THAN_NONE:
             d = Design.from_dict(json.loads(best.design))
             out += [f"no certified candidate makes tolerant control better than none here (best: trial {best.number}); "
                     + s for s in explain_metrics(d, best.metrics, windows=[k], faults=[])]  # fmt: skip
