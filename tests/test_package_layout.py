@@ -1,4 +1,6 @@
-"""The shape of the package: no import circles, not even through imports inside functions."""
+"""The shape of the package: no import circles (not even through imports inside functions); what issue #20
+found written several times (the symmetric part, the solver statuses, nice rounding, the compiler lookup)
+written once; one class per name."""
 
 from __future__ import annotations
 
@@ -84,3 +86,61 @@ def test_the_graph_sees_imports_inside_functions():
 
 def test_no_import_circles():
     assert _cycles(import_graph()) == []
+
+
+# -- written once (issue #20, "one name per concept") ---------------------------------------------------
+def _where(pred) -> list[str]:
+    """``module:line`` of every AST node of the package for which ``pred(node)`` holds."""
+    out = []
+    for path in sorted(ROOT.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if pred(node):
+                out.append(f"{path.relative_to(ROOT).as_posix()}:{node.lineno}")
+    return out
+
+
+def _is_sym(node) -> bool:
+    """``0.5 * (M + M.T)``: the symmetric part, written out."""
+    if not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mult)):
+        return False
+    inner = node.right if isinstance(node.left, ast.Constant) else node.left
+    return (
+        isinstance(inner, ast.BinOp)
+        and isinstance(inner.op, ast.Add)
+        and ast.unparse(inner.right) == f"{ast.unparse(inner.left)}.T"
+    )
+
+
+def _calls(name: str):
+    return lambda node: isinstance(node, ast.Call) and ast.unparse(node.func) == name
+
+
+def _modules_of(places: list[str]) -> set[str]:
+    return {p.split(":")[0] for p in places}
+
+
+def test_the_symmetric_part_is_written_once():
+    assert _where(_is_sym) == ["design/linalg.py:12"]
+    assert _is_sym(ast.parse("0.5 * (P.value + P.value.T)").body[0].value)  # the check sees an inline one
+
+
+def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once():
+    inaccurate = _where(lambda n: isinstance(n, ast.Constant) and n.value == "optimal_inaccurate")
+    assert _modules_of(inaccurate) == {"design/sdp.py"} and len(inaccurate) == 1  # SOLVED
+    assert _modules_of(_where(_calls("math.log10")) + _where(_calls("np.log10"))) <= {
+        "rounding.py",
+        "design/conditioned.py",  # the span of the bracket in a message, not a rounding
+    }
+    assert _modules_of(_where(_calls("shutil.which"))) == {"toolchain.py"}
+
+
+def test_one_class_per_name():
+    """Two unrelated classes were both called ``Layout`` (the conic layer's and the engine's path layout)."""
+    seen: dict[str, list[str]] = {}
+    for place in _where(lambda n: isinstance(n, ast.ClassDef)):
+        path, line = place.split(":")
+        tree = ast.parse((ROOT / path).read_text())
+        name = next(n.name for n in ast.walk(tree) if isinstance(n, ast.ClassDef) and n.lineno == int(line))
+        seen.setdefault(name, []).append(place)
+    assert {k: v for k, v in seen.items() if len(v) > 1} == {}
+    assert "Layout" in seen and "PathLayout" in seen

@@ -215,14 +215,13 @@ def lyapunov_ts_max(R: list[np.ndarray], Pbar: np.ndarray) -> float:
     """
     best = np.inf
     for Ri in R:
-        S = Ri.T @ Pbar + Pbar @ Ri
-        S = 0.5 * (S + S.T)
+        S = _sym(Ri.T @ Pbar + Pbar @ Ri)
         if not np.linalg.eigvalsh(S).max() < 0:
             return 0.0
         G = Ri.T @ Pbar @ Ri
         L = np.linalg.cholesky(-S)  # -S = L L^T; eigenvalues of L^-1 G L^-T
         Li = np.linalg.inv(L)
-        lam = np.linalg.eigvalsh(Li @ (0.5 * (G + G.T)) @ Li.T).max()
+        lam = np.linalg.eigvalsh(Li @ _sym(G) @ Li.T).max()
         best = min(best, 1.0 / lam if lam > 0 else np.inf)
     return float(best)
 
