@@ -137,7 +137,7 @@ def _design_rows(designs: dict, printed: dict | None) -> list[str]:
     return out
 
 
-def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
+def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .checkout import load_benchmarks
     from .codegen import compile_shared, find_compiler, generate_c
     from .codegen.ctypes_step import CStep, closed_loop_compare
@@ -343,7 +343,7 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
     sec.append("")
     log(f"[{name}] generate, compile and check the embedded C")
     cdir = out / "c" / name.replace("-", "_")
-    csec, cinfo = _c_section(d, cdir, log)
+    csec, cinfo = _c_section(d, cdir)
     sec += ["### Embedded C", ""] + csec + [""]
     summary = {
         "metrics": m,

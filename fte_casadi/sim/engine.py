@@ -150,7 +150,7 @@ def closed_loop_sample(
     return fn, lay
 
 
-def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, seed, dt):
+def _check_settings(design: Design, plant: Plant, paths, seed, dt):
     if not isinstance(paths, (int, np.integer)) or isinstance(paths, bool) or paths < 1:
         raise ParameterError(f"paths must be a positive integer; got {paths!r}")
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
@@ -453,7 +453,7 @@ def simulate(
         With ``metrics`` (the metrics document over all paths, streamed) and the recorded paths.
     """
     t_wall = time.perf_counter()
-    _check_settings(design, plant, scenario, paths, seed, dt)
+    _check_settings(design, plant, paths, seed, dt)
     paths, seed = int(paths), int(seed)
     if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")

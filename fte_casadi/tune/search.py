@@ -368,7 +368,7 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     done = [r for r in records if r.state == "ok"]
     front = [done[i].number for i in pareto_front([r.values for r in done])]
     chosen, tier = choose(records, front, names, rule)
-    limits = _limits(records, done, plant)
+    limits = _limits(done, plant)
     return TuneResult(plant=plant.name, objectives=names, records=tuple(records), front=tuple(front), chosen=chosen,
                       rule=rule, tier=tier, seed=seed, paths=paths, space=dict(space.ranges), wall_s=time.perf_counter() - t0,
                       limits=tuple(limits))  # fmt: skip
@@ -389,7 +389,7 @@ def _sigma_sup(plant, base_design) -> float | None:
         return None
 
 
-def _limits(records, done, plant) -> list[str]:
+def _limits(done, plant) -> list[str]:
     """Item 4 of issue #18: the windows where no certified candidate makes tolerant control better
     than none, and the faults whose false alarms none keeps below 1, with their structural causes
     (:func:`fte_casadi.design.limits.explain_metrics`, at the candidate closest to succeeding)."""
