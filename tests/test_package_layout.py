@@ -144,3 +144,35 @@ def test_one_class_per_name():
         seen.setdefault(name, []).append(place)
     assert {k: v for k, v in seen.items() if len(v) > 1} == {}
     assert "Layout" in seen and "PathLayout" in seen
+
+
+def test_every_exception_class_lives_in_errors_py():
+    from fte_casadi import errors
+
+    def is_exception(node) -> bool:
+        return isinstance(node, ast.ClassDef) and any(
+            ast.unparse(b).split(".")[-1].endswith(("Error", "Exception", "Warning")) for b in node.bases
+        )
+
+    assert _modules_of(_where(is_exception)) == {"errors.py"}
+    assert not issubclass(
+        errors.SolverFailedError, errors.InfeasibleDesignError
+    )  # a failure, not infeasibility
+
+
+def test_the_method_text_is_shown_not_parsed():
+    """``TSModel.method`` is display text; code decides on ``TSModel.kind``."""
+
+    def reads_method(node) -> bool:
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+            return ast.unparse(node.func.value).endswith(".method") and node.func.attr in (
+                "startswith",
+                "endswith",
+            )
+        return isinstance(node, ast.Compare) and any(
+            ast.unparse(x).endswith(".method")
+            and not ast.unparse(x).startswith("plant.")  # Plant.method is a kind
+            for x in (node.left, *node.comparators)
+        )
+
+    assert _where(reads_method) == []
