@@ -88,6 +88,35 @@ def test_no_import_circles():
     assert _cycles(import_graph()) == []
 
 
+#: the steps of the path of the data, lowest first (docs/layout.md): a module imports its own step's
+#: modules and those of lower steps only
+LAYERS = (
+    {"errors", "rounding", "toolchain", "verdicts", "deprecation", "interop", "checkout"},
+    {"model"},
+    {"ts"},
+    {"design"},
+    {"step"},
+    {"sim", "codegen"},
+    {"plants", "plot"},
+    {"tune"},
+    {"report", "generated"},
+    {"cli", "__init__", "__main__"},
+)
+
+
+def _layer(module: str) -> int:
+    part = module.split(".")[1] if "." in module else "__init__"
+    return next(k for k, names in enumerate(LAYERS) if part in names)
+
+
+def test_no_module_imports_a_layer_above_it():
+    g = import_graph()
+    assert {m.split(".")[1] for m in g if "." in m} <= set().union(*LAYERS)  # every top-level part placed
+    up = sorted(f"{a} -> {b}" for a, bs in g.items() for b in bs if _layer(b) > _layer(a))
+    assert up == []
+    assert _layer("fte_casadi.design.api") > _layer("fte_casadi.ts.model")  # design may read ts, not back
+
+
 # -- written once (issue #20, "one name per concept") ---------------------------------------------------
 def _where(pred) -> list[str]:
     """``module:line`` of every AST node of the package for which ``pred(node)`` holds."""
