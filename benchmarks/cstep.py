@@ -50,7 +50,7 @@ def hand_written_c(design: Design, sample_time: float) -> str:
     n, m, p, lf, r, nbar = (int(d[k]) for k in ("n", "m", "p", "lf", "r", "nbar"))
     T = np.asarray(design.T)
     Cbar = np.hstack([design.C, np.zeros((p, lf)), design.Df])
-    gain = float(design.params["delta"]) + float(design.params["epsilon"])
+    gain = float(design.params.delta) + float(design.params.epsilon)
     src = [f"/* hand-written baseline, n={n} m={m} p={p} lf={lf} r={r} */\n", '#include "hand.h"\n']
     src.append("int hand_sched(const fte_real **arg, fte_real **res, int *iw, fte_real *w, int mem);\n")
     for k, M in (
@@ -198,7 +198,7 @@ def bench_c_step(
     name = c_name(design.plant)
     fn = step_function(design, sample_time)
     y0 = np.asarray(design.C) @ (
-        np.full(design.dims["n"], 0.1) if design.x_ref is None else np.asarray(design.x_ref)
+        np.full(design.dims.n, 0.1) if design.x_ref is None else np.asarray(design.x_ref)
     )
     z = np.zeros(design.nbar)
     # CasADi from Python: the Function called with numpy arrays, as the simulator would per sample
@@ -245,8 +245,8 @@ def bench_c_step(
         main.write_text(
             _TIMING_MAIN.format(
                 name=name,
-                ny=int(design.dims["p"]),
-                nu=int(design.dims["m"]),
+                ny=int(design.dims.p),
+                nu=int(design.dims.m),
                 nxbar=design.nbar,
                 y0=", ".join(f"{v:.17g}" for v in y0),
                 iters=iters,
