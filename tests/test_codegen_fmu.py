@@ -139,18 +139,25 @@ def test_fmpy_simulation_equals_the_python_step(plant, fmus):
     """FMPy's simulate_fmu reads the outputs before it sets the next inputs: it records at t_0 the
     sample of y_0, and at t_{k+1} the sample of y_k (held through the step)."""
     d, path = fmus[plant]
-    ts, ys, ref = _recorded(plant, d)
+    sample_time, ys, ref = _recorded(plant, d)
     names = [v.name for v in fmu_variables(d)]
     p = ys.shape[1]
     signal = np.zeros(len(ys), dtype=[("time", float)] + [(n, float) for n in names[:p]])
-    signal["time"] = np.arange(len(ys)) * ts
+    signal["time"] = np.arange(len(ys)) * sample_time
     for j, n in enumerate(names[:p]):
         signal[n] = ys[:, j]
     res = fmpy.simulate_fmu(
-        str(path), start_time=0.0, stop_time=len(ys) * ts, output_interval=ts, input=signal, output=names[p:]
+        str(path),
+        start_time=0.0,
+        stop_time=len(ys) * sample_time,
+        output_interval=sample_time,
+        input=signal,
+        output=names[p:],
     )
     assert len(res) == len(ys) + 1
-    np.testing.assert_allclose(res["time"], np.arange(len(ys) + 1) * ts, rtol=0, atol=1e-9 * ts * len(ys))
+    np.testing.assert_allclose(
+        res["time"], np.arange(len(ys) + 1) * sample_time, rtol=0, atol=1e-9 * sample_time * len(ys)
+    )
     got = np.column_stack([res[n] for n in names[p:]])
     expected = np.vstack([ref[:1], ref])  # t_0: y_0's sample (read after the inputs), then held samples
     assert _worst(got, expected, _groups(d)) <= C_DOUBLE
@@ -192,7 +199,7 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
     """A master that sets y_k and then reads gets the sample of y_k at t_k (no delay, as the simulator
     applies u_k); reading before the new inputs gives the held sample of y_{k-1}."""
     d, path = fmus["manipulator"]
-    ts, ys, ref = _recorded("manipulator", d)
+    sample_time, ys, ref = _recorded("manipulator", d)
     ys, ref = ys[:200], ref[:200]
     p = ys.shape[1]
     nout = ref.shape[1]
@@ -205,7 +212,7 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
             held.append(s.getReal(vout))
         s.setReal(vin, list(y))
         got.append(s.getReal(vout))
-        s.doStep(currentCommunicationPoint=k * ts, communicationStepSize=ts)
+        s.doStep(currentCommunicationPoint=k * sample_time, communicationStepSize=sample_time)
     s.terminate()
     s.reset()  # back to the start: the next first step takes the first measurement again
     s.setupExperiment(startTime=0.0)
@@ -215,7 +222,7 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
     for k, y in enumerate(ys[:20]):
         s.setReal(vin, list(y))
         again.append(s.getReal(vout))
-        s.doStep(currentCommunicationPoint=k * ts, communicationStepSize=ts)
+        s.doStep(currentCommunicationPoint=k * sample_time, communicationStepSize=sample_time)
     s.freeInstance()
     assert np.array_equal(np.array(again), np.array(got[:20]))
     assert _worst(np.array(got), ref, _groups(d)) <= C_DOUBLE
@@ -396,12 +403,12 @@ def test_fmpy_rebuilds_the_binary_from_the_sources(fmus, tmp_path):
     (tmp_path / "build").mkdir()
     build_platform_binary(str((tmp_path / "fmu").resolve()), build_dir=str(tmp_path / "build"))
     assert shipped.is_file()
-    ts, ys, ref = _recorded("three-tank", d)
+    sample_time, ys, ref = _recorded("three-tank", d)
     names = [v.name for v in fmu_variables(d)]
     signal = np.zeros(200, dtype=[("time", float), (names[0], float), (names[1], float)])
-    signal["time"] = np.arange(200) * ts
+    signal["time"] = np.arange(200) * sample_time
     signal[names[0]], signal[names[1]] = ys[:200, 0], ys[:200, 1]
-    res = fmpy.simulate_fmu(str((tmp_path / "fmu").resolve()), stop_time=200 * ts, output_interval=ts,
+    res = fmpy.simulate_fmu(str((tmp_path / "fmu").resolve()), stop_time=200 * sample_time, output_interval=sample_time,
                             input=signal, output=names[2:])  # fmt: skip
     got = np.column_stack([res[n] for n in names[2:]])
     assert _worst(got, np.vstack([ref[:1], ref[:200]]), _groups(d)) <= C_DOUBLE
