@@ -319,11 +319,11 @@ class ConicProblem:
                 status = str(prob.status)
             except cp.SolverError as exc:
                 status = f"solver_error ({' '.join(str(exc).split())[:120]})"
-        dt = time.perf_counter() - t0
-        self.seconds += dt
+        elapsed = time.perf_counter() - t0
+        self.seconds += elapsed
         warned = tuple(sorted({str(wn.message).split(".")[0] for wn in caught}))
         v = None if w.value is None else np.asarray(w.value, dtype=float) * d
-        return SolveResult(status, v, dt, rescale, warned)
+        return SolveResult(status, v, elapsed, rescale, warned)
 
     @property
     def large(self) -> bool:
