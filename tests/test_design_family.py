@@ -1,5 +1,6 @@
 """The scalable chain family (issue #17), designed at its defaults: no design defaults, so the tool
-finds its own parameters; every member certified, whatever the BLAS's thread count."""
+finds its own parameters; every member certified, whatever the BLAS's thread count. The members run
+from 2 to 24 states and from 2 to 64 rules (n = 24 takes about two minutes, docs/benchmarks.md)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from fte_casadi.design.certify import failures
 from fte_casadi.ts import derive
 
 
-@pytest.mark.parametrize(("n", "q"), [(2, 1), (4, 2), (8, 2), (6, 4)])
+@pytest.mark.parametrize(("n", "q"), [(2, 1), (4, 2), (8, 2), (16, 2), (24, 2), (6, 4), (6, 6)])
 def test_a_member_designs_at_its_defaults(n, q):
     ts = derive(chain(n, q), fidelity_samples=500)
     assert ts.r == 2**q and not chain(n, q).design_defaults

@@ -46,7 +46,7 @@ machine beyond round-off.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -226,6 +226,7 @@ def worst_block(lmis, blocks: dict[int, list[tuple[str, int]]]) -> tuple[str, fl
 def _fail(
     step: str, res: SolveResult, solver: str, hint: str, spread=None
 ) -> InfeasibleDesignError | SolverFailedError:
+    solver = res.solver or solver
     if res.infeasible:
         return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
     other = "SCS" if solver == "CLARABEL" else "CLARABEL"
@@ -280,9 +281,9 @@ def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: 
     try:
         K = Su_s @ u["Y"] @ np.linalg.inv(u["X"])
     except np.linalg.LinAlgError:
-        return prob, SolveResult(res.status, None, res.seconds, res.rescaled, res.warned)
+        return prob, replace(res, v=None)
     v = layout.pack(X=u["X"], Y=np.linalg.solve(Su, K @ u["X"]), s=tau * sy**2 * u["s"], t=0.0)
-    return prob, SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+    return prob, replace(res, v=v)
 
 
 def step3(aug: Augmented, params: dict, solver: str) -> Step3:
@@ -306,7 +307,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
         raise _fail("LMI (45)", res, solver, hint, worst_block(prob.lmis, names))
     v0 = v0.copy()  # t starts well above ||Y'||: the epigraph is then strictly feasible
     v0[layout.index("t")] = 2.0 * np.linalg.norm(layout.unpack(v0)["Y"], 2) + 1.0
-    res = SolveResult(res.status, v0, res.seconds, res.rescaled, res.warned)
+    res = replace(res, v=v0)
     floor = 0.01 * max(np.linalg.norm(A[: aug.n, : aug.n], 2) for A in aug.Abar)
     try:
         cen = centre(lmis, c, res.v, eta=ETA, floor=floor)
@@ -444,7 +445,7 @@ class _Step5:
             return res
         u = layout_s.unpack(res.v)
         v = self.layout.pack(Pt=u["Pt"], s=u["s"] / tau, rho=u["rho"] / tau, tau=0.0)
-        return SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+        return replace(res, v=v)
 
     def first(self) -> SolveResult:
         """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else.
@@ -457,9 +458,7 @@ class _Step5:
             other = "SCS" if self.solver == "CLARABEL" else "CLARABEL"
             first, self.solver = res, other
             res = self._conic()
-            res = SolveResult(
-                res.status, res.v, first.seconds + res.seconds, res.rescaled, first.warned + res.warned
-            )
+            res = replace(res, seconds=first.seconds + res.seconds, warned=first.warned + res.warned)
             self.notes.append(
                 f"step 5: {'SCS' if other == 'CLARABEL' else 'CLARABEL'} failed numerically on the feasibility solve "
                 f"({first.status[:120]}, also on rescaled data); {other}'s point ({res.status}) starts the centring"
@@ -468,7 +467,7 @@ class _Step5:
             v = res.v.copy()
             ir = self.layout.index("rho")
             v[ir] = np.minimum(v[ir], 0.5 * self.rho_cap)
-            res_c = SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
+            res_c = replace(res, v=v)
             start = _start(
                 res_c, self.layout, "Pt", self.soft, self.fixed + self.caps, self.notes, self.kappa
             )

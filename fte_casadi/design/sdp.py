@@ -239,6 +239,8 @@ def margin_lmi(
 #: given to SCS first when Clarabel was asked for: Clarabel factors each PSD cone as a dense block of that
 #: many rows (measured, step 3 of a 24-state chain, k = 74: Clarabel 22 s and 1.35 GB, SCS 3.3 s and 0.56 GB)
 LARGE_CONE = 1000
+#: the iterations SCS is given when it is tried first on a large problem (then Clarabel)
+SCS_FIRST_ITERS = 10_000
 
 #: the solver statuses that come with a point (which the design then checks in numpy)
 SOLVED = ("optimal", "optimal_inaccurate")
@@ -251,6 +253,7 @@ class SolveResult:
     seconds: float
     rescaled: bool = False
     warned: tuple[str, ...] = ()
+    solver: str = ""  # the solver that gave this answer
 
     @property
     def optimal(self) -> bool:
@@ -306,7 +309,7 @@ class ConicProblem:
         self._built[rescale] = (prob, w, p, d)
         return self._built[rescale]
 
-    def _solve_once(self, solver: str, p: float, rescale: bool) -> SolveResult:
+    def _solve_once(self, solver: str, p: float, rescale: bool, settings: dict | None = None) -> SolveResult:
         prob, w, par, d = self._build(rescale)
         par.value = float(p)
         w.value = None
@@ -315,7 +318,7 @@ class ConicProblem:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                prob.solve(solver=solver, **SOLVER_SETTINGS[solver])
+                prob.solve(solver=solver, **(SOLVER_SETTINGS[solver] | (settings or {})))
                 status = str(prob.status)
             except cp.SolverError as exc:
                 status = f"solver_error ({' '.join(str(exc).split())[:120]})"
@@ -323,7 +326,7 @@ class ConicProblem:
         self.seconds += elapsed
         warned = tuple(sorted({str(wn.message).split(".")[0] for wn in caught}))
         v = None if w.value is None else np.asarray(w.value, dtype=float) * d
-        return SolveResult(status, v, elapsed, rescale, warned)
+        return SolveResult(status, v, elapsed, rescale, warned, solver)
 
     @property
     def large(self) -> bool:
@@ -334,10 +337,13 @@ class ConicProblem:
         """Solve with ``solver``; a large problem asked of Clarabel goes to SCS first (and to Clarabel
         when SCS fails): the solves only give start points, which the design checks and centres in numpy."""
         if solver == "CLARABEL" and self.large:
-            res = self._solve_with("SCS", p)
-            if not res.failed:
+            # a few thousand iterations find a point when there is one with margin; a problem SCS
+            # cannot settle in 10^4 (badly scaled, or infeasible) goes to Clarabel instead of
+            # running to 10^5 (minutes)
+            res = self._solve_once("SCS", p, rescale=False, settings={"max_iters": SCS_FIRST_ITERS})
+            if res.status in ("optimal", "infeasible"):  # an inaccurate answer goes to Clarabel too
                 k = max(L.k for L in self.lmis)
-                self.notes.append(f"SCS gave this point: an LMI of size {k} is a dense block of {k * (k + 1) // 2} "
+                self.notes.append(f"SCS gave this answer: an LMI of size {k} is a dense block of {k * (k + 1) // 2} "
                                   f"rows in Clarabel's KKT system (more than {LARGE_CONE})")  # fmt: skip
                 return res
         return self._solve_with(solver, p)
