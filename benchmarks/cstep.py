@@ -28,7 +28,7 @@ import casadi as ca
 import numpy as np
 
 from fte_casadi.codegen import build
-from fte_casadi.codegen.generate import _void_unused, c_name, default_ts, generate_c, memory_report
+from fte_casadi.codegen.generate import _void_unused, c_name, default_sample_time, generate_c, memory_report
 from fte_casadi.design.record import Design
 from fte_casadi.step import step_function
 
@@ -44,13 +44,13 @@ def _arr(name: str, a) -> str:
     )
 
 
-def hand_written_c(design: Design, ts: float) -> str:
+def hand_written_c(design: Design, sample_time: float) -> str:
     """Plain C of the step (dense loops, expanded sum over rules), for the speed baseline."""
     d = design.dims
     n, m, p, lf, r, nbar = (int(d[k]) for k in ("n", "m", "p", "lf", "r", "nbar"))
     T = np.asarray(design.T)
     Cbar = np.hstack([design.C, np.zeros((p, lf)), design.Df])
-    gain = float(design.params["delta"]) + float(design.params["epsilon"])
+    gain = float(design.params.delta) + float(design.params.epsilon)
     src = [f"/* hand-written baseline, n={n} m={m} p={p} lf={lf} r={r} */\n", '#include "hand.h"\n']
     src.append("int hand_sched(const fte_real **arg, fte_real **res, int *iw, fte_real *w, int mem);\n")
     for k, M in (
@@ -65,8 +65,8 @@ def hand_written_c(design: Design, ts: float) -> str:
     src.append(_arr("UREF", design.u_ref))
     for i in range(r):
         lm = design.local_models[i]
-        Bbar = np.vstack([np.asarray(lm["B"]), np.zeros((2 * lf, m))])
-        abar = np.concatenate([np.asarray(lm.get("a", np.zeros(n)), float).ravel(), np.zeros(2 * lf)])
+        Bbar = np.vstack([lm.B, np.zeros((2 * lf, m))])
+        abar = np.concatenate([lm.a.ravel(), np.zeros(2 * lf)])
         src.append(_arr(f"R{i}", design.R[i]))
         src.append(_arr(f"TB{i}", T @ Bbar))
         src.append(_arr(f"LY{i}", np.asarray(design.L1[i]) + np.asarray(design.L2[i])))
@@ -111,7 +111,7 @@ void hand_step(fte_real *z, const fte_real *y, fte_real *u, fte_real *xb, fte_re
     rhs[i] += h[{i}]*t[i];
   }}
 """
-    body += f"  for (i = 0; i < {nbar}; ++i) z[i] += (fte_real){float(ts)!r}*rhs[i];\n}}\n"
+    body += f"  for (i = 0; i < {nbar}; ++i) z[i] += (fte_real){float(sample_time)!r}*rhs[i];\n}}\n"
     return "".join(src) + body
 
 
@@ -185,15 +185,20 @@ def _object_sizes(folder: Path, cc: str) -> dict | None:
 
 
 def bench_c_step(
-    design: Design, *, ts: float | None = None, real: str = "double", iters: int = 200_000, reps: int = 5
+    design: Design,
+    *,
+    sample_time: float | None = None,
+    real: str = "double",
+    iters: int = 200_000,
+    reps: int = 5,
 ) -> dict:
     """Measure one design's generated step (see the module docstring for the fields)."""
     cc = build.find_compiler()
-    ts = default_ts(design) if ts is None else ts
+    sample_time = default_sample_time(design) if sample_time is None else sample_time
     name = c_name(design.plant)
-    fn = step_function(design, ts)
+    fn = step_function(design, sample_time)
     y0 = np.asarray(design.C) @ (
-        np.full(design.dims["n"], 0.1) if design.x_ref is None else np.asarray(design.x_ref)
+        np.full(design.dims.n, 0.1) if design.x_ref is None else np.asarray(design.x_ref)
     )
     z = np.zeros(design.nbar)
     # CasADi from Python: the Function called with numpy arrays, as the simulator would per sample
@@ -206,10 +211,10 @@ def bench_c_step(
         best = min(best, (time.perf_counter() - t0) / calls)
     result = {
         "plant": design.plant,
-        "ts": ts,
+        "ts": sample_time,  # the bench document's key (kept)
         "real": real,
         "casadi_us": best * 1e6,
-        **memory_report(design, ts=ts, real=real),
+        **memory_report(design, sample_time=sample_time, real=real),
     }
     if cc is None:
         result["c_ns"] = None
@@ -217,14 +222,14 @@ def bench_c_step(
         return result
     with tempfile.TemporaryDirectory(prefix="fte_bench_") as tmp:
         folder = Path(tmp)
-        generate_c(design, folder, ts=ts, real=real)
+        generate_c(design, folder, sample_time=sample_time, real=real)
         result["objects"] = _object_sizes(folder, cc)
         hand = folder / "hand"
         hand.mkdir()
         (hand / "hand.h").write_text(
             f'#include "fte_{name}.h"\nvoid hand_step(fte_real *z, const fte_real *y, fte_real *u, fte_real *xb, fte_real *yc);\n'
         )
-        (hand / "hand.c").write_text(hand_written_c(design, ts))
+        (hand / "hand.c").write_text(hand_written_c(design, sample_time))
         sched = design.scheduling_function()
         sched = ca.Function(
             "hand_sched", [sched.sx_in(0), sched.sx_in(1)], sched.call([sched.sx_in(0), sched.sx_in(1)])
@@ -240,8 +245,8 @@ def bench_c_step(
         main.write_text(
             _TIMING_MAIN.format(
                 name=name,
-                ny=int(design.dims["p"]),
-                nu=int(design.dims["m"]),
+                ny=int(design.dims.p),
+                nu=int(design.dims.m),
                 nxbar=design.nbar,
                 y0=", ".join(f"{v:.17g}" for v in y0),
                 iters=iters,

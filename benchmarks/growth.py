@@ -31,10 +31,10 @@ out = {"n": n, "q": q, "rules": ts.r}
 t0 = time.perf_counter()
 try:
     d = design(ts, sample_time=1e-3)
-    out.update(certified=d.certified, sigma=d.params["sigma"], gamma=d.params["gamma"],
+    out.update(certified=d.certified, sigma=d.params.sigma, gamma=d.params.gamma,
                chosen=sorted(d.params_chosen or {}), solver_s=d.timings["solver_s"])
     t1 = time.perf_counter()
-    design(ts, sample_time=1e-3, sigma=d.params["sigma"], gamma=d.params["gamma"])
+    design(ts, sample_time=1e-3, sigma=d.params.sigma, gamma=d.params.gamma)
     out["one_design_s"] = time.perf_counter() - t1
 except FteError as exc:
     out["error"] = " ".join(str(exc).split())[:300]

@@ -160,7 +160,7 @@ def simulate_per_path(
     SimulationResult
     """
     t_wall = time.perf_counter()
-    _check_settings(design, plant, scenario, paths, seed, dt)
+    _check_settings(design, plant, paths, seed, dt)
     paths, seed = int(paths), int(seed)
     dt, nsteps, notes = resolve_dt(design, scenario, dt)
     if record_every is None:

@@ -190,8 +190,9 @@ def _scenario(plant_spec: str):
         return None
 
 
-def _scenario_dt(plant_spec: str) -> float | None:
-    """The sample time of the plant's scenario (its Euler-Maruyama step), when it has one."""
+def _scenario_sample_time(plant_spec: str) -> float | None:
+    """The sample time a design is made for: the plant's scenario step (``Scenario.dt``, the step
+    ``fte simulate`` runs the controller at), when the plant has a scenario."""
     sc = _scenario(plant_spec)
     return None if sc is None else float(sc.dt)
 
@@ -237,7 +238,7 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 
     ts = derive_ts(load_plant(plant_spec))
     with tqdm(total=12, desc=f"explore {ts.plant.name}", unit=" sigma", file=sys.stderr, delay=1.0) as bar:
-        points, info = explore(ts, solver=solver, gamma1=gamma1, sample_time=_scenario_dt(plant_spec),
+        points, info = explore(ts, solver=solver, gamma1=gamma1, sample_time=_scenario_sample_time(plant_spec),
                                progress=lambda k, n: bar.update(1))  # fmt: skip
     click.echo(
         f"feasible frontier of {ts.plant.name} (gamma1 = {info['gamma1']:g}; (45) is feasible for any gamma only with "
@@ -363,7 +364,7 @@ def _design_or_plant(target: str, progress: bool = True):
     "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files."
 )
 @click.option(
-    "--ts", type=float,
+    "--ts", "sample_time", type=float,
     help="Sample time (default: the one the design was made for and fte simulate runs, its scenario's step; "
     "without one, a tenth of the design's ts_max, rounded down).",
 )  # fmt: skip
@@ -371,27 +372,29 @@ def _design_or_plant(target: str, progress: bool = True):
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
 @click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
 @_guard
-def codegen(target, out_dir, ts, real, boundary_layer, fmu):
+def codegen(target, out_dir, sample_time, real, boundary_layer, fmu):
     """Generate the embedded C of the observer/controller step."""
-    from .codegen import default_ts, generate_c
+    from .codegen import default_sample_time, generate_c
     from .codegen.fmu import check_fmu_target, generate_fmu
 
-    _positive("ts", ts)
+    _positive("ts", sample_time)
     _positive("boundary-layer", boundary_layer)
     d = _design_or_plant(target)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
-    files = generate_c(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
-    step = ts if ts is not None else default_ts(d)
-    how = "--ts" if ts is not None else "the design's sample time, the step fte simulate runs"
-    if ts is not None and abs(ts - default_ts(d)) > 1e-12 * ts:
-        how += f"; the design was made for {default_ts(d):g}"
+    files = generate_c(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+    made_for = default_sample_time(d)
+    how = "--ts" if sample_time is not None else "the design's sample time, the step fte simulate runs"
+    if sample_time is not None and abs(sample_time - made_for) > 1e-12 * sample_time:
+        how += f"; the design was made for {made_for:g}"
+    if sample_time is None:
+        sample_time = made_for
     click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
-    click.echo(f"sample time Ts = {step:g} ({how})")
+    click.echo(f"sample time Ts = {sample_time:g} ({how})")
     click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")
     if fmu:
-        path = generate_fmu(d, out_dir, ts=ts, real=real, boundary_layer=boundary_layer)
-        click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {step:g} (docs/fmu.md)")
+        path = generate_fmu(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+        click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {sample_time:g} (docs/fmu.md)")
 
 
 # -- simulate -----------------------------------------------------------------------------
@@ -414,7 +417,7 @@ def _window_lines(m: dict) -> list[str]:
 def _warnings(m: dict, inputs, faults=()) -> list[str]:
     """Where tolerant control is worse than none, a fault estimate raises false alarms, or an input
     sits at a limit (the thresholds of :mod:`fte_casadi.sim.metrics`)."""
-    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+    from .verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
 
     out = []
     for name, v in zip(faults, m.get("false_alarm_rel_rms") or ()):

@@ -40,7 +40,7 @@ def local_model_ss(lm, C, Df, names: dict, rule: int, plant: str):
     )  # fmt: skip
 
 
-def closed_loop_ss(design, i: int, j: int, dt: float | None = None):
+def closed_loop_ss(design, i: int, j: int, sample_time: float | None = None):
     """Plant rule ``i``, observer rule ``i`` and controller gain ``K_j`` in closed loop (see Design.to_control)."""
     ct = require_control()
     dims = design.dims
@@ -51,7 +51,7 @@ def closed_loop_ss(design, i: int, j: int, dt: float | None = None):
 
             raise ParameterError(f"rule index {nm} must be an integer in 0..{r - 1}; got {k!r}")
     lm = design.local_models[i]
-    A, B, Bd, Bf = (np.asarray(lm[k], float) for k in ("A", "B", "Bd", "Bf"))
+    A, B, Bd, Bf = lm.A, lm.B, lm.Bd, lm.Bf
     C, Df, H, T = (np.asarray(a, float) for a in (design.C, design.Df, design.H, design.T))
     ld = Bd.shape[1]
     R = np.asarray(design.R[i], float)
@@ -63,17 +63,21 @@ def closed_loop_ss(design, i: int, j: int, dt: float | None = None):
     # xbarhat = z + H y, y = C x + Df f, u = r + M xbarhat: inputs [r; d; f], states [x; z]
     Uz, Ux, Uf = M, M @ H @ C, M @ H @ Df
     Gx = np.hstack([B, Bd, Bf])  # how [u; d; f] enters the plant
-    if dt is None:
+    if sample_time is None:
         Ad, Gd = A, Gx
         Az, Gz, Lz = R, TB, Ly
     else:
-        if not (isinstance(dt, (int, float)) and np.isfinite(dt) and dt > 0):
+        if not (isinstance(sample_time, (int, float)) and np.isfinite(sample_time) and sample_time > 0):
             from .errors import ParameterError
 
-            raise ParameterError(f"dt must be a positive sample time; got {dt!r}")
-        E = sla.expm(np.block([[A, Gx], [np.zeros((Gx.shape[1], n + Gx.shape[1]))]]) * dt)
+            raise ParameterError(f"sample_time must be a positive number; got {sample_time!r}")
+        E = sla.expm(np.block([[A, Gx], [np.zeros((Gx.shape[1], n + Gx.shape[1]))]]) * sample_time)
         Ad, Gd = E[:n, :n], E[:n, n:]  # zero-order hold of the plant
-        Az, Gz, Lz = np.eye(nbar) + dt * R, dt * TB, dt * Ly  # the observer as the C computes it
+        Az, Gz, Lz = (
+            np.eye(nbar) + sample_time * R,
+            sample_time * TB,
+            sample_time * Ly,
+        )  # the observer as the C computes it
     Bu, Bdd, Bff = Gd[:, :m], Gd[:, m : m + ld], Gd[:, m + ld :]
     Acl = np.block([[Ad + Bu @ Ux, Bu @ Uz], [Lz @ C + Gz @ Ux, Az + Gz @ Uz]])
     Bcl = np.block([[Bu, Bdd, Bff + Bu @ Uf], [Gz, np.zeros((nbar, ld)), Lz @ Df + Gz @ Uf]])
@@ -87,7 +91,7 @@ def closed_loop_ss(design, i: int, j: int, dt: float | None = None):
     fn = names.get("faults") or [f"f{k}" for k in range(lf)]
     xbar = [f"{s}_hat" for s in xn] + [f"{s}_dot_hat" for s in fn] + [f"{s}_hat" for s in fn]
     return ct.ss(
-        Acl, Bcl, Ccl, Dcl, dt if dt is not None else 0,
+        Acl, Bcl, Ccl, Dcl, sample_time if sample_time is not None else 0,
         inputs=[f"{s}_ref" for s in un] + [f"d{k}" for k in range(ld)] + list(fn),
         outputs=list(yn) + list(un) + xbar,
         states=list(xn) + [f"z{k}" for k in range(nbar)],

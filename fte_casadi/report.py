@@ -137,40 +137,48 @@ def _design_rows(designs: dict, printed: dict | None) -> list[str]:
     return out
 
 
-def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
+def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .checkout import load_benchmarks
     from .codegen import compile_shared, find_compiler, generate_c
     from .codegen.ctypes_step import CStep, closed_loop_compare
-    from .codegen.generate import default_ts, memory_report
+    from .codegen.generate import default_sample_time, memory_report
     from .errors import MissingDependencyError
 
-    ts = default_ts(d)
-    files = generate_c(d, folder, ts=ts)
-    out = [f"Generated into `{folder.name}/` ({', '.join(f.name for f in files)}), Ts = {ts:g} s."]
-    info: dict = {"ts": ts}
+    sample_time = default_sample_time(d)
+    files = generate_c(d, folder, sample_time=sample_time)
+    out = [f"Generated into `{folder.name}/` ({', '.join(f.name for f in files)}), Ts = {sample_time:g} s."]
+    info: dict = {"ts": sample_time}  # the report document's key (kept: documents are not renamed)
     if find_compiler() is None:
         return out + ["No C compiler found: the C was not compiled or checked here."], info
     with tempfile.TemporaryDirectory(prefix="fte_report_") as tmp:
         lib = compile_shared(folder, Path(tmp) / "libstep.so")
-        steps = int(min(20000, round(float(SCENARIOS[d.plant]().T) / ts)))
+        steps = int(min(20000, round(float(SCENARIOS[d.plant]().T) / sample_time)))
         lf = int(d.dims.lf)
 
         def fault(t, u):
             f = np.zeros(lf)
-            f[0] = -0.4 * float(u[0]) if d.plant == "manipulator" and t >= 0.25 * steps * ts else 0.0
-            if d.plant == "three-tank" and t >= 0.3 * steps * ts:
+            f[0] = -0.4 * float(u[0]) if d.plant == "manipulator" and t >= 0.25 * steps * sample_time else 0.0
+            if d.plant == "three-tank" and t >= 0.3 * steps * sample_time:
                 f[0] = -10.0
-            if d.plant == "quadruple-tank" and t >= 0.25 * steps * ts:  # pump 1 delivers 70 % of v0 + dv1
+            if (
+                d.plant == "quadruple-tank" and t >= 0.25 * steps * sample_time
+            ):  # pump 1 delivers 70 % of v0 + dv1
                 f[0] = -0.3 * (3.0 + float(u[0]))
             return f
 
-        err, _ = closed_loop_compare(d, CStep(lib, d), ts, steps, plant=BUILTIN[d.plant](), fault=fault)
+        err, _ = closed_loop_compare(
+            d, CStep(lib, d), sample_time, steps, plant=BUILTIN[d.plant](), fault=fault
+        )
     info["max_diff"] = max(err.values())
     info["steps"] = steps
     try:  # the timings need the checkout's benchmarks/ (not in the wheel); the sizes do not
-        b = load_benchmarks().bench_c_step(d, ts=ts, iters=100_000, reps=3)
+        b = load_benchmarks().bench_c_step(d, sample_time=sample_time, iters=100_000, reps=3)
     except MissingDependencyError:
-        b = {"casadi_us": None, **memory_report(d, ts=ts), "note": "timings: run from a source checkout"}
+        b = {
+            "casadi_us": None,
+            **memory_report(d, sample_time=sample_time),
+            "note": "timings: run from a source checkout",
+        }
     info["bench"] = b
     out += [
         f"Compiled with `cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic`; over a {steps}-sample closed loop on the "
@@ -190,7 +198,7 @@ def _c_section(d, folder: Path, log) -> tuple[list[str], dict]:
 
 def _windows_section(m: dict, plant) -> list[str]:
     """One row per fault window; a window where tolerant control is worse than none is marked."""
-    from .sim.metrics import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+    from .verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
 
     out = ["Per fault window (FTC run, all paths pooled; **bold**: tolerant control worse than none there):", "",
            f"| fault | window | fault relative RMS error | FTC deviation ratio | inputs at a limit ({', '.join(plant.input_names)}) |",
@@ -335,7 +343,7 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
     sec.append("")
     log(f"[{name}] generate, compile and check the embedded C")
     cdir = out / "c" / name.replace("-", "_")
-    csec, cinfo = _c_section(d, cdir, log)
+    csec, cinfo = _c_section(d, cdir)
     sec += ["### Embedded C", ""] + csec + [""]
     summary = {
         "metrics": m,

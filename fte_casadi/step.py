@@ -25,6 +25,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .deprecation import renamed_keyword
 from .design.record import Design
 from .errors import ParameterError
 
@@ -58,30 +59,32 @@ def saturate(u: ca.SX, limits) -> ca.SX:
     return ca.vertcat(*out)
 
 
+@renamed_keyword("ts", "sample_time")
 def step_function(
     design: Design,
-    ts: float,
+    sample_time: float,
     *,
     tolerant: bool = True,
     boundary_layer: float | None = None,
     name: str = "fte_step",
 ) -> ca.Function:
-    """Build the step ``(z, y) -> (z_next, u, xbarhat, yc, s)`` of a design at sample time ``ts``.
+    """Build the step ``(z, y) -> (z_next, u, xbarhat, yc, s)`` of a design at ``sample_time``.
 
     Parameters
     ----------
     design : Design
         The design record (gains, H, T, memberships).
-    ts : float
-        Sample time; must be positive (the caller checks it against ``checks.ts_max``).
+    sample_time : float
+        The observer/controller's sample time Ts; must be positive (the caller checks it against
+        ``checks.ts_max``). The former keyword ``ts`` still works, with a ``DeprecationWarning``.
     tolerant : bool
         With tolerant control (Kf term and sensor compensation) or without it.
     boundary_layer : float, optional
         Replace ``sgn(s)`` by ``sat(s / phi)``; ``None``: the design's ``params.boundary_layer``
         when it has one, else the discontinuous ``sgn`` with ``sgn(0) = 0``.
     """
-    if not (isinstance(ts, (int, float)) and np.isfinite(ts) and ts > 0):
-        raise ParameterError(f"sample time must be a positive number; got {ts!r}")
+    if not (isinstance(sample_time, (int, float)) and np.isfinite(sample_time) and sample_time > 0):
+        raise ParameterError(f"sample time must be a positive number; got {sample_time!r}")
     if (
         boundary_layer is None
     ):  # a design chosen with one (fte tune) carries it: the simulation and the C follow
@@ -126,8 +129,8 @@ def step_function(
     rhs = ca.mtimes(_dm(design.Ls), us)  # Ls = T J1 (T [Bdbar_u J1]) for every rule, and sum_i h_i = 1
     for i in range(r):
         lm = design.local_models[i]
-        Bbar = np.vstack([np.asarray(lm["B"]), np.zeros((2 * lf, m))])
-        abar = np.concatenate([np.asarray(lm["a"], dtype=float).ravel(), np.zeros(2 * lf)])
+        Bbar = np.vstack([lm.B, np.zeros((2 * lf, m))])
+        abar = np.concatenate([lm.a.ravel(), np.zeros(2 * lf)])
         TB = T @ Bbar
         Ly = np.asarray(design.L1[i]) + np.asarray(design.L2[i])
         Ta = T @ abar
@@ -135,5 +138,5 @@ def step_function(
         if np.any(Ta):
             term = term + _dm(Ta)
         rhs = rhs + h[i] * term
-    z_next = z + float(ts) * rhs
+    z_next = z + float(sample_time) * rhs
     return ca.Function(name, [z, y], [z_next, u, xbh, yc, s], list(STEP_INPUTS), list(STEP_OUTPUTS))

@@ -97,7 +97,7 @@ def lqr_design(ts, *, q_state=1.0, q_fault=1e3, r_obs=1e-2) -> Design:
         params=dict(plant.design_defaults),
         dims={"n": n, "m": m, "p": p, "ld": ld, "lf": lf, "r": r, "nbar": nbar},
         premises=[pr.to_dict() for pr in ts.premises],
-        local_models=tuple({k: np.asarray(v, float) for k, v in lm.__dict__.items()} for lm in lms),
+        local_models=tuple(lms),
         C=C,
         Df=Df,
         H=H,

@@ -130,9 +130,9 @@ def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeyp
 
     monkeypatch.setattr(checkout, "load_benchmarks", missing)
     d = real_designs["three-tank"]
-    lines, info = _c_section(d, tmp_path / "c", lambda s: None)
+    lines, info = _c_section(d, tmp_path / "c")
     row = next(ln for ln in lines if ln.startswith("| n/a ns | n/a ns | n/a |"))
-    mem = memory_report(d, ts=info["ts"])
+    mem = memory_report(d, sample_time=info["ts"])
     assert f"{mem['state_bytes']} B" in row and f"{mem['const_bytes']} B" in row
     assert "(timings: run from a source checkout.)" in lines
     assert info["max_diff"] < 1e-9 and info["bench"]["casadi_us"] is None

@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from fte_casadi.cli import main
-from fte_casadi.codegen.generate import default_ts
+from fte_casadi.codegen.generate import default_sample_time
 from fte_casadi.design import design
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive
@@ -32,7 +32,7 @@ def test_designs_at_its_1_ms_step_with_the_discrete_step_proven(ts, tmp_path):
     assert disc["holds"] and disc["sample_time"] == 1e-3 and disc["ts_max_lyapunov"] > 1e-3
     f = tmp_path / "cp.json"
     d.save(f)
-    assert default_ts(d) == 1e-3
+    assert default_sample_time(d) == 1e-3
     runner = CliRunner()
     r = runner.invoke(main, ["simulate", str(f), "--paths", "2", "--seed", "1", "--json", "--quiet"])
     assert r.exit_code == 0, r.output

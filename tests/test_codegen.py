@@ -20,7 +20,7 @@ from tolerances import C_DOUBLE, C_FLOAT_REL
 
 from fte_casadi.codegen import build
 from fte_casadi.codegen.ctypes_step import CStep, closed_loop_compare
-from fte_casadi.codegen.generate import c_name, default_ts, generate_c, output_files
+from fte_casadi.codegen.generate import c_name, default_sample_time, generate_c, output_files
 from fte_casadi.errors import CodegenError, DesignFileError, ParameterError
 from fte_casadi.plants.loader import load_plant
 from fte_casadi.rounding import series_floor
@@ -67,7 +67,7 @@ def _samples(design, k: int, seed: int):
 @pytest.mark.parametrize("plant", PLANTS)
 def test_double_step_matches_casadi(plant, designs, libs):
     d = designs[plant]
-    fn = step_function(d, default_ts(d))
+    fn = step_function(d, default_sample_time(d))
     c = CStep(libs[plant, "double"][1], d, "double")
     worst = 0.0
     for z, y in _samples(d, 200, seed=1):
@@ -85,7 +85,7 @@ def test_double_step_matches_casadi(plant, designs, libs):
 def test_float_step_matches_casadi(plant, designs, libs):
     """Float code from the same (z, y): each output within C_FLOAT_REL of its vector's size."""
     d = designs[plant]
-    fn = step_function(d, default_ts(d))
+    fn = step_function(d, default_sample_time(d))
     c = CStep(libs[plant, "float"][1], d, "float")
     worst = 0.0
     for z, y in _samples(d, 200, seed=2):
@@ -110,10 +110,12 @@ def _fault(plant):
 @pytest.mark.parametrize("plant", PLANTS)
 def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
     d = designs[plant]
-    ts = default_ts(d)
-    steps = int(round((1.5 if plant == "manipulator" else 20.0) / ts))
+    sample_time = default_sample_time(d)
+    steps = int(round((1.5 if plant == "manipulator" else 20.0) / sample_time))
     c = CStep(libs[plant, "double"][1], d, "double")
-    err, traj = closed_loop_compare(d, c, ts, min(steps, 2000), plant=load_plant(plant), fault=_fault(plant))
+    err, traj = closed_loop_compare(
+        d, c, sample_time, min(steps, 2000), plant=load_plant(plant), fault=_fault(plant)
+    )
     scale = max(1.0, float(np.max(np.abs(traj["y"]))), float(np.max(np.abs(traj["u"]))))
     assert max(err.values()) <= C_DOUBLE * scale, err  # same operations in the same order: round-off only
     assert np.all(np.isfinite(traj["u"]))
@@ -127,10 +129,10 @@ def test_saturating_closed_loop_matches_casadi(designs, libs):
     d = designs["three-tank"]
     lim = np.asarray(d.input_limits)
     assert np.array_equal(lim, [[0.0, 100.0], [0.0, 100.0]])
-    ts = default_ts(d)
+    sample_time = default_sample_time(d)
     c = CStep(libs["three-tank", "double"][1], d, "double")
     err, traj = closed_loop_compare(
-        d, c, ts, 2000, plant=load_plant("three-tank"), fault=_fault("three-tank")
+        d, c, sample_time, 2000, plant=load_plant("three-tank"), fault=_fault("three-tank")
     )
     u = traj["u"]
     assert np.all(u >= lim[:, 0]) and np.all(u <= lim[:, 1])
@@ -163,7 +165,7 @@ def test_boundary_layer_variant_matches(designs, tmp_path):
     d = designs["manipulator"]
     generate_c(d, tmp_path, boundary_layer=0.05)
     c = CStep(build.compile_shared(tmp_path, tmp_path / "lib.so"), d)
-    fn = step_function(d, default_ts(d), boundary_layer=0.05)
+    fn = step_function(d, default_sample_time(d), boundary_layer=0.05)
     for z, y in _samples(d, 50, seed=3):
         c.init(z)
         rc, uc, xbc, _ = c.step(y)
@@ -222,7 +224,7 @@ def test_readme_states_memory_and_sample_time(designs, libs):
     d = designs["three-tank"]
     src = libs["three-tank", "double"][0]
     text = (src / "README.md").read_text()
-    assert f"Ts = {default_ts(d)!r}" in text
+    assert f"Ts = {default_sample_time(d)!r}" in text
     nbar = int(d.dims["nbar"])
     assert f"{2 * nbar * 8} bytes" in text
     assert "numeric literals" in text
@@ -237,13 +239,13 @@ def _listing(folder: Path):
 
 def test_ts_above_ts_max_refused(designs, tmp_path):
     d = designs["manipulator"]
-    tsm = d.checks["ts_max"]
+    ts_max = d.checks["ts_max"]
     out = tmp_path / "out"
-    with pytest.raises(ParameterError, match=f"ts_max = {tsm:.6g}"):
-        generate_c(d, out, ts=2 * tsm)
+    with pytest.raises(ParameterError, match=f"ts_max = {ts_max:.6g}"):
+        generate_c(d, out, sample_time=2 * ts_max)
     for bad in (0.0, -1e-3, float("nan")):
         with pytest.raises(ParameterError, match="positive"):
-            generate_c(d, out, ts=bad)
+            generate_c(d, out, sample_time=bad)
     assert not out.exists()
 
 
@@ -299,7 +301,7 @@ def test_only_own_files_written_others_kept(designs, tmp_path):
 
 
 def test_failed_write_leaves_nothing_half_written(designs, tmp_path, monkeypatch):
-    generate_c(designs["manipulator"], tmp_path, ts=0.001)
+    generate_c(designs["manipulator"], tmp_path, sample_time=0.001)
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     real_fsync, calls = os.fsync, []
 
@@ -311,11 +313,11 @@ def test_failed_write_leaves_nothing_half_written(designs, tmp_path, monkeypatch
 
     monkeypatch.setattr(os, "fsync", failing_fsync)
     with pytest.raises(CodegenError, match="No space left"):
-        generate_c(designs["manipulator"], tmp_path, ts=0.002)
+        generate_c(designs["manipulator"], tmp_path, sample_time=0.002)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before  # old files intact, no temporaries
 
 
-def test_default_ts(designs):
+def test_default_sample_time(designs):
     """The sample time the design was made for (the scenario's step, which fte simulate runs); without
     one, a tenth of ts_max rounded down to 1-2-5, capped by the built-in scenario's simulation step."""
     import dataclasses
@@ -324,25 +326,27 @@ def test_default_ts(designs):
     from fte_casadi.plants import SCENARIOS
 
     for plant, d in designs.items():
-        ts, tsm = default_ts(d), d.checks["ts_max"]
-        assert ts == d.observer["sample_time"] == SCENARIOS[plant]().dt < tsm
+        sample_time, ts_max = default_sample_time(d), d.checks["ts_max"]
+        assert sample_time == d.observer["sample_time"] == SCENARIOS[plant]().dt < ts_max
         bare = dataclasses.replace(d, observer={k: v for k, v in d.observer.items() if k != "sample_time"})
-        ts = default_ts(bare)
-        assert ts <= 0.1 * tsm and f"{ts:e}"[0] in "125"
-        assert ts == min(BUILTIN_DT[plant], series_floor(0.1 * tsm))
+        sample_time = default_sample_time(bare)
+        assert sample_time <= 0.1 * ts_max and f"{sample_time:e}"[0] in "125"
+        assert sample_time == min(BUILTIN_DT[plant], series_floor(0.1 * ts_max))
         assert BUILTIN_DT[plant] == SCENARIOS[plant]().dt  # kept in step with the simulator
     d = designs["three-tank"]
     user = dataclasses.replace(
         d, plant="my-tank", observer={k: v for k, v in d.observer.items() if k != "sample_time"}
     )
-    assert default_ts(user) == series_floor(0.1 * user.checks["ts_max"])
-    assert 0.04 * user.checks["ts_max"] < default_ts(user) <= 0.1 * user.checks["ts_max"]
+    assert default_sample_time(user) == series_floor(0.1 * user.checks["ts_max"])
+    assert 0.04 * user.checks["ts_max"] < default_sample_time(user) <= 0.1 * user.checks["ts_max"]
     motor = dataclasses.replace(d, plant="motor", observer=dict(d.observer, sample_time=1e-3))
-    assert default_ts(motor) == 1e-3  # the simulated rate, not a tenth of ts_max
+    assert default_sample_time(motor) == 1e-3  # the simulated rate, not a tenth of ts_max
     too_slow = dataclasses.replace(
         d, plant="motor", observer=dict(d.observer, sample_time=2 * d.checks["ts_max"])
     )
-    assert default_ts(too_slow) == series_floor(0.1 * d.checks["ts_max"])  # never an unstable default
+    assert default_sample_time(too_slow) == series_floor(
+        0.1 * d.checks["ts_max"]
+    )  # never an unstable default
     assert [series_floor(v) for v in (0.0999, 0.1, 0.35, 7.0, 1.99e-3)] == [0.05, 0.1, 0.2, 5.0, 1e-3]
 
 
@@ -411,10 +415,10 @@ def test_init_from_y_starts_as_the_simulation(plant, designs, libs):
 def test_closed_loop_from_first_measurement_matches_casadi(plant, designs, libs):
     """The start-up window: plant at the nominal x0, both observers started from y0 (C: init_from_y)."""
     d = designs[plant]
-    ts = default_ts(d)
+    sample_time = default_sample_time(d)
     c = CStep(libs[plant, "double"][1], d, "double")
-    steps = min(int(round((1.0 if plant == "manipulator" else 20.0) / ts)), 1000)
-    err, traj = closed_loop_compare(d, c, ts, steps, plant=load_plant(plant), start_from_y=True)
+    steps = min(int(round((1.0 if plant == "manipulator" else 20.0) / sample_time)), 1000)
+    err, traj = closed_loop_compare(d, c, sample_time, steps, plant=load_plant(plant), start_from_y=True)
     scale = max(1.0, float(np.max(np.abs(traj["y"]))), float(np.max(np.abs(traj["u"]))))
     assert max(err.values()) <= C_DOUBLE * scale, err
     # started where the plant is, the fault-free estimate stays near zero from the first sample on

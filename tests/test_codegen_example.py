@@ -10,7 +10,7 @@ import pytest
 from tolerances import C_DOUBLE
 
 from fte_casadi.codegen import build
-from fte_casadi.codegen.generate import default_ts
+from fte_casadi.codegen.generate import default_sample_time
 from fte_casadi.design.record import Design
 from fte_casadi.step import step_function
 
@@ -36,7 +36,7 @@ def test_example_runs_and_matches_casadi(tmp_path):
     ys = _measurements()
     assert got.shape == (len(ys), 4)
     design = Design.load(GEN / "design.json")
-    fn = step_function(design, default_ts(design))
+    fn = step_function(design, default_sample_time(design))
     z = design.observer_start(ys[0])  # main.c starts with init_from_y on the first measurement
     for k, y in enumerate(ys):
         z, u, xb, *_ = (np.asarray(v).ravel() for v in fn(z, y))

@@ -21,7 +21,7 @@ from tolerances import C_DOUBLE
 from fte_casadi.cli import main
 from fte_casadi.codegen import build
 from fte_casadi.codegen.fmu import fmu_variables, generate_fmu, is_fte_fmu
-from fte_casadi.codegen.generate import default_ts
+from fte_casadi.codegen.generate import default_sample_time
 from fte_casadi.design.record import Design
 from fte_casadi.errors import CodegenError
 from fte_casadi.plants.loader import load_plant
@@ -56,15 +56,15 @@ def _recorded(plant: str, design: Design):
     the measurements y_k and the step's (u_k, xbarhat_k, yc_k) at each sample."""
     model = load_plant(plant)
     F = model.drift_function()
-    ts = default_ts(design)
-    fn = step_function(design, ts)
+    sample_time = default_sample_time(design)
+    fn = step_function(design, sample_time)
     horizon, fault = _fault(plant)
     x = design.xbar0[: model.n].copy()
     u = np.zeros(model.m)
     ys, ref = [], []
     z = None
-    for k in range(int(round(horizon / ts))):
-        t = k * ts
+    for k in range(int(round(horizon / sample_time))):
+        t = k * sample_time
         f = fault(t, u)
         d = np.full(model.ld, 0.05 * np.sin(3.0 * t))  # a deterministic unknown input
         y = design.C @ x + design.Df @ f
@@ -73,9 +73,9 @@ def _recorded(plant: str, design: Design):
         zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
         ys.append(y)
         ref.append(np.concatenate([u, xb, yc]))
-        x = x + ts * np.asarray(F(x, u, d, f)).ravel()
+        x = x + sample_time * np.asarray(F(x, u, d, f)).ravel()
         z = zn
-    return ts, np.array(ys), np.array(ref)
+    return sample_time, np.array(ys), np.array(ref)
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +112,7 @@ def test_fmpy_validates_the_fmu(plant, fmus):
     md = fmpy.read_model_description(str(path))
     assert md.fmiVersion == "2.0" and md.coSimulation is not None and md.modelExchange is None
     assert md.coSimulation.canHandleVariableCommunicationStepSize is False
-    assert float(md.defaultExperiment.stepSize) == default_ts(d)
+    assert float(md.defaultExperiment.stepSize) == default_sample_time(d)
     names = d.names or {}
     inputs = [v.name for v in md.modelVariables if v.causality == "input"]
     assert inputs == names["outputs"]
@@ -139,18 +139,25 @@ def test_fmpy_simulation_equals_the_python_step(plant, fmus):
     """FMPy's simulate_fmu reads the outputs before it sets the next inputs: it records at t_0 the
     sample of y_0, and at t_{k+1} the sample of y_k (held through the step)."""
     d, path = fmus[plant]
-    ts, ys, ref = _recorded(plant, d)
+    sample_time, ys, ref = _recorded(plant, d)
     names = [v.name for v in fmu_variables(d)]
     p = ys.shape[1]
     signal = np.zeros(len(ys), dtype=[("time", float)] + [(n, float) for n in names[:p]])
-    signal["time"] = np.arange(len(ys)) * ts
+    signal["time"] = np.arange(len(ys)) * sample_time
     for j, n in enumerate(names[:p]):
         signal[n] = ys[:, j]
     res = fmpy.simulate_fmu(
-        str(path), start_time=0.0, stop_time=len(ys) * ts, output_interval=ts, input=signal, output=names[p:]
+        str(path),
+        start_time=0.0,
+        stop_time=len(ys) * sample_time,
+        output_interval=sample_time,
+        input=signal,
+        output=names[p:],
     )
     assert len(res) == len(ys) + 1
-    np.testing.assert_allclose(res["time"], np.arange(len(ys) + 1) * ts, rtol=0, atol=1e-9 * ts * len(ys))
+    np.testing.assert_allclose(
+        res["time"], np.arange(len(ys) + 1) * sample_time, rtol=0, atol=1e-9 * sample_time * len(ys)
+    )
     got = np.column_stack([res[n] for n in names[p:]])
     expected = np.vstack([ref[:1], ref])  # t_0: y_0's sample (read after the inputs), then held samples
     assert _worst(got, expected, _groups(d)) <= C_DOUBLE
@@ -192,7 +199,7 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
     """A master that sets y_k and then reads gets the sample of y_k at t_k (no delay, as the simulator
     applies u_k); reading before the new inputs gives the held sample of y_{k-1}."""
     d, path = fmus["manipulator"]
-    ts, ys, ref = _recorded("manipulator", d)
+    sample_time, ys, ref = _recorded("manipulator", d)
     ys, ref = ys[:200], ref[:200]
     p = ys.shape[1]
     nout = ref.shape[1]
@@ -205,7 +212,7 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
             held.append(s.getReal(vout))
         s.setReal(vin, list(y))
         got.append(s.getReal(vout))
-        s.doStep(currentCommunicationPoint=k * ts, communicationStepSize=ts)
+        s.doStep(currentCommunicationPoint=k * sample_time, communicationStepSize=sample_time)
     s.terminate()
     s.reset()  # back to the start: the next first step takes the first measurement again
     s.setupExperiment(startTime=0.0)
@@ -215,7 +222,7 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
     for k, y in enumerate(ys[:20]):
         s.setReal(vin, list(y))
         again.append(s.getReal(vout))
-        s.doStep(currentCommunicationPoint=k * ts, communicationStepSize=ts)
+        s.doStep(currentCommunicationPoint=k * sample_time, communicationStepSize=sample_time)
     s.freeInstance()
     assert np.array_equal(np.array(again), np.array(got[:20]))
     assert _worst(np.array(got), ref, _groups(d)) <= C_DOUBLE
@@ -227,14 +234,18 @@ def test_outputs_follow_new_inputs_at_once(fmus, tmp_path):
 @pytest.mark.parametrize("factor", [2.0, 0.5, 1.001])
 def test_a_step_other_than_ts_is_refused(factor, fmus, tmp_path):
     d, path = fmus["three-tank"]
-    ts = default_ts(d)
+    sample_time = default_sample_time(d)
     messages: list = []
     s = _slave(path, tmp_path, messages)
     with pytest.raises(FMICallException) as err:
-        s.doStep(currentCommunicationPoint=0.0, communicationStepSize=factor * ts)
+        s.doStep(currentCommunicationPoint=0.0, communicationStepSize=factor * sample_time)
     assert err.value.status == 3  # fmi2Error
-    assert any(st == 3 and "refused" in msg and f"Ts = {ts!r}" in msg for st, msg in messages), messages
-    s.doStep(currentCommunicationPoint=0.0, communicationStepSize=ts * (1 + 1e-12))  # round-off: accepted
+    assert any(st == 3 and "refused" in msg and f"Ts = {sample_time!r}" in msg for st, msg in messages), (
+        messages
+    )
+    s.doStep(
+        currentCommunicationPoint=0.0, communicationStepSize=sample_time * (1 + 1e-12)
+    )  # round-off: accepted
     s.freeInstance()
 
 
@@ -392,12 +403,12 @@ def test_fmpy_rebuilds_the_binary_from_the_sources(fmus, tmp_path):
     (tmp_path / "build").mkdir()
     build_platform_binary(str((tmp_path / "fmu").resolve()), build_dir=str(tmp_path / "build"))
     assert shipped.is_file()
-    ts, ys, ref = _recorded("three-tank", d)
+    sample_time, ys, ref = _recorded("three-tank", d)
     names = [v.name for v in fmu_variables(d)]
     signal = np.zeros(200, dtype=[("time", float), (names[0], float), (names[1], float)])
-    signal["time"] = np.arange(200) * ts
+    signal["time"] = np.arange(200) * sample_time
     signal[names[0]], signal[names[1]] = ys[:200, 0], ys[:200, 1]
-    res = fmpy.simulate_fmu(str((tmp_path / "fmu").resolve()), stop_time=200 * ts, output_interval=ts,
+    res = fmpy.simulate_fmu(str((tmp_path / "fmu").resolve()), stop_time=200 * sample_time, output_interval=sample_time,
                             input=signal, output=names[2:])  # fmt: skip
     got = np.column_stack([res[n] for n in names[2:]])
     assert _worst(got, np.vstack([ref[:1], ref[:200]]), _groups(d)) <= C_DOUBLE

@@ -302,9 +302,7 @@ def test_theorem5_with_diffusion_in_u_and_f():
         for j in range(d.r):  # (79) with its G terms, recomputed; differs from (46) without them
             L = lmi46(aug, i, d.K[j], d.P, d.T, d.Pbar, d.Q[i], pr["sigma"], pr["gamma1"])
             assert np.linalg.eigvalsh(L)[-1] < 0
-    no_g = augment(
-        [{k: v for k, v in lm.items() if k not in ("G", "Gf")} for lm in d.local_models], d.C, d.Df
-    )
+    no_g = augment([dataclasses.replace(lm, G=None, Gf=None) for lm in d.local_models], d.C, d.Df)
     L0 = lmi46(no_g, 0, d.K[0], d.P, d.T, d.Pbar, d.Q[0], pr["sigma"], pr["gamma1"])
     L5 = lmi46(aug, 0, d.K[0], d.P, d.T, d.Pbar, d.Q[0], pr["sigma"], pr["gamma1"])
     assert np.max(np.abs(L5 - L0)) > 1e-8  # the G, Gf terms of (79) are really there

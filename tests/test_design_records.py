@@ -1,5 +1,6 @@
 """Issue #20 (the house): the Design record's ``params``, ``dims`` and ``observer`` are typed frozen records,
-and the design document they read and write is byte for byte what it was."""
+its ``local_models`` the T-S model's own ``LocalModel`` records, and the design document they read and write
+is byte for byte what it was."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fte_casadi.design import Design
 from fte_casadi.design.records import Dims, Observer, Params
 from fte_casadi.errors import DesignFileError
+from fte_casadi.ts.model import LOCAL_MODEL_KEYS, LocalModel
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMITTED = sorted((ROOT / "generated").glob("*/design.json"))
@@ -119,3 +122,72 @@ def test_replace_keeps_the_order_and_appends_a_new_key(committed):
     assert q.boundary_layer == 0.25 and q.sigma == p.sigma / 2 and p.boundary_layer is None
     assert list(q.to_dict()) == list(p.to_dict()) + ["boundary_layer"]
     assert q != p and p == dict(p) and p.replace() == p
+
+
+# -- the local models: the T-S model's own records, one type for both (issue #20, "the local models once") --
+def test_local_models_are_the_typed_records_and_agree_with_the_document(committed):
+    _, text, d = committed
+    doc = json.loads(text)
+    assert len(d.local_models) == d.r == len(doc["local_models"])
+    for lm, entry in zip(d.local_models, doc["local_models"]):
+        assert isinstance(lm, LocalModel)
+        assert list(lm.to_dict()) == list(entry) == list(LOCAL_MODEL_KEYS)  # the document's key order
+        for k, v in entry.items():
+            assert getattr(lm, k).dtype == float and getattr(lm, k).tolist() == v, k
+            assert lm[k] is getattr(lm, k)  # the transitional item access reads the same array
+        assert lm.A.shape == (d.dims.n, d.dims.n) and lm.B.shape == (d.dims.n, d.dims.m)
+
+
+def test_a_design_holds_the_very_records_of_its_ts_model(ts_models, real_designs):
+    ts, d = ts_models["manipulator"], real_designs["manipulator"]
+    assert d.local_models == ts.local_models  # the same records, not copies converted to dicts
+    assert all(a is b for a, b in zip(d.local_models, ts.local_models))
+    assert d.to_dict()["local_models"] == ts.to_dict()["local_models"]  # design and derive documents agree
+
+
+def test_an_older_local_model_without_the_optional_matrices_loads_and_saves_as_it_was(committed):
+    doc = json.loads(committed[1])
+    n, m, lf = doc["dims"]["n"], doc["dims"]["m"], doc["dims"]["lf"]
+    for entry in doc["local_models"]:
+        for k in ("a", "G", "Gf", "M"):
+            del entry[k]
+    d = Design.from_dict(doc)
+    lm = d.local_models[0]
+    assert lm.a.shape == (n,) and lm.G.shape == (n, m) and lm.Gf.shape == (n, lf) and lm.M.shape == (n, 0)
+    assert not lm.has_diffusion_extension and not np.any(d.affine(0))
+    out = d.to_dict()["local_models"]
+    # written back with the keys it had, plus the affine offset "a" (zeros) that documents always carry
+    assert [list(e) for e in out] == [["A", "B", "Bd", "Bf", "W", "a"]] * d.r
+    assert out[0]["a"] == [0.0] * n and out[0]["A"] == doc["local_models"][0]["A"]
+
+
+def test_an_unknown_local_model_key_survives_a_round_trip(committed):
+    doc = json.loads(committed[1])
+    doc["local_models"][0] = {"later": [[1.5]], **doc["local_models"][0]}
+    d = Design.from_dict(doc)
+    assert d.local_models[0].extra["later"].tolist() == [[1.5]] and d.local_models[0]["later"][0, 0] == 1.5
+    again = json.loads(d.to_json())
+    assert again["local_models"] == doc["local_models"]
+    assert list(again["local_models"][0]) == list(doc["local_models"][0])
+
+
+def test_a_malformed_local_model_is_refused_by_name(committed):
+    doc = json.loads(committed[1])
+    del doc["local_models"][1]["Bf"]
+    with pytest.raises(DesignFileError, match=r"'local_models\[1\]' lacks the matrix 'Bf'"):
+        Design.from_dict(doc)
+    doc = json.loads(committed[1])
+    doc["local_models"][0] = [[1.0]]
+    with pytest.raises(DesignFileError, match=r"'local_models\[0\]' must be a JSON object"):
+        Design.from_dict(doc)
+    doc = json.loads(committed[1])
+    doc["local_models"][0]["A"][0][0] = None
+    with pytest.raises(DesignFileError, match=r"'local_models\[0\].A' holds a NaN"):
+        Design.from_dict(doc)
+
+
+def test_dicts_given_for_the_local_models_become_records(committed):
+    d = committed[2]
+    e = dataclasses.replace(d, local_models=[lm.to_dict() for lm in d.local_models])
+    assert isinstance(e.local_models, tuple) and all(isinstance(lm, LocalModel) for lm in e.local_models)
+    assert e.to_json() == d.to_json()

@@ -61,15 +61,17 @@ def test_example_simulates_and_estimates_its_faults(pendulum_design):
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_example_generated_c_equals_python(pendulum_design, tmp_path):
     d = pendulum_design
-    ts = 1e-3
-    generate_c(d, tmp_path / "c", ts=ts)
+    sample_time = 1e-3
+    generate_c(d, tmp_path / "c", sample_time=sample_time)
     lib = build.compile_shared(tmp_path / "c", tmp_path / "libpendulum.so")
 
     def fault(t, u):
         f = np.array([-0.3 * u[0] if t > 0.5 else 0.0, 0.05 if t > 1.0 else 0.0])
         return f[: int(d.dims["lf"])]
 
-    err, traj = closed_loop_compare(d, CStep(lib, d), ts, 1500, plant=load_plant(d.plant_spec), fault=fault)
+    err, traj = closed_loop_compare(
+        d, CStep(lib, d), sample_time, 1500, plant=load_plant(d.plant_spec), fault=fault
+    )
     assert max(err.values()) <= C_DOUBLE
     assert np.max(np.abs(traj["fhat"][-1])) > 0.01  # the observer saw the faults
 

@@ -40,7 +40,7 @@ def test_closed_loop_poles_are_controller_and_observer_poles(real_designs, ts_mo
 
 def test_sampled_closed_loop_is_stable_and_step_response_runs(real_designs):
     d = real_designs["three-tank"]
-    cl = d.to_control(1, 1, dt=0.01)
+    cl = d.to_control(1, 1, sample_time=0.01)
     assert cl.dt == 0.01 and np.max(np.abs(control.poles(cl))) < 1
     resp = control.step_response(cl[0, 0], T=np.arange(0, 5, 0.01))
     assert np.all(np.isfinite(resp.outputs))

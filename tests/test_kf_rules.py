@@ -26,8 +26,8 @@ def kf_design():
 def test_rules_keep_their_own_kf(kf_design, tmp_path):
     d = kf_design
     assert d.certified and d.Kf_rules is not None and len(d.Kf_rules) == d.r == 2
-    B = [np.asarray(lm["B"]) for lm in d.local_models]
-    Bf = [np.asarray(lm["Bf"]) for lm in d.local_models]
+    B = [lm.B for lm in d.local_models]
+    Bf = [lm.Bf for lm in d.local_models]
     for i in range(d.r):
         np.testing.assert_allclose(d.Kf_rules[i], -np.linalg.pinv(B[i]) @ Bf[i], rtol=1e-14)
     assert abs(float(d.Kf_rules[0][0, 0] - d.Kf_rules[1][0, 0])) > 0.05  # 1/(2 + cos x1) over [-1, 1]
@@ -62,10 +62,10 @@ def test_step_blends_kf_with_the_memberships(kf_design):
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_c_and_simulation_run_the_scheduled_term(kf_design, tmp_path):
     d = kf_design
-    ts = scenario().dt
-    generate_c(d, tmp_path, ts=ts)
+    sample_time = scenario().dt
+    generate_c(d, tmp_path, sample_time=sample_time)
     c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), d, "double")
-    fn = step_function(d, ts)
+    fn = step_function(d, sample_time)
     rng = np.random.default_rng(5)
     z = d.observer_start(np.zeros(d.dims["p"]))
     c.init(z)

@@ -1,4 +1,6 @@
-"""The shape of the package: no import circles, not even through imports inside functions."""
+"""The shape of the package: no import circles (not even through imports inside functions); what issue #20
+found written several times (the symmetric part, the solver statuses, nice rounding, the compiler lookup)
+written once; one class per name."""
 
 from __future__ import annotations
 
@@ -84,3 +86,122 @@ def test_the_graph_sees_imports_inside_functions():
 
 def test_no_import_circles():
     assert _cycles(import_graph()) == []
+
+
+#: the steps of the path of the data, lowest first (docs/layout.md): a module imports its own step's
+#: modules and those of lower steps only
+LAYERS = (
+    {"errors", "rounding", "toolchain", "verdicts", "deprecation", "interop", "checkout"},
+    {"model"},
+    {"ts"},
+    {"design"},
+    {"step"},
+    {"sim", "codegen"},
+    {"plants", "plot"},
+    {"tune"},
+    {"report", "generated"},
+    {"cli", "__init__", "__main__"},
+)
+
+
+def _layer(module: str) -> int:
+    part = module.split(".")[1] if "." in module else "__init__"
+    return next(k for k, names in enumerate(LAYERS) if part in names)
+
+
+def test_no_module_imports_a_layer_above_it():
+    g = import_graph()
+    assert {m.split(".")[1] for m in g if "." in m} <= set().union(*LAYERS)  # every top-level part placed
+    up = sorted(f"{a} -> {b}" for a, bs in g.items() for b in bs if _layer(b) > _layer(a))
+    assert up == []
+    assert _layer("fte_casadi.design.api") > _layer("fte_casadi.ts.model")  # design may read ts, not back
+
+
+# -- written once (issue #20, "one name per concept") ---------------------------------------------------
+def _where(pred) -> list[str]:
+    """``module:line`` of every AST node of the package for which ``pred(node)`` holds."""
+    out = []
+    for path in sorted(ROOT.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if pred(node):
+                out.append(f"{path.relative_to(ROOT).as_posix()}:{node.lineno}")
+    return out
+
+
+def _is_sym(node) -> bool:
+    """``0.5 * (M + M.T)``: the symmetric part, written out."""
+    if not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Mult)):
+        return False
+    inner = node.right if isinstance(node.left, ast.Constant) else node.left
+    return (
+        isinstance(inner, ast.BinOp)
+        and isinstance(inner.op, ast.Add)
+        and ast.unparse(inner.right) == f"{ast.unparse(inner.left)}.T"
+    )
+
+
+def _calls(name: str):
+    return lambda node: isinstance(node, ast.Call) and ast.unparse(node.func) == name
+
+
+def _modules_of(places: list[str]) -> set[str]:
+    return {p.split(":")[0] for p in places}
+
+
+def test_the_symmetric_part_is_written_once():
+    assert _where(_is_sym) == ["design/linalg.py:12"]
+    assert _is_sym(ast.parse("0.5 * (P.value + P.value.T)").body[0].value)  # the check sees an inline one
+
+
+def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once():
+    inaccurate = _where(lambda n: isinstance(n, ast.Constant) and n.value == "optimal_inaccurate")
+    assert _modules_of(inaccurate) == {"design/sdp.py"} and len(inaccurate) == 1  # SOLVED
+    assert _modules_of(_where(_calls("math.log10")) + _where(_calls("np.log10"))) <= {
+        "rounding.py",
+        "design/conditioned.py",  # the span of the bracket in a message, not a rounding
+    }
+    assert _modules_of(_where(_calls("shutil.which"))) == {"toolchain.py"}
+
+
+def test_one_class_per_name():
+    """Two unrelated classes were both called ``Layout`` (the conic layer's and the engine's path layout)."""
+    seen: dict[str, list[str]] = {}
+    for place in _where(lambda n: isinstance(n, ast.ClassDef)):
+        path, line = place.split(":")
+        tree = ast.parse((ROOT / path).read_text())
+        name = next(n.name for n in ast.walk(tree) if isinstance(n, ast.ClassDef) and n.lineno == int(line))
+        seen.setdefault(name, []).append(place)
+    assert {k: v for k, v in seen.items() if len(v) > 1} == {}
+    assert "Layout" in seen and "PathLayout" in seen
+
+
+def test_every_exception_class_lives_in_errors_py():
+    from fte_casadi import errors
+
+    def is_exception(node) -> bool:
+        return isinstance(node, ast.ClassDef) and any(
+            ast.unparse(b).split(".")[-1].endswith(("Error", "Exception", "Warning")) for b in node.bases
+        )
+
+    assert _modules_of(_where(is_exception)) == {"errors.py"}
+    assert not issubclass(
+        errors.SolverFailedError, errors.InfeasibleDesignError
+    )  # a failure, not infeasibility
+
+
+def test_the_method_text_is_shown_not_parsed():
+    """``TSModel.method`` is display text; code decides on ``TSModel.kind``."""
+
+    def reads_method(node) -> bool:
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+            return ast.unparse(node.func.value).endswith(".method") and node.func.attr in (
+                "startswith",
+                "endswith",
+            )
+        return isinstance(node, ast.Compare) and any(
+            ast.unparse(x).endswith(".method")
+            and not ast.unparse(x).startswith("plant.")  # Plant.method is a kind
+            for x in (node.left, *node.comparators)
+        )
+
+    assert _where(reads_method) == []

@@ -73,7 +73,7 @@ def test_c_started_from_the_first_measurement_has_no_false_fault_estimate(commit
     lib = build.compile_shared(GENERATED, tmp_path / "libq.so")
     plant = quadruple_tank()
     F, G = plant.drift_function(), plant.diffusion_function()
-    ts, n, lf, nd2 = 0.1, plant.n, plant.lf, plant.d2.shape[0]
+    sample_time, n, lf, nd2 = 0.1, plant.n, plant.lf, plant.d2.shape[0]
 
     def run(x_start, seconds: float, *, start_from_y: bool = True, noise: bool = True, seed: int = 3):
         rng = np.random.default_rng(seed)
@@ -84,13 +84,13 @@ def test_c_started_from_the_first_measurement_has_no_false_fault_estimate(commit
         else:
             c.init(None)
         fhat = []
-        for _ in range(int(round(seconds / ts))):
+        for _ in range(int(round(seconds / sample_time))):
             rc, u, xb, _ = c.step(np.asarray(d.C) @ x)
             assert rc == 0
             fhat.append(np.abs(xb[n + lf :]))
             dd = rng.uniform(-0.5, 0.5, size=plant.ld) if noise else np.zeros(plant.ld)
-            dw = rng.normal(0.0, np.sqrt(ts)) if noise else 0.0
-            x = (x + ts * np.asarray(F(x, u, dd, np.zeros(lf))).ravel()
+            dw = rng.normal(0.0, np.sqrt(sample_time)) if noise else 0.0
+            x = (x + sample_time * np.asarray(F(x, u, dd, np.zeros(lf))).ravel()
                  + np.asarray(G(x, u, np.zeros(lf), np.zeros(nd2))).ravel() * dw)  # fmt: skip
         return np.array(fhat)
 

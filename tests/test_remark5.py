@@ -27,7 +27,7 @@ from fte_casadi.step import step_function
 from fte_casadi.ts import derive
 
 HERE = Path(__file__).resolve().parent
-TS = 1e-3
+SAMPLE_TIME = 1e-3
 
 
 @pytest.fixture(scope="module")
@@ -37,13 +37,13 @@ def ts5():
 
 @pytest.fixture(scope="module")
 def r5(ts5):
-    return design(ts5, sample_time=TS)
+    return design(ts5, sample_time=SAMPLE_TIME)
 
 
 @pytest.fixture(scope="module")
 def r5_bound(ts5):
     """The same plant with a true bound on |gust| (its scenario's amplitude) in the sliding gain."""
-    return design(ts5, sample_time=TS, d_bound=0.5)
+    return design(ts5, sample_time=SAMPLE_TIME, d_bound=0.5)
 
 
 def _certified_beyond_roundoff(d: Design):
@@ -56,7 +56,7 @@ def test_without_the_fallback_assumption_1_is_refused(ts5):
     with pytest.raises(
         AssumptionError, match=r"assumption \(1\) fails.*Remark 5.*\"gust\".*accept-assumption 1"
     ):
-        design(ts5, sample_time=TS, remark5=False)
+        design(ts5, sample_time=SAMPLE_TIME, remark5=False)
 
 
 def test_fallback_designs_and_certifies_with_the_widened_sliding_term(r5):
@@ -71,7 +71,7 @@ def test_fallback_designs_and_certifies_with_the_widened_sliding_term(r5):
     Cbar = np.hstack([d.C, np.zeros((p, lf)), d.Df])
     assert np.max(np.abs(Cbar @ Bdu)) < 1e-12  # the outputs do not see it: that is why (1) fails
     for i, lm in enumerate(d.local_models):  # T Bdbar_i = Bdu M_i: all of d that reaches the error
-        Bdbar = np.vstack([np.asarray(lm["Bd"]), np.zeros((2 * lf, 1))])
+        Bdbar = np.vstack([lm.Bd, np.zeros((2 * lf, 1))])
         np.testing.assert_allclose(d.T @ Bdbar, Bdu @ np.array(rk["M"][i]), atol=1e-14)
     J1 = np.vstack([np.zeros((d.dims["n"], lf)), np.eye(lf), np.zeros((lf, lf))])
     np.testing.assert_allclose(d.Ls, d.T @ np.hstack([Bdu, J1]), atol=1e-14)
@@ -106,7 +106,7 @@ def test_document_round_trip_and_old_documents(r5_bound, tmp_path):
 def test_step_applies_each_sliding_gain(r5_bound):
     """z_next = z + Ts (sum_i h_i (...) + Ls diag(g) sgn(s)), rebuilt by hand from the step's own s."""
     d = r5_bound
-    fn = step_function(d, TS)
+    fn = step_function(d, SAMPLE_TIME)
     sched = d.scheduling_function()
     n, lf, m = d.dims["n"], d.dims["lf"], d.dims["m"]
     g = d.sliding_gain()
@@ -119,19 +119,19 @@ def test_step_applies_each_sliding_gain(r5_bound):
         h = np.asarray(sched(y, xb[:n])).ravel()
         rhs = d.Ls @ (g * np.sign(s))
         for i, lm in enumerate(d.local_models):
-            TB = d.T @ np.vstack([np.asarray(lm["B"]), np.zeros((2 * lf, m))])
+            TB = d.T @ np.vstack([lm.B, np.zeros((2 * lf, m))])
             rhs = rhs + h[i] * (d.R[i] @ z + TB @ u + (d.L1[i] + d.L2[i]) @ y)
-        np.testing.assert_allclose(zn, z + TS * rhs, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(zn, z + SAMPLE_TIME * rhs, rtol=0, atol=1e-13)
 
 
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_c_equals_the_step_with_the_widened_sliding_term(r5_bound, tmp_path):
     d = r5_bound
-    generate_c(d, tmp_path, ts=TS)
+    generate_c(d, tmp_path, sample_time=SAMPLE_TIME)
     header = (tmp_path / "fte_remark5.h").read_text()
     assert "#define FTE_REMARK5_NS 2" in header and "Remark 5" in header
     c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), d, "double")
-    fn = step_function(d, TS)
+    fn = step_function(d, SAMPLE_TIME)
     rng = np.random.default_rng(11)
     z = d.observer_start(np.zeros(d.dims["p"]))
     c.init(z)
@@ -164,14 +164,14 @@ def test_rule_dependent_bd_is_named_and_remark5_used():
     succeed), and says that Remark 5 makes (3) and (4) hold; with it on, the design certifies."""
     ts = derive(bd_plant())
     with pytest.raises(AssumptionError) as info:
-        design(ts, sample_time=TS, remark5=False)
+        design(ts, sample_time=SAMPLE_TIME, remark5=False)
     msg = str(info.value)
     assert "assumption (4) fails" in msg and "s = 0" in msg
     assert 'rule-dependent Bd_i: unknown input "tau"' in msg and "rules [1, 2]" in msg
     assert '"vel" from 0.3624 to 1' in msg  # cos(theta) over |theta| <= 1.2
     assert "--accept-assumption 4" not in msg and "Accepting (4) cannot succeed" in msg
     assert "Remark 5's attenuation, which makes (3) and (4) hold here" in msg
-    d = design(ts, sample_time=TS)
+    d = design(ts, sample_time=SAMPLE_TIME)
     _certified_beyond_roundoff(d)
     assert (
         d.remark5["used"] and d.remark5["unknown_inputs"] == ["tau"] and "mean direction" in d.remark5["why"]

@@ -11,13 +11,13 @@ from fte_casadi.design import design
 from fte_casadi.errors import InfeasibleDesignError
 
 
-def _blended_decrease(d, ts: float, rng, count: int = 200) -> float:
-    """Largest eigenvalue of A(h)^T Pbar A(h) - Pbar over random memberships h, A(h) = I + ts sum h_i R_i."""
+def _blended_decrease(d, sample_time: float, rng, count: int = 200) -> float:
+    """Largest eigenvalue of A(h)^T Pbar A(h) - Pbar over random memberships h, A(h) = I + Ts sum h_i R_i."""
     P, R = np.asarray(d.Pbar), [np.asarray(r) for r in d.R]
     n = P.shape[0]
     worst = -np.inf
     for h in rng.dirichlet(np.ones(len(R)), size=count):
-        A = np.eye(n) + ts * sum(hi * Ri for hi, Ri in zip(h, R))
+        A = np.eye(n) + sample_time * sum(hi * Ri for hi, Ri in zip(h, R))
         worst = max(worst, float(np.linalg.eigvalsh(A.T @ P @ A - P).max()))
     return worst
 
@@ -27,12 +27,12 @@ def test_design_certifies_the_discrete_step_it_runs(plant, real_designs):
     from fte_casadi.plants import SCENARIOS
 
     d = real_designs[plant]
-    ts = SCENARIOS[plant]().dt
+    sample_time = SCENARIOS[plant]().dt
     disc = d.checks["discrete"]
-    assert disc["sample_time"] == ts and disc["holds"] and disc["max_eig_rel"] < 0
-    assert disc["ts_max_lyapunov"] >= 2 * ts  # the default alpha keeps a factor of 2
+    assert disc["sample_time"] == sample_time and disc["holds"] and disc["max_eig_rel"] < 0
+    assert disc["ts_max_lyapunov"] >= 2 * sample_time  # the default alpha keeps a factor of 2
     # independently: V = e^T Pbar e decreases along the blended discrete step for any memberships
-    assert _blended_decrease(d, ts, np.random.default_rng(1)) < 0
+    assert _blended_decrease(d, sample_time, np.random.default_rng(1)) < 0
     assert not any("kept" in s for s in d.status)
 
 
@@ -68,12 +68,12 @@ def test_one_step_everywhere(ts_models, tmp_path):
     from click.testing import CliRunner
 
     from fte_casadi.cli import main
-    from fte_casadi.codegen.generate import default_ts
+    from fte_casadi.codegen.generate import default_sample_time
 
     d = design(ts_models["manipulator"], sample_time=0.002, plant_spec="manipulator")
     f = tmp_path / "m.json"
     d.save(f)
-    assert default_ts(d) == 0.002
+    assert default_sample_time(d) == 0.002
     runner = CliRunner()
     r = runner.invoke(main, ["simulate", str(f), "--paths", "1", "--seed", "1", "--json", "--quiet"])
     assert r.exit_code == 0, r.output

@@ -68,7 +68,7 @@ def test_plain_manipulator_designs_simulates_and_generates_like_the_builtin(
     m = simulate(d, ts.plant, sc, paths=4, seed=1, progress=False).metrics
     assert m["fault_rel_rms_error"][0] < 0.3
     if build.find_compiler() is not None:
-        generate_c(d, tmp_path, ts=1e-3)
+        generate_c(d, tmp_path, sample_time=1e-3)
         lib = build.compile_shared(tmp_path, tmp_path / "lib.so")
         err, _ = closed_loop_compare(d, CStep(lib, d), 1e-3, 500, plant=ts.plant)
         assert max(err.values()) <= C_DOUBLE * 10
@@ -216,7 +216,7 @@ def test_linear_plant_is_one_rule_with_a_certified_design_simulation_and_working
     m = simulate(d, ts.plant, linear_scenario(), paths=3, seed=2, progress=False).metrics
     assert all(e is not None and e < 0.5 for e in m["fault_rel_rms_error"]) and m["ftc_deviation_ratio"] < 0.8
     if build.find_compiler() is not None:
-        generate_c(d, tmp_path, ts=1e-3)
+        generate_c(d, tmp_path, sample_time=1e-3)
         lib = build.compile_shared(tmp_path, tmp_path / "lib.so")
         err, traj = closed_loop_compare(d, CStep(lib, d), 1e-3, 800, plant=ts.plant,
                                         fault=lambda t, u: np.array([0.3 if t > 0.2 else 0.0, 0.0]))  # fmt: skip

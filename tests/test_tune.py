@@ -258,12 +258,12 @@ def test_limits_named_when_no_candidate_helps(small):
         return Record(k, {}, "ok", {}, m, doc, (0.0,))
 
     done = [rec(0, (1.2, 0.5), [0.3, 1.4]), rec(1, (1.1, 0.6), [0.2, 1.1])]
-    lines = _limits(done, done, plant)
+    lines = _limits(done, plant)
     # the fa window (no candidate below 1, the best is trial 1) and fs's false alarms (best 1.1)
     assert len(lines) == 2
     assert "best: trial 1" in lines[0] and "window of fa" in lines[0] and "FTC ratio 1.1" in lines[0]
     assert "false alarms of fs (ratio 1.1)" in lines[1]
-    assert _limits([rec(0, (0.9, 0.5), [0.3, 0.4])], [rec(0, (0.9, 0.5), [0.3, 0.4])], plant) == []
+    assert _limits([rec(0, (0.9, 0.5), [0.3, 0.4])], plant) == []
 
 
 def test_bound_is_an_objective(result):

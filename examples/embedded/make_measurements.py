@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fte_casadi.codegen.generate import default_ts
+from fte_casadi.codegen.generate import default_sample_time
 from fte_casadi.design.record import Design
 from fte_casadi.plants import manipulator
 from fte_casadi.step import step_function
@@ -27,27 +27,27 @@ def record(design: Design, horizon: float = HORIZON_S) -> tuple[float, np.ndarra
     """Sample time and measurements (rows of y) of the closed loop."""
     plant = manipulator()
     F = plant.drift_function()
-    ts = default_ts(design)
-    fn = step_function(design, ts)
+    sample_time = default_sample_time(design)
+    fn = step_function(design, sample_time)
     x = design.xbar0[: plant.n].copy()
     z = design.observer_start(design.C @ x)
     u = np.zeros(plant.m)
     ys = []
-    for k in range(int(round(horizon / ts))):
-        f = np.array([-0.4 * u[0] if k * ts >= FAULT_START_S else 0.0, 0.0])
+    for k in range(int(round(horizon / sample_time))):
+        f = np.array([-0.4 * u[0] if k * sample_time >= FAULT_START_S else 0.0, 0.0])
         y = design.C @ x + design.Df @ f
         ys.append(y)
         zn, un, *_ = (np.asarray(v).ravel() for v in fn(z, y))
-        x = x + ts * np.asarray(F(x, un, np.zeros(plant.ld), f)).ravel()
+        x = x + sample_time * np.asarray(F(x, un, np.zeros(plant.ld), f)).ravel()
         z, u = zn, un
-    return ts, np.array(ys)
+    return sample_time, np.array(ys)
 
 
 def main() -> None:
     design = Design.load(ROOT / "generated" / "manipulator" / "design.json")
-    ts, ys = record(design)
+    sample_time, ys = record(design)
     lines = [
-        f"# manipulator measurements theta_m w_m theta_l, Ts = {ts!r} s, actuator fault from {FAULT_START_S} s"
+        f"# manipulator measurements theta_m w_m theta_l, Ts = {sample_time!r} s, actuator fault from {FAULT_START_S} s"
     ]
     lines += [" ".join(f"{v:.12g}" for v in y) for y in ys]
     (Path(__file__).parent / "measurements.txt").write_text("\n".join(lines) + "\n")

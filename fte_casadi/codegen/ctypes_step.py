@@ -77,7 +77,7 @@ class CStep:
 def closed_loop_compare(
     design: Design,
     cstep: CStep,
-    ts: float,
+    sample_time: float,
     steps: int,
     *,
     plant,
@@ -87,13 +87,15 @@ def closed_loop_compare(
 ):
     """Euler closed loop of the nonlinear plant driven by the CasADi step; the C step gets the same y.
 
+    One sample per Euler step: the plant is integrated with the step ``sample_time`` the controller runs at.
+
     ``plant``: the nonlinear plant the design is for. ``start_from_y``: the plant starts at the
     design's nominal x0 and both observers start as ``fte simulate`` does, z0 = xbar0 - H y0 (the C
     through ``init_from_y``); otherwise the plant starts at its own x0 and both observers at z = 0. Returns a dict of the largest absolute differences (z, u, xbarhat, yc) over the run, plus
     the trajectories. ``fault(t, u) -> f`` gives the fault signal (default none).
     """
     F = plant.drift_function()
-    fn = step_function(design, ts, boundary_layer=boundary_layer)
+    fn = step_function(design, sample_time, boundary_layer=boundary_layer)
     n, m, ld, lf = plant.n, plant.m, plant.ld, plant.lf
     C, Df = np.asarray(design.C), np.asarray(design.Df)
     if start_from_y:
@@ -117,7 +119,7 @@ def closed_loop_compare(
     traj = {"y": [], "u": [], "fhat": []}
     u_prev = np.zeros(m)
     for k in range(steps):
-        t = k * ts
+        t = k * sample_time
         f = np.zeros(lf) if fault is None else np.asarray(fault(t, u_prev), float)
         y = C @ x + Df @ f
         zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
@@ -131,7 +133,7 @@ def closed_loop_compare(
         traj["y"].append(y)
         traj["u"].append(u)
         traj["fhat"].append(xb[n + lf :])
-        x = x + ts * np.asarray(F(x, u, np.zeros(ld), f)).ravel()
+        x = x + sample_time * np.asarray(F(x, u, np.zeros(ld), f)).ravel()
         z = zn
         u_prev = u
     return err, {k: np.array(v) for k, v in traj.items()}

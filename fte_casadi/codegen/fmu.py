@@ -42,12 +42,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..deprecation import renamed_keyword
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import build
 from .fmu_template import FMI2_HEADER, FMI2_HEADER_NAME, WRAPPER
-from .generate import _check_ts, _version, c_name, file_mode, generate_c, output_files, prepare_dir
+from .generate import _check_sample_time, _version, c_name, file_mode, generate_c, output_files, prepare_dir
 
 __all__ = [
     "FmuVariable",
@@ -147,10 +148,10 @@ def fmu_variables(design: Design) -> list[FmuVariable]:
     return out
 
 
-def _dependencies(design: Design, ts: float, boundary_layer) -> list[list[int]]:
+def _dependencies(design: Design, sample_time: float, boundary_layer) -> list[list[int]]:
     """Per output (u, xbarhat, yc in order): the inputs it depends on structurally (0-based), from the
     CasADi step, in the running observer and at the first sample (z0 = xbar0 - H y0), united."""
-    fn = step_function(design, ts, boundary_layer=boundary_layer)
+    fn = step_function(design, sample_time, boundary_layer=boundary_layer)
     nbar, p = int(design.dims.nbar), int(design.dims.p)
     z, y = ca.SX.sym("z", nbar), ca.SX.sym("y", p)
     z0 = ca.DM(design.xbar0) - ca.mtimes(ca.DM(np.asarray(design.H, float)), y)
@@ -163,7 +164,7 @@ def _dependencies(design: Design, ts: float, boundary_layer) -> list[list[int]]:
     return [list(np.flatnonzero(row)) for row in deps]
 
 
-def _model_description(design, variables, ts, deps, guid, sources, mid) -> str:
+def _model_description(design, variables, sample_time, deps, guid, sources, mid) -> str:
     root = ET.Element(
         "fmiModelDescription",
         {
@@ -172,7 +173,7 @@ def _model_description(design, variables, ts, deps, guid, sources, mid) -> str:
             "guid": guid,
             "description": f"observer / fault estimator / tolerant controller of plant {design.plant} "
             f"(design variant {design.variant}, {'certified' if design.certified else 'NOT certified'}); "
-            f"one fmi2DoStep = one sample, fixed step Ts = {ts!r}",
+            f"one fmi2DoStep = one sample, fixed step Ts = {sample_time!r}",
             "generationTool": f"{_TOOL} {_version()}",
             "variableNamingConvention": "flat",
             "numberOfEventIndicators": "0",
@@ -205,7 +206,7 @@ def _model_description(design, variables, ts, deps, guid, sources, mid) -> str:
             ET.SubElement(ud, "Unit", {"name": u})
     cats = ET.SubElement(root, "LogCategories")
     ET.SubElement(cats, "Category", {"name": "logStatusError", "description": "errors (always logged)"})
-    ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stepSize": repr(float(ts))})
+    ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stepSize": repr(float(sample_time))})
     mv = ET.SubElement(root, "ModelVariables")
     for v in variables:
         attrs = {
@@ -326,11 +327,12 @@ def _write_zip(target: Path, members: dict[str, bytes]) -> None:
         raise CodegenError(f"cannot write the FMU {str(target)!r}: {exc.strerror or exc}") from None
 
 
+@renamed_keyword("ts", "sample_time")
 def generate_fmu(
     design: Design | str | os.PathLike,
     out_dir: str | os.PathLike,
     *,
-    ts: float | None = None,
+    sample_time: float | None = None,
     real: str = "double",
     boundary_layer: float | None = None,
 ) -> Path:
@@ -343,9 +345,10 @@ def generate_fmu(
     out_dir : path
         Created if needed. Only ``<model identifier>.fmu`` is written (atomically); an existing file
         of that name is replaced only when fte wrote it (:func:`is_fte_fmu`).
-    ts, real, boundary_layer
-        As for :func:`~fte_casadi.codegen.generate.generate_c`; ``ts`` is the FMU's fixed
-        communication step (default: the design's sample time).
+    sample_time, real, boundary_layer
+        As for :func:`~fte_casadi.codegen.generate.generate_c`; ``sample_time`` is the FMU's fixed
+        communication step (default: the design's sample time). The former keyword ``ts`` still
+        works, with a ``DeprecationWarning``.
 
     Returns
     -------
@@ -374,21 +377,21 @@ def generate_fmu(
         )
     if real not in ("double", "float"):
         raise ParameterError(f"--real must be one of ['double', 'float']; got {real!r}")
-    tsf = _check_ts(design, ts)
+    sample_time = _check_sample_time(design, sample_time)
     target = check_fmu_target(design, out_dir)
     folder, suffix = _platform()
     mid = model_identifier(design.plant)
     name = c_name(design.plant)
     variables = fmu_variables(design)
-    deps = _dependencies(design, tsf, boundary_layer)
+    deps = _dependencies(design, sample_time, boundary_layer)
     with tempfile.TemporaryDirectory(prefix="fte_fmu_") as tmp:
         src = Path(tmp, "sources")
-        generate_c(design, src, ts=tsf, real=real, boundary_layer=boundary_layer)
+        generate_c(design, src, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
         generated = {f: (src / f).read_text() for f in output_files(design.plant)}
         readme = generated.pop("README.md")
         wrapper_name = f"{mid}_fmi2.c"
         c_files = sorted([f for f in generated if f.endswith(".c")] + [wrapper_name])
-        md_draft = _model_description(design, variables, tsf, deps, "{GUID}", c_files, mid)
+        md_draft = _model_description(design, variables, sample_time, deps, "{GUID}", c_files, mid)
         guid = _guid([md_draft, *generated.values()])
         p = int(design.dims.p)
         wrapper = WRAPPER.substitute(
@@ -401,7 +404,7 @@ def generate_fmu(
             ny=p,
             ny_last=p - 1,
             nvar_last=len(variables) - 1,
-            ts_text=repr(tsf),
+            sample_time_text=repr(sample_time),
             y_start=_c_reals(v.start for v in variables[:p]),
             var_names=_c_strings(v.name for v in variables),
         )

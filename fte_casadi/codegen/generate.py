@@ -14,7 +14,7 @@ docs/interface.md and a README. What the CasADi output is made to satisfy, and h
   (``iw``, ``w``, ``mem``); a ``(void)name;`` line is added for each, nothing else is changed.
 - deterministic: no timestamps, CasADi prints constants with 17 significant digits.
 
-Default sample time (when ``ts`` is not given): the sample time the design was made for
+Default sample time (when ``sample_time`` is not given): the sample time the design was made for
 (``observer.sample_time``: the plant's scenario step, the step ``fte simulate`` runs), so that the C
 runs the very step the simulator ran; for a design without one, ``0.1 * ts_max`` rounded down to
 1, 2 or 5 times a power of ten, and for a built-in plant at most the time step its paper scenario
@@ -34,13 +34,23 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from ..deprecation import renamed_keyword
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
 from ..rounding import series_floor
 from ..step import step_function
 from . import template
 
-__all__ = ["generate_c", "default_ts", "c_name", "output_files", "BUILTIN_DIRS", "write_files", "file_mode"]
+__all__ = [
+    "generate_c",
+    "default_sample_time",
+    "default_ts",
+    "c_name",
+    "output_files",
+    "BUILTIN_DIRS",
+    "write_files",
+    "file_mode",
+]
 
 #: directory name under ``generated/`` of each built-in plant
 BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank", "quadruple-tank": "quadruple_tank"}
@@ -74,24 +84,25 @@ def output_files(plant: str) -> list[str]:
 
 
 def _ts_max(design: Design) -> float:
-    tsm = design.checks.get("ts_max") if isinstance(design.checks, dict) else None
+    """The design's largest stable observer sample time (``checks["ts_max"]``), checked."""
+    ts_max = design.checks.get("ts_max") if isinstance(design.checks, dict) else None
     try:
-        tsm = float(tsm)
+        ts_max = float(ts_max)
     except (TypeError, ValueError):
-        tsm = float("nan")
-    if not (math.isfinite(tsm) and tsm > 0):
+        ts_max = float("nan")
+    if not (math.isfinite(ts_max) and ts_max > 0):
         raise CodegenError(
             f"the design gives no usable largest sample time (checks.ts_max = {design.checks.get('ts_max')!r}); "
             "its observer may be unstable in discrete time: make the design again with `fte design`"
         )
-    return tsm
+    return ts_max
 
 
 #: simulation time step of the built-in plants' paper scenarios (``fte_casadi.plants.SCENARIOS``)
 BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2, "quadruple-tank": 0.1}
 
 
-def default_ts(design: Design) -> float:
+def default_sample_time(design: Design) -> float:
     """Default sample time: the sample time the design was made for (``observer.sample_time``, the
     scenario's step, which ``fte simulate`` runs and the default alpha respects) when it is below
     ``ts_max``; otherwise ``0.1 * ts_max`` rounded down to 1, 2 or 5 times a power of ten, and no
@@ -99,28 +110,38 @@ def default_ts(design: Design) -> float:
     st = design.observer.sample_time
     if st is not None and math.isfinite(float(st)) and 0 < float(st) < _ts_max(design):
         return float(st)
-    ts = series_floor(0.1 * _ts_max(design))
-    return min(ts, BUILTIN_DT.get(design.plant, ts))
+    sample_time = series_floor(0.1 * _ts_max(design))
+    return min(sample_time, BUILTIN_DT.get(design.plant, sample_time))
 
 
-def _check_ts(design: Design, ts) -> float:
-    tsm = _ts_max(design)
-    if ts is None:
-        return default_ts(design)
+def default_ts(design: Design) -> float:
+    """Deprecated name of :func:`default_sample_time` (issue #20: ``ts`` names a T-S model)."""
+    import warnings
+
+    warnings.warn("default_ts() is deprecated; call default_sample_time()", DeprecationWarning, stacklevel=2)
+    return default_sample_time(design)
+
+
+def _check_sample_time(design: Design, sample_time) -> float:
+    """``sample_time`` as a float below ``ts_max`` (the CLI's ``--ts``); None: :func:`default_sample_time`."""
+    ts_max = _ts_max(design)
+    if sample_time is None:
+        return default_sample_time(design)
+    given = sample_time
     try:
-        tsf = float(ts)
+        sample_time = float(given)
     except (TypeError, ValueError):
-        raise ParameterError(f"sample time --ts must be a number; got {ts!r}") from None
-    if not (math.isfinite(tsf) and tsf > 0):
+        raise ParameterError(f"sample time --ts must be a number; got {given!r}") from None
+    if not (math.isfinite(sample_time) and sample_time > 0):
         raise ParameterError(
-            f"sample time --ts must be positive and finite; got {ts!r} (the design allows Ts < {tsm:.6g})"
+            f"sample time --ts must be positive and finite; got {given!r} (the design allows Ts < {ts_max:.6g})"
         )
-    if tsf >= tsm:
+    if sample_time >= ts_max:
         raise ParameterError(
-            f"sample time Ts = {tsf:.6g} is not below the design's ts_max = {tsm:.6g}: the discrete observer "
-            f"would be unstable; choose --ts below {tsm:.6g} (default {default_ts(design):.6g})"
+            f"sample time Ts = {sample_time:.6g} is not below the design's ts_max = {ts_max:.6g}: the discrete "
+            f"observer would be unstable; choose --ts below {ts_max:.6g} (default {default_sample_time(design):.6g})"
         )
-    return tsf
+    return sample_time
 
 
 _FUNC_RE = re.compile(r"^(?:static )?[A-Za-z_][\w \*]*?\b(\w+)\(([^()]*)\) \{\n", re.M)
@@ -230,7 +251,14 @@ def _c_values(values) -> str:
 
 
 def _wrapper(
-    design: Design, name: str, real: str, ts: float, tsm: float, boundary_layer, c_src: str, h_src: str
+    design: Design,
+    name: str,
+    real: str,
+    sample_time: float,
+    ts_max: float,
+    boundary_layer,
+    c_src: str,
+    h_src: str,
 ):
     fname = f"fte_{name}_casadi_step"
     sizes = _sizes(h_src, fname)
@@ -263,7 +291,7 @@ def _wrapper(
     setup += [f"res[{k}] = 0;" for k in range(5, sizes["SZ_RES"])]
     mem = _memory(c_src, real, nbar, sizes)
     certified = "certified" if design.certified else "NOT certified"
-    affine = any(np.any(np.asarray(lm.get("a", 0.0))) for lm in design.local_models)
+    affine = any(np.any(lm.a) for lm in design.local_models)
     sub = {
         "name": name,
         "NAME": NAME,
@@ -277,9 +305,9 @@ def _wrapper(
         "nxbar": nbar,
         "n": n,
         "lf": lf,
-        "ts_c": f"({_fmt(ts)})",
-        "ts_text": _fmt(ts),
-        "ts_max_text": f"{tsm:.6g}",
+        "sample_time_c": f"({_fmt(sample_time)})",
+        "sample_time_text": _fmt(sample_time),
+        "ts_max_text": f"{ts_max:.6g}",
         "time_unit": names.get("time_unit", "s"),
         "y_names": joined("outputs", p, "y"),
         "u_names": joined("inputs", m, "u"),
@@ -401,11 +429,12 @@ def write_files(out_dir: Path, texts: dict[str, str]) -> list[Path]:
     return [out_dir / f for f in texts]
 
 
+@renamed_keyword("ts", "sample_time")
 def generate_c(
     design: Design | str | os.PathLike,
     out_dir: str | os.PathLike,
     *,
-    ts: float | None = None,
+    sample_time: float | None = None,
     real: str = "double",
     boundary_layer: float | None = None,
 ) -> list[Path]:
@@ -418,8 +447,10 @@ def generate_c(
     out_dir : path
         Created if needed. Only the files of :func:`output_files` are written (atomically:
         temporary files, then renames); nothing else in the directory is touched.
-    ts : float, optional
-        Sample time; positive and below ``design.checks["ts_max"]``. Default :func:`default_ts`.
+    sample_time : float, optional
+        The step's sample time Ts (the CLI's ``--ts``); positive and below ``design.checks["ts_max"]``.
+        Default :func:`default_sample_time`. The former keyword ``ts`` still works, with a
+        ``DeprecationWarning``.
     real : {"double", "float"}
         The C type of ``fte_real``.
     boundary_layer : float, optional
@@ -438,7 +469,7 @@ def generate_c(
     >>> from fte_casadi.ts import derive
     >>> from fte_casadi.design import design
     >>> d = design(derive(three_tank(), fidelity_samples=200))
-    >>> [p.name for p in generate_c(d, tempfile.mkdtemp(), ts=0.1)][:2]
+    >>> [p.name for p in generate_c(d, tempfile.mkdtemp(), sample_time=0.1)][:2]
     ['fte_three_tank.h', 'fte_three_tank.c']
     """
     if isinstance(design, (str, os.PathLike)):
@@ -449,8 +480,8 @@ def generate_c(
         )
     if real not in _REALS:
         raise ParameterError(f"--real must be one of {list(_REALS)}; got {real!r}")
-    tsf = _check_ts(design, ts)
-    tsm = _ts_max(design)
+    sample_time = _check_sample_time(design, sample_time)
+    ts_max = _ts_max(design)
     if boundary_layer is None:  # the design's own (fte tune), as the simulation runs it
         boundary_layer = design.params.boundary_layer
     name = c_name(design.plant)
@@ -458,7 +489,7 @@ def generate_c(
     prepare_dir(out)
     try:
         fn = step_function(
-            design, tsf, tolerant=True, boundary_layer=boundary_layer, name=f"fte_{name}_casadi_step"
+            design, sample_time, tolerant=True, boundary_layer=boundary_layer, name=f"fte_{name}_casadi_step"
         )
     except ParameterError:
         raise
@@ -467,7 +498,7 @@ def generate_c(
             f"cannot build the step of this design ({exc}); make the design again with `fte design`"
         ) from None
     c_src, h_src = _casadi_sources(fn, name, real)
-    texts, _ = _wrapper(design, name, real, tsf, tsm, boundary_layer, c_src, h_src)
+    texts, _ = _wrapper(design, name, real, sample_time, ts_max, boundary_layer, c_src, h_src)
     files = output_files(design.plant)
     ordered = {
         files[0]: texts[files[0]],
@@ -479,10 +510,10 @@ def generate_c(
     return write_files(out, ordered)
 
 
-def memory_report(design: Design, *, ts: float | None = None, real: str = "double") -> dict:
+def memory_report(design: Design, *, sample_time: float | None = None, real: str = "double") -> dict:
     """Bytes of state, constant data and stack of the generated step (as the README states them)."""
-    tsf = _check_ts(design, ts)
+    sample_time = _check_sample_time(design, sample_time)
     name = c_name(design.plant)
-    fn = step_function(design, tsf, tolerant=True, name=f"fte_{name}_casadi_step")
+    fn = step_function(design, sample_time, tolerant=True, name=f"fte_{name}_casadi_step")
     c_src, h_src = _casadi_sources(fn, name, real)
     return _memory(c_src, real, int(design.dims.nbar), _sizes(h_src, f"fte_{name}_casadi_step"))

@@ -310,13 +310,7 @@ def design(
             {"n": ts.n, "m": ts.m, "p": ts.p, "ld": ts.ld, "lf": ts.lf, "r": ts.r, "nbar": aug.nbar}
         ),
         premises=[p.to_dict() for p in ts.premises],
-        local_models=tuple(
-            {
-                k: np.array(getattr(lm, k), dtype=float)
-                for k in ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M")
-            }
-            for lm in ts.local_models
-        ),  # fmt: skip
+        local_models=ts.local_models,
         C=np.array(ts.C, dtype=float),
         Df=np.array(ts.Df, dtype=float),
         H=H,
@@ -370,12 +364,8 @@ def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc) -> dict:
 
     from .bounds import fault_error_bound
 
-    lms = tuple(
-        {k: getattr(lm, k) for k in ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M")}
-        for lm in ts.local_models
-    )
     view = SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
-                           local_models=lms, R=R, K=K)  # fmt: skip
+                           local_models=ts.local_models, R=R, K=K)  # fmt: skip
     return {"fault_error": fault_error_bound(view)}
 
 

@@ -16,10 +16,12 @@ without Remark 5) and :attr:`Augmented.Js` the widened ``[Bdbar_u J1]`` that (20
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+
+from ..ts.model import LocalModel
 
 __all__ = ["Augmented", "augment", "pad_rows", "time_scale", "time_scaled"]
 
@@ -69,12 +71,9 @@ class Augmented:
         return self.Js.shape[1]
 
 
-def _get(lm, key: str):
-    return lm[key] if isinstance(lm, Mapping) else getattr(lm, key)
-
-
 def augment(local_models: Sequence, C: np.ndarray, Df: np.ndarray) -> Augmented:
-    """Build (8) from local models (``LocalModel`` objects or dicts with A, B, Bd, Bf, W[, G, Gf, M]).
+    """Build (8) from local models (:class:`~fte_casadi.ts.model.LocalModel` records, or dicts with A, B,
+    Bd, Bf, W[, a, G, Gf, M], which become records).
 
     Examples
     --------
@@ -91,12 +90,12 @@ def augment(local_models: Sequence, C: np.ndarray, Df: np.ndarray) -> Augmented:
     nbar = n + 2 * lf
     Abar, Bbar, Bdbar, Wbar, Gbar, Gfbar, Mbar = ([] for _ in range(7))
     m = ld = 0
-    for lm in local_models:
-        A = np.asarray(_get(lm, "A"), dtype=float)
-        B = np.asarray(_get(lm, "B"), dtype=float).reshape(n, -1)
-        Bd = np.asarray(_get(lm, "Bd"), dtype=float).reshape(n, -1)
-        Bf = np.asarray(_get(lm, "Bf"), dtype=float).reshape(n, lf)
-        W = np.asarray(_get(lm, "W"), dtype=float).reshape(n, n)
+    for lm in map(LocalModel.from_mapping, local_models):
+        A = lm.A
+        B = lm.B.reshape(n, -1)
+        Bd = lm.Bd.reshape(n, -1)
+        Bf = lm.Bf.reshape(n, lf)
+        W = lm.W.reshape(n, n)
         m, ld = B.shape[1], Bd.shape[1]
         Ab = np.zeros((nbar, nbar))
         Ab[:n, :n] = A
@@ -106,9 +105,9 @@ def augment(local_models: Sequence, C: np.ndarray, Df: np.ndarray) -> Augmented:
         Bbar.append(pad_rows(B, lf))
         Bdbar.append(pad_rows(Bd, lf))
         Wbar.append(pad_rows(W, lf))
-        G = _optional(lm, "G", (n, m))
-        Gf = _optional(lm, "Gf", (n, lf))
-        M = _optional(lm, "M", (n, -1))
+        G = _columns(lm.G, n)
+        Gf = _columns(lm.Gf, n)
+        M = _columns(lm.M, n)
         Gbar.append(pad_rows(G, lf))
         Gfbar.append(pad_rows(Gf, lf))
         Mbar.append(pad_rows(M, lf) if M.size else np.zeros((nbar, 0)))
@@ -122,17 +121,9 @@ def augment(local_models: Sequence, C: np.ndarray, Df: np.ndarray) -> Augmented:
     )  # fmt: skip
 
 
-def _optional(lm, key: str, shape: tuple[int, int]) -> np.ndarray:
-    try:
-        v = _get(lm, key)
-    except (KeyError, AttributeError):
-        v = None
-    if v is None:
-        return np.zeros((shape[0], max(shape[1], 0)))
-    v = np.asarray(v, dtype=float)
-    if v.size == 0:
-        return np.zeros((shape[0], 0))
-    return v.reshape(shape[0], -1)
+def _columns(v: np.ndarray, n: int) -> np.ndarray:
+    """``v`` as n rows (an empty matrix as n rows of no column)."""
+    return np.zeros((n, 0)) if v.size == 0 else v.reshape(n, -1)
 
 
 def time_scale(aug: Augmented) -> float:
@@ -167,3 +158,36 @@ def time_scaled(aug: Augmented, tau: float) -> Augmented:
         Gfbar=tuple(rt * G for G in aug.Gfbar),
         Mbar=tuple(rt * M for M in aug.Mbar),
     )
+
+
+def output_scale(aug: Augmented) -> float:
+    """The outputs' characteristic size ``sy``: the power of two nearest the largest row norm of C (1 when C is zero).
+
+    Outputs measured in mm of a state in m give ``sy = 1024``; LMI (45) holds ``C X`` beside ``-I``, so a
+    feasible X is ``sy^2`` times smaller than for the same plant measured in m, and sigma with it.
+    """
+    c = float(np.max(np.linalg.norm(aug.Cbar[:, : aug.n], axis=1), initial=0.0))
+    if not (c > 0 and np.isfinite(c)):
+        return 1.0
+    return float(2.0 ** round(np.log2(c)))
+
+
+def units_scaled(aug: Augmented, tau: float, sy: float) -> Augmented:
+    """(8) in the time ``t / tau`` (:func:`time_scaled`) with outputs divided by ``sy``: ``Cbar / sy``.
+
+    LMI (45) of these data at ``(sigma tau^2 sy^2, gamma / sy, gamma1 / sy)`` and ``X~ = tau sy^2 X`` (the same
+    gain K) is a congruence of (45) at ``(sigma, gamma, gamma1)`` and X, times ``sy^2``: multiply (45) by
+    ``sy^2``, then take the congruence ``diag(I, I, I / sy, I / sy^2)`` of its (x, x, y, d) blocks (the
+    time's part as in :func:`time_scaled`). Both scale factors are powers of two, so the map is exact.
+    """
+    out = time_scaled(aug, tau)
+    return out if sy == 1.0 else replace(out, Cbar=aug.Cbar / sy)
+
+
+def units_params(params: dict, tau: float, sy: float) -> dict:
+    """The parameters of (45) in the units of :func:`units_scaled` (sigma, gamma, gamma1; the rest as given)."""
+    out = dict(params, sigma=params["sigma"] * tau**2 * sy**2)
+    for k in ("gamma", "gamma1", "gamma2"):
+        if out.get(k) is not None:
+            out[k] = out[k] / sy
+    return out

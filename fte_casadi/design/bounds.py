@@ -53,8 +53,8 @@ def _vertices(design):
     Kfs = list(design.Kf_rules) if design.Kf_rules is not None else [design.Kf] * design.r
     out = []
     for i, lm in enumerate(design.local_models):
-        A, B, Bd, Bf, W = (np.asarray(lm[k], float) for k in ("A", "B", "Bd", "Bf", "W"))
-        a = np.asarray(lm.get("a", np.zeros(n)), float).ravel()
+        A, B, Bd, Bf, W = lm.A, lm.B, lm.Bd, lm.Bf, lm.W
+        a = lm.a.ravel()
         Wbar = np.vstack([W, np.zeros((2 * lf, n))])
         Wc = np.block([[W, np.zeros((n, nbar))], [T @ Wbar, np.zeros((nbar, nbar))]])
         R = np.asarray(design.R[i], float)
@@ -95,9 +95,10 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
     the analysis LMI is infeasible, fails its numpy check, or the design has Theorem 5 diffusion."""
     import cvxpy as cp
 
+    from .linalg import sym
     from .sdp import SOLVER_SETTINGS
 
-    if any(np.any(np.asarray(lm.get(k, 0.0))) for lm in design.local_models for k in ("G", "Gf", "M")):
+    if any(lm.has_diffusion_extension for lm in design.local_models):
         return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
     verts, Cz = _vertices(design)
     N = Cz.shape[1]
@@ -118,7 +119,7 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
             [Bc.T @ P, -Gd, np.zeros((k, N))],
             [P @ Wc, np.zeros((N, k)), -P],
         ])  # fmt: skip
-        cons.append(0.5 * (M + M.T) << -1e-9 * np.eye(M.shape[0]))
+        cons.append(sym(M) << -1e-9 * np.eye(M.shape[0]))
     prob = cp.Problem(cp.Minimize(cp.sum(g)), cons)
     try:
         with warnings.catch_warnings():  # "may be inaccurate": the point is checked with numpy below
@@ -128,7 +129,7 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
         return {"holds": False, "why": f"the analysis LMI failed in the solver ({exc})"}
     if P.value is None or g.value is None:
         return {"holds": False, "why": f"the analysis LMI is {prob.status}"}
-    Pv, gv = 0.5 * (P.value + P.value.T), np.maximum(np.asarray(g.value, float), 0.0)
+    Pv, gv = sym(P.value), np.maximum(np.asarray(g.value, float), 0.0)
     for _ in range(20):  # the solver's point, checked with numpy; a larger g only helps
         G = np.diag(np.concatenate([np.full(sizes[c], gv[k]) for k, c in enumerate(names)]))
         worst = max(

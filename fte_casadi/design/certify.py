@@ -215,30 +215,33 @@ def lyapunov_ts_max(R: list[np.ndarray], Pbar: np.ndarray) -> float:
     """
     best = np.inf
     for Ri in R:
-        S = Ri.T @ Pbar + Pbar @ Ri
-        S = 0.5 * (S + S.T)
+        S = _sym(Ri.T @ Pbar + Pbar @ Ri)
         if not np.linalg.eigvalsh(S).max() < 0:
             return 0.0
         G = Ri.T @ Pbar @ Ri
         L = np.linalg.cholesky(-S)  # -S = L L^T; eigenvalues of L^-1 G L^-T
         Li = np.linalg.inv(L)
-        lam = np.linalg.eigvalsh(Li @ (0.5 * (G + G.T)) @ Li.T).max()
+        lam = np.linalg.eigvalsh(Li @ _sym(G) @ Li.T).max()
         best = min(best, 1.0 / lam if lam > 0 else np.inf)
     return float(best)
 
 
-def discrete_certificate(R: list[np.ndarray], Pbar: np.ndarray, ts: float) -> dict:
-    """The discrete step at sample time ``ts`` checked with Pbar: the largest eigenvalue of
-    ``(I + ts R_i)^T Pbar (I + ts R_i) - Pbar`` over the rules, relative to ``||Pbar||`` (negative:
+def discrete_certificate(R: list[np.ndarray], Pbar: np.ndarray, sample_time: float) -> dict:
+    """The discrete step at ``sample_time`` (Ts) checked with Pbar: the largest eigenvalue of
+    ``(I + Ts R_i)^T Pbar (I + Ts R_i) - Pbar`` over the rules, relative to ``||Pbar||`` (negative:
     certified for any blending of the rules), and the largest Ts this holds for."""
     n = Pbar.shape[0]
     worst = max(
-        float(np.linalg.eigvalsh((np.eye(n) + ts * Ri).T @ Pbar @ (np.eye(n) + ts * Ri) - Pbar).max())
+        float(
+            np.linalg.eigvalsh(
+                (np.eye(n) + sample_time * Ri).T @ Pbar @ (np.eye(n) + sample_time * Ri) - Pbar
+            ).max()
+        )
         for Ri in R
     )
     rel = worst / float(np.linalg.norm(Pbar, 2))
     return {
-        "sample_time": float(ts),
+        "sample_time": float(sample_time),
         "max_eig_rel": rel,
         "ts_max_lyapunov": lyapunov_ts_max(R, Pbar),
         "holds": bool(rel < -8 * n * np.finfo(float).eps),

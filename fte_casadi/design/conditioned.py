@@ -53,7 +53,7 @@ import numpy as np
 from ..errors import CentringError, InfeasibleDesignError
 from ..errors import SolverFailedError as SolverFailedError
 from ..rounding import nice_floor
-from .augment import Augmented, time_scale, time_scaled
+from .augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
 from .certify import diffusion_coupling, lmi45, lmi46, lyapunov_ts_max, sliding_mismatch, ts_max
 from .sdp import (
     SOLVED,
@@ -260,26 +260,28 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
 
 
 def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: Layout, Su: np.ndarray):
-    """The feasibility solve of step 3, posed in the time ``t / tau`` (:func:`~fte_casadi.design.augment.time_scaled`),
-    its point mapped back exactly to the unknowns of the unscaled problem (``X = X_tau / tau``, the same K).
+    """The feasibility solve of step 3, posed in the time ``t / tau`` with outputs divided by ``sy``
+    (:func:`~fte_casadi.design.augment.units_scaled`), its point mapped back exactly to the unknowns of the
+    unscaled problem (``X = X~ / (tau sy^2)``, the same K).
 
     Only the starting point comes from here: the centring that follows runs on the unscaled LMIs, and
     Newton's method is invariant under such changes of variables, so the design does not depend on tau.
     """
-    aug_s = time_scaled(aug, tau)
-    params_s = dict(params, sigma=params["sigma"] * tau**2)
+    sy = output_scale(aug)
+    aug_s = units_scaled(aug, tau, sy)
+    params_s = units_params(params, tau, sy)
     Su_s = input_scaling(aug_s)
     layout_s, family_s, _ = _step3_problem(aug_s, params_s, Su_s)
     prob = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in family_s[:-1]])  # without the epigraph of t
     res = prob.solve(solver)
-    if tau == 1.0 or res.v is None or not np.all(np.isfinite(res.v)):
+    if (tau == 1.0 and sy == 1.0) or res.v is None or not np.all(np.isfinite(res.v)):
         return prob, res
     u = layout_s.unpack(res.v)
     try:
         K = Su_s @ u["Y"] @ np.linalg.inv(u["X"])
     except np.linalg.LinAlgError:
         return prob, SolveResult(res.status, None, res.seconds, res.rescaled, res.warned)
-    v = layout.pack(X=u["X"], Y=np.linalg.solve(Su, K @ u["X"]), s=tau * u["s"], t=0.0)
+    v = layout.pack(X=u["X"], Y=np.linalg.solve(Su, K @ u["X"]), s=tau * sy**2 * u["s"], t=0.0)
     return prob, SolveResult(res.status, v, res.seconds, res.rescaled, res.warned)
 
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .augment import Augmented
+from .augment import Augmented, output_scale, time_scale, units_params, units_scaled
 from .certify import lmi45
 from .conditioned import MARGIN, input_scaling
 from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
@@ -30,6 +30,19 @@ __all__ = ["gamma_min", "sigma_max", "FrontierPoint"]
 
 def _blocks(aug: Augmented) -> tuple[int, int, int, int]:
     return aug.n, aug.n, aug.p, aug.ld
+
+
+def _units(aug: Augmented) -> tuple[float, float]:
+    """``(tau, sy)`` in which the bounds are posed: the plant's own time and output size when its X is small.
+
+    The bounds fix the scale of X by ``X >= MARGIN I``. (45) of a plant in the time ``t / tau`` with outputs
+    ``y / sy`` is the same LMI at ``X~ = tau sy^2 X`` (:func:`~fte_casadi.design.augment.units_scaled`); a slow
+    plant measured in small units (``tau sy^2 > 1``, e.g. minutes and mm: 1e8) needs an X so small that the
+    absolute margin excludes every one, so there the bounds are posed in its own units, where the margin is
+    relative to them. Elsewhere (``tau sy^2 <= 1``) the absolute margin is the weaker one and is kept: the
+    data are used as they are."""
+    tau, sy = time_scale(aug), output_scale(aug)
+    return (tau, sy) if tau * sy**2 > 1.0 else (1.0, 1.0)
 
 
 def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: float):
@@ -95,13 +108,18 @@ def _memo(fn):
 
 @_memo
 def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple[float | None, str]:
-    """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status."""
-    layout, lmis, c = _problem(aug, sigma, None, gamma1)
+    """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status.
+
+    Posed in the plant's own time and output size where that matters (:func:`_units`), so that a plant in
+    minutes and millimetres is solved in numbers of order one."""
+    tau, sy = _units(aug)
+    p = units_params({"sigma": sigma, "gamma": None, "gamma1": gamma1}, tau, sy)
+    layout, lmis, c = _problem(units_scaled(aug, tau, sy), p["sigma"], None, p["gamma1"])
     res = ConicProblem(layout, lmis, c).solve(solver)
     if res.v is None or res.status not in SOLVED:
         return None, res.status
     g2 = layout.unpack(res.v)["q"]
-    return float(math.sqrt(max(g2, gamma1**2))), res.status
+    return float(sy * math.sqrt(max(g2, p["gamma1"] ** 2))), res.status
 
 
 @_memo
@@ -109,11 +127,15 @@ def sigma_max(aug: Augmented, gamma: float | None, gamma1: float, solver: str) -
     """The largest sigma with (45) feasible at ``gamma`` (None: gamma infinite), and the status.
 
     None when (45) is infeasible even at sigma -> 0 (then no sigma helps: gamma must rise)."""
-    layout, lmis, c = _problem(aug, None, gamma, gamma1)
+    tau, sy = _units(aug)
+    p = units_params({"sigma": 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy)
+    layout, lmis, c = _problem(units_scaled(aug, tau, sy), None, p["gamma"], p["gamma1"])
     res = ConicProblem(layout, lmis, c).solve(solver)
     if res.v is None or res.status not in SOLVED:
         return None, res.status
-    s = layout.unpack(res.v)["q"]
+    s = (
+        layout.unpack(res.v)["q"] / (tau * sy) ** 2
+    )  # back to the plant's units (gamma sy, sigma / (tau sy)^2)
     return (float(s) if s > 0 else None), res.status
 
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
+from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
+
 __all__ = ["FaultLimits", "channel_zeros", "fault_limits", "separation", "explain_metrics"]
 
 #: a normalised separation below this is "weak" (the outputs tell the columns apart only slowly)
@@ -107,7 +109,7 @@ def fault_limits(design, j: int) -> FaultLimits:
     names = list(design.names.get("faults") or [f"f{k + 1}" for k in range(Df.shape[1])])
     zeros, sep_d, sep_f = [], [], []
     for lm in design.local_models:
-        A, Bf, Bd = (np.asarray(lm[k], float) for k in ("A", "Bf", "Bd"))
+        A, Bf, Bd = lm.A, lm.Bf, lm.Bd
         ld = Bd.shape[1]
         B = np.hstack([Bf[:, [j]], Bd])
         D = np.hstack([Df[:, [j]], np.zeros((C.shape[0], ld))])
@@ -172,8 +174,9 @@ def causes(lim: FaultLimits, window: float | None) -> tuple[list[str], str]:
 
 
 def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list[str]:
-    """One sentence per fault window where tolerant control is not better than none (FTC ratio >= 1)
-    and per fault whose false-alarm ratio is >= 1 in ``metrics``, naming the structural cause with
+    """One sentence per fault window where tolerant control is not better than none (FTC ratio >=
+    :data:`~fte_casadi.verdicts.WORSE_THAN_NONE`) and per fault whose false-alarm ratio is >=
+    :data:`~fte_casadi.verdicts.FALSE_ALARM` in ``metrics``, naming the structural cause with
     numbers, or saying that none was found (then the limit is the tuning or the noise, not the plant).
 
     ``windows``: indices of ``metrics["windows"]`` to explain (default: those with a ratio >= 1);
@@ -182,7 +185,7 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
     out = []
     wins = metrics.get("windows") or []
     if windows is None:
-        windows = [k for k, w in enumerate(wins) if (w.get("ftc_deviation_ratio") or 0.0) >= 1.0]
+        windows = [k for k, w in enumerate(wins) if (w.get("ftc_deviation_ratio") or 0.0) >= WORSE_THAN_NONE]
     for k in windows:
         w = wins[k]
         j = names.index(w["fault"]) if w["fault"] in names else 0
@@ -195,7 +198,7 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
                    + f" ({seen})")  # fmt: skip
     fa = metrics.get("false_alarm_rel_rms") or []
     if faults is None:
-        faults = [j for j, v in enumerate(fa) if v is not None and v >= 1.0]
+        faults = [j for j, v in enumerate(fa) if v is not None and v >= FALSE_ALARM]
     for j in faults:
         lim = fault_limits(design, j)
         spans = [float(w["stop"]) - float(w["start"]) for w in wins if w["fault"] == lim.fault]

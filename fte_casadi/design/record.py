@@ -18,7 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..deprecation import renamed_keyword
 from ..errors import DesignFileError
+from ..ts.model import LocalModel
 from .records import Dims, Observer, Params, _Record
 
 __all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "atomic_write_text"]
@@ -52,7 +54,6 @@ REQUIRED_KEYS = (
 )
 _MATS = ("C", "Df", "H", "T", "X", "P", "Kf", "Pbar", "N", "Ls")
 _LISTS = ("K", "Q", "L1", "L2", "R")
-_LM_KEYS = ("A", "B", "Bd", "Bf", "W")
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> None:
@@ -99,7 +100,8 @@ class Design:
     params: Params
     dims: Dims
     premises: list
-    local_models: tuple  # of dicts of numpy arrays: A, B, Bd, Bf, W, a, G, Gf, M
+    #: one per rule, the T-S model's own records (:class:`~fte_casadi.ts.model.LocalModel`)
+    local_models: tuple[LocalModel, ...]
     C: np.ndarray
     Df: np.ndarray
     H: np.ndarray
@@ -150,6 +152,8 @@ class Design:
             value = getattr(self, name)
             if not isinstance(value, rec):
                 object.__setattr__(self, name, rec.from_mapping(value))
+        # and so do dicts given for the local models (a record is kept as it is)
+        object.__setattr__(self, "local_models", tuple(map(LocalModel.from_mapping, self.local_models)))
 
     # -- convenience ---------------------------------------------------------------------
     @property
@@ -202,7 +206,8 @@ class Design:
 
         return ca.Function.deserialize(self.scheduling)
 
-    def to_control(self, i: int = 0, j: int = 0, dt: float | None = None):
+    @renamed_keyword("dt", "sample_time")
+    def to_control(self, i: int = 0, j: int = 0, sample_time: float | None = None):
         """The closed loop of plant rule ``i``, observer rule ``i`` and gain ``K_j`` as a ``control.StateSpace``.
 
         States ``[x; z]``; inputs ``[u_ref; d; f]`` (the reference input, unknown inputs, faults);
@@ -210,22 +215,20 @@ class Design:
         Kf fhat`` with ``xbarhat = z + H y``. Left out: the sliding term ``Ls us`` (discontinuous),
         the affine offsets of linearised models and the actuator limits (the model is linear). Its
         poles are ``eig(A_i + B_i K_j)`` and ``eig(R_i)`` (the observer error decouples). With
-        ``dt``: the loop as the generated C runs it, the plant by zero-order hold and the observer
+        ``sample_time``: the loop as the generated C runs it, the plant by zero-order hold and the observer
         by the explicit Euler step of docs/method.md. Needs python-control (``fte_casadi[control]``).
+        The former keyword ``dt`` still works, with a ``DeprecationWarning``.
         """
         from ..interop import closed_loop_ss
 
-        return closed_loop_ss(self, i, j, dt)
+        return closed_loop_ss(self, i, j, sample_time)
 
     def affine(self, i: int) -> np.ndarray:
         """Affine offset ``a_i`` of rule ``i`` (zeros for sector models)."""
-        return _arr(self.local_models[i]["a"])
+        return self.local_models[i].a
 
     # -- JSON ----------------------------------------------------------------------------
     def to_dict(self) -> dict:
-        lms = []
-        for lm in self.local_models:
-            lms.append({k: _arr(v).tolist() for k, v in lm.items()})
         out = {
             "plant": self.plant,
             "variant": self.variant,
@@ -233,7 +236,7 @@ class Design:
             "params": self.params.to_dict(),
             "dims": self.dims.to_dict(),
             "premises": self.premises,
-            "local_models": lms,
+            "local_models": [lm.to_dict() for lm in self.local_models],
         }
         for k in _MATS:
             out[k] = _arr(getattr(self, k)).tolist()
@@ -320,13 +323,9 @@ class Design:
                 if not isinstance(v, list) or len(v) != r:
                     raise DesignFileError(f"{source}: {k!r} must be a list of r = {r} matrices")
                 kw[k] = tuple(_finite(source, f"{k}[{i}]", M) for i, M in enumerate(v))
-            lms = []
-            for i, lm in enumerate(doc["local_models"]):
-                lms.append({k: _finite(source, f"local_models[{i}].{k}", v) for k, v in lm.items()})
+            lms = tuple(_local_model(source, i, lm) for i, lm in enumerate(doc["local_models"]))
             if len(lms) != r:
                 raise DesignFileError(f"{source}: 'local_models' must hold r = {r} models")
-            for lm in lms:
-                lm.setdefault("a", np.zeros(lm["A"].shape[0]))
             theta = float(doc["theta"])
             u_ref = _finite(source, "u_ref", doc["u_ref"])
         except (TypeError, KeyError, ValueError) as exc:
@@ -341,7 +340,7 @@ class Design:
             params=params,
             dims=dims,
             premises=list(doc["premises"]),
-            local_models=tuple(lms),
+            local_models=lms,
             theta=theta,
             checks=dict(doc["checks"]),
             timings=dict(doc["timings"]),
@@ -418,6 +417,22 @@ def _remark5(source: str, value, k: int) -> dict:
             "columns of 'Ls' beyond the faults')"
         )
     return dict(value)
+
+
+def _local_model(source: str, i: int, entry) -> LocalModel:
+    """Rule ``i``'s local model of a document: every matrix finite, A, B, Bd, Bf, W present."""
+    if not isinstance(entry, dict):
+        raise DesignFileError(
+            f"{source}: 'local_models[{i}]' must be a JSON object of matrices (A, B, Bd, Bf, W, ...)"
+        )
+    try:
+        return LocalModel.from_mapping(
+            {k: _finite(source, f"local_models[{i}].{k}", v) for k, v in entry.items()}
+        )
+    except KeyError as exc:
+        raise DesignFileError(
+            f"{source}: 'local_models[{i}]' lacks the matrix {exc}; make it again with `fte design`"
+        ) from None
 
 
 def _reject_constant(name: str):

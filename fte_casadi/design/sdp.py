@@ -319,11 +319,11 @@ class ConicProblem:
                 status = str(prob.status)
             except cp.SolverError as exc:
                 status = f"solver_error ({' '.join(str(exc).split())[:120]})"
-        dt = time.perf_counter() - t0
-        self.seconds += dt
+        elapsed = time.perf_counter() - t0
+        self.seconds += elapsed
         warned = tuple(sorted({str(wn.message).split(".")[0] for wn in caught}))
         v = None if w.value is None else np.asarray(w.value, dtype=float) * d
-        return SolveResult(status, v, dt, rescale, warned)
+        return SolveResult(status, v, elapsed, rescale, warned)
 
     @property
     def large(self) -> bool:
@@ -411,11 +411,20 @@ class _Barrier:
             g += np.bincount(
                 ip.ravel(), weights=np.trace(W, axis1=-2, axis2=-1).ravel(), minlength=nf
             )  # tr(W_l)
+            # tr(W_l W_m) over the upper triangles, off-diagonal entries weighted sqrt(2) (W is symmetric):
+            # half the products of the full vec(W_l) . vec(W_m)
+            # (for large LMIs only: for small ones the gather costs more than the products it saves)
+            k = W.shape[-1]
+            if k >= 24:
+                iu, ju = np.triu_indices(k)
+                Wt = W[..., iu, ju] * np.where(iu == ju, 1.0, np.sqrt(2.0))  # (g, ns, k(k+1)/2)
+            else:
+                Wt = W.reshape(*W.shape[:2], -1)
             if ip.shape[0] > 1 and np.all(ip == ip[0]):  # one support for all (e.g. Pt in (55) and (64))
-                W2 = np.swapaxes(W, 0, 1).reshape(ip.shape[1], -1)
+                W2 = np.swapaxes(Wt, 0, 1).reshape(ip.shape[1], -1)
                 Hm[np.ix_(ip[0], ip[0])] += W2 @ W2.T
             else:
-                W2 = W.reshape(*ip.shape, -1)
+                W2 = Wt
                 Hl = W2 @ np.swapaxes(W2, -1, -2)  # Hess_lm = tr(W_l W_m) per LMI, over its support
                 flat = (ip[:, :, None] * nf + ip[:, None, :]).ravel()  # added where the supports overlap
                 Hm += np.bincount(flat, weights=Hl.ravel(), minlength=nf * nf).reshape(nf, nf)

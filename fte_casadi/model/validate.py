@@ -41,10 +41,10 @@ def _linearity(
     expr: ca.SX,
     var: ca.SX,
     var_names: list[str],
-    z: ca.SX,
     auto: bool = False,
 ) -> None:
-    """``expr`` must be affine in ``var`` with coefficients that depend on ``z`` only (``auto``: on x too)."""
+    """``expr`` must be affine in ``var``: its coefficients may depend on what ``var`` leaves out (the
+    premises z; with ``auto`` or local linearisation, the states x too). ``auto`` only words the message."""
     if var.numel() == 0:
         return
     jac = ca.jacobian(expr, var)
@@ -128,8 +128,8 @@ def validate(b: PlantBuilder) -> Plant:
         # local linearisation: x and u may enter nonlinearly; d and f must enter affinely
         v, vn = ca.vertcat(d, f), list(b._dn) + list(b._fn)
         w, wn = ca.vertcat(f, d2), list(b._fn) + list(b._d2n)
-    _linearity("drift", b._xn, drift, v, vn, z, auto)
-    _linearity("diffusion", b._xn, diff, w, wn, z, auto)
+    _linearity("drift", b._xn, drift, v, vn, auto)
+    _linearity("diffusion", b._xn, diff, w, wn, auto)
 
     # outputs: y = C x + Df f exactly
     yn = b._yn or tuple(f"y{k + 1}" for k in range(p))

@@ -1,4 +1,21 @@
-"""Scenarios (faults, disturbances, noise) and the compiled Euler-Maruyama Monte Carlo engine."""
+"""Scenarios (faults, disturbances, noise) and the compiled Euler-Maruyama Monte Carlo engine.
+
+Two names for time steps, one meaning each (issue #20, "one name per concept"):
+
+- ``sample_time`` (Ts) is the observer/controller's sample time, everywhere in the package: what a
+  design is made and certified for (``Design.observer.sample_time``, ``design(..., sample_time=)``),
+  and the step of :func:`~fte_casadi.step.step_function` and of the generated C (``fte codegen --ts``).
+- ``dt`` is the simulation's step, and is used only here in ``sim/`` and for the scenario
+  (``Scenario.dt``, ``simulate(..., dt=)``, ``fte simulate --dt``, the metrics key ``"dt"``): the
+  Euler-Maruyama step of the plant. The simulated controller takes one sample per step, so within a
+  run the integration step and the controller's sample time are the same number by construction
+  (the step Function is built at ``dt``); ``dt`` differs from the design's ``sample_time`` only when
+  ``--dt`` asks for it or the design's sample time exceeds its ``ts_max``, and the metrics say so
+  (``"dt_change"``).
+
+``ts`` names a T-S model (:class:`~fte_casadi.ts.TSModel`) only; ``ts_max`` (the design document's
+``checks.ts_max``) is the largest sample time its discrete observer is stable for.
+"""
 
 from .engine import simulate as simulate
 from .metrics import metrics as metrics

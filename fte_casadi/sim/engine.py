@@ -51,7 +51,7 @@ from .vector import auto_chunk as auto_chunk
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
 
-__all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_step", "SCALES",
+__all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_sample_time", "SCALES",
            "auto_chunk"]  # fmt: skip
 
 #: at most about this many recorded samples per example path
@@ -150,7 +150,7 @@ def closed_loop_sample(
     return fn, lay
 
 
-def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, seed, dt):
+def _check_settings(design: Design, plant: Plant, paths, seed, dt):
     if not isinstance(paths, (int, np.integer)) or isinstance(paths, bool) or paths < 1:
         raise ParameterError(f"paths must be a positive integer; got {paths!r}")
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
@@ -171,16 +171,12 @@ def _check_settings(design: Design, plant: Plant, scenario: Scenario, paths, see
         )
 
 
-def _lm(design: Design, key: str) -> np.ndarray:
-    return np.asarray(design.local_models[0][key], dtype=float)
-
-
 def plant_schedule(
     design: Design, plant: Plant, scenario: Scenario, t: np.ndarray, dt: float
 ) -> FaultSchedule:
     """The scenario's fault profiles resolved against this plant and design, sampled at ``t``."""
     return fault_schedule(
-        scenario, plant.fault_names, plant.fault_kinds, _lm(design, "B"), _lm(design, "Bf"),
+        scenario, plant.fault_names, plant.fault_kinds, design.local_models[0].B, design.local_models[0].Bf,
         np.asarray(plant.Df), plant.input_names, t, dt,
         u_operating=getattr(plant, "u_operating", None), u_ref=design.u_ref,
     )  # fmt: skip
@@ -200,10 +196,10 @@ def result_names(plant: Plant) -> dict:
     }
 
 
-def design_step(design: Design, scenario: Scenario) -> float:
-    """The step the design was made (and certified) for: its recorded sample time, else the scenario's."""
-    ts = design.observer.sample_time
-    return float(ts) if ts else float(scenario.dt)
+def design_sample_time(design: Design, scenario: Scenario) -> float:
+    """The sample time the design was made (and certified) for: its recorded one, else the scenario's step."""
+    sample_time = design.observer.sample_time
+    return float(sample_time) if sample_time else float(scenario.dt)
 
 
 def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[float, int, list[str]]:
@@ -212,7 +208,7 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
     notes = []
     ts_max = float(design.checks.get("ts_max", math.inf) or math.inf)
     if dt is None:
-        dt = design_step(design, scenario)
+        dt = design_sample_time(design, scenario)
         if dt > ts_max:
             new = series_floor(ts_max / 2)
             while abs(scenario.T / new - round(scenario.T / new)) > 1e-9 * scenario.T / new:
@@ -237,8 +233,8 @@ def resolve_dt(design: Design, scenario: Scenario, dt: float | None) -> tuple[fl
 
 def step_change(design: Design, scenario: Scenario, dt: float, given: float | None) -> dict | None:
     """``{"from", "to", "why"}`` when the step run differs from the design's sample time, else None."""
-    ts = design_step(design, scenario)
-    if abs(dt - ts) <= 1e-12 * ts:
+    sample_time = design_sample_time(design, scenario)
+    if abs(dt - sample_time) <= 1e-12 * sample_time:
         return None
     why = (
         "--dt given"
@@ -247,7 +243,7 @@ def step_change(design: Design, scenario: Scenario, dt: float, given: float | No
     )
     if given is not None and design.observer.sample_time is None:
         why = "--dt given (the design records no sample time: compared with the scenario's step)"
-    return {"from": ts, "to": float(dt), "why": why}
+    return {"from": sample_time, "to": float(dt), "why": why}
 
 
 def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
@@ -457,7 +453,7 @@ def simulate(
         With ``metrics`` (the metrics document over all paths, streamed) and the recorded paths.
     """
     t_wall = time.perf_counter()
-    _check_settings(design, plant, scenario, paths, seed, dt)
+    _check_settings(design, plant, paths, seed, dt)
     paths, seed = int(paths), int(seed)
     if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")

@@ -10,15 +10,8 @@ __all__ = ["metrics", "metrics_from_arrays", "windows", "input_saturation", "fau
            "fault_rel_rms_error", "false_alarm_rel_rms", "ftc_deviation_ratio", "WORSE_THAN_NONE", "FALSE_ALARM",
            "SATURATED"]  # fmt: skip
 
+from ..verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE  # re-exported: the verdicts of this document
 from .reduce import SETTLE_FRACTION, SETTLE_T, _mask
-
-#: the verdicts ``fte simulate`` and the report give, in one place:
-#: an FTC deviation ratio above this: tolerant control leaves the outputs worse than none
-WORSE_THAN_NONE = 1.0
-#: a fault estimate outside its windows above this fraction of the fault's RMS: false alarms
-FALSE_ALARM = 1.0
-#: an input at a limit for more than this fraction of a window: the tolerance is that of a saturated actuator
-SATURATED = 0.05
 
 
 def fault_windows(result: SimulationResult) -> list[list[tuple[float, float]]]:

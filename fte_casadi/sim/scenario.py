@@ -168,7 +168,8 @@ class Scenario:
     T : float
         Horizon (in the plant's time unit).
     dt : float
-        Default Euler-Maruyama step (= the controller's sample time).
+        Default Euler-Maruyama step, which the simulated controller also samples at (see
+        :mod:`fte_casadi.sim` for ``dt`` and ``sample_time``).
     faults : tuple
         Fault profiles (:class:`LossOfEffectiveness`, :class:`Bias`, :class:`Drift`, :class:`Stuck`).
     unknown_input : UniformNoise | Sinusoid | None

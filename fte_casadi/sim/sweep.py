@@ -61,7 +61,7 @@ def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, 
           exact: bool = True) -> list[dict]:  # fmt: skip
     """The metrics document of the scenario at every point of the grid ``vary`` (first factor slowest);
     ``exact=False``: the fast mode of :func:`.engine.simulate`."""
-    _check_settings(design, plant, scenario, paths, seed, dt)
+    _check_settings(design, plant, paths, seed, dt)
     grid = [dict(zip(vary, combo)) for combo in itertools.product(*vary.values())]
     for point in grid:  # every point checked before the first runs
         _scales(point, scenario)

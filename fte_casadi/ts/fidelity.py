@@ -168,7 +168,7 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
     centre = np.where(free, 0.0, 0.5 * (np.nan_to_num(lo) + np.nan_to_num(hi)))
     scale = np.where(free, np.maximum(1.0, np.abs(start)), np.nan_to_num(hi) - np.nan_to_num(lo))
     solver = method(fun, 0.0, np.asarray(start, float), horizon, rtol=1e-8, atol=1e-10)
-    ts, ys, i, stop = [], [], 0, ""
+    times, ys, i, stop = [], [], 0, ""
     while solver.status == "running":
         solver.step()
         if solver.status == "failed":
@@ -176,7 +176,7 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
             break
         j = int(np.searchsorted(t_eval, solver.t, side="right"))
         if j > i:
-            ts.append(t_eval[i:j])
+            times.append(t_eval[i:j])
             ys.append(solver.dense_output()(t_eval[i:j]))
             i = j
         y = solver.y
@@ -185,10 +185,10 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
         elif solver.status == "running" and solver.nfev > max_evaluations:
             stop = f"stiff: {max_evaluations} evaluations spent by t = {solver.t:.4g} ({method.__name__})"
         if stop:  # keep where it got to (beyond the last equally spaced time)
-            if np.all(np.isfinite(y)) and (not ts or solver.t > ts[-1][-1]):
-                ts.append(np.array([solver.t]))
+            if np.all(np.isfinite(y)) and (not times or solver.t > times[-1][-1]):
+                times.append(np.array([solver.t]))
                 ys.append(np.asarray(y, float)[:, None])
             break
-    if not ts:
+    if not times:
         return np.asarray(start, float)[:, None], np.zeros(1), stop
-    return np.hstack(ys), np.hstack(ts), stop
+    return np.hstack(ys), np.hstack(times), stop

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import casadi as ca
@@ -10,7 +10,7 @@ import numpy as np
 
 from ..model import Plant
 
-__all__ = ["Premise", "LocalModel", "Fidelity", "TSModel", "Kind", "METHOD_TEXT"]
+__all__ = ["Premise", "LocalModel", "LOCAL_MODEL_KEYS", "Fidelity", "TSModel", "Kind", "METHOD_TEXT"]
 
 #: how a T-S model was derived: the sector method on premises the plant declares (``"sector"``) or
 #: that the toolkit found (``"sector_auto"``), one rule for a plant without nonlinear term
@@ -41,11 +41,26 @@ class Premise:
         return {"name": self.name, "expr": self.expr, "min": float(self.min), "max": float(self.max)}
 
 
+#: the matrices of a local model, in the order the derive and design documents write them
+LOCAL_MODEL_KEYS: tuple[str, ...] = ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M")
+_REQUIRED = ("A", "B", "Bd", "Bf", "W")
+
+
 @dataclass(frozen=True)
 class LocalModel:
     """One rule: ``dx = (A x + B u + Bd d + Bf f + a) dt + (W x + G u + Gf f + M d2) dw``.
 
-    ``a`` is the affine offset that local linearisation leaves (zero for sector models).
+    ``a`` is the affine offset that local linearisation leaves (zero for sector models); ``G``, ``Gf``
+    and ``M`` the diffusion terms of Theorem 5 (zero, and ``M`` without columns, when the plant has none).
+    The same record is the T-S model's (:attr:`TSModel.local_models`) and the design's
+    (``Design.local_models``); every matrix is a float array. Given as ``None``, ``a``, ``G``, ``Gf``
+    and ``M`` are zeros of the sizes that ``A``, ``B`` and ``Bf`` imply.
+
+    ``order`` and ``extra`` let a design document read from a file be written back unchanged: ``order``
+    is the keys it had (plus ``a``, which documents always carry), ``extra`` any key this version does
+    not know. A model made in the toolkit writes :data:`LOCAL_MODEL_KEYS`. For a transition the record
+    also answers item access as the design's dicts did (``lm["A"]``, ``lm.get("a")``); new code reads
+    attributes.
     """
 
     A: np.ndarray
@@ -53,18 +68,54 @@ class LocalModel:
     Bd: np.ndarray
     Bf: np.ndarray
     W: np.ndarray
-    a: np.ndarray
-    G: np.ndarray
-    Gf: np.ndarray
-    M: np.ndarray
+    a: np.ndarray | None = None
+    G: np.ndarray | None = None
+    Gf: np.ndarray | None = None
+    M: np.ndarray | None = None
+    order: tuple[str, ...] = field(default=LOCAL_MODEL_KEYS, repr=False, compare=False)
+    extra: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        n = np.shape(self.A)[0]
+        cols = {"B": np.shape(self.B)[-1], "Bf": np.shape(self.Bf)[-1]}
+        zeros = {"a": (n,), "G": (n, cols["B"]), "Gf": (n, cols["Bf"]), "M": (n, 0)}
+        for k in LOCAL_MODEL_KEYS:
+            v = getattr(self, k)
+            object.__setattr__(self, k, np.zeros(zeros[k]) if v is None else np.asarray(v, dtype=float))
+
+    @classmethod
+    def from_mapping(cls, doc) -> LocalModel:
+        """The record of a document's entry (``{"A": M, ...}``); a record is returned as it is.
+
+        Keeps the entry's key order and any unknown key (see the class docstring). Raises ``KeyError``
+        naming a required matrix (A, B, Bd, Bf, W) that ``doc`` lacks.
+        """
+        if isinstance(doc, cls):
+            return doc
+        for k in _REQUIRED:
+            if k not in doc:
+                raise KeyError(k)
+        known = {k: doc[k] for k in LOCAL_MODEL_KEYS if k in doc}
+        extra = {k: np.asarray(v, dtype=float) for k, v in doc.items() if k not in LOCAL_MODEL_KEYS}
+        order = tuple(doc) + (() if "a" in doc else ("a",))
+        return cls(**known, order=order, extra=extra)
 
     def to_dict(self) -> dict:
-        return {k: np.asarray(getattr(self, k)).tolist() for k in ("A", "B", "Bd", "Bf", "W")} | {
-            "a": np.asarray(self.a).tolist(),
-            "G": self.G.tolist(),
-            "Gf": self.Gf.tolist(),
-            "M": self.M.tolist(),
-        }
+        """The entry of the derive and design documents: ``{key: matrix as a list of rows}``."""
+        return {k: np.asarray(self[k]).tolist() for k in self.order}
+
+    # -- transitional mapping view (item access as the design's dicts had) ----------------------
+    def __getitem__(self, key: str) -> np.ndarray:
+        if key in LOCAL_MODEL_KEYS:
+            return getattr(self, key)
+        return self.extra[key]
+
+    def get(self, key: str, default=None):
+        """``self[key]`` or ``default`` (transitional: new code reads the attribute)."""
+        try:
+            return self[key]
+        except KeyError:
+            return default
 
     @property
     def has_diffusion_extension(self) -> bool:

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ParameterError
+from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 from .evaluate import evaluate
 from .space import Space, space_for
 
@@ -197,13 +198,13 @@ def _within_inputs(values: tuple, base: tuple, names: tuple) -> bool:
 
 
 def _admissible(m: dict) -> tuple[bool, bool]:
-    """(every window's FTC ratio < 1, every false-alarm ratio < 1)."""
+    """(every window's FTC ratio < 1, every false-alarm ratio < 1): the thresholds of :mod:`fte_casadi.verdicts`."""
     ftc = all(
-        w["ftc_deviation_ratio"] < 1
+        w["ftc_deviation_ratio"] < WORSE_THAN_NONE
         for w in m.get("windows") or []
         if w.get("ftc_deviation_ratio") is not None
     )
-    fa = all(v < 1 for v in m.get("false_alarm_rel_rms") or [] if v is not None)
+    fa = all(v < FALSE_ALARM for v in m.get("false_alarm_rel_rms") or [] if v is not None)
     return ftc, fa
 
 
@@ -380,7 +381,7 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     done = [r for r in records if r.state == "ok"]
     front = [done[i].number for i in pareto_front([r.values for r in done])]
     chosen, tier = choose(records, front, names, rule)
-    limits = _limits(records, done, plant)
+    limits = _limits(done, plant)
     return TuneResult(plant=plant.name, objectives=names, records=tuple(records), front=tuple(front), chosen=chosen,
                       rule=rule, tier=tier, seed=seed, paths=paths, space=dict(space.ranges), wall_s=time.perf_counter() - t0,
                       limits=tuple(limits))  # fmt: skip
@@ -419,7 +420,7 @@ def _sigma_sup(plant, base_design) -> float | None:
         return None
 
 
-def _limits(records, done, plant) -> list[str]:
+def _limits(done, plant) -> list[str]:
     """Item 4 of issue #18: the windows where no certified candidate makes tolerant control better
     than none, and the faults whose false alarms none keeps below 1, with their structural causes
     (:func:`fte_casadi.design.limits.explain_metrics`, at the candidate closest to succeeding)."""
@@ -432,7 +433,7 @@ def _limits(records, done, plant) -> list[str]:
     out = []
     for k in range(nwin):
         best = min(done, key=lambda r: r.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf)
-        if (best.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf) >= 1:
+        if (best.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf) >= WORSE_THAN_NONE:
             d = Design.from_dict(json.loads(best.design))
             out += [f"no certified candidate makes tolerant control better than none here (best: trial {best.number}); "
                     + s for s in explain_metrics(d, best.metrics, windows=[k], faults=[])]  # fmt: skip
