@@ -680,7 +680,7 @@ def _tune_target(out_dir: str) -> None:
     "--seed", type=int, default=0, show_default=True, help="Seed of the sampler and of the Monte Carlo."
 )
 @click.option("--objective", "rule", default="balanced", show_default=True,
-              help="How the chosen design is picked from the front: balanced, fault-error, false-alarm or ftc.")  # fmt: skip
+              help="How the chosen design is picked from the front: balanced, fault-error, false-alarm, ftc or bound.")  # fmt: skip
 @click.option(
     "--paths", type=int, help="Brownian paths per candidate (default: 20, or the scenario's when more)."
 )

@@ -78,7 +78,8 @@ def test_an_older_document_without_the_newer_keys_loads_and_saves_as_it_was(comm
 
 def test_keys_a_record_does_not_type_survive_a_round_trip(committed):
     doc = json.loads(committed[1])
-    doc["params"] = {"kappa": 500.0, **doc["params"], "later_knob": 2.5}
+    params = {k: v for k, v in doc["params"].items() if k != "kappa"}  # the tuned three-tank's has one
+    doc["params"] = {"kappa": 500.0, **params, "later_knob": 2.5}
     doc["observer"] = {**doc["observer"], "sample_time": None, "later_note": "x"}
     d = Design.from_dict(doc)
     assert d.params.kappa == 500.0 and d.params["later_knob"] == 2.5 and d.params.extra == {"later_knob": 2.5}
@@ -115,7 +116,8 @@ def test_dicts_given_for_the_records_become_records(committed):
 
 
 def test_replace_keeps_the_order_and_appends_a_new_key(committed):
-    p = committed[2].params
+    # without the boundary layer the tuned three-tank's design has
+    p = Params.from_mapping({k: v for k, v in committed[2].params.to_dict().items() if k != "boundary_layer"})
     q = p.replace(boundary_layer=0.25, sigma=p.sigma / 2)
     assert q.boundary_layer == 0.25 and q.sigma == p.sigma / 2 and p.boundary_layer is None
     assert list(q.to_dict()) == list(p.to_dict()) + ["boundary_layer"]

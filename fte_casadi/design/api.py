@@ -169,6 +169,16 @@ def design(
         ts, {"gamma": gamma, "gamma1": gamma1, "sigma": sigma, "delta": delta, "epsilon": epsilon}, status
     )
     plant_defaults = getattr(ts.plant, "design_defaults", {}) or {}
+    # the knobs `fte tune` finds, recorded in the plant's defaults (issue #18 item 3)
+    tuned = {k: plant_defaults[k] for k in ("alpha", "kappa", "boundary_layer") if k in plant_defaults}
+    alpha = tuned.get("alpha") if alpha is None else alpha
+    kappa = tuned.get("kappa") if kappa is None else kappa
+    if "boundary_layer" in tuned:
+        params["boundary_layer"] = float(tuned["boundary_layer"])
+    if tuned:
+        status.append(
+            "from the plant's design defaults: " + ", ".join(f"{k} = {v:g}" for k, v in tuned.items())
+        )
     generic = {k for k, v in (("gamma", gamma), ("sigma", sigma)) if v is None and k not in plant_defaults}
     if gamma2 is not None:
         params["gamma2"] = _params(

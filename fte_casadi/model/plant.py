@@ -247,8 +247,10 @@ class PlantBuilder:
         self._time_unit = unit
 
     def design_defaults(self, **values: float) -> None:
-        """Default design parameters: any of gamma, gamma1, sigma, delta, epsilon."""
-        allowed = {"gamma", "gamma1", "sigma", "delta", "epsilon"}
+        """Default design parameters: any of gamma, gamma1, sigma, delta, epsilon, and the knobs
+        ``fte tune`` finds: alpha (the observer decay rate), kappa (the bound on cond(Pbar)) and
+        boundary_layer (the sliding term's ``sat(s/phi)`` width)."""
+        allowed = {"gamma", "gamma1", "sigma", "delta", "epsilon", "alpha", "kappa", "boundary_layer"}
         for k, v in values.items():
             if k not in allowed:
                 raise PlantError(f"design_defaults: unknown parameter {k!r}; allowed are {sorted(allowed)}")
@@ -258,6 +260,10 @@ class PlantBuilder:
                 raise PlantError(f"design_defaults: {k} must be a number; got {v!r}") from None
             if not (np.isfinite(fv) and fv > 0):
                 raise PlantError(f"design_defaults: {k} must be a positive finite number; got {v!r}")
+            if k == "kappa" and fv <= 1:
+                raise PlantError(
+                    f"design_defaults: kappa (the bound on cond(Pbar)) must be above 1; got {v!r}"
+                )
             self._design[k] = fv
 
     # -- validation ----------------------------------------------------------------------

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import FteError
 
-__all__ = ["evaluate", "design_kwargs", "KNOBS"]
+__all__ = ["evaluate", "design_kwargs", "default_alpha", "bound_gain", "KNOBS", "TUNED_DEFAULTS"]
 
 #: the input peak (and the output-error scale of the boundary layer) is read from the first paths, recorded
 PEAK_PATHS = 5
@@ -27,16 +27,44 @@ KNOBS = ("gamma", "gamma1_ratio", "sigma", "alpha_scale", "kappa", "epsilon", "u
          "boundary_layer_rel")  # fmt: skip
 
 
+#: design defaults a plant may record from an earlier tune; the candidates set them from their own knobs
+TUNED_DEFAULTS = ("alpha", "kappa", "boundary_layer")
+
+
 @functools.lru_cache(maxsize=4)
 def _plant_ts(blob_hash: str, blob: bytes):
-    """The plant and its T-S model, once per process and plant."""
+    """The plant and its T-S model, once per process and plant; the knobs of an earlier tune are
+    removed from the plant's design defaults (a candidate's knobs set them: ``alpha`` as a fraction of
+    the rate the design takes by default at the candidate's other knobs, not the base's fixed rate)."""
+    import dataclasses
+
     import casadi as ca
 
     from ..ts import derive
 
     with ca.global_unpickle_context():
         plant = pickle.loads(blob)
+    defaults = dict(getattr(plant, "design_defaults", {}) or {})
+    if any(k in defaults for k in TUNED_DEFAULTS):
+        kept = {k: v for k, v in defaults.items() if k not in TUNED_DEFAULTS}
+        plant = dataclasses.replace(plant, design_defaults=kept)
     return plant, derive(plant)
+
+
+def default_alpha(task: dict) -> float | None:
+    """The observer decay rate the design takes by default (no alpha given) at ``task["knobs"]``:
+    what the knob ``alpha_scale`` multiplies; None when that design fails."""
+    from ..design import design as run_design
+
+    blob = task["plant"]
+    _, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob)
+    try:
+        d = run_design(ts, variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
+                       initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
+                       **design_kwargs(task["knobs"]))  # fmt: skip
+    except FteError:
+        return None
+    return None if d.observer.alpha is None else float(d.observer.alpha)
 
 
 def design_kwargs(knobs: dict) -> dict:
@@ -51,6 +79,18 @@ def design_kwargs(knobs: dict) -> dict:
     if abs(float(knobs["kappa"]) / KAPPA - 1.0) > 1e-12:
         kw["kappa"] = float(knobs["kappa"])
     return kw
+
+
+def bound_gain(bounds: dict | None) -> float | None:
+    """The certified L2 gain from the stacked channels ``w = [d; f''; u_s; f; 1]`` to ``f - fhat`` of a
+    design's ``bounds.fault_error`` (:mod:`fte_casadi.design.bounds`): ``max_k gain_k``, since
+    ``E int |f - fhat|^2 <= sum_k gain_k^2 E int |w_k|^2 + v0 <= max_k gain_k^2 E int |w|^2 + v0``.
+    None when the bound was not computed or does not hold."""
+    fe = (bounds or {}).get("fault_error") or {}
+    gains = fe.get("gains") or {}
+    if not fe.get("holds") or not gains:
+        return None
+    return float(max(gains.values()))
 
 
 def _output_error_scale(res, design) -> float:
@@ -78,7 +118,8 @@ def evaluate(task: dict) -> dict:
     Returns ``{"state": "ok", "params", "metrics", "design", "e_scale"}`` or
     ``{"state": "fail", "reason"}``. The metrics document gains ``input_peak``: per input, the
     largest ``|u_i|`` of the FTC run over the first :data:`PEAK_PATHS` paths (their recorded
-    samples, at most ~2e4 per path). Never raises for a candidate that fails (a failed design, a
+    samples, at most ~2e4 per path) and ``fault_error_bound`` (:func:`bound_gain` of the design's certified
+    bound, None when not computed). Never raises for a candidate that fails (a failed design, a
     design that is not certified, a diverging simulation are failed trials with their reason).
     """
     import dataclasses
@@ -101,7 +142,7 @@ def evaluate(task: dict) -> dict:
                           **design_kwargs(knobs))  # fmt: skip
             d = run_design(ts, **common)
             scale = float(knobs["alpha_scale"])
-            if scale < 1.0 - 1e-12 and d.observer.alpha is not None:
+            if abs(scale - 1.0) > 1e-12 and d.observer.alpha is not None:
                 d = run_design(ts, alpha=scale * float(d.observer.alpha), **common)
             if knobs.get("use_boundary_layer") and task.get("e_scale"):
                 phi = (
@@ -123,6 +164,7 @@ def evaluate(task: dict) -> dict:
     m = dict(res.metrics)
     u = res.ftc.u
     m["input_peak"] = [float(v) for v in np.max(np.abs(u), axis=(0, 1))] if u.size else [0.0] * plant.m
+    m["fault_error_bound"] = bound_gain(d.bounds)
     params = d.params.to_dict()
     params["alpha"] = None if d.observer.alpha is None else float(d.observer.alpha)
     params.setdefault("kappa", KAPPA)

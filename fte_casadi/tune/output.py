@@ -112,6 +112,14 @@ def comparison(
     for i, u in enumerate(input_names):
         rows.append((f"peak |{u}|", base["input_peak"][i], chosen["input_peak"][i]))
         rows.append((f"saturation {u}", base["input_saturation"][i], chosen["input_saturation"][i]))
+    if base.get("fault_error_bound") is not None:
+        rows.append(
+            (
+                "certified bound (L2 gain to f - fhat)",
+                base["fault_error_bound"],
+                chosen.get("fault_error_bound"),
+            )
+        )
     for i, v in enumerate(base["state_rms_error"]):
         rows.append((f"state RMS error {i + 1}", v, chosen["state_rms_error"][i]))
     return rows
@@ -138,7 +146,8 @@ def front_table(result) -> list[str]:
     cols = [("gamma", "gamma"), ("gamma1", "gamma1"), ("sigma", "sigma"), ("alpha", "alpha"), ("kappa", "kappa"),
             ("epsilon", "eps"), ("boundary_layer", "phi")]  # fmt: skip
     short = [n.replace("fault_error", "err").replace("false_alarm", "fa")
-             .replace("input_peak", "u_peak").replace("input_saturation", "u_sat") for n in result.objectives]  # fmt: skip
+             .replace("input_peak", "u_peak").replace("input_saturation", "u_sat")
+             .replace("bound[fault_error]", "bound") for n in result.objectives]  # fmt: skip
     w = max(8, *(len(s) for s in short))
     lines = [
         f"{'trial':>6} " + " ".join(f"{h:>8}" for _, h in cols) + " " + " ".join(f"{s:>{w}}" for s in short)

@@ -14,7 +14,10 @@ Objectives (all minimised; those the base design leaves undefined are dropped):
   (``windows[].ftc_deviation_ratio``; one objective per window, so that the worst window, and every
   window, can be read off the front);
 - ``input_peak``: the largest ``max |u_i|`` over the inputs, each relative to the base design's;
-- ``input_saturation``: the largest fraction of samples an input spends at a limit (plants with limits).
+- ``input_saturation``: the largest fraction of samples an input spends at a limit (plants with limits);
+- ``bound[fault_error]``: the certified L2 gain from the channels ``w = [d; f''; u_s; f; 1]`` to the
+  fault-estimation error (``max_k gain_k`` of the design's ``bounds.fault_error``; dropped when the base
+  design has none).
 
 The chosen design (:func:`choose`) is a member of the front: among the front members that are
 certified (every completed trial is) and make tolerant control better than none in every window
@@ -28,9 +31,10 @@ FTC ratio < 1, or else all of them — the one with the smallest score of the ru
   better than the base on every fault objective: the rule picks a design that dominates the base
   whenever the search found one;
 - ``fault-error``: the largest fault error; ``false-alarm``: the largest false-alarm ratio;
-  ``ftc``: the worst window's FTC ratio;
+  ``ftc``: the worst window's FTC ratio; ``bound``: the smallest certified bound;
 
-ties broken by the balanced score, then by the sum of all objectives relative to the base's.
+ties broken by the balanced score, then by the sum of all objectives relative to the base's (the
+bound among them). The bound is not in the balanced score: that score is the issue's measured table.
 """
 
 from __future__ import annotations
@@ -56,7 +60,7 @@ BATCH = 4
 #: paths per candidate unless asked (or the scenario's, when more)
 DEFAULT_PATHS = 20
 #: the rules of :func:`choose`
-RULES = ("balanced", "fault-error", "false-alarm", "ftc")
+RULES = ("balanced", "fault-error", "false-alarm", "ftc", "bound")
 #: objective values for a metric a candidate leaves undefined
 UNDEFINED = 1e6
 #: floors of the base values the balanced rule divides by, per objective kind
@@ -66,6 +70,7 @@ FLOORS = {
     "ftc": 1e-3,
     "input_peak": 1e-12,
     "input_saturation": 1e-2,
+    "bound": 1e-12,
 }
 #: the objectives of the balanced rule's score (the issue's table: errors, false alarms, FTC ratio per window)
 FAULT_KINDS = ("fault_error", "false_alarm", "ftc")
@@ -142,6 +147,9 @@ def objectives_for(
     if has_limits:
         names.append("input_saturation")
         getters.append(lambda m: float(max(m["input_saturation"])) if m["input_saturation"] else 0.0)
+    if base_metrics.get("fault_error_bound") is not None:
+        names.append("bound[fault_error]")
+        getters.append(lambda m: m.get("fault_error_bound"))
 
     def values(m: dict) -> tuple:
         out = []
@@ -234,6 +242,8 @@ def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> 
             main = max((x for n, x in v.items() if n.startswith("fault_error")), default=bal)
         elif rule == "false-alarm":
             main = max((x for n, x in v.items() if n.startswith("false_alarm")), default=bal)
+        elif rule == "bound":
+            main = v.get("bound[fault_error]", bal)
         else:
             main = max((x for n, x in v.items() if n.startswith("ftc")), default=bal)
         return (main, bal, sum(_ratios(r.values, base, names, tuple(FLOORS))), r.number)
@@ -280,8 +290,9 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     sigma_sup : float, optional
         The largest sigma (45) allows for any gamma (caps the sigma range).
     base_is_given : bool
-        Simulate ``base_design`` as it is for trial 0 (a DESIGN.json) instead of designing it again
-        from its parameters.
+        Kept for callers of earlier versions; trial 0 is always ``base_design`` as it is (its alpha,
+        kappa and boundary layer may come from the plant's defaults, which a design from its
+        parameters alone would not reproduce).
     progress : callable, optional
         ``progress(done, total)`` after each trial.
     """
@@ -301,7 +312,6 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     t0 = time.perf_counter()
     if sigma_sup is None:
         sigma_sup = _sigma_sup(plant, base_design)
-    space: Space = space_for(base_design, sigma_sup)
     fixed = {"delta": float(base_design.params.delta)}
     common = {
         "plant": plant_bytes(plant), "scenario": scenario.to_dict(), "variant": base_design.variant,
@@ -318,9 +328,9 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
             sampler = optuna.samplers.TPESampler(seed=seed, multivariate=True,
                                                  n_startup_trials=max(4, min(12, trials // 4)))  # fmt: skip
         records: list[Record] = []
-        # trial 0: the base design, alone, so that the objectives are defined against it
-        base_task = dict(common, knobs=space.base | fixed, e_scale=None,
-                         design=base_design.to_json() if base_is_given else None)  # fmt: skip
+        # trial 0: the base design as it is, alone, so that the objectives are defined against it
+        base_task = dict(common, knobs=space_for(base_design, sigma_sup).base | fixed, e_scale=None,
+                         design=base_design.to_json())  # fmt: skip
         out0 = run([base_task])[0]
         if out0["state"] != "ok":
             raise ParameterError(
@@ -331,12 +341,15 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
             out0["metrics"], list(plant.fault_names), plant.input_limits is not None
         )
         e_scale = out0["e_scale"]
+        space: Space = space_for(base_design, sigma_sup, *_base_knobs(base_design, base_task, e_scale))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
             study = optuna.create_study(directions=["minimize"] * len(names), sampler=sampler)
             study.enqueue_trial(space.base)
             t = study.ask()
             space.suggest(t)
+            for knobs in space.local_steps(trials - 1):
+                study.enqueue_trial(knobs)
         v0 = values_of(out0["metrics"])
         study.tell(t, list(v0))
         records.append(Record(0, dict(space.base), "ok", out0["params"], out0["metrics"], out0["design"], v0))
@@ -372,6 +385,24 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     return TuneResult(plant=plant.name, objectives=names, records=tuple(records), front=tuple(front), chosen=chosen,
                       rule=rule, tier=tier, seed=seed, paths=paths, space=dict(space.ranges), wall_s=time.perf_counter() - t0,
                       limits=tuple(limits))  # fmt: skip
+
+
+def _base_knobs(base_design, base_task: dict, e_scale: float | None) -> tuple[float, float | None]:
+    """The base design's ``alpha_scale`` (1 when its alpha is the default rate; else its alpha over the
+    default rate at its other knobs, one design more) and ``boundary_layer_rel`` (None without one)."""
+    from .evaluate import default_alpha
+
+    scale = 1.0
+    alpha = base_design.observer.alpha
+    if alpha is not None and base_design.observer.alpha_max is None:  # alpha was set, not found
+        a0 = default_alpha(base_task)
+        if a0:
+            scale = float(alpha) / a0
+    phi = base_design.params.boundary_layer
+    rel = None
+    if phi is not None and e_scale:
+        rel = float(phi) / (float(np.linalg.norm(base_design.N, 2)) * float(e_scale))
+    return scale, rel
 
 
 def _sigma_sup(plant, base_design) -> float | None:
