@@ -239,7 +239,8 @@ def margin_lmi(
 #: given to SCS first when Clarabel was asked for: Clarabel factors each PSD cone as a dense block of that
 #: many rows (measured, step 3 of a 24-state chain, k = 74: Clarabel 22 s and 1.35 GB, SCS 3.3 s and 0.56 GB)
 LARGE_CONE = 1000
-#: the iterations SCS is given when it is tried first on a large problem (then Clarabel)
+#: the iterations SCS is given when it is tried first on a large problem (then Clarabel); measured on the
+#: 24-state chain: step 5 needs between 5000 and 10^4, an infeasible (45) is reported after them (30 s)
 SCS_FIRST_ITERS = 10_000
 
 #: the solver statuses that come with a point (which the design then checks in numpy)
@@ -341,7 +342,10 @@ class ConicProblem:
             # cannot settle in 10^4 (badly scaled, or infeasible) goes to Clarabel instead of
             # running to 10^5 (minutes)
             res = self._solve_once("SCS", p, rescale=False, settings={"max_iters": SCS_FIRST_ITERS})
-            if res.status in ("optimal", "infeasible"):  # an inaccurate answer goes to Clarabel too
+            # an inaccurate point goes to Clarabel; an inaccurate infeasibility is kept: what follows an
+            # infeasible (45) or (46) is a search whose bounds are solves of their own (Clarabel took
+            # 105 s and 2.2 GB to fail numerically on the 24-state chain's (45) at sigma = 1)
+            if res.status in ("optimal", "infeasible", "infeasible_inaccurate"):
                 k = max(L.k for L in self.lmis)
                 self.notes.append(f"SCS gave this answer: an LMI of size {k} is a dense block of {k * (k + 1) // 2} "
                                   f"rows in Clarabel's KKT system (more than {LARGE_CONE})")  # fmt: skip
