@@ -241,10 +241,13 @@ def design(
                                          retried=_retried)  # fmt: skip
                 raise InfeasibleDesignError(beyond) from None
         except InfeasibleDesignError as exc:
-            chosen = _choose(ts, aug, params, solver, retry, generic, "45", exc) if diagnose else None
+            refused: list = []
+            chosen = (
+                _choose(ts, aug, params, solver, retry, generic, "45", exc, refused) if diagnose else None
+            )
             if chosen is not None:
                 return chosen
-            raise (explain_45(ts, aug, params, solver, retry) if diagnose else exc) from None
+            raise (explain_45(ts, aug, params, solver, retry, refused) if diagnose else exc) from None
         K = [s3.K] * aug.r
         try:
             s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time)
@@ -253,10 +256,11 @@ def design(
                                  diagnose=diagnose, retried=_retried)  # fmt: skip
         except InfeasibleDesignError as exc:
             if diagnose and "alpha" not in str(exc) and "sample time" not in str(exc):
-                chosen = _choose(ts, aug, params, solver, retry, generic, "46", exc)
+                refused = []
+                chosen = _choose(ts, aug, params, solver, retry, generic, "46", exc, refused)
                 if chosen is not None:
                     return chosen
-                raise explain_46(ts, aug, params, solver, retry, exc) from None
+                raise explain_46(ts, aug, params, solver, retry, exc, refused) from None
             raise
     status += s3.notes + s5.notes
     X = s3.X
@@ -407,7 +411,8 @@ SIGMA_TRIALS = (0.8, 0.6, 0.4, 0.2, 0.1, 0.05)
 GAMMA_TRIALS = (1.25, 1.6, 2.5, 4.0, 10.0)
 
 
-def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: str, exc) -> Design | None:
+def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: str, exc,
+            refused: list | None = None) -> Design | None:  # fmt: skip
     """Parameters the tool finds itself (issue #17): when sigma and/or gamma came from the generic
     defaults (neither the user nor the plant set them) and the design fails at them, the feasibility
     bounds say where to look: sigma below the largest sigma (45) allows, else gamma above the smallest
@@ -451,7 +456,7 @@ def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: 
                 yield from (({"gamma": nice_ceil(max(gmin * f, g1 * 1.01))}, why) for f in GAMMA_TRIALS)
 
     for change, why in trials():
-        d = _try(ts, retry, **change)
+        d = _try(ts, retry, refused, **change)
         if d is not None:
             first = " ".join(str(exc).split())[:160]
             chosen = {k: {"value": v, "why": f"the generic default {params[k]:g} failed ({first}); {why}; "
@@ -491,17 +496,38 @@ def _initial_state(plant, x0) -> np.ndarray:
     return a
 
 
-def _try(ts, retry: dict, **change) -> Design | None:
-    """The whole design with some parameters changed, or None when it does not give a certified design."""
+def _try(ts, retry: dict, refused: list | None = None, **change) -> Design | None:
+    """The whole design with some parameters changed, or None when it does not give a certified design
+    (then ``(change, why)`` is appended to ``refused``, when given)."""
     kw = dict(retry) | change
     try:
         d = design(ts, diagnose=False, **kw)
-    except FteError:
+    except FteError as exc:
+        if refused is not None:
+            refused.append((change, " ".join(str(exc).split())))
         return None
+    if not d.certified and refused is not None:
+        refused.append((change, "not certified"))
     return d if d.certified else None
 
 
-def explain_45(ts, aug, params: dict, solver: str, retry: dict) -> InfeasibleDesignError:
+def _refusals(refused: list) -> str:
+    """What stopped the values tried (the first of each kind), for the refusal's message: a bound can be
+    right and the design still fail at it for another reason (e.g. the sample time)."""
+    seen, out = set(), []
+    for change, why in refused:
+        kind = why[:40]
+        if kind in seen:
+            continue
+        seen.add(kind)
+        at = ", ".join(f"{k} = {v:g}" for k, v in change.items())
+        out.append(f"at {at}: {why[:700]}")
+    return (" The values tried were refused for other reasons: " + "; ".join(out[:2]) + ".") if out else ""
+
+
+def explain_45(
+    ts, aug, params: dict, solver: str, retry: dict, refused: list | None = None
+) -> InfeasibleDesignError:
     """The error for an infeasible (45): the smallest feasible gamma and the largest feasible sigma,
     each followed by a value that was tried and gives a certified design."""
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
@@ -527,7 +553,7 @@ def explain_45(ts, aug, params: dict, solver: str, retry: dict) -> InfeasibleDes
         )
         for f in (1.05, 1.25, 1.6, 2.5, 4.0):
             cand = nice_ceil(max(gmin * f, g1 * 1.01))
-            if _try(ts, retry, gamma=cand) is not None:
+            if _try(ts, retry, refused, gamma=cand) is not None:
                 fixes.append(f"raise gamma to >= {cand:g}")
                 break
     if smax is None:
@@ -536,7 +562,7 @@ def explain_45(ts, aug, params: dict, solver: str, retry: dict) -> InfeasibleDes
         parts.append(f"the largest sigma for which it is feasible with gamma = {g:g} is {smax:.3g}")
         for f in (0.95, 0.8, 0.6, 0.4, 0.2, 0.1):
             cand = nice_floor(smax * f)
-            if _try(ts, retry, sigma=cand) is not None:
+            if _try(ts, retry, refused, sigma=cand) is not None:
                 fixes.append(f"lower sigma to <= {cand:g}")
                 break
     checked = "each checked: it gives" if len(fixes) > 1 else "checked: it gives"
@@ -549,10 +575,12 @@ def explain_45(ts, aug, params: dict, solver: str, retry: dict) -> InfeasibleDes
     )
     return InfeasibleDesignError(
         f"LMI (45) is infeasible: {'; '.join(parts)}. {advice[0].upper() + advice[1:]}."
+        + ("" if fixes else _refusals(refused or []))
     )
 
 
-def explain_46(ts, aug, params: dict, solver: str, retry: dict, exc: Exception) -> InfeasibleDesignError:
+def explain_46(ts, aug, params: dict, solver: str, retry: dict, exc: Exception,
+               refused: list | None = None) -> InfeasibleDesignError:  # fmt: skip
     """The error for an infeasible (46) at alpha = 0: a larger sigma (within what (45) allows) that works."""
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
     smax, _ = sigma_max(aug, g, g1, solver)
@@ -560,7 +588,7 @@ def explain_46(ts, aug, params: dict, solver: str, retry: dict, exc: Exception) 
     if smax is not None and smax > sg:
         for f in (0.2, 0.4, 0.6, 0.8, 0.95):
             cand = nice_floor(sg + f * (smax - sg))
-            if cand > sg and _try(ts, retry, sigma=cand) is not None:
+            if cand > sg and _try(ts, retry, refused, sigma=cand) is not None:
                 fix = cand
                 break
     msg = (f"{str(exc).rstrip('.')}. The -sigma I block of (46) must dominate the coupling of the observer with the loop; (45) allows "
@@ -568,7 +596,10 @@ def explain_46(ts, aug, params: dict, solver: str, retry: dict, exc: Exception) 
     msg += (
         f" Raise sigma to {fix:g} (checked: it gives a certified design)."
         if fix
-        else (" No larger sigma tried gives a certified design: see `fte design PLANT --explore`.")
+        else (
+            " No larger sigma tried gives a certified design: see `fte design PLANT --explore`."
+            + _refusals(refused or [])
+        )
     )
     return InfeasibleDesignError(msg)
 
