@@ -65,3 +65,16 @@ def test_the_refusal_names_the_sample_time_and_that_one_certifies(ts):
     d = design(ts, sample_time=ts_ok)
     assert d.certified and d.checks["discrete"]["holds"]
     assert d.params["sigma"] < 1e-9 and set(d.params_chosen) == {"sigma", "gamma"}
+
+
+def test_an_unstable_mode_barely_reachable_is_named(ts):
+    """Coupled more strongly than it decays, the chain is open-loop unstable and its one input, at the chain's
+    head, reaches the unstable modes only weakly: the reason (45) may leave no margin sigma at all."""
+    from fte_casadi.design.limits import reachability
+
+    assert reachability(augment(ts.local_models, ts.C, ts.Df)) == ""  # the 4-stage chain is stable
+    long_chain = derive(slow_plant(16, 4), fidelity_samples=200)
+    why = reachability(augment(long_chain.local_models, long_chain.C, long_chain.Df))
+    assert "open loop is unstable" in why
+    pbh = float(re.search(r"\|\| = ([0-9.e+-]+)", why).group(1))
+    assert 0 < pbh < 0.05

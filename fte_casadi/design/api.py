@@ -17,6 +17,7 @@ from . import conditioned, paper
 from .augment import augment
 from .certify import certificate, discrete_certificate, failures
 from .diagnose import FrontierPoint, gamma_min, sigma_max
+from .limits import reachability
 from .record import Design
 from .records import Dims, Observer, Params
 from .remark5 import explain_causes, with_remark5
@@ -538,6 +539,8 @@ def explain_45(
         sup, _ = sigma_max(aug, None, g1, solver)
         parts.append(f"no gamma makes (45) feasible at sigma = {sg:g}"
                      + (f" (any gamma needs sigma < {sup:.3g})" if sup else ""))  # fmt: skip
+        if sup is None and (why := reachability(aug)):
+            parts.append(why)
     else:
         lowered = retry.get("gamma1") is None and g1 != float(
             (getattr(ts.plant, "design_defaults", {}) or {}).get("gamma1", GENERIC_DEFAULTS["gamma1"])

@@ -26,7 +26,7 @@ import scipy.linalg as sla
 
 from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 
-__all__ = ["FaultLimits", "channel_zeros", "fault_limits", "separation", "explain_metrics"]
+__all__ = ["FaultLimits", "channel_zeros", "fault_limits", "separation", "explain_metrics", "reachability"]
 
 #: a normalised separation below this is "weak" (the outputs tell the columns apart only slowly)
 WEAK_SEPARATION = 5e-2
@@ -207,3 +207,29 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
         out.append(f"false alarms of {lim.fault} (ratio {'n/a' if v is None else format(v, '.3g')})"
                    + (": " + "; ".join(found) if found else ": no structural cause found") + f" ({seen})")  # fmt: skip
     return out
+
+
+def reachability(aug) -> str:
+    """Why (45) may allow no sigma > 0 at all: per rule, the open-loop unstable modes of ``A_i`` and how
+    well the inputs reach them (the smallest singular value of the PBH test ``[A_i - lambda I, B_i]``,
+    relative to ``||[A_i, B_i]||``). A mode the inputs barely reach leaves (45) a margin sigma too small
+    for any solver (e.g. an unstable mode at the far end of a chain driven at its head). "" when every
+    rule is open-loop stable."""
+    n = aug.n
+    worst = None
+    for i in range(aug.r):
+        A, B = aug.Abar[i][:n, :n], aug.Bbar[i][:n]
+        scale = max(float(np.linalg.norm(np.hstack([A, B]), 2)), 1e-300)
+        for lam in np.linalg.eigvals(A):
+            if lam.real <= 0:
+                continue
+            pbh = float(np.linalg.svd(np.hstack([A - lam * np.eye(n), B]), compute_uv=False)[-1]) / scale
+            if worst is None or pbh < worst[2]:
+                worst = (i, lam, pbh, sum(ev.real > 0 for ev in np.linalg.eigvals(A)))
+    if worst is None:
+        return ""
+    i, lam, pbh, count = worst
+    return (f"the open loop is unstable ({count} mode(s) of rule {i + 1} in the right half plane, the least reachable at "
+            f"{lam.real:.3g}{lam.imag:+.3g}j), and the inputs reach it only as much as the relative PBH test "
+            f"sigma_min([A - lambda I, B]) / ||[A, B]|| = {pbh:.2g} says: a controller must stabilise it through that, "
+            "which leaves (45) little or no margin sigma")  # fmt: skip
