@@ -137,3 +137,21 @@ def test_affine_lmi_parameter_term():
     P = lay.unpack(v)["P"]
     assert np.allclose(L.at(0.7).value(v), A.T @ P + P @ A + 1.4 * P)
     assert isinstance(L.at(0.0), AffineLMI)
+
+
+def test_a_support_is_checked_and_keeps_the_map():
+    """An LMI built on its support only equals the full extraction, and a builder (or its parameter term)
+    that depends on an unknown outside the support it names fails loudly instead of giving a wrong LMI."""
+    lay = Layout(Var("P", (2, 2), True), Var("r", (3,)))
+
+    def b(P, r):
+        return P + r[1] * np.eye(2) - np.eye(2)
+
+    full = affine_lmi("b", lay, b, param=lambda P, r: 2 * P)
+    part = affine_lmi("b", lay, b, param=lambda P, r: 2 * P, support=lay.support("P", ("r", 1)))
+    np.testing.assert_array_equal(full.F, part.F)
+    np.testing.assert_array_equal(full.G, part.G)
+    with pytest.raises(RuntimeError, match="not affine"):
+        affine_lmi("b", lay, b, support=lay.support("P", ("r", 0)))
+    with pytest.raises(RuntimeError, match="not linear"):
+        affine_lmi("b", lay, b, param=lambda P, r: r[2] * np.eye(2), support=lay.support("P", ("r", 1)))

@@ -202,6 +202,9 @@ def affine_lmi(
         G0, G = _basis(layout, param, support)
         if np.any(G0):
             raise RuntimeError(f"internal error: the parameter term of {name} has a constant part")
+        direct = _sym(np.asarray(param(**layout.unpack(v)), dtype=float))
+        if not np.allclose(direct, np.tensordot(v, G, 1), rtol=1e-9, atol=1e-9 * (1 + np.abs(direct).max())):
+            raise RuntimeError(f"internal error: the parameter term of {name} is not linear in its unknowns")
     return AffineLMI(name, F0, F, G)
 
 
