@@ -172,6 +172,7 @@ def design(
     plant_defaults = getattr(ts.plant, "design_defaults", {}) or {}
     # the knobs `fte tune` finds, recorded in the plant's defaults (issue #18 item 3)
     tuned = {k: plant_defaults[k] for k in ("alpha", "kappa", "boundary_layer") if k in plant_defaults}
+    alpha_from_plant = alpha is None and "alpha" in tuned
     alpha = tuned.get("alpha") if alpha is None else alpha
     kappa = tuned.get("kappa") if kappa is None else kappa
     if "boundary_layer" in tuned:
@@ -303,6 +304,8 @@ def design(
     sched, sources = scheduling_from_measurements(ts)
     plant = ts.plant
     total = time.perf_counter() - t0
+    if alpha_from_plant and s5.observer.get("why") == "set by the user":
+        s5.observer["why"] = "the plant's design defaults (fte tune's choice)"
     observer = {k: (float(v) if isinstance(v, (int, float, np.floating)) and v is not None else v)
                 for k, v in s5.observer.items()}  # fmt: skip
     return Design(
