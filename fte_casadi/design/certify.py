@@ -264,8 +264,9 @@ def lmi_matrices(aug, d: dict, params: dict):
     every rule pair, (64) for every rule, (55) once. Each must be negative definite."""
     X, K, P, T, Pbar, Q, N, theta = (d[k] for k in ("X", "K", "P", "T", "Pbar", "Q", "N", "theta"))
     s, g, g1, g2 = params["sigma"], params["gamma"], params["gamma1"], params.get("gamma2", params["gamma"])
+    js = distinct(K)
     for i in range(aug.r):
-        for j in distinct(K):
+        for j in js:
             yield "45", lmi45(aug, i, X, K[j] @ X, s, g, g1)
             yield "46", lmi46(aug, i, K[j], P, T, Pbar, Q[i], s, g1, g2)
         yield "64", lmi64(aug, i, T, Pbar, theta)
@@ -290,9 +291,9 @@ def certificate(aug, d: dict, params: dict) -> dict:
         lm_bal[key] = max(lm_bal[key], _maxeig(Lb))
         roundoff_bal[key] = max(roundoff_bal[key], eig_roundoff(Lb))
         blocks[key] = [max(a, b) for a, b in zip(blocks[key], _block_max(L, sizes[key]))]
-    r = aug.r
+    r, js = aug.r, distinct(K)
     cl = max(float(np.max(np.linalg.eigvals(aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ K[j]).real))
-             for i in range(r) for j in distinct(K))  # fmt: skip
+             for i in range(r) for j in js)  # fmt: skip
     R = d["R"]
     ev_P = np.linalg.eigvalsh(_sym(Pbar))
     ev_X = np.linalg.eigvalsh(_sym(X))

@@ -393,12 +393,29 @@ class _Barrier:
         pos = np.full(nv, -1)
         pos[self.free] = np.arange(len(self.free))
         self.groups = []
+        self._last = None  # (factors, derivatives) of the last point asked
+        self.hess = []  # per group, how its Hessian terms are gathered and added (fixed by the supports)
         for key in sorted({(L.k, len(sp)) for L, sp in zip(lmis, supports)}):
             members = [(L, sp) for L, sp in zip(lmis, supports) if (L.k, len(sp)) == key]
             F0 = np.stack([L.F0 for L, _ in members])  # (g, k, k)
             idx = np.stack([sp for _, sp in members])  # (g, ns): the unknowns of each
             Fs = np.stack([L.F[sp] for L, sp in members])  # (g, ns, k, k)
             self.groups.append((key[0], F0, idx, Fs, pos[idx]))
+            self.hess.append(self._hessian_layout(key[0], pos[idx], len(self.free)))
+
+    @staticmethod
+    def _hessian_layout(k: int, ip: np.ndarray, nf: int):
+        """``(tri, shared, where)``: the upper-triangle gather of a large LMI (k >= 24: ``tr(W_l W_m)`` over
+        the upper triangles, off-diagonal entries weighted sqrt(2), half the products; for small LMIs the
+        gather costs more than it saves: None), whether every LMI of the group has the same support, and
+        else the flat positions in the Hessian where each LMI's block is added."""
+        tri = None
+        if k >= 24:
+            iu, ju = np.triu_indices(k)
+            tri = (iu, ju, np.where(iu == ju, 1.0, np.sqrt(2.0)))
+        shared = ip.shape[0] > 1 and bool(np.all(ip == ip[0]))
+        where = None if shared else (ip[:, :, None] * nf + ip[:, None, :]).ravel()
+        return tri, shared, where
 
     def factors(self, v):
         out = []
@@ -415,32 +432,32 @@ class _Barrier:
         return -2.0 * sum(float(np.sum(np.log(np.diagonal(Lc, axis1=-2, axis2=-1)))) for Lc in fac)
 
     def derivatives(self, fac):
+        if self._last is not None and self._last[0] is fac:  # the start point: _fit_mu, then Newton
+            return self._last[1]
+        out = self._derivatives(fac)
+        self._last = (fac, out)
+        return out
+
+    def _derivatives(self, fac):
         nf = len(self.free)
         g = np.zeros(nf)
         Hm = np.zeros((nf, nf))
-        for Lc, (_, _, _, Fs, ip) in zip(fac, self.groups):
+        for Lc, (_, _, _, Fs, ip), (tri, shared, where) in zip(fac, self.groups, self.hess):
             Li = np.linalg.inv(Lc)  # (g, k, k)
             W = Li[:, None] @ Fs @ np.swapaxes(Li, -1, -2)[:, None]  # W_l = L^-1 F_l L^-T, (g, ns, k, k)
             g += np.bincount(
                 ip.ravel(), weights=np.trace(W, axis1=-2, axis2=-1).ravel(), minlength=nf
             )  # tr(W_l)
-            # tr(W_l W_m) over the upper triangles, off-diagonal entries weighted sqrt(2) (W is symmetric):
-            # half the products of the full vec(W_l) . vec(W_m)
-            # (for large LMIs only: for small ones the gather costs more than the products it saves)
-            k = W.shape[-1]
-            if k >= 24:
-                iu, ju = np.triu_indices(k)
-                Wt = W[..., iu, ju] * np.where(iu == ju, 1.0, np.sqrt(2.0))  # (g, ns, k(k+1)/2)
+            if tri is not None:
+                Wt = W[..., tri[0], tri[1]] * tri[2]  # (g, ns, k(k+1)/2)
             else:
                 Wt = W.reshape(*W.shape[:2], -1)
-            if ip.shape[0] > 1 and np.all(ip == ip[0]):  # one support for all (e.g. Pt in (55) and (64))
+            if shared:  # one support for all (e.g. Pt in (55) and (64))
                 W2 = np.swapaxes(Wt, 0, 1).reshape(ip.shape[1], -1)
                 Hm[np.ix_(ip[0], ip[0])] += W2 @ W2.T
             else:
-                W2 = Wt
-                Hl = W2 @ np.swapaxes(W2, -1, -2)  # Hess_lm = tr(W_l W_m) per LMI, over its support
-                flat = (ip[:, :, None] * nf + ip[:, None, :]).ravel()  # added where the supports overlap
-                Hm += np.bincount(flat, weights=Hl.ravel(), minlength=nf * nf).reshape(nf, nf)
+                Hl = Wt @ np.swapaxes(Wt, -1, -2)  # Hess_lm = tr(W_l W_m) per LMI, over its support
+                Hm += np.bincount(where, weights=Hl.ravel(), minlength=nf * nf).reshape(nf, nf)
         return g, Hm
 
     def slack(self, v) -> float:
