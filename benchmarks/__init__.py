@@ -52,7 +52,16 @@ def run_all(paths: int = 1000, log: Callable[[str], None] = lambda s: None) -> d
 def fast_lines(fm: dict, e: dict) -> list[str]:
     """The fast mode's lines of the summary: ``fm`` the ``fast_mode`` entry, ``e`` the exact engine's."""
     h = fm["one_thread_vs_hand_loop"]
-    return [
+    scalar = sorted(k for k, done in h["hand_path_loop_vectorised"].items() if not done)
+    note = (
+        [
+            f"    GCC did not vectorise the hand loop's path loop on this CPU ({', '.join(scalar)}): those ratios are "
+            "against scalar code, not against a vectorised baseline"
+        ]  # fmt: skip
+        if scalar
+        else []
+    )
+    return note + [
         f"  fast mode (--fast-math): {fm['paths']} paths in {fm['wall_s']:.2f} s "
         f"({fm['path_steps_per_s'] / 1e6:.2f} M path-steps/s; exact mode {e['path_steps_per_s'] / 1e6:.2f} M: "
         f"{fm['speedup_vs_exact']:.2f}x)",

@@ -34,16 +34,22 @@ def test_monte_carlo_bench_smoke(lqr_designs):
     fm = out["fast_mode"]
     assert fm["path_steps_per_s"] > 0 and fm["speedup_vs_exact"] > 0
     h = fm["one_thread_vs_hand_loop"]
-    # the hand loop computes the engine's numbers (to rounding) and GCC vectorised its path loop
+    # the hand loop computes the engine's numbers (to rounding); whether GCC vectorised its path loop is the
+    # compiler's choice on this CPU (yes with AVX-512 on the development machine, no on an AVX2 Zen 3 with
+    # GCC 12): it is reported, and the summary says when the baseline is scalar
     assert max(h["hand_max_rel_diff_final_state"].values()) < 1e-9
-    assert all(h["hand_path_loop_vectorised"].values()), h["hand_path_loop_vectorised"]
+    vec = h["hand_path_loop_vectorised"]
+    assert set(vec) == {f"{v}_{b}" for v in ("hand", "hand_fast_math") for b in (8, 16, 64)}
+    assert all(isinstance(x, bool) for x in vec.values())
     assert h["ratio_fast_vs_hand"] > 0 and h["ratio_exact_vs_hand"] > 0
     # the hand loop built with -ffast-math did not switch this process to flush-to-zero (crtfastmath.o)
     tiny = np.array([2.0e-308])
     assert (tiny / 4.0)[0] > 0.0
     from benchmarks import fast_lines
 
-    assert "hand-vectorised C loop" in "\n".join(fast_lines(fm, out["engine"]))
+    text = "\n".join(fast_lines(fm, out["engine"]))
+    assert "hand-vectorised C loop" in text
+    assert ("did not vectorise" in text) == (not all(vec.values()))
 
 
 def test_layers_do_not_import_the_plants():
