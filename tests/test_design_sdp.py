@@ -155,3 +155,97 @@ def test_a_support_is_checked_and_keeps_the_map():
         affine_lmi("b", lay, b, support=lay.support("P", ("r", 0)))
     with pytest.raises(RuntimeError, match="not linear"):
         affine_lmi("b", lay, b, param=lambda P, r: r[2] * np.eye(2), support=lay.support("P", ("r", 1)))
+
+
+# -- Kron terms: a symmetric unknown's part of an LMI given as sum_h A_h^T P B_h ------------------------------
+def _kron_family(seed=3, n=4, k=7, r=3):
+    """r LMIs ``sum_j (U_ij^T P V_ij + V_ij^T P U_ij) + W_i^T P W_i + rho_i S_i + s C_i - 50 I``, each with its own
+    scalar rho_i (a different dense support per member, as rule i's gain scale in (46)), and a parameter
+    term ``2 E^T P E`` (the decay rate's)."""
+    rng = np.random.default_rng(seed)
+    lay = Layout(Var("P", (n, n), True), Var("s", ()), Var("rho", (r,)))
+    E = np.eye(n, k)
+    lmis, plain = [], []
+    for i in range(r):
+        U, V, W = (rng.standard_normal((2, n, k)) for _ in range(3))
+        W = W[0]
+        S, C = (rng.standard_normal((k, k)) for _ in range(2))
+        S, C = S + S.T, C + C.T
+
+        def b(P, s, rho, U=U, V=V, W=W, S=S, C=C, i=i):
+            return (
+                sum(U[j].T @ P @ V[j] + V[j].T @ P @ U[j] for j in range(2))
+                + W.T @ P @ W
+                + rho[i] * S
+                + s * C
+                - 50 * np.eye(k)
+            )
+
+        sup = lay.support("P", "s", ("rho", i))
+        terms = [(U[0], V[0]), (U[1], V[1]), (W, None)]
+        lmis.append(affine_lmi(f"k{i}", lay, b, param=lambda P, s, rho: 2 * E.T @ P @ E, support=sup,
+                               kron=("P", terms), kron_param=("P", [(E, E)])))  # fmt: skip
+        plain.append(affine_lmi(f"k{i}", lay, b, param=lambda P, s, rho: 2 * E.T @ P @ E, support=sup))
+    return lay, lmis, plain
+
+
+def test_kron_terms_give_the_builders_coefficients():
+    _, lmis, plain = _kron_family()
+    for K, L in zip(lmis, plain):
+        np.testing.assert_allclose(K.F, L.F, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(K.G, L.G, rtol=0, atol=1e-12)
+        assert K.kron is not None and L.kron is None
+
+
+def test_kron_terms_that_are_not_the_builders_are_refused():
+    lay = Layout(Var("P", (2, 2), True))
+    with pytest.raises(RuntimeError, match="Kron terms"):
+        affine_lmi("lyap", lay, lambda P: A.T @ P + P @ A, kron=("P", [(np.eye(2), A.T)]))  # A, not A^T
+
+
+def test_proportional_kron_terms_are_merged():
+    """``(U, V) + (V, U)`` with ``V = c U`` is one term ``U^T P (2c U)``; the decay term joins ``P A``."""
+    from fte_casadi.design.sdp import Kron
+
+    U = np.arange(6.0).reshape(2, 3)
+    K = Kron.of(0, [(U, 0.5 * U)], 2, 3)
+    assert K.A.shape[0] == 1 and np.allclose(K.B[0], U)
+    lay = Layout(Var("P", (2, 2), True))
+    L = affine_lmi("decay", lay, lambda P: A.T @ P + P @ A, param=lambda P: 2 * P,
+                   kron=("P", [(np.eye(2), A)]), kron_param=("P", [(np.eye(2), np.eye(2))]))  # fmt: skip
+    assert L.kron.A.shape[0] == 2 and L.at(0.7).kron.A.shape[0] == 2
+
+
+@pytest.mark.parametrize("p", [0.0, 0.8])
+def test_kron_barrier_derivatives_equal_the_dense_ones(p):
+    """The Kronecker route (gradient, Hessian over P's triangle, cross terms with each member's own scalar)
+    gives the barrier's derivatives of the dense route to round-off."""
+    from fte_casadi.design.sdp import _Barrier
+
+    lay, lmis, plain = _kron_family()
+    v = 0.05 * np.random.default_rng(4).standard_normal(lay.size)
+    out = []
+    for family in (lmis, plain):
+        bar = _Barrier([L.at(p) for L in family], lay.size)
+        fac = bar.factors(v)
+        assert fac is not None
+        out.append(bar.derivatives(fac))
+    (gk, Hk), (gd, Hd) = out
+    np.testing.assert_allclose(gk, gd, rtol=1e-11, atol=1e-11 * np.abs(gd).max())
+    np.testing.assert_allclose(Hk, Hd, rtol=1e-11, atol=1e-11 * np.abs(Hd).max())
+
+
+def test_kron_centring_and_phase1_give_the_dense_answers():
+    lay, lmis, plain = _kron_family()
+    c = np.zeros(lay.size)
+    c[lay.index("rho")] = 1.0
+    hard = [affine_lmi("|s| <= 1", lay, lambda P, s, rho: np.diag([s - 1.0, -1.0 - s])),
+            affine_lmi("|rho| <= 10", lay, lambda P, s, rho: np.diag(np.r_[rho, -rho]) - 10 * np.eye(6)),
+            affine_lmi("|P| <= 10", lay, lambda P, s, rho: np.block([[P - 10 * np.eye(4), 0 * P], [0 * P, -P - 10 * np.eye(4)]]))]  # fmt: skip
+    v0 = np.zeros(lay.size)
+    a, b = (phase1([L.at(0.0) for L in fam], hard, v0) for fam in (lmis, plain))
+    assert a is not None and b is not None
+    ca_, cb_ = (
+        centre([L.at(0.0) for L in fam] + hard, c, v0, eta=0.5, floor=40.0).v for fam in (lmis, plain)
+    )
+    assert np.max(np.abs(ca_ - cb_)) <= 1e-8 * np.max(np.abs(cb_))

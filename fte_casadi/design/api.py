@@ -234,6 +234,16 @@ def design(
     else:
         try:
             try:
+                if "sigma" in generic and all(c.holds for c in checks_a):
+                    # the generic sigma is often outside what a plant's (45) allows, and a conic solver takes
+                    # long to say so (24-state chain at sigma = 1: SCS 45 s); the bound is one solve that the
+                    # parameter search needs anyway, and only a definite bound is taken as a refusal here
+                    smax, _ = sigma_max(aug, params["gamma"], params["gamma1"], solver)
+                    if smax is not None and params["sigma"] >= smax:
+                        raise InfeasibleDesignError(
+                            f"LMI (45) is infeasible: sigma = {params['sigma']:g} is above the largest sigma "
+                            f"{smax:.3g} it allows at gamma = {params['gamma']:g}"
+                        )
                 s3 = conditioned.step3(aug, params, solver)
             except conditioned.SolverFailedError as exc:
                 beyond = _outside_45(aug, params, solver)

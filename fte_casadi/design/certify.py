@@ -25,7 +25,7 @@ import numpy as np
 from .augment import Augmented
 from .linalg import sym as _sym
 
-__all__ = ["lmi45", "lmi46", "lmi55", "lmi64", "sliding_mismatch", "diffusion_coupling", "certificate", "ts_max",
+__all__ = ["lmi45", "lmi46", "lmi45_kron", "lmi46_kron", "sliding_kron", "lmi55", "lmi64", "sliding_mismatch", "diffusion_coupling", "certificate", "ts_max",
            "lyapunov_ts_max", "discrete_certificate", "balanced",
            "block_sizes", "failures"]  # fmt: skip
 
@@ -63,6 +63,44 @@ def lmi45(
         [const * Bd.T, Z((ld, n)), Z((ld, p)), const * (gamma1**2 - gamma**2) * np.eye(ld)],
     ])  # fmt: skip
     return _sym(L)
+
+
+def _selector(sizes, which: int) -> np.ndarray:
+    """``E`` with ``E @ [z_0; z_1; ...] = z_which`` for blocks of ``sizes``."""
+    E = np.zeros((sizes[which], sum(sizes)))
+    a = sum(sizes[:which])
+    E[:, a : a + sizes[which]] = np.eye(sizes[which])
+    return E
+
+
+def lmi45_kron(aug: Augmented, i: int):
+    """How X enters (45) for rule i: pairs ``(U, V)`` meaning ``U^T X V + V^T X U`` (:meth:`~fte_casadi.design.sdp.Kron.of`):
+    ``A X + X A^T`` and ``X W^T`` and ``X C^T`` in the first block row, ``-X`` in the second diagonal block."""
+    n, p, ld = aug.n, aug.p, aug.ld
+    A, _, _, W, _, _, _ = _parts(aug, i)
+    C = aug.Cbar[:, :n]
+    sizes = (n, n, p, ld)
+    E1, E2, E3 = (_selector(sizes, b) for b in range(3))
+    return [(E1, A.T @ E1 + W.T @ E2 + C.T @ E3), (E2, -0.5 * E2)]
+
+
+def lmi46_kron(aug: Augmented, i: int, K: np.ndarray, T: np.ndarray):
+    """How Pbar enters (46)/(79) for rule i (blocks x, d, e, d2; :func:`lmi45_kron`; ``(U, None)`` is
+    ``U^T Pbar U``): ``Phi^T T^T Pbar T Phi`` with ``Phi = [Wbk, 0, -Gbe, Mb]`` and
+    ``Pbar T Abar_i + Abar_i^T T^T Pbar`` in the e block (the decay term ``2 alpha Pbar`` is ``(Ee, alpha Ee)``)."""
+    t = lmi46_terms(aug, i, K)
+    n, ld, nbar, l2 = aug.n, aug.ld, aug.nbar, t["Mb"].shape[1]
+    Ee = _selector((n, ld, nbar, l2), 2)
+    Phi = np.hstack([t["Wbk"], np.zeros((nbar, ld)), -t["Gbe"], t["Mb"]])
+    TPhi = T @ Phi
+    return [(TPhi, None), (Ee, T @ aug.Abar[i] @ Ee)]
+
+
+def sliding_kron(aug: Augmented, T: np.ndarray, right: np.ndarray):
+    """How Pbar enters ``[[-tau I, E^T], [E, -tau I]]`` with ``E = Js^T T^T Pbar right`` (:func:`lmi45_kron`):
+    (55) with ``right = I - Cbar^+ Cbar`` (N eliminated), (64) with ``right = T Wbar_i``."""
+    a, b = right.shape[1], aug.ns
+    return [(T @ aug.Js @ _selector((a, b), 1), right @ _selector((a, b), 0))]
 
 
 def lmi46_terms(aug: Augmented, i: int, K: np.ndarray):

@@ -54,7 +54,17 @@ from ..errors import CentringError, InfeasibleDesignError
 from ..errors import SolverFailedError as SolverFailedError
 from ..rounding import nice_floor
 from .augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
-from .certify import diffusion_coupling, lmi45, lmi46, lyapunov_ts_max, sliding_mismatch, ts_max
+from .certify import (
+    diffusion_coupling,
+    lmi45,
+    lmi45_kron,
+    lmi46,
+    lmi46_kron,
+    lyapunov_ts_max,
+    sliding_kron,
+    sliding_mismatch,
+    ts_max,
+)
 from .sdp import (
     SOLVED,
     AffineLMI,
@@ -129,14 +139,11 @@ def _diag(sizes, values) -> np.ndarray:
 def _normalisation(layout: Layout, name: str, size: int, kappa: float = KAPPA) -> list[MarginLMI]:
     eye = np.eye(size)
     return [
-        margin_lmi(f"{name} >= I", layout, lambda **u: eye - u[name], margin=lambda **u: eye),
-        margin_lmi(
-            f"{name} <= {kappa:g} I",
-            layout,
-            lambda **u: u[name] - kappa * eye,
-            margin=lambda **u: kappa * eye,
-        ),
-    ]
+        margin_lmi(f"{name} >= I", layout, lambda **u: eye - u[name], margin=lambda **u: eye,
+                   support=layout.support(name), kron=(name, [(eye, -0.5 * eye)])),
+        margin_lmi(f"{name} <= {kappa:g} I", layout, lambda **u: u[name] - kappa * eye,
+                   margin=lambda **u: kappa * eye, support=layout.support(name), kron=(name, [(eye, 0.5 * eye)])),
+    ]  # fmt: skip
 
 
 def _balanced(E: np.ndarray, tau) -> np.ndarray:
@@ -249,7 +256,8 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
     D = _diag([n, n, p, ld], [sg, 0.0, 1.0, g**2 - g1**2])
     lmis = [
         margin_lmi(f"(45) rule {i + 1}", layout, lambda X, Y, s, t, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
-                   margin=lambda X, Y, s, t: s * D, support=layout.support("X", "Y", "s"))
+                   margin=lambda X, Y, s, t: s * D, support=layout.support("X", "Y", "s"),
+                   kron=("X", lmi45_kron(aug, i)))
         for i in range(aug.r)
     ]  # fmt: skip
     lmis += _normalisation(layout, "X", n, _kappa(params))
@@ -363,7 +371,15 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
         M[n : n + nbar, n : n + nbar] = 2 * Pt
         return M
 
-    feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46, support=layout.support("Pt", "s", ("rho", i)))
+    def k46(i):  # the Kron terms of (46) after the congruence by Dx, without the d rows
+        return (
+            "Pt",
+            [(U @ Dx[:, keep], None if V is None else V @ Dx[:, keep]) for U, V in lmi46_kron(aug, i, K, T)],
+        )
+
+    Ee = np.eye(n + ld + nbar + l2)[n + ld : n + ld + nbar][:, keep]
+    feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46, support=layout.support("Pt", "s", ("rho", i)),
+                       kron=k46(i), kron_param=("Pt", [(Ee, Ee)]))
             for i in range(r)]  # fmt: skip
     feas += _normalisation(layout, "Pt", nbar, _kappa(params))
     if not rest:  # the feasibility solve needs (46) and the normalisation only
@@ -373,10 +389,12 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
         return aug.Js.T @ T.T @ Pt @ Cp
 
     others = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
-                       margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf))]  # fmt: skip
+                       margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf), support=layout.support("Pt", "tau"),
+                       kron=("Pt", sliding_kron(aug, T, np.eye(nbar) - Cp @ Cb)))]  # fmt: skip
     others += [margin_lmi(f"(64) rule {i + 1}", layout,
                         lambda Pt, s, rho, tau, i=i: _balanced(diffusion_coupling(aug, i, T, Pt), tau),
-                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, n, lf))
+                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, n, lf), support=layout.support("Pt", "tau"),
+                        kron=("Pt", sliding_kron(aug, T, T @ aug.Wbar[i])))
              for i in range(r)]  # fmt: skip
     c = np.zeros(layout.size)
     c[layout.index("rho")] = 1.0
@@ -431,6 +449,14 @@ class _Step5:
         (:func:`~fte_casadi.design.augment.time_scaled`: ``Pbar' = Pbar / tau``, ``P' = P / tau``, the same
         Q_i) and mapped back exactly to the unknowns of the unscaled problem. Only the starting point
         comes from here; the centring runs on the unscaled LMIs."""
+        if self.feas.heavy and self.feas.layout is self.layout:
+            # (46) per rule soft, the normalisation and the gain caps hard, from Pt = sqrt(kappa) I, s = rho_i = 1
+            v0 = self.layout.pack(
+                Pt=np.sqrt(self.kappa) * np.eye(self.aug.nbar), s=1.0, rho=np.ones(self.aug.r)
+            )
+            res = self.feas.numpy_first(self.aug.r, v0, self.caps)
+            if res is not None:
+                return res
         if self.tau == 1.0:
             return self.feas.solve(self.solver, 0.0)
         tau = self.tau

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .augment import Augmented, output_scale, time_scale, units_params, units_scaled
-from .certify import lmi45
+from .certify import lmi45, lmi45_kron
 from .conditioned import MARGIN, input_scaling
 from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
@@ -77,8 +77,12 @@ def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: f
 
         return f
 
-    lmis = [affine_lmi(f"(45) rule {i + 1}", layout, b(i)) for i in range(aug.r)]
-    lmis.append(affine_lmi("X > 0", layout, lambda X, Y, q: MARGIN * np.eye(n) - X))
+    lmis = [affine_lmi(f"(45) rule {i + 1}", layout, b(i),
+                       kron=("X", [(U[:, keep], V[:, keep]) for U, V in lmi45_kron(aug, i)]))
+            for i in range(aug.r)]  # fmt: skip
+    eye = np.eye(n)
+    lmis.append(affine_lmi("X > 0", layout, lambda X, Y, q: MARGIN * eye - X, support=layout.support("X"),
+                           kron=("X", [(eye, -0.5 * eye)])))  # fmt: skip
     c = np.zeros(layout.size)
     c[layout.index("q")] = 1.0 if sigma is not None else -1.0
     return layout, lmis, c
