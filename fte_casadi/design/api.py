@@ -238,7 +238,11 @@ def design(
                     # the generic sigma is often outside what a plant's (45) allows, and a conic solver takes
                     # long to say so (24-state chain at sigma = 1: SCS 45 s); the bound is one solve that the
                     # parameter search needs anyway, and only a definite bound is taken as a refusal here
-                    smax, _ = sigma_max(aug, params["gamma"], params["gamma1"], solver)
+                    smax, st = sigma_max(aug, params["gamma"], params["gamma1"], solver)
+                    if smax is None and st in ("optimal", "infeasible"):  # solved: no sigma > 0 at all
+                        raise InfeasibleDesignError(
+                            f"LMI (45) is infeasible: no sigma > 0 makes it feasible at gamma = {params['gamma']:g}"
+                        )
                     if smax is not None and params["sigma"] >= smax:
                         raise InfeasibleDesignError(
                             f"LMI (45) is infeasible: sigma = {params['sigma']:g} is above the largest sigma "
