@@ -365,7 +365,9 @@ SCS_FIRST = {"max_iters": SCS_FIRST_ITERS, "eps_abs": 1e-3, "eps_rel": 1e-3}
 
 #: a problem whose PSD cones hold more rows than this in all gets its start point from phase 1 in numpy where
 #: the design knows a strictly feasible start for its fixed LMIs (step 5): measured, a 64-rule chain's (46)
-#: 1.2 s with Clarabel (and 0.4 s of cvxpy's compilation) against 0.x s, a 24-state chain's 18 s with SCS
+#: 1.2-2.6 s with Clarabel (with cvxpy's compilation) against 0.15 s in numpy, a 24-state chain's 18 s with
+#: SCS. (Sending step 3's heavy (45) to SCS first instead of Clarabel, 0.65 s against 1.4 s, gained nothing
+#: in a whole design: the different start point cost the centring more Newton steps.)
 HEAVY_CONES = 4000
 
 #: the solver statuses that come with a point (which the design then checks in numpy)
@@ -483,7 +485,7 @@ class ConicProblem:
         return self._solve_with(solver, p)
 
     def numpy_first(self, soft: int, v0: np.ndarray, hard=()) -> SolveResult | None:
-        """A large problem's start point by :func:`phase1` in numpy instead of a conic solver: its first
+        """A heavy problem's start point by :func:`phase1` in numpy instead of a conic solver: its first
         ``soft`` LMIs are the soft ones, the rest (with ``hard``) must hold strictly at ``v0``; the parameter
         ``p`` is 0. Phase 1 either finds a strictly feasible point or proves that none exists (the duality
         bound); with the Kronecker Hessian its Newton steps cost less than a conic solver's iterations on a
@@ -496,10 +498,9 @@ class ConicProblem:
             return None
         elapsed = time.perf_counter() - t0
         self.seconds += elapsed
-        k = max(L.k for L in self.lmis)
+        rows = sum(L.k * (L.k + 1) // 2 for L in self.lmis)
         self.notes.append(f"phase 1 in numpy gave this answer ({'a point' if v is not None else 'infeasible'}, "
-                          f"{elapsed:.2g} s): an LMI of size {k} is a dense block of {k * (k + 1) // 2} rows in a "
-                          "conic solver's cone")  # fmt: skip
+                          f"{elapsed:.2g} s): {len(self.lmis)} LMIs, {rows} rows of PSD cones for a conic solver")  # fmt: skip
         return SolveResult("optimal" if v is not None else "infeasible", v, elapsed, solver="phase 1 (numpy)")
 
     def _solve_with(self, solver: str, p: float) -> SolveResult:
