@@ -852,6 +852,10 @@ def centre(
         # follow the central path at most eightfold per stage (a far start converges in a few damped
         # steps per stage), and never further than halfway to zero
         mu = min(max(nxt, mu / 8.0), 8.0 * mu)
+    else:  # the point would not be the unique centred one: say so instead of returning it
+        raise CentringError(
+            f"the centring did not reach its fixed point in 200 stages (mu {mu:.3g}, {budget[0]} steps)"
+        )
     return Centred(v, mu, budget[0], bar.slack(v))
 
 
