@@ -1,4 +1,4 @@
-"""Tests of fte_casadi.design.sdp: affine LMIs, the cvxpy assembly, the centring and phase 1."""
+"""Tests of fte_casadi.design.sdp and .barrier: affine LMIs, the cvxpy assembly, the centring and phase 1."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
+from fte_casadi.design.barrier import centre, phase1
 from fte_casadi.design.sdp import (
     AffineLMI,
     CentringError,
@@ -13,9 +14,7 @@ from fte_casadi.design.sdp import (
     Layout,
     Var,
     affine_lmi,
-    centre,
     margin_lmi,
-    phase1,
 )
 
 
@@ -220,7 +219,7 @@ def test_proportional_kron_terms_are_merged():
 def test_kron_barrier_derivatives_equal_the_dense_ones(p):
     """The Kronecker route (gradient, Hessian over P's triangle, cross terms with each member's own scalar)
     gives the barrier's derivatives of the dense route to round-off."""
-    from fte_casadi.design.sdp import _Barrier
+    from fte_casadi.design.barrier import _Barrier
 
     lay, lmis, plain = _kron_family()
     v = 0.05 * np.random.default_rng(4).standard_normal(lay.size)

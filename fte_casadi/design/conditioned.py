@@ -39,7 +39,7 @@ Step 5 — LMIs (46), (55), (64) for Pbar, Q_i, N, theta
 Margins are per diagonal block and relative to that block's own size (``MARGIN`` of sigma, of
 gamma1^2, of Pt >= I, ...; ``2 MARGIN`` in the conic solve, ``MARGIN`` in the centring, so that
 the solver's point starts the centring strictly inside). After each conic solve,
-:func:`fte_casadi.design.sdp.centre` moves to the unique central-path point with relative gap
+:func:`fte_casadi.design.barrier.centre` moves to the unique central-path point with relative gap
 ``ETA``: the design is a smooth function of the plant and does not depend on the solver or the
 machine beyond round-off.
 """
@@ -54,6 +54,7 @@ from ..errors import CentringError, InfeasibleDesignError
 from ..errors import SolverFailedError as SolverFailedError
 from ..rounding import nice_floor
 from .augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
+from .barrier import centre, numpy_first, phase1
 from .certify import (
     diffusion_coupling,
     lmi45,
@@ -73,9 +74,7 @@ from .sdp import (
     MarginLMI,
     SolveResult,
     Var,
-    centre,
     margin_lmi,
-    phase1,
 )
 
 __all__ = ["Step3", "Step5", "step3", "step5", "input_scaling", "alpha_max", "MARGIN", "KAPPA", "ETA",
@@ -191,7 +190,7 @@ def _start(
     """A strictly feasible point of ``soft`` and ``hard`` from the solver's answer, or None.
 
     The solver's point is taken if it is strictly feasible; otherwise (an approximate point, e.g.
-    SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.sdp.phase1`
+    SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.barrier.phase1`
     decides, in numpy, from there. A status that is neither a point nor infeasibility is a failure.
     """
     if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
@@ -297,7 +296,7 @@ def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: 
 def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
 
-    One feasibility solve gives a strictly feasible point; :func:`~fte_casadi.design.sdp.centre`
+    One feasibility solve gives a strictly feasible point; :func:`~fte_casadi.design.barrier.centre`
     then minimises ``t`` along the central path to the unique centred point.
     """
     Su = input_scaling(aug)
@@ -406,7 +405,7 @@ class _Step5:
     """Step 5 built once per design: the LMIs, one conic solve, and deterministic decisions in alpha.
 
     The one conic solve is the feasibility of (46) with the normalisation at ``alpha = 0``. Every
-    further question "is (46) feasible at alpha?" is answered by :func:`~fte_casadi.design.sdp.phase1`
+    further question "is (46) feasible at alpha?" is answered by :func:`~fte_casadi.design.barrier.phase1`
     (a barrier method in numpy), started from the last point found feasible: its answer does
     not depend on the solver, so the default alpha (and hence the design) is the same with
     Clarabel and SCS. (46) is monotone in alpha (``2 alpha Pt >= 0``): a point feasible at some
@@ -454,7 +453,7 @@ class _Step5:
             v0 = self.layout.pack(
                 Pt=np.sqrt(self.kappa) * np.eye(self.aug.nbar), s=1.0, rho=np.ones(self.aug.r)
             )
-            res = self.feas.numpy_first(self.aug.r, v0, self.caps)
+            res = numpy_first(self.feas, self.aug.r, v0, self.caps)
             if res is not None:
                 return res
         if self.tau == 1.0:
