@@ -309,7 +309,7 @@ def _fit_mu(bar: _Barrier, c: np.ndarray, fac) -> float:
 
 #: the Newton decrement to which the centring's stages far from the fixed point are centred (the quadratic
 #: region's edge); only stages within CENTRE_NEAR of the fixed point are centred to the full tolerance, so the
-#: point returned is the same (64-rule chain: 319 -> ... Newton steps in two centrings)
+#: point returned is the same (64-rule chain: 319 -> 273 Newton steps in its two centrings)
 CENTRE_LOOSE = 0.25
 CENTRE_NEAR = 0.1
 
