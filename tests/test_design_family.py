@@ -4,6 +4,7 @@ from 2 to 24 states and from 2 to 64 rules (n = 24 takes about 15 s, docs/benchm
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from threadpoolctl import threadpool_info
 
@@ -39,3 +40,29 @@ def test_the_design_limits_the_blas_to_one_thread(monkeypatch):
     monkeypatch.setattr(conditioned, "step3", spy)
     design(derive(chain(2, 1), fidelity_samples=200), sample_time=1e-3)
     assert seen and all(t == 1 for t in seen)
+
+
+def test_the_numpy_starts_and_the_rule_subsets_do_not_change_the_design(monkeypatch):
+    """A heavy problem's step 3 starts from phase 1 in numpy instead of a conic solve, and step 5's
+    decisions in alpha take the rules a few at a time (barrier.phase1_active); both only change the path
+    to the design, not the design: a 16-rule member designed with every start from the conic solver and
+    every decision on all rules, and with every problem treated as heavy and subsets of 2 rules, gives the
+    same alpha and the same Pbar and K to round-off."""
+    from fte_casadi.design import barrier, sdp
+
+    ts = derive(chain(4, 4), fidelity_samples=300)
+    out = []
+    for heavy, add in ((10**9, 10**6), (0, 2)):
+        monkeypatch.setattr(sdp, "HEAVY_CONES", heavy)
+        monkeypatch.setattr(barrier, "ACTIVE_ADD", add)
+        d = design(ts, sample_time=1e-3, sigma=0.47, gamma=1.0)
+        assert d.certified
+        out.append(d)
+    a, b = out
+    notes = " ".join(b.status)
+    assert "step 3: phase 1 in numpy gave this answer (a point" in notes
+    assert "phase 1 in numpy" not in " ".join(a.status)
+    assert a.observer.alpha == pytest.approx(b.observer.alpha, rel=1e-9)
+    for x, y in ((a.Pbar, b.Pbar), (a.K[0], b.K[0])):
+        x, y = np.asarray(x), np.asarray(y)
+        assert np.max(np.abs(x - y)) <= 1e-7 * np.max(np.abs(x))

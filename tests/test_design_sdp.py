@@ -248,3 +248,54 @@ def test_kron_centring_and_phase1_give_the_dense_answers():
         centre([L.at(0.0) for L in fam] + hard, c, v0, eta=0.5, floor=40.0).v for fam in (lmis, plain)
     )
     assert np.max(np.abs(ca_ - cb_)) <= 1e-8 * np.max(np.abs(cb_))
+
+
+def test_phase1_on_a_growing_subset_decides_as_phase1_on_all():
+    """phase1_active answers the same question as phase1 on every soft LMI: its point satisfies all of
+    them strictly, and its 'no' (a subset without a point) is a 'no' for all. Here x <= hi_k for 20 soft
+    LMIs with x >= 1 hard: feasible iff min hi_k > 1, decided by the one smallest hi_k among 20."""
+    from fte_casadi.design.barrier import phase1_active
+
+    lay = Layout(Var("x", ()))
+    hard = [affine_lmi("x >= 1", lay, lambda x: np.array([[1.0 - x]]))]
+    rng = np.random.default_rng(3)
+    v0 = np.array([5.0])
+    for lowest in (0.9, 1.2, 6.0):
+        his = np.r_[rng.uniform(2.0, 9.0, 19), lowest]
+        soft = [
+            affine_lmi(f"x <= {h:g}", lay, lambda x, h=h: np.array([[x - h]])) for h in rng.permutation(his)
+        ]
+        full = phase1(soft, hard, v0)
+        v, active = phase1_active(soft, hard, v0)
+        assert (v is None) == (full is None) == (lowest <= 1.0)
+        if v is not None:
+            assert all(np.linalg.eigvalsh(L.value(v))[-1] < 0 for L in soft)
+        assert len(active) < len(soft)  # a few decided it
+
+
+def test_phase1_on_a_subset_with_tied_caps_gives_the_full_answers(monkeypatch):
+    """The Kron family with 12 members (one scalar rho_i each, capped by an LMI of its own) and I <= P <= 10 I:
+    the decay term makes it infeasible for large parameters. Taken two members at a time, with the caps tied
+    to their members, the growing subset decides every value as phase 1 on all members does."""
+    from fte_casadi.design import barrier
+
+    monkeypatch.setattr(barrier, "ACTIVE_ADD", 2)
+    lay, lmis, _ = _kron_family(r=12)
+    eye, zero = np.eye(4), np.zeros((4, 4))
+    hard = [affine_lmi("|s| <= 1", lay, lambda P, s, rho: np.diag([s - 1.0, -1.0 - s])),
+            affine_lmi("I <= P <= 10 I", lay, lambda P, s, rho: np.block([[P - 10 * eye, zero], [zero, eye - P]]))]  # fmt: skip
+    caps = [affine_lmi(f"|rho_{i}| <= 10", lay, lambda P, s, rho, i=i: np.diag([rho[i] - 10.0, -rho[i] - 10.0]),
+                       support=lay.support(("rho", i))) for i in range(len(lmis))]  # fmt: skip
+    v0 = lay.pack(P=2 * eye)
+    answers = []
+    for p in (0.0, 10.0, 15.0, 30.0):
+        soft = [L.at(p) for L in lmis]
+        full = barrier.phase1(soft, hard + caps, v0)
+        v, active = barrier.phase1_active(soft, hard, v0, tied=[[c] for c in caps])
+        assert (v is None) == (full is None)
+        if v is not None:
+            assert all(np.linalg.eigvalsh(L.value(v))[-1] < 0 for L in soft + hard + caps)
+        else:
+            assert len(active) < len(lmis)  # a subset proved it
+        answers.append(v is not None)
+    assert answers == [True, True, False, False]

@@ -54,7 +54,7 @@ from ..errors import CentringError, InfeasibleDesignError
 from ..errors import SolverFailedError as SolverFailedError
 from ..rounding import nice_floor
 from .augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
-from .barrier import centre, numpy_first, phase1
+from .barrier import centre, numpy_first, phase1, phase1_active
 from .certify import (
     diffusion_coupling,
     lmi45,
@@ -74,6 +74,7 @@ from .sdp import (
     MarginLMI,
     SolveResult,
     Var,
+    affine_lmi,
     margin_lmi,
 )
 
@@ -293,16 +294,55 @@ def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: 
     return prob, replace(res, v=v)
 
 
+def _scalar_cap(layout: Layout, name: str, hi: float) -> list[AffineLMI]:
+    """``0 < v[name] <= hi`` as two 1 x 1 LMIs."""
+    F = np.zeros((layout.size, 1, 1))
+    F[layout.index(name), 0, 0] = 1.0
+    return [AffineLMI(f"{name} <= cap", np.array([[-hi]]), F), AffineLMI(f"{name} > 0", np.zeros((1, 1)), -F)]
+
+
+def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list):
+    """A heavy step 3's start point by phase 1 in numpy (:func:`~fte_casadi.design.barrier.numpy_first`),
+    or None (then the conic solvers).
+
+    (45) is a cone in ``(X', Y', s)`` cut by ``I <= X' <= kappa I``; phase 1's barrier pushes along the
+    cone towards the upper normalisation, so it starts there (``X' = kappa/2 I``, ``s = 1``, ``Y' = 0``;
+    from ``X' = sqrt(kappa) I`` the damped Newton steps creep up the ray 0.25 % at a time). Phase 1 needs
+    a bounded set: ``||Y'|| <= RHO_CAP kappa max(max ||A_i||, sigma)`` (a gain ``||K~||`` of RHO_CAP times
+    the plant's fastest rate) and ``0 < s <= `` that cap times ``max(1, 1/sigma, ||C||^2)``. The caps only
+    serve phase 1: an answer "infeasible" under them goes to the conic solver, which has none.
+    """
+    n, m, r = aug.n, aug.m, aug.r
+    kappa, sg = _kappa(params), float(params["sigma"])
+    a = max(np.linalg.norm(A[:n, :n], 2) for A in aug.Abar)
+    ycap = RHO_CAP * kappa * max(a, sg, 1e-300)
+    scap = ycap * max(1.0, 1.0 / max(sg, 1e-300), np.linalg.norm(aug.Cbar[:, :n], 2) ** 2)
+    ycap_lmi = affine_lmi(
+        "||Y'|| <= cap", layout, lambda X, Y, s, t: _balanced(Y, ycap), support=layout.support("Y")
+    )
+    prob = ConicProblem(layout, feas)
+    v0 = layout.pack(X=0.5 * kappa * np.eye(n), Y=np.zeros((m, n)), s=1.0, t=0.0)
+    res = numpy_first(prob, r, v0, [ycap_lmi] + _scalar_cap(layout, "s", scap))
+    return None if res is None or res.v is None else (prob, res)
+
+
 def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
 
-    One feasibility solve gives a strictly feasible point; :func:`~fte_casadi.design.barrier.centre`
-    then minimises ``t`` along the central path to the unique centred point.
+    One feasibility solve gives a strictly feasible point (for a problem with many PSD cones, phase 1 in
+    numpy, :func:`_step3_numpy`; the conic solvers when it finds none);
+    :func:`~fte_casadi.design.barrier.centre` then minimises ``t`` along the central path to the unique
+    centred point, which does not depend on where it started.
     """
     Su = input_scaling(aug)
     layout, family, c = _step3_problem(aug, params, Su)
     tau = time_scale(aug)
-    prob, res = _step3_conic(aug, params, solver, tau, layout, Su)
+    feas = [L.at(2 * MARGIN) for L in family[:-1]]  # without the epigraph of t
+    first = _step3_numpy(aug, params, layout, feas) if ConicProblem(layout, feas).heavy else None
+    if first is not None:
+        prob, res = first
+    else:
+        prob, res = _step3_conic(aug, params, solver, tau, layout, Su)
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
     lmis = [L.at(MARGIN) for L in family]
     repaired: list[str] = []
@@ -406,7 +446,9 @@ class _Step5:
 
     The one conic solve is the feasibility of (46) with the normalisation at ``alpha = 0``. Every
     further question "is (46) feasible at alpha?" is answered by :func:`~fte_casadi.design.barrier.phase1`
-    (a barrier method in numpy), started from the last point found feasible: its answer does
+    (a barrier method in numpy) on a growing subset of the rules (:func:`~fte_casadi.design.barrier.phase1_active`:
+    a few rules decide; the answer is the same fact as on all of them), started from the last point found
+    feasible: its answer does
     not depend on the solver, so the default alpha (and hence the design) is the same with
     Clarabel and SCS. (46) is monotone in alpha (``2 alpha Pt >= 0``): a point feasible at some
     alpha is a strictly feasible start for the centring at every smaller alpha.
@@ -434,6 +476,7 @@ class _Step5:
         self.points: dict[float, np.ndarray] = {}  # alpha -> a strictly feasible point there
         self.newton = 0
         self.decisions = 0
+        self.active: list[int] = []  # the rules that decided the last phase 1 (phase1_active)
 
     @property
     def solves(self) -> int:
@@ -525,7 +568,8 @@ class _Step5:
         if not below:
             return False
         try:
-            v = phase1([L.at(alpha) for L in self.soft], self.fixed + self.caps, self.points[max(below)])
+            v, self.active = phase1_active([L.at(alpha) for L in self.soft], self.fixed, self.points[max(below)],
+                                           self.active, tied=[[cap] for cap in self.caps])  # fmt: skip
         except CentringError as exc:
             self.notes.append(f"step 5: phase 1 at alpha = {alpha:.4g} failed ({exc}); counted as infeasible")
             return False
