@@ -62,3 +62,31 @@ def test_one_vertex_per_rule_with_a_common_gain_and_a_size_limit_said(monkeypatc
     monkeypatch.setattr(bounds, "MAX_STATES", 10)
     out = bounds.fault_error_bound(d)
     assert out["holds"] is False and "not computed" in out["why"] and "12 states" in out["why"]
+
+
+def test_the_linear_and_the_schur_form_give_the_same_bound():
+    """The diffusion term W^T P W is linear in P: posed so, the analysis LMI is half the size of its Schur
+    form with a -P block (the same set for P > 0) and several times cheaper. Both forms' points pass the
+    numpy check of the linear form, and their optimal sums of g agree to the solver's accuracy; the Schur
+    form's point also satisfies the Schur-form matrix (the identity the linear form rests on)."""
+    from fte_casadi.design import bounds
+
+    d = design(derive(load_plant(SMALL)))
+    verts, Cz = bounds._vertices(d)
+    names = [c for c in bounds.CHANNELS if any(np.any(v[3][c]) for v in verts)]
+    sizes = {c: verts[0][3][c].shape[1] for c in names}
+    sums = []
+    for schur in (False, True):
+        P, g, status = bounds._solve(verts, Cz, names, sizes, "CLARABEL", schur)
+        assert P is not None, status
+        ok = bounds._checked(verts, Cz, names, sizes, P, g)
+        assert ok is not None
+        sums.append(float(np.sum(ok[0])))
+        for _, _, Ac, ch, Wc in verts:  # the Schur form at the point: negative definite as well
+            Bc = np.hstack([ch[c] for c in names])
+            G = np.diag(np.concatenate([np.full(sizes[c], ok[0][k]) for k, c in enumerate(names)]))
+            k, N = Bc.shape[1], Ac.shape[0]
+            S = np.block([[Ac.T @ P + P @ Ac + Cz.T @ Cz, P @ Bc, Wc.T @ P], [Bc.T @ P, -G, np.zeros((k, N))],
+                          [P @ Wc, np.zeros((N, k)), -P]])  # fmt: skip
+            assert np.linalg.eigvalsh(0.5 * (S + S.T))[-1] < 0
+    assert sums[0] == pytest.approx(sums[1], rel=1e-3)

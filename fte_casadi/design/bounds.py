@@ -13,11 +13,13 @@ The error is driven by the fault's second derivative, the sliding term, and — 
 With ``w = [d; f''; u_s; f; 1]`` (the channels that are not identically zero), the stochastic
 bounded-real lemma gives, for ``P > 0`` and ``g_k`` with, for every rule pair (i, j)::
 
-    [[A_ij^T P + P A_ij + C^T C,  P B_ij,  W_i^T P],
-     [B_ij^T P,                  -diag(g), 0      ],
-     [P W_i,                      0,       -P     ]]  < 0,      C = [0, J2]
+    [[A_ij^T P + P A_ij + W_i^T P W_i + C^T C,  P B_ij ],
+     [B_ij^T P,                                 -diag(g)]]  < 0,      C = [0, J2]
 
-(affine in the vertex matrices, so the vertices cover every blend of the rules), the bound
+(affine in P and in the vertex matrices, so the vertices cover every blend of the rules; the diffusion's
+``W_i^T P W_i`` is linear in P as it stands: the Schur form with a ``-P`` block, which this module used
+before, is the same set for ``P > 0`` but twice the size, and a conic solver's cost per iteration grows
+like the cube of each PSD cone's k(k+1)/2 rows: a chain of n = 8 states, 4 rules, about 7 s -> 1.8 s), the bound
 
     E int_0^t |f - fhat|^2 ds  <=  sum_k g_k E int_0^t |w_k|^2 ds + E xi(0)^T P xi(0)
 
@@ -37,8 +39,9 @@ __all__ = ["fault_error_bound", "bound_value", "CHANNELS"]
 #: the input channels, in order
 CHANNELS = ("d", "fddot", "u_s", "f", "const")
 #: the analysis is skipped (and says so) beyond these sizes: one conic solve over all vertices, whose cost
-#: grows with vertices x states^4 (a chain of n = 8 states, 4 rules, closed loop of 20 states: 5 s; n = 6
-#: with 64 rules, 11 s of a design's 12 s, so 64 vertices are beyond it)
+#: grows with vertices x states^6 (measured, chain family, Clarabel: 20 closed-loop states and 4 vertices 1.8 s,
+#: 16 states and 16 vertices 2.5 s, 64 vertices 12.6 s, 28 states 8 s, 36 states 21 s: a design of those takes
+#: 1-6 s without it)
 MAX_VERTICES, MAX_STATES = 16, 24
 
 
@@ -80,24 +83,78 @@ def _vertices(design):
 
 
 def _lmi(Ac, Bc, Wc, Cz, P, G):
-    k = Bc.shape[1]
-    N = Ac.shape[0]
     return np.block([
-        [Ac.T @ P + P @ Ac + Cz.T @ Cz, P @ Bc, Wc.T @ P],
-        [Bc.T @ P, -G, np.zeros((k, N))],
-        [P @ Wc, np.zeros((N, k)), -P],
+        [Ac.T @ P + P @ Ac + Wc.T @ P @ Wc + Cz.T @ Cz, P @ Bc],
+        [Bc.T @ P, -G],
     ])  # fmt: skip
 
 
-def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
-    """The bound of the module docstring at ``design``: ``{"holds", "gains": {channel: sqrt(g)},
-    "channels": {channel: size}, "P": M, "lmi_max_eig", "what"}``; ``{"holds": False, "why"}`` when
-    the analysis LMI is infeasible, fails its numpy check, or the design has Theorem 5 diffusion."""
+def _solve(verts, Cz, names, sizes, solver: str, schur: bool):
+    """``min sum g`` over P, g (cvxpy): ``(P, g, status)``, None for a value the solver did not give.
+    ``schur``: the diffusion term as the Schur complement of a ``-P`` block (the same set, twice the size)."""
     import cvxpy as cp
 
     from .linalg import sym
     from .sdp import SOLVER_SETTINGS
 
+    N = Cz.shape[1]
+    P = cp.Variable((N, N), symmetric=True)
+    g = cp.Variable(len(names))
+    cons = [P >> 1e-9 * np.eye(N)]
+    for _, _, Ac, chans, Wc in verts:
+        Bc = np.hstack([chans[c] for c in names])
+        Gd = cp.diag(cp.hstack([g[k] * np.ones(sizes[c]) for k, c in enumerate(names)]))
+        if schur:
+            k = Bc.shape[1]
+            M = cp.bmat([
+                [Ac.T @ P + P @ Ac + Cz.T @ Cz, P @ Bc, Wc.T @ P],
+                [Bc.T @ P, -Gd, np.zeros((k, N))],
+                [P @ Wc, np.zeros((N, k)), -P],
+            ])  # fmt: skip
+        else:
+            M = cp.bmat([[Ac.T @ P + P @ Ac + Wc.T @ P @ Wc + Cz.T @ Cz, P @ Bc], [Bc.T @ P, -Gd]])
+        cons.append(sym(M) << -1e-9 * np.eye(M.shape[0]))
+    prob = cp.Problem(cp.Minimize(cp.sum(g)), cons)
+    try:
+        with warnings.catch_warnings():  # "may be inaccurate": the point is checked with numpy
+            warnings.simplefilter("ignore", UserWarning)
+            prob.solve(solver=solver, **SOLVER_SETTINGS.get(solver, {}))
+    except cp.error.SolverError as exc:
+        return None, None, f"the analysis LMI failed in the solver ({' '.join(str(exc).split())[:100]})"
+    if P.value is None or g.value is None:
+        return None, None, f"the analysis LMI is {prob.status}"
+    return sym(P.value), np.maximum(np.asarray(g.value, float), 0.0), prob.status
+
+
+#: the factors by which g is raised, in turn, when the solver's point misses the LMIs by its round-off
+REPAIR = (1e-8, 1e-6, 1e-4, 1e-3, 1e-2, 0.1, 0.5, 1.0, 2.0, 4.0)
+
+
+def _checked(verts, Cz, names, sizes, Pv, gv):
+    """The smallest ``g (1 + f)``, f in REPAIR (or f = 0), at which the LMIs hold at ``Pv`` (numpy), with the
+    largest eigenvalue there; None when none does (a larger g only helps the g block)."""
+    if np.linalg.eigvalsh(Pv)[0] <= 0:
+        return None
+    worst = np.inf
+    for f in (0.0,) + REPAIR:
+        gf = gv * (1.0 + f) + 1e-12 * (f > 0)
+        G = np.diag(np.concatenate([np.full(sizes[c], gf[k]) for k, c in enumerate(names)]))
+        worst = max(
+            float(np.linalg.eigvalsh(_lmi(Ac, np.hstack([ch[c] for c in names]), Wc, Cz, Pv, G))[-1])
+            for _, _, Ac, ch, Wc in verts
+        )
+        if worst < 0:
+            return gf, worst
+    return None
+
+
+def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
+    """The bound of the module docstring at ``design``: ``{"holds", "gains": {channel: sqrt(g)},
+    "channels": {channel: size}, "P": M, "lmi_max_eig", "what"}``; ``{"holds": False, "why"}`` when
+    the analysis LMI is infeasible, fails its numpy check, or the design has Theorem 5 diffusion.
+
+    The LMIs are posed with the diffusion term linear in P; when the solver gives no point that passes
+    the numpy check there, the Schur form of the same set is solved too (the smaller bound is kept)."""
     if any(lm.has_diffusion_extension for lm in design.local_models):
         return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
     verts, Cz = _vertices(design)
@@ -107,43 +164,18 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
                 f"(the analysis is posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)"}  # fmt: skip
     names = [c for c in CHANNELS if any(np.any(v[3][c]) for v in verts)]
     sizes = {c: verts[0][3][c].shape[1] for c in names}
-    P = cp.Variable((N, N), symmetric=True)
-    g = cp.Variable(len(names))
-    cons = [P >> 1e-9 * np.eye(N)]
-    for _, _, Ac, chans, Wc in verts:
-        Bc = np.hstack([chans[c] for c in names])
-        Gd = cp.diag(cp.hstack([g[k] * np.ones(sizes[c]) for k, c in enumerate(names)]))
-        k = Bc.shape[1]
-        M = cp.bmat([
-            [Ac.T @ P + P @ Ac + Cz.T @ Cz, P @ Bc, Wc.T @ P],
-            [Bc.T @ P, -Gd, np.zeros((k, N))],
-            [P @ Wc, np.zeros((N, k)), -P],
-        ])  # fmt: skip
-        cons.append(sym(M) << -1e-9 * np.eye(M.shape[0]))
-    prob = cp.Problem(cp.Minimize(cp.sum(g)), cons)
-    try:
-        with warnings.catch_warnings():  # "may be inaccurate": the point is checked with numpy below
-            warnings.simplefilter("ignore", UserWarning)
-            prob.solve(solver=solver, **SOLVER_SETTINGS.get(solver, {}))
-    except cp.error.SolverError as exc:
-        return {"holds": False, "why": f"the analysis LMI failed in the solver ({exc})"}
-    if P.value is None or g.value is None:
-        return {"holds": False, "why": f"the analysis LMI is {prob.status}"}
-    Pv, gv = sym(P.value), np.maximum(np.asarray(g.value, float), 0.0)
-    for _ in range(20):  # the solver's point, checked with numpy; a larger g only helps
-        G = np.diag(np.concatenate([np.full(sizes[c], gv[k]) for k, c in enumerate(names)]))
-        worst = max(
-            float(np.linalg.eigvalsh(_lmi(Ac, np.hstack([ch[c] for c in names]), Wc, Cz, Pv, G))[-1])
-            for _, _, Ac, ch, Wc in verts
-        )
-        if worst < 0 and np.linalg.eigvalsh(Pv)[0] > 0:
-            break
-        gv = gv * 1.5 + 1e-12
-    else:
-        return {
-            "holds": False,
-            "why": f"the analysis LMI does not hold at the solver's point (largest eigenvalue {worst:.3g})",
-        }
+    found, why = None, ""
+    for schur in (False, True):
+        Pv, gv, status = _solve(verts, Cz, names, sizes, solver, schur)
+        ok = None if Pv is None else _checked(verts, Cz, names, sizes, Pv, gv)
+        if ok is None:
+            why = status if Pv is None else "the analysis LMI does not hold at the solver's point"
+            continue
+        found = (Pv, *ok)
+        break
+    if found is None:
+        return {"holds": False, "why": why}
+    Pv, gv, worst = found
     return {
         "holds": True,
         "what": "E int |f - fhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
