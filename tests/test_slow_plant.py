@@ -1,10 +1,14 @@
 """A slow plant measured in small units (issue #17's "real plants"): time constants of 100-130 s, an input
 gain of 1e-3, every level measured in mm of a state in m (outputs x 1e3), 4 rules, no design defaults.
 
-(45) then needs sigma of order 1e-11 and gamma of order 50: four orders of magnitude from any default. The
-bounds, posed in the plant's own time and output size, find them; at a sample time of 1 s no certified
-observer exists (its fastest mode is ~5e3 /s) and the refusal says so and names the sample time that works,
-which then certifies."""
+(45) then needs sigma of order 1e-11: four orders of magnitude and more from any default. The bounds, posed
+in the plant's own time and output size, find it. The generic gamma, gamma1 and sigma are taken in the
+outputs' own size and step 5's objective weighs the observer gains by it, so the design does not depend on
+the unit the outputs are measured in: the same plant measured in m or in mm (its sensor fault with it) gets
+the same design, scaled. (Before, with the generic values as absolute numbers, the mm plant needed a sample
+time of 3.6e-4 s where the m plant runs at 1 s.) This plant's level bias is in mm on outputs in mm; at a
+sample time of 1 s it is refused by a narrow margin and the refusal names the sample time that works, which
+then certifies."""
 
 from __future__ import annotations
 
@@ -21,7 +25,7 @@ from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive
 
 
-def slow_plant(n: int = 4, q: int = 2):
+def slow_plant(n: int = 4, q: int = 2, sy: float = 1e3, bias_scaled: bool = False):
     b = PlantBuilder(f"slow{n}")
     x = b.states(*[f"x{k + 1}" for k in range(n)])
     (u,) = b.inputs("u")
@@ -39,7 +43,7 @@ def slow_plant(n: int = 4, q: int = 2):
         rates.append(r)
     b.drift(rates)
     b.diffusion([1e-4 * xk for xk in x])
-    b.outputs([1e3 * x[0] + fs] + [1e3 * xk for xk in x])
+    b.outputs([sy * (x[0] + fs) if bias_scaled else sy * x[0] + fs] + [sy * xk for xk in x])
     b.region(**{f"x{k + 1}": (-1.0, 1.0) for k in range(n)})
     return b.build()
 
@@ -61,10 +65,35 @@ def test_the_refusal_names_the_sample_time_and_that_one_certifies(ts):
     msg = " ".join(str(exc.value).split())
     assert "refused for other reasons" in msg and "no certified design runs at the sample time 1" in msg
     ts_ok = float(re.search(r"sample time <= ([0-9.e+-]+)", msg).group(1))
-    assert 1e-5 < ts_ok < 1e-2
+    assert 0.05 < ts_ok < 1.0
     d = design(ts, sample_time=ts_ok)
     assert d.certified and d.checks["discrete"]["holds"]
-    assert d.params["sigma"] < 1e-9 and set(d.params_chosen) == {"sigma", "gamma"}
+    assert d.params["sigma"] < 1e-9 and "sigma" in d.params_chosen
+    assert any("outputs' own size" in s for s in d.status)
+
+
+def test_the_design_does_not_depend_on_the_outputs_unit():
+    """The plant with every output (and its sensor bias) in units 1024 times smaller. At its defaults both
+    certify at a sample time of 1 s with the same largest sample time up to the rounding of the sigma the
+    tool chooses (decimal, in each plant's units). At parameters in the same relation (sigma / 1024^2,
+    gamma and gamma1 x 1024): the same K, decay rate and largest sample time, Pbar 1024^2 times larger and
+    the observer gains 1024 times smaller (a power of two: the change of units is exact in floating point)."""
+    import numpy as np
+
+    plants = [derive(slow_plant(sy=sy, bias_scaled=True), fidelity_samples=300) for sy in (1.0, 1024.0)]
+    a, b = (design(ts, sample_time=1.0) for ts in plants)
+    assert a.certified and b.certified
+    assert b.checks["ts_max"] == pytest.approx(a.checks["ts_max"], rel=0.02)
+    a, b = (design(ts, sample_time=1.0, sigma=1.9e-5 / c**2, gamma=c, gamma1=0.5 * c)
+            for ts, c in zip(plants, (1.0, 1024.0)))  # fmt: skip
+    assert a.certified and b.certified
+    assert b.observer.alpha == pytest.approx(a.observer.alpha, rel=1e-6)
+    assert b.checks["ts_max"] == pytest.approx(a.checks["ts_max"], rel=1e-6)
+    np.testing.assert_allclose(np.asarray(b.K[0]), np.asarray(a.K[0]), rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(b.Pbar), 1024.0**2 * np.asarray(a.Pbar), rtol=1e-5,
+                               atol=1e-8 * 1024.0**2 * np.abs(a.Pbar).max())  # fmt: skip
+    np.testing.assert_allclose(np.asarray(b.L1[0]), np.asarray(a.L1[0]) / 1024.0, rtol=1e-5,
+                               atol=1e-8 * np.abs(a.L1[0]).max())  # fmt: skip
 
 
 def test_an_unstable_mode_barely_reachable_is_named(ts):

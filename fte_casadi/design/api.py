@@ -32,6 +32,35 @@ VARIANTS = ("paper", "conditioned")
 SOLVERS = ("CLARABEL", "SCS")
 
 
+def _outputs_own_size(params: dict, aug, generic: set, status: list) -> None:
+    """The generic gamma, gamma1 and sigma in the outputs' own size ``sy`` (:func:`~fte_casadi.design.augment.output_scale`).
+
+    gamma bounds the gain from the unknown input to the outputs, so a number for it carries the outputs'
+    units: the generic 1 asks a plant measured in mm for 1000 times the attenuation it asks of the same
+    plant measured in m. (45) with outputs ``y / sy`` at ``(sigma, gamma, gamma1)`` is (45) with y at
+    ``(sigma / sy^2, gamma sy, gamma1 sy)`` (:func:`~fte_casadi.design.augment.units_params`), and (46),
+    (55), (64) and step 5's objective follow (:func:`~fte_casadi.design.conditioned._step5_problem`), so with
+    the generic values taken in the outputs' own size a plant gets the same design whatever unit its outputs
+    (and its sensor faults) are in: Pbar scaled by ``sy^2``, the gains L_i1 by ``1 / sy``, the same K, decay
+    rate and largest sample time (``tests/test_slow_plant.py``; measured on a slow 4-state plant: in m it
+    certifies at a sample time of 1 s, in mm or km, with the generic values as absolute numbers, it needed
+    3.6e-4 s). A value the user or the plant's defaults gave is kept; sy = 1 leaves everything as it is."""
+    from .augment import output_scale
+
+    sy = output_scale(aug)
+    if sy == 1.0 or not generic:
+        return
+    scale = {"gamma": sy, "gamma1": sy, "sigma": sy**-2}
+    for k in generic:
+        params[k] *= scale[k]
+    status.append(
+        "generic values in the outputs' own size (sy = "
+        + f"{sy:g}, the largest row norm of C as a power of two): "
+        + ", ".join(f"{k} = {params[k]:g}" for k in sorted(generic))
+        + ", so that what they ask does not depend on the outputs' units"
+    )
+
+
 def _params(ts: TSModel, given: dict, status: list) -> dict:
     plant_defaults = dict(getattr(ts.plant, "design_defaults", {}) or {})
     out = {}
@@ -204,6 +233,8 @@ def design(
                 f"{name} must be a {'positive' if name == 'sample_time' else 'non-negative'} finite number; got {v!r}"
             )
     aug = augment(ts.local_models, ts.C, ts.Df)
+    _outputs_own_size(params, aug, {k for k, v in (("gamma", gamma), ("gamma1", gamma1), ("sigma", sigma))
+                                     if v is None and k not in plant_defaults}, status)  # fmt: skip
     theorem5 = any(lm.has_diffusion_extension for lm in ts.local_models)
     if theorem5:
         params.setdefault("gamma2", params["gamma"])
@@ -559,9 +590,12 @@ def explain_45(
         if sup is None and (why := reachability(aug)):
             parts.append(why)
     else:
-        lowered = retry.get("gamma1") is None and g1 != float(
-            (getattr(ts.plant, "design_defaults", {}) or {}).get("gamma1", GENERIC_DEFAULTS["gamma1"])
-        )
+        from .augment import output_scale
+
+        default_g1 = (getattr(ts.plant, "design_defaults", {}) or {}).get("gamma1")
+        if default_g1 is None:  # the generic one, in the outputs' own size (_outputs_own_size)
+            default_g1 = GENERIC_DEFAULTS["gamma1"] * output_scale(aug)
+        lowered = retry.get("gamma1") is None and not math.isclose(g1, float(default_g1), rel_tol=1e-12)
         parts.append(
             f"the smallest gamma for which (45) is feasible with gamma1 = {g1:g}"
             + (
@@ -641,8 +675,11 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
     params = _params(
         ts, {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": None, "epsilon": None}, status
     )
-    g1 = params["gamma1"]
     aug = augment(ts.local_models, ts.C, ts.Df)
+    plant_defaults = getattr(ts.plant, "design_defaults", {}) or {}
+    _outputs_own_size(params, aug, {k for k, v in (("gamma", None), ("gamma1", gamma1), ("sigma", None))
+                                    if v is None and k not in plant_defaults}, status)  # fmt: skip
+    g1 = params["gamma1"]
     sup, _ = sigma_max(aug, None, g1, solver)
     if sigmas is None:
         if sup is None:

@@ -436,7 +436,12 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
                         kron=("Pt", sliding_kron(aug, T, T @ aug.Wbar[i])))
              for i in range(r)]  # fmt: skip
     c = np.zeros(layout.size)
-    c[layout.index("rho")] = 1.0
+    # rho_i enters as rho_i Cbar^T Cbar: outputs sy times larger (mm for m) give the same observer at rho_i / sy^2,
+    # and an unweighted sum rho_i + tau then weighs the gains sy^2 times less (a 4-state plant in mm got gains
+    # 25 times those of the same plant in m, and no design at its sample time); weighted by sy^2 the objective,
+    # and the design, do not depend on the outputs' units (sy = 1 for every built-in plant: their designs are
+    # unchanged)
+    c[layout.index("rho")] = output_scale(aug) ** 2
     c[layout.index("tau")] = 1.0
     return layout, feas, others, c
 
