@@ -457,7 +457,7 @@ def phase1_active(
     used, which the next question about the same LMIs starts from.
 
     Measured on the 64-rule chain (step 5's six decisions in alpha): 8 to 16 of the 64 rules decide
-    each of them, and the decisions cost 490 Newton steps on all 64 LMIs before, 290 on 16 or fewer."""
+    each of them, and the six decisions cost 490 Newton steps on all 64 LMIs before, 280 on 16 or fewer."""
     tied = tied if tied is not None else [[] for _ in soft]
     worst = np.argsort([-float(np.linalg.eigvalsh(L.value(v0))[-1]) for L in soft], kind="stable")
     act = list(dict.fromkeys([int(i) for i in active] + [int(i) for i in worst[:ACTIVE_ADD]]))
