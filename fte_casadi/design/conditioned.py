@@ -30,8 +30,9 @@ Step 5 — LMIs (46), (55), (64) for Pbar, Q_i, N, theta
     ``theta = (tau/s)^2``; the scale of Pbar is an unknown instead of a grid.
     *Decay rate*: ``2 alpha Pbar`` in the (3,3) block makes every R_i decay at least as fast as
     ``exp(-alpha t)``; alpha is a DPP parameter (re-solved without re-canonicalisation).
-    *Objective*: ``min sum_i rho_i + tau`` (observer gain scale and sliding mismatch, both in
-    the normalised units of Pt).
+    *Objective*: ``min sy^2 sum_i rho_i + tau`` (observer gain scale and sliding mismatch, both in
+    the normalised units of Pt; ``sy`` the outputs' size, :func:`~fte_casadi.design.augment.output_scale`,
+    so that the balance does not depend on the outputs' unit).
     *Observer speed*: by default alpha is ``ALPHA_FRACTION`` times the largest alpha for which
     (46) is feasible with ``I <= Pt <= kappa I`` (found by bisection, each trial one solve of the
     same problem), lowered when needed so that ``ts_max >= TS_FACTOR * sample_time``.
@@ -437,10 +438,9 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
              for i in range(r)]  # fmt: skip
     c = np.zeros(layout.size)
     # rho_i enters as rho_i Cbar^T Cbar: outputs sy times larger (mm for m) give the same observer at rho_i / sy^2,
-    # and an unweighted sum rho_i + tau then weighs the gains sy^2 times less (a 4-state plant in mm got gains
-    # 25 times those of the same plant in m, and no design at its sample time); weighted by sy^2 the objective,
-    # and the design, do not depend on the outputs' units (sy = 1 for every built-in plant: their designs are
-    # unchanged)
+    # and an unweighted sum rho_i + tau then weighs the gains sy^2 times less (a slow 4-state plant in mm needed a
+    # sample time of 3.6e-4 s where in m it runs at 1 s); weighted by sy^2 the objective, and the design, do not
+    # depend on the outputs' units (sy = 1 for every built-in plant: their designs are unchanged)
     c[layout.index("rho")] = output_scale(aug) ** 2
     c[layout.index("tau")] = 1.0
     return layout, feas, others, c
