@@ -107,3 +107,19 @@ def test_an_unstable_mode_barely_reachable_is_named(ts):
     assert "open loop is unstable" in why
     pbh = float(re.search(r"\|\| = ([0-9.e+-]+)", why).group(1))
     assert 0 < pbh < 0.05
+
+
+def test_generic_values_follow_the_outputs_size(ts):
+    """The generic gamma, gamma1, sigma in the outputs' own size (sy = 1024 here); gamma1 follows only a
+    generic gamma, so it stays below a gamma that was given; given values are kept."""
+    from fte_casadi.design.api import _params
+
+    def params(**given):
+        full = {k: given.get(k) for k in ("gamma", "gamma1", "sigma", "delta", "epsilon")}
+        return _params(ts, full, [])
+
+    p = params()
+    assert (p["gamma"], p["gamma1"], p["sigma"]) == (1024.0, 512.0, 1024.0**-2)
+    assert params(gamma=2000.0)["gamma1"] == 0.5  # the generic 0.5, below the given gamma
+    assert params(gamma1=100.0)["gamma"] == 1024.0
+    assert params(sigma=3e-11)["sigma"] == 3e-11 and p["delta"] == 1e-4  # delta, epsilon are not scaled

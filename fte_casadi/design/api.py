@@ -32,8 +32,9 @@ VARIANTS = ("paper", "conditioned")
 SOLVERS = ("CLARABEL", "SCS")
 
 
-def _outputs_own_size(params: dict, aug, generic: set, status: list) -> None:
-    """The generic gamma, gamma1 and sigma in the outputs' own size ``sy`` (:func:`~fte_casadi.design.augment.output_scale`).
+def _generic_scale(ts: TSModel, given: dict) -> tuple[float, dict]:
+    """Factors for the generic gamma, gamma1 and sigma: they are taken in the outputs' own size ``sy`` (the
+    power of two nearest the largest row norm of C, as :func:`~fte_casadi.design.augment.output_scale`).
 
     gamma bounds the gain from the unknown input to the outputs, so a number for it carries the outputs'
     units: the generic 1 asks a plant measured in mm for 1000 times the attenuation it asks of the same
@@ -43,22 +44,18 @@ def _outputs_own_size(params: dict, aug, generic: set, status: list) -> None:
     the generic values taken in the outputs' own size a plant gets the same design whatever unit its outputs
     (and its sensor faults) are in: Pbar scaled by ``sy^2``, the gains L_i1 by ``1 / sy``, the same K, decay
     rate and largest sample time (``tests/test_slow_plant.py``; measured on a slow 4-state plant: in m it
-    certifies at a sample time of 1 s, in mm or km, with the generic values as absolute numbers, it needed
-    3.6e-4 s). A value the user or the plant's defaults gave is kept; sy = 1 leaves everything as it is."""
-    from .augment import output_scale
-
-    sy = output_scale(aug)
-    if sy == 1.0 or not generic:
-        return
+    certifies at a sample time of 1 s, in mm, with the generic values as absolute numbers, it needed
+    3.6e-4 s). gamma1 follows only a generic gamma (it stays below a gamma that was given). Values the user
+    or the plant's defaults gave are kept; sy = 1 (every built-in plant) leaves everything as it is."""
+    C = np.asarray(ts.C, dtype=float)
+    c = float(np.max(np.linalg.norm(C, axis=1), initial=0.0)) if C.size else 0.0
+    sy = float(2.0 ** round(np.log2(c))) if c > 0 and np.isfinite(c) else 1.0
+    defaults = getattr(ts.plant, "design_defaults", {}) or {}
+    generic = {k for k in ("gamma", "gamma1", "sigma") if given.get(k) is None and k not in defaults}
+    if "gamma" not in generic:
+        generic.discard("gamma1")
     scale = {"gamma": sy, "gamma1": sy, "sigma": sy**-2}
-    for k in generic:
-        params[k] *= scale[k]
-    status.append(
-        "generic values in the outputs' own size (sy = "
-        + f"{sy:g}, the largest row norm of C as a power of two): "
-        + ", ".join(f"{k} = {params[k]:g}" for k in sorted(generic))
-        + ", so that what they ask does not depend on the outputs' units"
-    )
+    return sy, {k: (scale[k] if k in generic else 1.0) for k in given}
 
 
 def _params(ts: TSModel, given: dict, status: list) -> dict:
@@ -69,9 +66,17 @@ def _params(ts: TSModel, given: dict, status: list) -> dict:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
                 raise ParameterError(f"{k} must be a positive finite number; got {v!r}")
             out[k] = float(v)
+    sy, factor = _generic_scale(ts, given)
     for k in given:
         if k not in out:
-            out[k] = float(plant_defaults.get(k, GENERIC_DEFAULTS[k]))
+            out[k] = float(plant_defaults.get(k, GENERIC_DEFAULTS[k] * factor[k]))
+    scaled = sorted(k for k, f in factor.items() if f != 1.0)
+    if scaled:
+        status.append(
+            f"generic values in the outputs' own size (C's largest row norm, as a power of two, is {sy:g}): "
+            + ", ".join(f"{k} = {out[k]:g}" for k in scaled)
+            + ", so that what they ask does not depend on the outputs' units"
+        )
     if given["gamma1"] is None and out["gamma1"] >= out["gamma"]:
         ratio = plant_defaults.get("gamma1", GENERIC_DEFAULTS["gamma1"]) / plant_defaults.get(
             "gamma", GENERIC_DEFAULTS["gamma"]
@@ -233,8 +238,6 @@ def design(
                 f"{name} must be a {'positive' if name == 'sample_time' else 'non-negative'} finite number; got {v!r}"
             )
     aug = augment(ts.local_models, ts.C, ts.Df)
-    _outputs_own_size(params, aug, {k for k, v in (("gamma", gamma), ("gamma1", gamma1), ("sigma", sigma))
-                                     if v is None and k not in plant_defaults}, status)  # fmt: skip
     theorem5 = any(lm.has_diffusion_extension for lm in ts.local_models)
     if theorem5:
         params.setdefault("gamma2", params["gamma"])
@@ -590,11 +593,10 @@ def explain_45(
         if sup is None and (why := reachability(aug)):
             parts.append(why)
     else:
-        from .augment import output_scale
-
-        default_g1 = (getattr(ts.plant, "design_defaults", {}) or {}).get("gamma1")
-        if default_g1 is None:  # the generic one, in the outputs' own size (_outputs_own_size)
-            default_g1 = GENERIC_DEFAULTS["gamma1"] * output_scale(aug)
+        given = {k: retry.get(k) for k in ("gamma", "gamma1", "sigma")}
+        default_g1 = (getattr(ts.plant, "design_defaults", {}) or {}).get(
+            "gamma1", GENERIC_DEFAULTS["gamma1"] * _generic_scale(ts, given)[1]["gamma1"]
+        )
         lowered = retry.get("gamma1") is None and not math.isclose(g1, float(default_g1), rel_tol=1e-12)
         parts.append(
             f"the smallest gamma for which (45) is feasible with gamma1 = {g1:g}"
@@ -676,9 +678,6 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
         ts, {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": None, "epsilon": None}, status
     )
     aug = augment(ts.local_models, ts.C, ts.Df)
-    plant_defaults = getattr(ts.plant, "design_defaults", {}) or {}
-    _outputs_own_size(params, aug, {k for k, v in (("gamma", None), ("gamma1", gamma1), ("sigma", None))
-                                    if v is None and k not in plant_defaults}, status)  # fmt: skip
     g1 = params["gamma1"]
     sup, _ = sigma_max(aug, None, g1, solver)
     if sigmas is None:
