@@ -47,9 +47,9 @@ def _generic_scale(ts: TSModel, given: dict) -> tuple[float, dict]:
     certifies at a sample time of 1 s, in mm, with the generic values as absolute numbers, it needed
     3.6e-4 s). gamma1 follows only a generic gamma (it stays below a gamma that was given). Values the user
     or the plant's defaults gave are kept; sy = 1 (every built-in plant) leaves everything as it is."""
-    C = np.asarray(ts.C, dtype=float)
-    c = float(np.max(np.linalg.norm(C, axis=1), initial=0.0)) if C.size else 0.0
-    sy = float(2.0 ** round(np.log2(c))) if c > 0 and np.isfinite(c) else 1.0
+    from .augment import output_size
+
+    sy = output_size(ts.C)
     defaults = getattr(ts.plant, "design_defaults", {}) or {}
     generic = {k for k in ("gamma", "gamma1", "sigma") if given.get(k) is None and k not in defaults}
     if "gamma" not in generic:

@@ -166,7 +166,14 @@ def output_scale(aug: Augmented) -> float:
     Outputs measured in mm of a state in m give ``sy = 1024``; LMI (45) holds ``C X`` beside ``-I``, so a
     feasible X is ``sy^2`` times smaller than for the same plant measured in m, and sigma with it.
     """
-    c = float(np.max(np.linalg.norm(aug.Cbar[:, : aug.n], axis=1), initial=0.0))
+    return output_size(aug.Cbar[:, : aug.n])
+
+
+def output_size(C) -> float:
+    """The power of two nearest the largest row norm of ``C`` (1 when C is zero): :func:`output_scale` of a
+    plant's output matrix, for code that has C before the augmented model."""
+    C = np.asarray(C, dtype=float)
+    c = float(np.max(np.linalg.norm(C, axis=1), initial=0.0)) if C.size else 0.0
     if not (c > 0 and np.isfinite(c)):
         return 1.0
     return float(2.0 ** round(np.log2(c)))
