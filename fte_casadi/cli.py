@@ -101,7 +101,8 @@ def _positive(name: str, value, allow_zero: bool = False):
     if value is None:
         return None
     if not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
-        raise ParameterError(f"--{name.replace('_', '-')} must be a positive finite number; got {value}")
+        what = "a finite number >= 0" if allow_zero else "a positive finite number"
+        raise ParameterError(f"--{name.replace('_', '-')} must be {what}; got {value}")
     return value
 
 
@@ -174,7 +175,7 @@ def _check_params(**kw) -> dict:
     out = {}
     for k, v in kw.items():
         if v is not None:
-            _positive(k, v, allow_zero=(k in ("alpha", "d_bound")))
+            _positive(k, v, allow_zero=(k in ("alpha", "d_bound", "bound_weight")))
             out[k] = v
     return out
 
@@ -287,6 +288,11 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
     help="sample time the observer must run at (default: the plant's scenario step); caps the default alpha.",
 )  # fmt: skip
 @click.option(
+    "--bound-weight", "bound_weight", type=float,
+    help="Weight of the closed loop's fault-error bound in the observer's objective (default 0: off; 1 counts it "
+    "as much as the rest; docs/design.md).",
+)  # fmt: skip
+@click.option(
     "--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so)."
 )
 @click.option(
@@ -312,11 +318,11 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
-def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, allow_uncertified, accept,
-           no_remark5, d_bound, output, explore, out_dir):  # fmt: skip
+def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, bound_weight,
+           allow_uncertified, accept, no_remark5, d_bound, output, explore, out_dir):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
-                           sample_time=sample_time, d_bound=d_bound)  # fmt: skip
+                           sample_time=sample_time, d_bound=d_bound, bound_weight=bound_weight)  # fmt: skip
     if no_remark5:
         params["remark5"] = False
     if explore:

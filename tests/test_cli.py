@@ -192,3 +192,17 @@ def test_failed_assumptions_are_named_with_the_cli_option_to_accept_them():
     r = CliRunner().invoke(main, ["design", f"{PLANT_AUTO}:too_few_outputs", "--accept-assumption", "2",
                                   "--accept-assumption", "4"])  # fmt: skip
     assert "assumption (" not in r.output and "Traceback" not in r.output, r.output
+
+
+def test_design_bound_weight_option(tmp_path):
+    """--bound-weight puts the fault-error bound into the observer's objective and is recorded; a negative
+    weight is refused by name."""
+    r = run("design", "manipulator", "--bound-weight", "-1")
+    assert r.exit_code != 0 and "--bound-weight must be a finite number >= 0" in r.text
+    f = tmp_path / "w.json"
+    r = run("design", "manipulator", "--bound-weight", "2", "-o", str(f))
+    assert r.exit_code == 0, r.output
+    assert "in the objective with weight 2" in r.text
+    d = json.loads(f.read_text())
+    assert d["params"]["bound_weight"] == 2.0 and d["observer"]["bound_weight"] == 2.0
+    assert d["bounds"]["fault_error"]["holds"]

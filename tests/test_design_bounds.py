@@ -30,14 +30,9 @@ def _energies(d, scenario) -> dict:
     return {"d": amp**2 * ld * T, "fddot": 0.0, "u_s": gain**2 * lf * T, "f": 0.0, "const": T}
 
 
-@pytest.mark.parametrize("spec, horizon", [(SMALL, None), ("manipulator", None), ("three-tank", 100.0)])
-def test_monte_carlo_stays_below_the_bound(spec, horizon):
-    plant, scenario = load_plant(spec), load_scenario(spec)
-    scenario = dataclasses.replace(scenario, faults=(), T=horizon or scenario.T)
-    d = design(derive(plant), sample_time=scenario.dt, initial_state=scenario.x0)
+def _monte_carlo_and_bound(d, plant, scenario) -> tuple[float, float]:
+    """The fault-free Monte Carlo mean of int |f - fhat|^2 dt (8 paths, seed 4) and the bound's right side."""
     fb = d.bounds["fault_error"]
-    assert fb["holds"] and fb["lmi_max_eig"] < 0
-    assert Design.from_dict(json.loads(d.to_json())).bounds == json.loads(json.dumps(d.bounds))
     res = simulate(d, plant, scenario, paths=8, seed=4, progress=False, record_all=True, record_every=1)
     n, lf, dt = int(d.dims["n"]), int(d.dims["lf"]), res.dt
     run = res.ftc
@@ -47,8 +42,71 @@ def test_monte_carlo_stays_below_the_bound(spec, horizon):
     xi0 = np.concatenate([run.x[:, 0, :], xbar0 - run.xbarhat[:, 0, :]], axis=1)
     P = np.asarray(fb["P"])
     v0 = float(np.mean(np.einsum("pi,ij,pj->p", xi0, P, xi0)))
-    rhs = bound_value(fb, _energies(d, scenario), v0)
+    return lhs, bound_value(fb, _energies(d, scenario), v0)
+
+
+@pytest.mark.parametrize("spec, horizon", [(SMALL, None), ("manipulator", None), ("three-tank", 100.0)])
+def test_monte_carlo_stays_below_the_bound(spec, horizon):
+    plant, scenario = load_plant(spec), load_scenario(spec)
+    scenario = dataclasses.replace(scenario, faults=(), T=horizon or scenario.T)
+    d = design(derive(plant), sample_time=scenario.dt, initial_state=scenario.x0)
+    fb = d.bounds["fault_error"]
+    assert fb["holds"] and fb["lmi_max_eig"] < 0
+    assert Design.from_dict(json.loads(d.to_json())).bounds == json.loads(json.dumps(d.bounds))
+    lhs, rhs = _monte_carlo_and_bound(d, plant, scenario)
     assert 0 < lhs <= rhs, (lhs, rhs)
+
+
+@pytest.mark.parametrize("spec", [SMALL, "manipulator"])
+def test_the_bound_in_the_objective_lowers_it_and_monte_carlo_stays_below(spec):
+    """bound_weight puts the closed loop's bound (block-diagonal P) into step 5's objective: the bound at the
+    observer falls with the weight (step 5's own number and the certified one with a common P), the design
+    stays certified, and Monte Carlo on the nonlinear plant stays below the certified bound."""
+    plant, scenario = load_plant(spec), load_scenario(spec)
+    scenario = dataclasses.replace(scenario, faults=(), T=scenario.T)
+    ts = derive(plant)
+    base = design(ts, sample_time=scenario.dt, initial_state=scenario.x0)
+    worst0 = max(base.bounds["fault_error"]["gains"].values())
+    last = None
+    for w in (1.0, 3.0):
+        d = design(ts, sample_time=scenario.dt, initial_state=scenario.x0, bound_weight=w)
+        assert d.certified and d.params["bound_weight"] == w
+        ob = d.observer.extra
+        assert ob["bound_weight"] == w and ob["bound_objective"] < ob["bound_objective_before"]
+        assert any("closed-loop fault-error bound" in s and f"weight {w:g}" in s for s in d.status)
+        fb = d.bounds["fault_error"]
+        assert fb["holds"] and fb["lmi_max_eig"] < 0 and fb["P_structure"].startswith("common")
+        worst = max(fb["gains"].values())
+        assert worst < (worst0 if last is None else last), (w, worst, worst0, last)
+        last = worst
+    lhs, rhs = _monte_carlo_and_bound(d, plant, dataclasses.replace(scenario, faults=()))
+    assert 0 < lhs <= rhs, (lhs, rhs)
+
+
+def test_the_analysis_from_step_5s_point_agrees_with_the_conic_solver():
+    """With the bound in the objective, the certified bound (common P) is computed by the barrier method in
+    numpy from step 5's block-diagonal point; Clarabel's optimum of the same problem agrees with it to the
+    centring's gap, and the block-diagonal point itself is a (looser) certificate."""
+    from fte_casadi.design import bounds
+
+    d = design(derive(load_plant(SMALL)), bound_weight=1.0)
+    verts, Cz = bounds._vertices(d)
+    names, sizes = bounds.channel_names(verts)
+    numpy_sum = sum(g**2 for g in d.bounds["fault_error"]["gains"].values())
+    P, g, status = bounds._solve(verts, Cz, names, sizes, "CLARABEL", False)
+    assert P is not None, status
+    ok = bounds._checked(verts, Cz, names, sizes, P, g)
+    assert ok is not None
+    assert numpy_sum == pytest.approx(float(np.sum(ok[0])), rel=2e-3)
+
+
+def test_a_bad_bound_weight_is_refused_with_its_name():
+    from fte_casadi.errors import ParameterError
+
+    ts = derive(load_plant(SMALL))
+    for bad in (-1.0, float("nan"), "1"):
+        with pytest.raises(ParameterError, match="bound_weight"):
+            design(ts, bound_weight=bad)
 
 
 def test_one_vertex_per_rule_with_a_common_gain_and_a_size_limit_said(monkeypatch):
@@ -73,8 +131,7 @@ def test_the_linear_and_the_schur_form_give_the_same_bound():
 
     d = design(derive(load_plant(SMALL)))
     verts, Cz = bounds._vertices(d)
-    names = [c for c in bounds.CHANNELS if any(np.any(v[3][c]) for v in verts)]
-    sizes = {c: verts[0][3][c].shape[1] for c in names}
+    names, sizes = bounds.channel_names(verts)
     sums = []
     for schur in (False, True):
         P, g, status = bounds._solve(verts, Cz, names, sizes, "CLARABEL", schur)

@@ -362,22 +362,24 @@ def test_three_tank_default_is_the_tuned_design():
 
 def test_local_steps_are_one_knob_from_the_base(small):
     """The first trials after the base: each float knob times and divided by 2 within its range, then the
-    boundary layer switched; none when the budget is short."""
+    boundary layer switched, then the bound's weight; none when the budget is short."""
     from fte_casadi.tune.space import LOCAL_FACTOR, LOCAL_SHARE, space_for
 
     _, _, _, base = small
     sp = space_for(base, None)
     steps = sp.local_steps(1000)
     assert steps and sp.local_steps(LOCAL_SHARE * len(steps) - 1) == []
-    for st in steps[:-1]:
+    for st in steps[:-2]:
         changed = [k for k in sp.base if st[k] != sp.base[k]]
-        assert len(changed) == 1 and changed[0] not in ("boundary_layer_rel", "use_boundary_layer")
+        assert len(changed) == 1 and changed[0] not in ("boundary_layer_rel", "use_boundary_layer", "bound_weight",
+                                                        "use_bound_weight")  # fmt: skip
         k = changed[0]
         lo, hi = sp.ranges[k]
         assert lo <= st[k] <= hi
         assert st[k] / sp.base[k] in (pytest.approx(LOCAL_FACTOR), pytest.approx(1 / LOCAL_FACTOR)) or st[
             k
         ] in (lo, hi)
-    assert steps[-1] == sp.base | {"use_boundary_layer": True}
+    assert steps[-2] == sp.base | {"use_boundary_layer": True}
+    assert steps[-1] == sp.base | {"use_bound_weight": True} and sp.base["bound_weight"] == 1.0
     # alpha_scale is 1 at the base and at most 1: only its step down is taken
     assert sum(1 for st in steps if st["alpha_scale"] != 1.0) == 1

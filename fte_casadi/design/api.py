@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 import math
 import time
+from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
@@ -29,6 +30,8 @@ __all__ = ["design", "explore", "GENERIC_DEFAULTS", "explain_45", "explain_46"]
 
 GENERIC_DEFAULTS = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}
 VARIANTS = ("paper", "conditioned")
+#: the design defaults a plant may record from `fte tune` (beside the LMI parameters)
+TUNED_KNOBS = ("alpha", "kappa", "boundary_layer", "bound_weight")
 SOLVERS = ("CLARABEL", "SCS")
 
 
@@ -154,6 +157,7 @@ def design(
     alpha: float | None = None,
     sample_time: float | None = None,
     kappa: float | None = None,
+    bound_weight: float | None = None,
     initial_state=None,
     allow_uncertified: bool = False,
     accept_assumptions=(),
@@ -173,6 +177,9 @@ def design(
     ``ts_max >= 2 sample_time`` when ``sample_time`` is given); ``gamma2`` the d2 attenuation of
     Theorem 5 (default gamma). ``kappa`` bounds cond(X') and cond(Pbar) in the conditioned variant
     (default :data:`~fte_casadi.design.conditioned.KAPPA`; recorded in ``params`` when given).
+    ``bound_weight`` (conditioned variant; default 0, off) puts the closed loop's fault-error bound into
+    step 5's objective with that weight relative to the rest of it
+    (:mod:`fte_casadi.design.bound_objective`; recorded in ``params`` when positive).
     ``initial_state`` is the nominal x(0) the simulations start from
     (default: the plant's), recorded as ``x0`` for the generated C's start from a first measurement.
     ``remark5`` (default True) applies Remark 5's fallback where H cannot decouple the unknown inputs
@@ -205,10 +212,11 @@ def design(
     )
     plant_defaults = getattr(ts.plant, "design_defaults", {}) or {}
     # the knobs `fte tune` finds, recorded in the plant's defaults (issue #18 item 3)
-    tuned = {k: plant_defaults[k] for k in ("alpha", "kappa", "boundary_layer") if k in plant_defaults}
+    tuned = {k: plant_defaults[k] for k in TUNED_KNOBS if k in plant_defaults}
     alpha_from_plant = alpha is None and "alpha" in tuned
     alpha = tuned.get("alpha") if alpha is None else alpha
     kappa = tuned.get("kappa") if kappa is None else kappa
+    bound_weight = tuned.get("bound_weight") if bound_weight is None else bound_weight
     if "boundary_layer" in tuned:
         params["boundary_layer"] = float(tuned["boundary_layer"])
     if tuned:
@@ -231,6 +239,18 @@ def design(
                 f"kappa (the bound on cond(Pbar)) must be a finite number above 1; got {kappa!r}"
             )
         params["kappa"] = float(kappa)
+    if bound_weight is not None:
+        if (
+            isinstance(bound_weight, bool)
+            or not isinstance(bound_weight, (int, float))
+            or not (math.isfinite(bound_weight) and bound_weight >= 0)
+        ):
+            raise ParameterError(
+                f"bound_weight (the fault-error bound's weight in step 5's objective) must be a finite number >= 0; "
+                f"got {bound_weight!r}"
+            )
+        if bound_weight > 0:
+            params["bound_weight"] = float(bound_weight)
     for name, v in (("alpha", alpha), ("sample_time", sample_time)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0
                               or (name == "sample_time" and v == 0)):  # fmt: skip
@@ -258,7 +278,7 @@ def design(
         generic = set()  # a plant that fails an assumption gets the bounds, not a search over parameters
     retry = dict(variant=variant, solver=solver, gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon,
                  gamma2=gamma2, alpha=alpha, sample_time=sample_time, accept_assumptions=accept_assumptions,
-                 kappa=kappa, remark5=remark5, d_bound=d_bound, plant_spec=plant_spec, initial_state=initial_state)  # fmt: skip
+                 kappa=kappa, bound_weight=bound_weight, remark5=remark5, d_bound=d_bound, plant_spec=plant_spec, initial_state=initial_state)  # fmt: skip
     if variant == "paper":
         s3, K = paper.step3(aug, params, solver)
         s5 = paper.step5(aug, params, s3.X, K, T, solver)
@@ -300,7 +320,9 @@ def design(
             raise (explain_45(ts, aug, params, solver, retry, refused) if diagnose else exc) from None
         K = [s3.K] * aug.r
         try:
-            s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time)
+            view = _closed_loop_view(ts, T, K, r5doc) if params.get("bound_weight") else None
+            s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time,
+                                   bound_view=view)  # fmt: skip
         except conditioned.SolverFailedError as exc:
             return _other_solver(ts, retry, solver, exc, "step 5 (LMIs (46), (55), (64))", allow_uncertified=allow_uncertified,
                                  diagnose=diagnose, retried=_retried)  # fmt: skip
@@ -319,16 +341,7 @@ def design(
     R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
     L2 = [Ri @ H for Ri in R]
     Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
-    Bs = [lm.B for lm in ts.local_models]
-    Bfs = [lm.Bf for lm in ts.local_models]
-    Kfs = [-np.linalg.pinv(B) @ Bf for B, Bf in zip(Bs, Bfs)]
-    Kf, Kf_rules = Kfs[0], None
-    # B_i and Bf_i may both vary (an actuator fault enters where u does: Bf = B E) and still give one Kf
-    spread = max(float(np.max(np.abs(Ki - Kfs[0]))) for Ki in Kfs)
-    if spread > 1e-9 * max(1.0, float(np.max(np.abs(Kfs[0])))):
-        Kf_rules = tuple(Kfs)
-        status.append(f"Kf scheduled: -pinv(B_i) Bf_i differs between rules (by up to {spread:.3g}); the step blends "
-                      "Kf(h) = sum_i h_i Kf_i (document: Kf_rules; Kf is rule 1's)")  # fmt: skip
+    Kf, Kf_rules = _fault_gains(ts, status)
     point = dict(X=X, K=K, P=P, T=T, Pbar=s5.Pbar, Q=s5.Q, N=s5.N, theta=s5.theta, R=R, L1=L1)
     checks = certificate(aug, point, params)
     if sample_time is not None:  # the step that runs: z+ = z + Ts (...), checked with Pbar for any blending
@@ -404,25 +417,49 @@ def design(
         observer=Observer.from_mapping(observer),
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
-        bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc),
+        bounds=_bounds(certified, R, K, T, ts, r5doc, getattr(s5, "bound", None)),
         remark5=r5doc,
     )
 
 
-def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc) -> dict:
+def _fault_gains(ts: TSModel, status: list):
+    """``(Kf, Kf_rules)``: the fault compensation ``Kf_i = -pinv(B_i) Bf_i``, one for all rules when they agree."""
+    Kfs = [-np.linalg.pinv(lm.B) @ lm.Bf for lm in ts.local_models]
+    Kf, Kf_rules = Kfs[0], None
+    # B_i and Bf_i may both vary (an actuator fault enters where u does: Bf = B E) and still give one Kf
+    spread = max(float(np.max(np.abs(Ki - Kfs[0]))) for Ki in Kfs)
+    if spread > 1e-9 * max(1.0, float(np.max(np.abs(Kfs[0])))):
+        Kf_rules = tuple(Kfs)
+        status.append(f"Kf scheduled: -pinv(B_i) Bf_i differs between rules (by up to {spread:.3g}); the step blends "
+                      "Kf(h) = sum_i h_i Kf_i (document: Kf_rules; Kf is rule 1's)")  # fmt: skip
+    return Kf, Kf_rules
+
+
+def _closed_loop_view(ts: TSModel, T, K, r5doc, **known):
+    """The closed loop's data the bound needs (:mod:`fte_casadi.design.bounds`), or None where it is not posed
+    (Remark 5's fallback, Theorem 5's diffusion). ``known``: ``R`` once the observer is designed."""
+    if (r5doc and r5doc.get("used")) or any(lm.has_diffusion_extension for lm in ts.local_models):
+        return None
+    scratch: list = []  # their messages are the design's once it is returned, not here
+    Kf, Kf_rules = _fault_gains(ts, scratch)
+    u_ref, _ = _u_reference(ts, K, scratch)
+    return SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
+                           local_models=ts.local_models, K=K, **known)  # fmt: skip
+
+
+def _bounds(certified, R, K, T, ts, r5doc, fallback=None) -> dict:
     """The certified bound on the fault-estimation error at the returned design (issue #18 item 1;
     :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
     if not certified:
         return {}
     if r5doc and r5doc.get("used"):
         return {"fault_error": {"holds": False, "why": "not computed where Remark 5's fallback is used"}}
-    from types import SimpleNamespace
-
     from .bounds import fault_error_bound
 
-    view = SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
-                           local_models=ts.local_models, R=R, K=K)  # fmt: skip
-    return {"fault_error": fault_error_bound(view)}
+    view = _closed_loop_view(ts, T, K, None, R=R)
+    if view is None:  # Theorem 5's diffusion: fault_error_bound says so
+        view = SimpleNamespace(local_models=ts.local_models)
+    return {"fault_error": fault_error_bound(view, fallback=fallback)}
 
 
 def _outside_45(aug, params: dict, solver: str) -> str | None:

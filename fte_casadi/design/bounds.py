@@ -34,7 +34,15 @@ import warnings
 
 import numpy as np
 
-__all__ = ["fault_error_bound", "bound_value", "CHANNELS"]
+__all__ = [
+    "fault_error_bound",
+    "bound_value",
+    "vertex_parts",
+    "channel_names",
+    "CHANNELS",
+    "MAX_VERTICES",
+    "MAX_STATES",
+]
 
 #: the input channels, in order
 CHANNELS = ("d", "fddot", "u_s", "f", "const")
@@ -45,7 +53,11 @@ CHANNELS = ("d", "fddot", "u_s", "f", "const")
 MAX_VERTICES, MAX_STATES = 16, 24
 
 
-def _vertices(design):
+def vertex_parts(design):
+    """``([(i, j, Ax, channels, Wc)], Cz)``: the closed loop's vertices without the error's own dynamics
+    (``Ax`` has a zero error block; the vertex matrix is ``Ax + diag(0, R_i)``). ``design`` needs
+    ``dims.n, dims.lf, T, u_ref, K, Kf, Kf_rules, r, local_models`` (not R: step 5 poses the bound with
+    R_i's ``Pbar R_i`` as an unknown)."""
     n, lf = int(design.dims.n), int(design.dims.lf)
     nbar = n + 2 * lf
     T = np.asarray(design.T, float)
@@ -60,7 +72,6 @@ def _vertices(design):
         a = lm.a.ravel()
         Wbar = np.vstack([W, np.zeros((2 * lf, n))])
         Wc = np.block([[W, np.zeros((n, nbar))], [T @ Wbar, np.zeros((nbar, nbar))]])
-        R = np.asarray(design.R[i], float)
         seen: list = []
         for j in range(design.r):
             K, Kf = np.asarray(design.K[j], float), np.asarray(Kfs[j], float)
@@ -69,7 +80,9 @@ def _vertices(design):
             if any(np.array_equal(K, K2) and np.array_equal(Kf, Kf2) for K2, Kf2 in seen):
                 continue
             seen.append((K, Kf))
-            Ac = np.block([[A + B @ K, -B @ (K @ J0 + Kf @ J2)], [np.zeros((nbar, n)), R]])
+            Ax = np.block(
+                [[A + B @ K, -B @ (K @ J0 + Kf @ J2)], [np.zeros((nbar, n)), np.zeros((nbar, nbar))]]
+            )
             chans = {
                 "d": np.vstack([Bd, np.zeros((nbar, Bd.shape[1]))]),
                 "fddot": np.vstack([np.zeros((n, lf)), J1]),
@@ -77,8 +90,25 @@ def _vertices(design):
                 "f": np.vstack([B @ Kf + Bf, np.zeros((nbar, lf))]),
                 "const": np.concatenate([B @ u_ref + a, np.zeros(nbar)])[:, None],
             }
-            out.append((i, j, Ac, chans, Wc))
+            out.append((i, j, Ax, chans, Wc))
     Cz = np.hstack([np.zeros((lf, n)), J2])
+    return out, Cz
+
+
+def channel_names(verts) -> tuple[list, dict]:
+    """The channels that are not identically zero at these vertices, and their sizes."""
+    names = [c for c in CHANNELS if any(np.any(v[3][c]) for v in verts)]
+    return names, {c: verts[0][3][c].shape[1] for c in names}
+
+
+def _vertices(design):
+    verts, Cz = vertex_parts(design)
+    n = int(design.dims.n)
+    out = []
+    for i, j, Ax, chans, Wc in verts:
+        Ac = Ax.copy()
+        Ac[n:, n:] = np.asarray(design.R[i], float)
+        out.append((i, j, Ac, chans, Wc))
     return out, Cz
 
 
@@ -148,13 +178,61 @@ def _checked(verts, Cz, names, sizes, Pv, gv):
     return None
 
 
-def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
+#: the relative gap to which the analysis is centred in numpy from step 5's point (when the conic solver fails)
+POINT_ETA = 1e-4
+
+
+def _from_point(verts, Cz, names, sizes, P0, g0):
+    """``min sum g`` over a common P by the barrier method in numpy (:func:`~fte_casadi.design.barrier.centre`)
+    from the strictly feasible ``(P0, g0)`` (step 5's block-diagonal certificate): ``(P, g)`` or ``(None, None)``."""
+    from ..errors import CentringError
+    from .barrier import centre
+    from .sdp import AffineLMI, Layout, Var, affine_lmi
+
+    N = Cz.shape[1]
+    layout = Layout(Var("P", (N, N), True), Var("g", (len(names),)))
+
+    def builder(Ac, Bc, Wc):
+        def f(P, g):
+            return _lmi(
+                Ac,
+                Bc,
+                Wc,
+                Cz,
+                P,
+                np.diag(np.concatenate([np.full(sizes[c], g[k]) for k, c in enumerate(names)])),
+            )
+
+        return f
+
+    lmis = [
+        affine_lmi("bound", layout, builder(Ac, np.hstack([ch[c] for c in names]), Wc))
+        for _, _, Ac, ch, Wc in verts
+    ]
+    F = np.zeros((layout.size, N, N))
+    iu, ju = np.triu_indices(N)
+    for q, (a, b) in enumerate(zip(iu, ju)):
+        F[q, a, b] = F[q, b, a] = -1.0
+    lmis.append(AffineLMI("P > 0", np.zeros((N, N)), F))
+    c = np.zeros(layout.size)
+    c[layout.index("g")] = 1.0
+    try:
+        cen = centre(lmis, c, layout.pack(P=P0, g=g0), eta=POINT_ETA)
+    except CentringError:
+        return None, None
+    u = layout.unpack(cen.v)
+    return u["P"], np.asarray(u["g"], float)
+
+
+def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = None) -> dict:
     """The bound of the module docstring at ``design``: ``{"holds", "gains": {channel: sqrt(g)},
     "channels": {channel: size}, "P": M, "lmi_max_eig", "what"}``; ``{"holds": False, "why"}`` when
     the analysis LMI is infeasible, fails its numpy check, or the design has Theorem 5 diffusion.
 
     The LMIs are posed with the diffusion term linear in P; when the solver gives no point that passes
-    the numpy check there, the Schur form of the same set is solved too (the smaller bound is kept)."""
+    the numpy check there, the Schur form of the same set is solved too. When neither passes, ``fallback``
+    (``{"P", "g", "names"}``: step 5's block-diagonal certificate, :mod:`~fte_casadi.design.bound_objective`)
+    is checked the same way and recorded (``"P_structure": "block-diagonal"``)."""
     if any(lm.has_diffusion_extension for lm in design.local_models):
         return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
     verts, Cz = _vertices(design)
@@ -162,23 +240,36 @@ def fault_error_bound(design, solver: str = "CLARABEL") -> dict:
     if N > MAX_STATES or len(verts) > MAX_VERTICES:
         return {"holds": False, "why": f"not computed: {len(verts)} vertices of a closed loop of {N} states "
                 f"(the analysis is posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)"}  # fmt: skip
-    names = [c for c in CHANNELS if any(np.any(v[3][c]) for v in verts)]
-    sizes = {c: verts[0][3][c].shape[1] for c in names}
-    found, why = None, ""
+    names, sizes = channel_names(verts)
+    found, why, structure = None, "", "common"
+    point = None
+    if fallback is not None and list(fallback["names"]) == names:
+        point = np.asarray(fallback["P"], float), np.asarray(fallback["g"], float)
+        # step 5's point starts the barrier method in numpy: no conic solve, and the same answer on any machine
+        Pv, gv = _from_point(verts, Cz, names, sizes, *point)
+        ok = None if Pv is None else _checked(verts, Cz, names, sizes, Pv, gv)
+        if ok is not None:
+            found, structure = (Pv, *ok), "common (numpy, from step 5's block-diagonal point)"
     for schur in (False, True):
+        if found is not None:
+            break
         Pv, gv, status = _solve(verts, Cz, names, sizes, solver, schur)
         ok = None if Pv is None else _checked(verts, Cz, names, sizes, Pv, gv)
         if ok is None:
             why = status if Pv is None else "the analysis LMI does not hold at the solver's point"
             continue
         found = (Pv, *ok)
-        break
+    if found is None and point is not None:
+        ok = _checked(verts, Cz, names, sizes, *point)
+        if ok is not None:
+            found, structure = (point[0], *ok), "block-diagonal (step 5's)"
     if found is None:
         return {"holds": False, "why": why}
     Pv, gv, worst = found
     return {
         "holds": True,
         "what": "E int |f - fhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
+        "P_structure": structure,
         "gains": {c: float(np.sqrt(gv[k])) for k, c in enumerate(names)},
         "channels": sizes,
         "P": Pv.tolist(),

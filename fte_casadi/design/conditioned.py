@@ -56,6 +56,7 @@ from ..errors import SolverFailedError as SolverFailedError
 from ..rounding import nice_floor
 from .augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
 from .barrier import centre, numpy_first, phase1, phase1_active
+from .bound_objective import bound_term
 from .certify import (
     diffusion_coupling,
     lmi45,
@@ -125,6 +126,8 @@ class Step5:
     seconds: float
     observer: dict
     notes: list = field(default_factory=list)
+    #: the block-diagonal certificate of the fault-error bound when it was in the objective (bound_objective)
+    bound: dict | None = None
 
 
 def input_scaling(aug: Augmented) -> np.ndarray:
@@ -482,6 +485,7 @@ class _Step5:
         self.newton = 0
         self.decisions = 0
         self.active: list[int] = []  # the rules that decided the last phase 1 (phase1_active)
+        self.bound = None  # the closed-loop bound's term of the objective (bound_objective), when asked for
 
     @property
     def solves(self) -> int:
@@ -609,7 +613,13 @@ class _Step5:
             self.notes.append(f"step 5: centring failed at alpha = {alpha:.4g} ({exc})")
             return None
         self.newton += cen.newton_steps
-        u = self.layout.unpack(cen.v)
+        v, info = cen.v, None
+        if self.bound is not None:
+            got = self.bound.improve([L.at(alpha) for L in self.centring], self.c, v, ETA)
+            if got is not None:
+                v, info = got[0][: self.layout.size], got[1]
+                self.newton += info["newton_steps"]
+        u = self.layout.unpack(v)
         aug, T, s = self.aug, self.T, u["s"]
         Pbar = u["Pt"] / s
         Q = [u["rho"][i] * aug.Cbar.T / (2 * s) for i in range(aug.r)]
@@ -617,7 +627,7 @@ class _Step5:
         L1 = [np.linalg.solve(Pbar, Qi) for Qi in Q]
         R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
         return dict(Pbar=Pbar, Q=Q, N=N, theta=float((u["tau"] / s) ** 2), R=R, ts_max=ts_max(R),
-                    ts_cert=lyapunov_ts_max(R, Pbar))  # fmt: skip
+                    ts_cert=lyapunov_ts_max(R, Pbar), bound=info)  # fmt: skip
 
 
 def alpha_max(prob: _Step5, start: float, rtol: float = ALPHA_RTOL) -> tuple[float, float]:
@@ -654,9 +664,17 @@ def alpha_max(prob: _Step5, start: float, rtol: float = ALPHA_RTOL) -> tuple[flo
 
 
 def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | None = None,
-          sample_time: float | None = None) -> Step5:  # fmt: skip
-    """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate."""
+          sample_time: float | None = None, bound_view=None) -> Step5:  # fmt: skip
+    """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate.
+
+    With ``params["bound_weight"] > 0``, the closed loop's fault-error bound is a term of the objective
+    (:mod:`fte_casadi.design.bound_objective`; ``bound_view`` the closed loop's data without R)."""
     prob = _Step5(aug, params, X, K, T, solver)
+    prob.bound, why_not = bound_term(
+        prob.layout, aug, T, np.linalg.inv(X), bound_view, params.get("bound_weight")
+    )
+    if why_not:
+        prob.notes.append(f"step 5: {why_not}")
     res0 = prob.first()
     if not prob.points:
         l2 = aug.Mbar[0].shape[1]
@@ -694,6 +712,18 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
     if alpha is None and sample_time is not None and pt["ts_cert"] < TS_FACTOR * sample_time:
         a, pt, why = _cap_for_sample_time(prob, a, pt, why, sample_time)
     observer.update(alpha=a, why=why, ts_max=pt["ts_max"])
+    if pt["bound"] is not None:
+        b = pt["bound"]
+        observer.update(
+            bound_weight=b["weight"], bound_objective_before=b["before"], bound_objective=b["after"]
+        )
+        prob.notes.append(
+            f"step 5: the closed-loop fault-error bound (block-diagonal P = diag(P1, Pbar), the smallest sum of the "
+            f"squared channel gains at the observer) is in the objective with weight {b['weight']:g}: "
+            f"{b['before']:.4g} without it, {b['after']:.4g} with it"
+        )
+    elif prob.bound is not None:
+        prob.notes += [f"step 5: {x}" for x in prob.bound.notes[-1:]]
     notes = [
         f"step 5: Q_i = rho_i Cbar^T / 2 (Finsler), N = J1^T T^T Pbar Cbar^+, Pbar = Pt/s with I <= Pt <= {prob.kappa:g} I, "
         f"min sum rho_i + tau; observer decay rate alpha = {a:.4g} ({why}); {prob.solves} conic solve "
@@ -701,7 +731,17 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         f"{prob.decisions} phase-1 decisions and {prob.newton} centring steps in numpy"
     ] + prob.notes + [f"step 5: {solver} warned: {w!r}" for w in res0.warned] + [f"step 5: {x}" for x in prob.feas.notes]  # fmt: skip
     return Step5(
-        pt["Pbar"], pt["Q"], pt["N"], pt["theta"], a, res0.status, prob.solves, prob.seconds, observer, notes
+        pt["Pbar"],
+        pt["Q"],
+        pt["N"],
+        pt["theta"],
+        a,
+        res0.status,
+        prob.solves,
+        prob.seconds,
+        observer,
+        notes,
+        pt["bound"],
     )
 
 

@@ -248,9 +248,20 @@ class PlantBuilder:
 
     def design_defaults(self, **values: float) -> None:
         """Default design parameters: any of gamma, gamma1, sigma, delta, epsilon, and the knobs
-        ``fte tune`` finds: alpha (the observer decay rate), kappa (the bound on cond(Pbar)) and
-        boundary_layer (the sliding term's ``sat(s/phi)`` width)."""
-        allowed = {"gamma", "gamma1", "sigma", "delta", "epsilon", "alpha", "kappa", "boundary_layer"}
+        ``fte tune`` finds: alpha (the observer decay rate), kappa (the bound on cond(Pbar)),
+        boundary_layer (the sliding term's ``sat(s/phi)`` width) and bound_weight (the fault-error
+        bound's weight in step 5's objective)."""
+        allowed = {
+            "gamma",
+            "gamma1",
+            "sigma",
+            "delta",
+            "epsilon",
+            "alpha",
+            "kappa",
+            "boundary_layer",
+            "bound_weight",
+        }
         for k, v in values.items():
             if k not in allowed:
                 raise PlantError(f"design_defaults: unknown parameter {k!r}; allowed are {sorted(allowed)}")

@@ -24,11 +24,11 @@ __all__ = ["evaluate", "design_kwargs", "default_alpha", "bound_gain", "KNOBS", 
 PEAK_PATHS = 5
 #: the knobs of the search, in the order of the tables
 KNOBS = ("gamma", "gamma1_ratio", "sigma", "alpha_scale", "kappa", "epsilon", "use_boundary_layer",
-         "boundary_layer_rel")  # fmt: skip
+         "boundary_layer_rel", "use_bound_weight", "bound_weight")  # fmt: skip
 
 
 #: design defaults a plant may record from an earlier tune; the candidates set them from their own knobs
-TUNED_DEFAULTS = ("alpha", "kappa", "boundary_layer")
+TUNED_DEFAULTS = ("alpha", "kappa", "boundary_layer", "bound_weight")
 
 
 @functools.lru_cache(maxsize=4)
@@ -78,6 +78,8 @@ def design_kwargs(knobs: dict) -> dict:
         kw["delta"] = float(knobs["delta"])
     if abs(float(knobs["kappa"]) / KAPPA - 1.0) > 1e-12:
         kw["kappa"] = float(knobs["kappa"])
+    if knobs.get("use_bound_weight"):
+        kw["bound_weight"] = float(knobs["bound_weight"])
     return kw
 
 
@@ -169,5 +171,6 @@ def evaluate(task: dict) -> dict:
     params["alpha"] = None if d.observer.alpha is None else float(d.observer.alpha)
     params.setdefault("kappa", KAPPA)
     params.setdefault("boundary_layer", None)
+    params.setdefault("bound_weight", None)
     return {"state": "ok", "params": params, "metrics": m, "design": d.to_json(),
             "e_scale": _output_error_scale(res, d)}  # fmt: skip

@@ -20,6 +20,9 @@ epsilon        the sliding gain's margin (gain delta + epsilon):            epsi
 boundary layer use_boundary_layer in {no, yes}; phi = boundary_layer_rel    the base's (no)
                x ||N|| x the base run's RMS output error, with
                boundary_layer_rel in [0.01, 100]
+bound weight   use_bound_weight in {no, yes}; bound_weight in [0.01, 100]:   the base's (no; 1)
+               the fault-error bound's weight in step 5's objective
+               (design.bound_objective)
 ============== ============================================================ =========================
 """
 
@@ -50,19 +53,21 @@ class Space:
         steps do, and they give the sampler each knob's local effect."""
         steps = []
         for k, (lo, hi) in self.ranges.items():
-            if k == "boundary_layer_rel":
+            if k in ("boundary_layer_rel", "bound_weight"):
                 continue
             for f in (LOCAL_FACTOR, 1 / LOCAL_FACTOR):
                 v = min(max(self.base[k] * f, lo), hi)
                 if abs(v / self.base[k] - 1) > 1e-9:
                     steps.append(self.base | {k: v})
         steps.append(self.base | {"use_boundary_layer": not self.base["use_boundary_layer"]})
+        steps.append(self.base | {"use_bound_weight": not self.base["use_bound_weight"]})
         return steps if budget >= LOCAL_SHARE * len(steps) else []
 
     def suggest(self, trial) -> dict:
         """The knobs of an optuna trial (the same names and order for every trial)."""
         out = {k: trial.suggest_float(k, lo, hi, log=True) for k, (lo, hi) in self.ranges.items()}
         out["use_boundary_layer"] = trial.suggest_categorical("use_boundary_layer", [False, True])
+        out["use_bound_weight"] = trial.suggest_categorical("use_bound_weight", [False, True])
         return out
 
 
@@ -85,6 +90,7 @@ def space_for(base_design, sigma_sup: float | None, alpha_scale: float = 1.0,
     it has them (a design whose alpha or boundary layer came from an earlier tune, recorded in the
     plant's defaults): its alpha over the rate the design takes by default at its other knobs, and its
     boundary layer over ``||N||`` x the base run's RMS output error. The ranges are widened to hold them.
+    The base's bound weight is its ``params.bound_weight`` (off when it has none).
     """
     from ..design.conditioned import KAPPA
 
@@ -92,6 +98,7 @@ def space_for(base_design, sigma_sup: float | None, alpha_scale: float = 1.0,
     g0, s0, e0 = float(p.gamma), float(p.sigma), float(p.epsilon)
     r0 = float(p.gamma1) / g0
     kappa0 = float(KAPPA if p.kappa is None else p.kappa)
+    w0 = p.extra.get("bound_weight")
     s_hi = 10 * s0 if not sigma_sup else min(10 * s0, 0.98 * sigma_sup)
     ranges = {
         "gamma": _around(g0, g0 / 3, 10 * g0),
@@ -101,11 +108,13 @@ def space_for(base_design, sigma_sup: float | None, alpha_scale: float = 1.0,
         "kappa": _around(kappa0, 1e2, 1e6),
         "epsilon": _around(e0, e0 / 10, 1000 * e0),
         "boundary_layer_rel": _around(boundary_layer_rel or 1.0, 0.01, 100.0),
+        "bound_weight": _around(w0 or 1.0, 0.01, 100.0),
     }
     for k, (lo, hi) in ranges.items():
         if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi):
             raise ValueError(f"search range of {k} is not a positive interval: ({lo}, {hi})")
     base = {"gamma": g0, "gamma1_ratio": r0, "sigma": s0, "alpha_scale": float(alpha_scale), "kappa": kappa0,
             "epsilon": e0, "boundary_layer_rel": float(boundary_layer_rel or 1.0),
-            "use_boundary_layer": boundary_layer_rel is not None}  # fmt: skip
+            "use_boundary_layer": boundary_layer_rel is not None, "bound_weight": float(w0 or 1.0),
+            "use_bound_weight": bool(w0)}  # fmt: skip
     return Space(ranges, base)
