@@ -1,7 +1,11 @@
 """What the fault-error bound's weight in step 5's objective does (docs/design.md): a built-in plant designed
 at each weight, its certified bound, and the metrics of ``simulate(..., paths, seed=1)`` on its scenario.
 
-    PYTHONPATH=. python benchmarks/bound_weight.py manipulator 0,0.3,1,3,10 20
+    PYTHONPATH=. python benchmarks/bound_weight.py manipulator 0,0.3,1,3,10 20 \
+        '{"gamma": 2, "gamma1": 0.01, "sigma": 0.2, "delta": 1e-5, "epsilon": 1e-5}'
+
+The optional last argument replaces the plant's design defaults (above: Section 6.1's parameters, without
+the tuned decay rate, kappa and bound weight the built-in manipulator now has).
 """
 
 from __future__ import annotations
@@ -13,13 +17,17 @@ import time
 __all__ = ["run"]
 
 
-def run(name: str, weights, paths: int = 20, seed: int = 1) -> list[dict]:
+def run(name: str, weights, paths: int = 20, seed: int = 1, defaults: dict | None = None) -> list[dict]:
+    import dataclasses
+
     from fte_casadi.design import design
     from fte_casadi.plants import BUILTIN, SCENARIOS
     from fte_casadi.sim import simulate
     from fte_casadi.ts import derive
 
     plant, scenario = BUILTIN[name](), SCENARIOS[name]()
+    if defaults is not None:
+        plant = dataclasses.replace(plant, design_defaults=dict(defaults))
     ts = derive(plant)
     rows = []
     for w in weights:
@@ -31,7 +39,7 @@ def run(name: str, weights, paths: int = 20, seed: int = 1) -> list[dict]:
         rows.append({
             "weight": w, "design_s": round(seconds, 2), "alpha": d.observer.alpha,
             "bound": max(fb["gains"].values()) if fb.get("holds") else None, "P_structure": fb.get("P_structure"),
-            "bound_objective": [d.observer.extra.get("bound_objective_before"), d.observer.extra.get("bound_objective")],
+            "bound_objective": [d.observer.bound_objective_before, d.observer.bound_objective],
             "fault_error": m["fault_rel_rms_error"], "false_alarm": m["false_alarm_rel_rms"],
             "ftc": [w_["ftc_deviation_ratio"] for w_ in m["windows"]],
         })  # fmt: skip
@@ -40,6 +48,5 @@ def run(name: str, weights, paths: int = 20, seed: int = 1) -> list[dict]:
 
 
 if __name__ == "__main__":
-    run(
-        sys.argv[1], [float(w) for w in sys.argv[2].split(",")], int(sys.argv[3]) if len(sys.argv) > 3 else 20
-    )
+    run(sys.argv[1], [float(w) for w in sys.argv[2].split(",")], int(sys.argv[3]) if len(sys.argv) > 3 else 20,
+        defaults=json.loads(sys.argv[4]) if len(sys.argv) > 4 else None)  # fmt: skip

@@ -31,7 +31,9 @@ def manipulator_plain():
     )
     b.reference(u=[2.0])
     b.initial_state([0.1, 0.05, 0.02, 0.03])
-    b.design_defaults(gamma=2.0, gamma1=0.01, sigma=0.2, delta=1e-5, epsilon=1e-5)
+    # the built-in manipulator's defaults (fte tune's, issue #18)
+    b.design_defaults(gamma=2.49, gamma1=0.0176, sigma=0.151, delta=1e-5, epsilon=8.4e-6, alpha=1.48, kappa=1.73e4,
+                      bound_weight=0.475)  # fmt: skip
     return b.build()
 
 

@@ -429,4 +429,6 @@ def test_the_fmpy_snippet_of_the_docs_runs(fmus, tmp_path, monkeypatch):
     scope: dict = {}
     exec(compile(block[0], "docs/fmu.md", "exec"), scope)
     assert len(scope["res"]) == len(scope["y"]) + 1
-    assert -1.2 < scope["res"]["fa_hat"][-1] < -0.8  # "about -1.0": the 40 % actuator loss of the recording
+    # "about -1.2": the recording's actuator fault (a 40 % loss) is -1.05 at its last sample (-0.83 with the
+    # design before issue #18's tuning), and the estimate is 0.3 s into the fault's transient
+    assert -1.4 < scope["res"]["fa_hat"][-1] < -1.0

@@ -89,3 +89,17 @@ def test_one_step_everywhere(ts_models, tmp_path):
     r = runner.invoke(main, ["codegen", str(f), "--out", str(tmp_path / "c")])
     assert r.exit_code == 0, r.output
     assert "#define FTE_MANIPULATOR_TS (0.002)" in (tmp_path / "c" / "fte_manipulator.h").read_text()
+
+
+def test_the_plants_tuned_alpha_gives_way_where_it_is_infeasible(ts_models):
+    """A decay rate recorded in the plant's defaults (fte tune's) is a default, not the user's: at parameters
+    where it is infeasible the design takes the rate it would find by default, and says why; a rate the user
+    gives is refused instead."""
+    ts = ts_models["manipulator"]
+    plant_alpha = ts.plant.design_defaults["alpha"]
+    d = design(ts, sample_time=1e-3, kappa=100.0)
+    assert d.certified and 0 < d.observer.alpha < plant_alpha
+    assert d.observer.alpha == pytest.approx(0.9 * d.observer.alpha_max, rel=1e-12)
+    assert f"the plant's default alpha = {plant_alpha:g} is infeasible" in d.observer.why
+    with pytest.raises(InfeasibleDesignError, match="lower alpha to"):
+        design(ts, sample_time=1e-3, kappa=100.0, alpha=plant_alpha)

@@ -322,7 +322,7 @@ def design(
         try:
             view = _closed_loop_view(ts, T, K, r5doc) if params.get("bound_weight") else None
             s5 = conditioned.step5(aug, params, s3.X, s3.K, T, solver, alpha=alpha, sample_time=sample_time,
-                                   bound_view=view)  # fmt: skip
+                                   bound_view=view, alpha_is_default=alpha_from_plant)  # fmt: skip
         except conditioned.SolverFailedError as exc:
             return _other_solver(ts, retry, solver, exc, "step 5 (LMIs (46), (55), (64))", allow_uncertified=allow_uncertified,
                                  diagnose=diagnose, retried=_retried)  # fmt: skip
@@ -365,8 +365,6 @@ def design(
     sched, sources = scheduling_from_measurements(ts)
     plant = ts.plant
     total = time.perf_counter() - t0
-    if alpha_from_plant and s5.observer.get("why") == "set by the user":
-        s5.observer["why"] = "the plant's design defaults (fte tune's choice)"
     observer = {k: (float(v) if isinstance(v, (int, float, np.floating)) and v is not None else v)
                 for k, v in s5.observer.items()}  # fmt: skip
     return Design(

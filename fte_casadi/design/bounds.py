@@ -53,6 +53,20 @@ CHANNELS = ("d", "fddot", "u_s", "f", "const")
 MAX_VERTICES, MAX_STATES = 16, 24
 
 
+#: a sum whose terms cancel to this fraction of their size is zero (round-off, not a channel)
+CANCELLED = 1e-9
+
+
+def _cancelled(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a + b``, or zeros when the two cancel to round-off: the fault channel ``B Kf + Bf`` of an actuator
+    fault is zero in exact arithmetic, and a channel that exists or not by the last digits of the data would
+    make the bound (and a design with it in the objective) jump under a 1e-12 change of the plant."""
+    out = a + b
+    if np.linalg.norm(out) <= CANCELLED * (np.linalg.norm(a) + np.linalg.norm(b)):
+        return np.zeros_like(out)
+    return out
+
+
 def vertex_parts(design):
     """``([(i, j, Ax, channels, Wc)], Cz)``: the closed loop's vertices without the error's own dynamics
     (``Ax`` has a zero error block; the vertex matrix is ``Ax + diag(0, R_i)``). ``design`` needs
@@ -87,8 +101,8 @@ def vertex_parts(design):
                 "d": np.vstack([Bd, np.zeros((nbar, Bd.shape[1]))]),
                 "fddot": np.vstack([np.zeros((n, lf)), J1]),
                 "u_s": np.vstack([np.zeros((n, lf)), -J1]),
-                "f": np.vstack([B @ Kf + Bf, np.zeros((nbar, lf))]),
-                "const": np.concatenate([B @ u_ref + a, np.zeros(nbar)])[:, None],
+                "f": np.vstack([_cancelled(B @ Kf, Bf), np.zeros((nbar, lf))]),
+                "const": np.concatenate([_cancelled(B @ u_ref, a), np.zeros(nbar)])[:, None],
             }
             out.append((i, j, Ax, chans, Wc))
     Cz = np.hstack([np.zeros((lf, n)), J2])

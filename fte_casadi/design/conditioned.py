@@ -664,11 +664,13 @@ def alpha_max(prob: _Step5, start: float, rtol: float = ALPHA_RTOL) -> tuple[flo
 
 
 def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | None = None,
-          sample_time: float | None = None, bound_view=None) -> Step5:  # fmt: skip
+          sample_time: float | None = None, bound_view=None, alpha_is_default: bool = False) -> Step5:  # fmt: skip
     """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate.
 
     With ``params["bound_weight"] > 0``, the closed loop's fault-error bound is a term of the objective
-    (:mod:`fte_casadi.design.bound_objective`; ``bound_view`` the closed loop's data without R)."""
+    (:mod:`fte_casadi.design.bound_objective`; ``bound_view`` the closed loop's data without R).
+    ``alpha_is_default``: ``alpha`` is the plant's recorded default (``fte tune``'s), not the user's: like the
+    rate found by default, it is lowered when the sample time needs it."""
     prob = _Step5(aug, params, X, K, T, solver)
     prob.bound, why_not = bound_term(
         prob.layout, aug, T, np.linalg.inv(X), bound_view, params.get("bound_weight")
@@ -696,9 +698,19 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
                f"(alpha_max in [{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
     else:
         a = float(alpha)
-        why = "set by the user"
+        why = "the plant's design defaults (fte tune's choice)" if alpha_is_default else "set by the user"
     pt = prob.design(a)
-    if pt is None and alpha is not None:
+    if (
+        pt is None and alpha_is_default
+    ):  # the plant's rate, tuned at its own parameters, is not feasible at these
+        lo, hi = alpha_max(prob, start)
+        observer.update(alpha_max=lo, alpha_max_upper=hi)
+        a = ALPHA_FRACTION * lo if np.isfinite(hi) else lo
+        why = (f"the plant's default alpha = {float(alpha):g} is infeasible at these parameters: {ALPHA_FRACTION:g} x the "
+               f"largest decay rate for which (46) is feasible with cond(Pbar) <= {prob.kappa:g} (alpha_max in "
+               f"[{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
+        pt = prob.design(a)
+    elif pt is None and alpha is not None:
         lo, hi = alpha_max(prob, start)
         raise InfeasibleDesignError(
             f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which (46) is "
@@ -709,7 +721,11 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         raise SolverFailedError(
             f"step 5: no centred design found ({'; '.join(prob.notes[-2:])}); try the other solver"
         )
-    if alpha is None and sample_time is not None and pt["ts_cert"] < TS_FACTOR * sample_time:
+    if (
+        (alpha is None or alpha_is_default)
+        and sample_time is not None
+        and pt["ts_cert"] < TS_FACTOR * sample_time
+    ):
         a, pt, why = _cap_for_sample_time(prob, a, pt, why, sample_time)
     observer.update(alpha=a, why=why, ts_max=pt["ts_max"])
     if pt["bound"] is not None:

@@ -166,7 +166,8 @@ class Params(_Record):
     """The LMI parameters the design was solved at (``Design.params``): the attenuation levels ``gamma``,
     ``gamma1``, the coupling weight ``sigma``, the sliding gains ``delta``, ``epsilon``; optional ones are
     ``None`` when not used: ``gamma2`` (Theorem 5's d2 attenuation), ``kappa`` (the bound on cond(Pbar)
-    when asked for one), ``boundary_layer`` (the sliding term's ``sat(s/phi)`` width, set by the tuner).
+    when asked for one), ``boundary_layer`` (the sliding term's ``sat(s/phi)`` width, set by the tuner),
+    ``bound_weight`` (the fault-error bound's weight in step 5's objective, when positive).
 
     Read ``d.params.sigma``; ``d.params["sigma"]`` still works for a transition (see the module docstring).
     """
@@ -179,6 +180,7 @@ class Params(_Record):
     gamma2: float | None = None
     kappa: float | None = None
     boundary_layer: float | None = None
+    bound_weight: float | None = None
     extra: dict = field(default_factory=dict, repr=False)
     order: tuple = field(default=(), repr=False)
 
@@ -196,7 +198,9 @@ class Observer(_Record):
     ``sample_time`` the sample time the design was made for (``None`` when none was given),
     ``alpha`` the decay rate used, ``why`` the reason, ``alpha_max`` and ``alpha_max_upper`` the bisection's
     bracket of the largest feasible rate (absent when the user set ``alpha``), ``ts_max`` the largest
-    sample time at which every R_i's explicit Euler step is stable. The paper variant holds only
+    sample time at which every R_i's explicit Euler step is stable; with the fault-error bound in step 5's
+    objective, ``bound_weight`` and the smallest block-diagonal bound (sum of squared channel gains) at the
+    observer without it (``bound_objective_before``) and with it (``bound_objective``). The paper variant holds only
     ``alpha`` (0) and ``why``; documents older than the observer entry hold none.
 
     Read ``d.observer.alpha``; ``d.observer["alpha"]`` still works for a transition (see the module
@@ -209,5 +213,8 @@ class Observer(_Record):
     alpha: float | None = None
     why: str | None = None
     ts_max: float | None = None
+    bound_weight: float | None = None
+    bound_objective_before: float | None = None
+    bound_objective: float | None = None
     extra: dict = field(default_factory=dict, repr=False)
     order: tuple = field(default=(), repr=False)

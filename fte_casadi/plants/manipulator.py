@@ -66,8 +66,12 @@ def manipulator() -> Plant:
     )
     b.reference(u=[2.0])
     b.initial_state([0.1, 0.05, 0.02, 0.03])
-    # Section 6.1: gamma = 2, gamma1 = 0.01, sigma = 0.2, rho0 = eps = 1e-5; delta not given: = eps
-    b.design_defaults(gamma=2.0, gamma1=0.01, sigma=0.2, delta=1e-5, epsilon=1e-5)
+    # Section 6.1's parameters were gamma = 2, gamma1 = 0.01, sigma = 0.2, rho0 = eps = 1e-5 (delta not given: = eps).
+    # The defaults are `fte tune`'s (rounded to 3 digits): `fte tune manipulator --trials 60 --seed 1` chose its
+    # trial 58 (the bound's weight 0.475), and its decay rate raised from 0.857 to 0.9 x the default rate at those
+    # knobs (a one-knob step, by hand) makes it better than Section 6.1's on every fault metric (docs/tune.md)
+    b.design_defaults(gamma=2.49, gamma1=0.0176, sigma=0.151, delta=1e-5, epsilon=8.4e-6, alpha=1.48, kappa=1.73e4,
+                      bound_weight=0.475)  # fmt: skip
     b.parameters(**p, **{f"alpha_d{k + 1}": v for k, v in enumerate(a)}, **w)
     return b.build()
 

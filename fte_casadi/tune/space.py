@@ -98,7 +98,7 @@ def space_for(base_design, sigma_sup: float | None, alpha_scale: float = 1.0,
     g0, s0, e0 = float(p.gamma), float(p.sigma), float(p.epsilon)
     r0 = float(p.gamma1) / g0
     kappa0 = float(KAPPA if p.kappa is None else p.kappa)
-    w0 = p.extra.get("bound_weight")
+    w0 = p.bound_weight
     s_hi = 10 * s0 if not sigma_sup else min(10 * s0, 0.98 * sigma_sup)
     ranges = {
         "gamma": _around(g0, g0 / 3, 10 * g0),
