@@ -68,6 +68,8 @@ from .certify import (
     sliding_mismatch,
     ts_max,
 )
+from .decay import ALPHA_RTOL as ALPHA_RTOL
+from .decay import TS_FACTOR, alpha_max, cap_for_sample_time
 from .sdp import (
     SOLVED,
     AffineLMI,
@@ -91,10 +93,6 @@ KAPPA = 1e4
 ETA = 0.5
 #: default observer decay rate as a fraction of the largest feasible one
 ALPHA_FRACTION = 0.9
-#: the default decay rate keeps ts_max >= TS_FACTOR * sample_time
-TS_FACTOR = 2.0
-#: relative precision of the bisection on alpha
-ALPHA_RTOL = 0.1
 #: phase 1 bounds the gains by rho_i <= RHO_CAP kappa max ||T Abar_i|| / sigma_min(Cbar)^2 (never active in a design)
 RHO_CAP = 1e3
 
@@ -630,39 +628,6 @@ class _Step5:
                     ts_cert=lyapunov_ts_max(R, Pbar), bound=info)  # fmt: skip
 
 
-def alpha_max(prob: _Step5, start: float, rtol: float = ALPHA_RTOL) -> tuple[float, float]:
-    """``(lo, hi)``: (46) with ``I <= Pt <= kappa I`` is feasible at ``lo`` and not at ``hi``
-    (``hi / lo <= 1 + rtol``); bracketing by factors of 4 from ``start``, then bisection in log
-    scale, every decision by :meth:`_Step5.feasible`. The trials depend on the answers only, not
-    on the points found. ``hi`` is ``inf`` when every trial up to ``start * 4^12`` was feasible;
-    ``lo = 0`` when no trial down to ``1e-6 start`` was."""
-    lo, a = 0.0, start
-    for _ in range(12):
-        if prob.feasible(a):
-            lo, a = a, 4 * a
-        else:
-            break
-    else:
-        return lo, float("inf")
-    hi = a
-    if lo == 0.0:
-        while hi > 1e-6 * start:
-            a = hi / 8
-            if prob.feasible(a):
-                lo = a
-                break
-            hi = a
-        else:
-            return 0.0, hi
-    while hi / lo > 1 + rtol:
-        mid = float(np.sqrt(lo * hi))
-        if prob.feasible(mid):
-            lo = mid
-        else:
-            hi = mid
-    return lo, hi
-
-
 def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | None = None,
           sample_time: float | None = None, bound_view=None, alpha_is_default: bool = False) -> Step5:  # fmt: skip
     """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate.
@@ -726,7 +691,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         and sample_time is not None
         and pt["ts_cert"] < TS_FACTOR * sample_time
     ):
-        a, pt, why = _cap_for_sample_time(prob, a, pt, why, sample_time)
+        a, pt, why = cap_for_sample_time(prob, a, pt, why, sample_time)
     observer.update(alpha=a, why=why, ts_max=pt["ts_max"])
     if pt["bound"] is not None:
         b = pt["bound"]
@@ -758,45 +723,4 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         observer,
         notes,
         pt["bound"],
-    )
-
-
-#: decay rates tried below the default when the sample time asks for it, as fractions of it
-CAP_GRID = (0.875, 0.75, 0.625, 0.5, 0.375, 0.25, 0.125, 0.0)
-
-
-def _cap_for_sample_time(prob: _Step5, a: float, pt: dict, why: str, sample_time: float):
-    """The largest alpha of ``CAP_GRID x a`` whose centred design runs at ``sample_time`` with margin.
-
-    The measure is ``ts_cert`` (:func:`~fte_casadi.design.certify.lyapunov_ts_max`): the largest Ts for
-    which Pbar proves the blended discrete step stable (not monotone in alpha: the centred point
-    moves with it, hence a scan, not a bisection). The target is ``TS_FACTOR * sample_time``; when no
-    alpha tried reaches it but some reach ``sample_time``, the largest such alpha is taken (stable at
-    the sample time, with less margin; said so). When none does, no design of this formulation was
-    found that runs at that rate, and the error names the fastest sample time found and what limits it.
-    """
-    target = TS_FACTOR * sample_time
-    tried = [(a, pt)] + [(f * a, prob.design(f * a)) for f in CAP_GRID]
-    tried = [(al, p) for al, p in tried if p is not None]
-    for need, how in ((target, f">= {TS_FACTOR:g} x"), (sample_time, "above")):
-        for al, p in tried:
-            if p["ts_cert"] >= need:
-                why += (f"; lowered to {al:.4g} so that the discrete step is proven stable for Ts < {p['ts_cert']:.3g} "
-                        f"({how} the sample time {sample_time:g})")  # fmt: skip
-                return al, p, why
-    al, best = max(tried, key=lambda t: t[1]["ts_cert"]) if tried else (None, None)
-    fastest = 0.0 if best is None else best["ts_cert"]
-    limit = ""
-    if best is not None:
-        lam = max((lam for Ri in best["R"] for lam in np.linalg.eigvals(Ri)), key=abs)
-        limit = (
-            f" (at alpha = {al:.3g}); what limits it is the observer's fastest mode, |lambda| = {abs(lam):.3g} "
-            "(Ts |lambda| must stay well below 2), set by the gains L_i1 that (46) needs to dominate the loop's "
-            "coupling"
-        )
-    raise InfeasibleDesignError(
-        f"no certified design runs at the sample time {sample_time:g}: over the observer decay rates tried "
-        f"(0 to {a:.3g}) the discrete step z+ = z + Ts (...) is proven stable at best for Ts < {fastest:.3g}{limit}. "
-        f"Run the observer at a sample time <= {nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
-        "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)"
     )
