@@ -415,7 +415,7 @@ def design(
         observer=Observer.from_mapping(observer),
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=_initial_state(plant, initial_state),
-        bounds=_bounds(certified, R, K, T, ts, r5doc, getattr(s5, "bound", None)),
+        bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, getattr(s5, "bound", None)),
         remark5=r5doc,
     )
 
@@ -433,19 +433,21 @@ def _fault_gains(ts: TSModel, status: list):
     return Kf, Kf_rules
 
 
-def _closed_loop_view(ts: TSModel, T, K, r5doc, **known):
+def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known):
     """The closed loop's data the bound needs (:mod:`fte_casadi.design.bounds`), or None where it is not posed
-    (Remark 5's fallback, Theorem 5's diffusion). ``known``: ``R`` once the observer is designed."""
+    (Remark 5's fallback, Theorem 5's diffusion). ``gains = (Kf, Kf_rules)`` and ``u_ref`` once the design has
+    them (before step 5 they are computed here, their messages left to the design); ``known``: ``R`` once the
+    observer is designed."""
     if (r5doc and r5doc.get("used")) or any(lm.has_diffusion_extension for lm in ts.local_models):
         return None
-    scratch: list = []  # their messages are the design's once it is returned, not here
-    Kf, Kf_rules = _fault_gains(ts, scratch)
-    u_ref, _ = _u_reference(ts, K, scratch)
+    scratch: list = []
+    Kf, Kf_rules = _fault_gains(ts, scratch) if gains is None else gains
+    u_ref = _u_reference(ts, K, scratch)[0] if u_ref is None else u_ref
     return SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
                            local_models=ts.local_models, K=K, **known)  # fmt: skip
 
 
-def _bounds(certified, R, K, T, ts, r5doc, fallback=None) -> dict:
+def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, fallback=None) -> dict:
     """The certified bound on the fault-estimation error at the returned design (issue #18 item 1;
     :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
     if not certified:
@@ -454,7 +456,7 @@ def _bounds(certified, R, K, T, ts, r5doc, fallback=None) -> dict:
         return {"fault_error": {"holds": False, "why": "not computed where Remark 5's fallback is used"}}
     from .bounds import fault_error_bound
 
-    view = _closed_loop_view(ts, T, K, None, R=R)
+    view = _closed_loop_view(ts, T, K, None, (Kf, Kf_rules), u_ref, R=R)
     if view is None:  # Theorem 5's diffusion: fault_error_bound says so
         view = SimpleNamespace(local_models=ts.local_models)
     return {"fault_error": fault_error_bound(view, fallback=fallback)}

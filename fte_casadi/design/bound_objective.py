@@ -61,10 +61,10 @@ def _block(L: AffineLMI, rows: np.ndarray) -> AffineLMI:
 
 
 class BoundTerm:
-    """The bound LMIs on step 5's layout extended by ``P1'`` and ``g'``, and the centring with them."""
+    """The bound LMIs on step 5's layout extended by ``P1'`` and ``g'``, and the centring with them
+    (``verts, Cz``: :func:`~fte_casadi.design.bounds.vertex_parts` of the closed loop)."""
 
-    def __init__(self, layout: Layout, aug, T, P, view, weight: float):
-        verts, Cz = vertex_parts(view)
+    def __init__(self, layout: Layout, aug, T, P, verts, Cz, weight: float):
         self.names, self.sizes = channel_names(verts)
         n, nbar = aug.n, aug.nbar
         self.base = layout
@@ -241,4 +241,4 @@ def bound_term(layout: Layout, aug, T, P, view, weight) -> tuple[BoundTerm | Non
     if N > MAX_STATES or len(verts) > MAX_VERTICES:
         return None, (f"the closed-loop bound is left out of step 5's objective: {len(verts)} vertices of a closed "
                       f"loop of {N} states (posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)")  # fmt: skip
-    return BoundTerm(layout, aug, T, P, view, weight), ""
+    return BoundTerm(layout, aug, T, P, verts, Cz, weight), ""
