@@ -35,8 +35,8 @@ import numpy as np
 
 from ..errors import CentringError
 from .barrier import centre, phase1
-from .bounds import MAX_STATES, MAX_VERTICES, channel_names, vertex_parts
-from .sdp import AffineLMI, Layout, Var, affine_lmi
+from .bounds import MAX_STATES, MAX_VERTICES, channel_names, gain_diag, vertex_parts
+from .sdp import AffineLMI, Layout, Var, affine_lmi, positive
 
 __all__ = ["BoundTerm", "bound_term"]
 
@@ -85,7 +85,7 @@ class BoundTerm:
                 PA = Pp @ Ax
                 PA[n:, n:] += Pt @ TA[i] - rho[i] * CtC / 2
                 M11 = PA + PA.T + Wc.T @ Pp @ Wc
-                G = np.diag(np.concatenate([np.full(self.sizes[c], g[k]) for k, c in enumerate(self.names)]))
+                G = gain_diag(g, self.names, self.sizes)
                 return np.block([[M11, Pp @ Bc], [(Pp @ Bc).T, -G]])
 
             return f
@@ -101,12 +101,7 @@ class BoundTerm:
         self.out[:N, :N] = Cz.T @ Cz
         self.lam = 1.0
         self.lmis = self.raw
-        ip = self.layout.index("P1")
-        F = np.zeros((self.layout.size, n, n))
-        iu, ju = np.triu_indices(n)
-        for q, (a, b) in enumerate(zip(iu, ju)):
-            F[ip.start + q, a, b] = F[ip.start + q, b, a] = -1.0
-        self.positive = AffineLMI("P1 > 0", np.zeros((n, n)), F)
+        self.positive = positive(self.layout, "P1")
         self.free = np.r_[self.layout.support("P1"), self.layout.support("g")]
         self.notes: list[str] = []
         self.newton = 0

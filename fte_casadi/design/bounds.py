@@ -39,6 +39,7 @@ __all__ = [
     "bound_value",
     "vertex_parts",
     "channel_names",
+    "gain_diag",
     "CHANNELS",
     "MAX_VERTICES",
     "MAX_STATES",
@@ -126,6 +127,11 @@ def _vertices(design):
     return out, Cz
 
 
+def gain_diag(g, names, sizes) -> np.ndarray:
+    """``diag(g_k I)`` over the channels ``names`` (each ``sizes[c]`` wide)."""
+    return np.diag(np.concatenate([np.full(sizes[c], g[k]) for k, c in enumerate(names)]))
+
+
 def _lmi(Ac, Bc, Wc, Cz, P, G):
     return np.block([
         [Ac.T @ P + P @ Ac + Wc.T @ P @ Wc + Cz.T @ Cz, P @ Bc],
@@ -182,7 +188,7 @@ def _checked(verts, Cz, names, sizes, Pv, gv):
     worst = np.inf
     for f in (0.0,) + REPAIR:
         gf = gv * (1.0 + f) + 1e-12 * (f > 0)
-        G = np.diag(np.concatenate([np.full(sizes[c], gf[k]) for k, c in enumerate(names)]))
+        G = gain_diag(gf, names, sizes)
         worst = max(
             float(np.linalg.eigvalsh(_lmi(Ac, np.hstack([ch[c] for c in names]), Wc, Cz, Pv, G))[-1])
             for _, _, Ac, ch, Wc in verts
@@ -201,7 +207,7 @@ def _from_point(verts, Cz, names, sizes, P0, g0):
     from the strictly feasible ``(P0, g0)`` (step 5's block-diagonal certificate): ``(P, g)`` or ``(None, None)``."""
     from ..errors import CentringError
     from .barrier import centre
-    from .sdp import AffineLMI, Layout, Var, affine_lmi
+    from .sdp import Layout, Var, affine_lmi, positive
 
     N = Cz.shape[1]
     layout = Layout(Var("P", (N, N), True), Var("g", (len(names),)))
@@ -214,7 +220,7 @@ def _from_point(verts, Cz, names, sizes, P0, g0):
                 Wc,
                 Cz,
                 P,
-                np.diag(np.concatenate([np.full(sizes[c], g[k]) for k, c in enumerate(names)])),
+                gain_diag(g, names, sizes),
             )
 
         return f
@@ -223,11 +229,7 @@ def _from_point(verts, Cz, names, sizes, P0, g0):
         affine_lmi("bound", layout, builder(Ac, np.hstack([ch[c] for c in names]), Wc))
         for _, _, Ac, ch, Wc in verts
     ]
-    F = np.zeros((layout.size, N, N))
-    iu, ju = np.triu_indices(N)
-    for q, (a, b) in enumerate(zip(iu, ju)):
-        F[q, a, b] = F[q, b, a] = -1.0
-    lmis.append(AffineLMI("P > 0", np.zeros((N, N)), F))
+    lmis.append(positive(layout, "P"))
     c = np.zeros(layout.size)
     c[layout.index("g")] = 1.0
     try:

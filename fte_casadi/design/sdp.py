@@ -40,6 +40,7 @@ __all__ = [
     "LARGE_CONE",
     "CentringError",
     "SOLVER_SETTINGS",
+    "positive",
 ]
 
 #: settings passed explicitly to every solve. The solves are feasibility problems whose point only
@@ -300,6 +301,17 @@ def affine_lmi(
         if not np.allclose(direct, np.tensordot(v, G, 1), rtol=1e-9, atol=1e-9 * (1 + np.abs(direct).max())):
             raise RuntimeError(f"internal error: the parameter term of {name} is not linear in its unknowns")
     return AffineLMI(name, F0, F, G, kr, kr_G)
+
+
+def positive(layout: Layout, name: str) -> AffineLMI:
+    """``-X < 0`` for the symmetric unknown ``name`` of ``layout`` (``X > 0``)."""
+    sl = layout.index(name)
+    n = layout.vars[[v.name for v in layout.vars].index(name)].shape[0]
+    F = np.zeros((layout.size, n, n))
+    iu, ju = np.triu_indices(n)
+    for q, (a, b) in enumerate(zip(iu, ju)):
+        F[sl.start + q, a, b] = F[sl.start + q, b, a] = -1.0
+    return AffineLMI(f"{name} > 0", np.zeros((n, n)), F)
 
 
 @dataclass(frozen=True)
