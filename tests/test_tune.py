@@ -105,6 +105,16 @@ def test_choose_rules():
     assert choose(recs, front, names, "fault-error")[0] == 2
     with pytest.raises(ParameterError, match="unknown objective"):
         choose(recs, front, names, "speed")
+    # of the designs better than the base on every fault objective, the one better by the most on the
+    # whole (geometric mean of the ratios: 2's), not the one whose worst ratio is smallest (1's 0.8)
+    recs = [_rec(0, (0.2, 0.5, 0.5, 1.0)), _rec(1, (0.16, 0.4, 0.4, 1.0)), _rec(2, (0.02, 0.45, 0.45, 1.0)),
+            _rec(3, (0.01, 0.6, 0.1, 1.0))]  # fmt: skip
+    assert choose(recs, front, names, "balanced")[0] == 2
+    # none better on every one: the base (score 1), or without it the smallest worst ratio (3's 1.2
+    # against 1.5)
+    recs[1], recs[2] = _rec(1, (0.3, 0.4, 0.4, 1.0)), _rec(2, (0.02, 0.75, 0.1, 1.0))
+    assert choose(recs, front, names, "balanced")[0] == 0
+    assert choose(recs, [1, 2, 3], names, "balanced")[0] == 3
     assert pareto_front([(1, 2), (2, 1), (2, 2), (1, 2)]) == [0, 1]
 
 

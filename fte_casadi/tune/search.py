@@ -24,12 +24,13 @@ certified (every completed trial is) and make tolerant control better than none 
 (FTC ratio < 1) and keep every false-alarm ratio below 1 — or, when none does, those with every
 FTC ratio < 1, or else all of them — the one with the smallest score of the rule:
 
-- ``balanced`` (default): the worst fault objective (errors, false alarms, each window's FTC ratio)
-  relative to the base design's value (``max_k v_k / max(b_k, 1e-3)``), among the members whose
-  input peak stays within :data:`INPUT_PEAK_ALLOWANCE` x the base's and whose saturation rises by
-  at most 1 % of the samples. The base design scores 1, so a chosen design that scores below 1 is
-  better than the base on every fault objective: the rule picks a design that dominates the base
-  whenever the search found one;
+- ``balanced`` (default): among the members whose input peak stays within :data:`INPUT_PEAK_ALLOWANCE`
+  x the base's and whose saturation rises by at most 1 % of the samples, those better than the base on
+  every fault objective (errors, false alarms, each window's FTC ratio: the worst ratio
+  ``max_k v_k / max(b_k, 1e-3)`` below 1) first, and of them the one better by the most on the whole
+  (the smallest geometric mean of the ratios); when there is none, the one whose worst ratio is
+  smallest (the base itself scores 1). The rule picks a design that dominates the base whenever the
+  search found one, and of several such the one that gains most, not the one closest to the base;
 - ``fault-error``: the largest fault error; ``false-alarm``: the largest false-alarm ratio;
   ``ftc``: the worst window's FTC ratio; ``bound``: the smallest certified bound;
 
@@ -189,6 +190,11 @@ def balanced_score(values: tuple, base: tuple, names: tuple) -> float:
     return max(_ratios(values, base, names), default=0.0)
 
 
+def _log_mean(ratios: list[float]) -> float:
+    """The mean of the logarithms (the geometric mean's logarithm; 0 for none)."""
+    return float(np.mean(np.log(np.maximum(ratios, 1e-300)))) if ratios else 0.0
+
+
 def _within_inputs(values: tuple, base: tuple, names: tuple) -> bool:
     """The inputs' allowance of the balanced rule: peak <= INPUT_PEAK_ALLOWANCE x the base's, and
     saturation at most 1 % of the samples above the base's."""
@@ -237,7 +243,9 @@ def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> 
         bal = balanced_score(r.values, base, names)
         v = dict(zip(names, r.values))
         if rule == "balanced":
-            main = bal
+            # better than the base on every fault objective: the one better by the most on the whole (the
+            # geometric mean of the ratios); else the smallest worst ratio
+            main = (0, _log_mean(_ratios(r.values, base, names))) if bal < 1 else (1, bal)
         elif rule == "fault-error":
             main = max((x for n, x in v.items() if n.startswith("fault_error")), default=bal)
         elif rule == "false-alarm":
