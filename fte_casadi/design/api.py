@@ -448,18 +448,20 @@ def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known)
 
 
 def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, fallback=None) -> dict:
-    """The certified bound on the fault-estimation error at the returned design (issue #18 item 1;
+    """The certified bounds on the fault- and state-estimation errors at the returned design (issue #18 item 1;
     :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
     if not certified:
         return {}
     if r5doc and r5doc.get("used"):
-        return {"fault_error": {"holds": False, "why": "not computed where Remark 5's fallback is used"}}
-    from .bounds import fault_error_bound
+        why = {"holds": False, "why": "not computed where Remark 5's fallback is used"}
+        return {"fault_error": why, "state_error": dict(why)}
+    from .bounds import fault_error_bound, state_error_bound
 
     view = _closed_loop_view(ts, T, K, None, (Kf, Kf_rules), u_ref, R=R)
-    if view is None:  # Theorem 5's diffusion: fault_error_bound says so
+    if view is None:  # Theorem 5's diffusion: the bounds say so
         view = SimpleNamespace(local_models=ts.local_models)
-    return {"fault_error": fault_error_bound(view, fallback=fallback)}
+    fe = fault_error_bound(view, fallback=fallback)
+    return {"fault_error": fe, "state_error": state_error_bound(view, start=fe)}
 
 
 def _outside_45(aug, params: dict, solver: str) -> str | None:

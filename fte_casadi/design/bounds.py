@@ -26,6 +26,8 @@ like the cube of each PSD cone's k(k+1)/2 rows: a chain of n = 8 states, 4 rules
 for every t, along the T-S model (the nonlinear plant inside the region where its T-S model is
 exact) without input saturation. ``fault_error_bound`` solves ``min sum_k g_k`` (cvxpy), checks the
 LMIs again with numpy at the returned point and records the per-channel gains ``sqrt(g_k)`` and P.
+``state_error_bound`` does the same with the state-estimation error ``x - xhat = J0 e`` as the output
+(``C = [0, J0]``), in numpy from scratch (phase 1, then the barrier method).
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 
 __all__ = [
     "fault_error_bound",
+    "state_error_bound",
     "bound_value",
     "vertex_parts",
     "channel_names",
@@ -266,15 +269,8 @@ def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = 
         ok = None if Pv is None else _checked(verts, Cz, names, sizes, Pv, gv)
         if ok is not None:
             found, structure = (Pv, *ok), "common (numpy, from step 5's block-diagonal point)"
-    for schur in (False, True):
-        if found is not None:
-            break
-        Pv, gv, status = _solve(verts, Cz, names, sizes, solver, schur)
-        ok = None if Pv is None else _checked(verts, Cz, names, sizes, Pv, gv)
-        if ok is None:
-            why = status if Pv is None else "the analysis LMI does not hold at the solver's point"
-            continue
-        found = (Pv, *ok)
+    if found is None:
+        found, why = _conic(verts, Cz, names, sizes, solver)
     if found is None and point is not None:
         ok = _checked(verts, Cz, names, sizes, *point)
         if ok is not None:
@@ -286,6 +282,100 @@ def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = 
         "holds": True,
         "what": "E int |f - fhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
         "P_structure": structure,
+        "gains": {c: float(np.sqrt(gv[k])) for k, c in enumerate(names)},
+        "channels": sizes,
+        "P": Pv.tolist(),
+        "lmi_max_eig": worst,
+    }
+
+
+def _conic(verts, Cz, names, sizes, solver: str) -> tuple[tuple | None, str]:
+    """``min sum g`` by the conic solver, the diffusion linear in P and then in Schur form: ``((P, g, worst),
+    "")`` at the first point that passes the numpy check, or ``(None, why)``."""
+    why = ""
+    for schur in (False, True):
+        Pv, gv, status = _solve(verts, Cz, names, sizes, solver, schur)
+        ok = None if Pv is None else _checked(verts, Cz, names, sizes, Pv, gv)
+        if ok is not None:
+            return (Pv, *ok), ""
+        why = status if Pv is None else "the analysis LMI does not hold at the solver's point"
+    return None, why
+
+
+def _from_scratch(verts, Cz, names, sizes, start=None) -> tuple[tuple | None, str]:
+    """``min sum g`` in numpy without a feasible start point: phase 1 (:func:`~fte_casadi.design.barrier.phase1`,
+    from ``start = (P, g)``, e.g. another output's certificate, or ``P = I``) finds a strictly feasible point
+    or proves there is none, then the barrier method centres from it. ``((P, g, worst), how)`` at a point
+    that passes the numpy check (the phase-1 point itself when the centring fails), or ``(None, why)``."""
+    from ..errors import CentringError
+    from .barrier import centre, phase1
+    from .sdp import Layout, Var, affine_lmi, positive
+
+    N = Cz.shape[1]
+    layout = Layout(Var("P", (N, N), True), Var("g", (len(names),)))
+
+    def builder(Ac, Bc, Wc):
+        return lambda P, g: _lmi(Ac, Bc, Wc, Cz, P, gain_diag(g, names, sizes))
+
+    soft = [
+        affine_lmi("bound", layout, builder(Ac, np.hstack([ch[c] for c in names]), Wc))
+        for _, _, Ac, ch, Wc in verts
+    ]
+    hard = [positive(layout, "P")]
+    try:
+        P0, g0 = (np.eye(N), np.ones(len(names))) if start is None else start
+        v = phase1(soft, hard, layout.pack(P=P0, g=g0))
+    except CentringError as exc:
+        return None, f"phase 1 in numpy failed ({exc})"
+    if v is None:
+        return None, "the analysis LMI has no point (phase 1 in numpy)"
+    c = np.zeros(layout.size)
+    c[layout.index("g")] = 1.0
+    how = "common (numpy, phase 1 and centring)"
+    try:
+        v = centre(soft + hard, c, v, eta=POINT_ETA).v
+    except CentringError:
+        how = "common (numpy, phase 1's point: the centring did not converge)"
+    u = layout.unpack(v)
+    ok = _checked(verts, Cz, names, sizes, u["P"], np.asarray(u["g"], float))
+    if ok is None:
+        return None, "the analysis LMI does not hold at the numpy point"
+    return (u["P"], *ok), how
+
+
+def state_error_bound(design, solver: str = "CLARABEL", start: dict | None = None) -> dict:
+    """The bound of the module docstring with the state-estimation error ``x - xhat = J0 e`` as the output
+    (``C = [0, J0]``): the same channels and LMIs, ``E int |x - xhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt
+    + E xi0' P xi0``. Found in numpy (phase 1 and centring: no conic solve, the same answer on any machine),
+    from ``start`` (the fault-error bound's dict, whose P satisfies these LMIs but for the output term) and
+    then from ``P = I``; the conic solver when both fail. The same dict as :func:`fault_error_bound`."""
+    if any(lm.has_diffusion_extension for lm in design.local_models):
+        return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
+    verts, Cz = _vertices(design)
+    n, N = int(design.dims.n), Cz.shape[1]
+    if N > MAX_STATES or len(verts) > MAX_VERTICES:
+        return {"holds": False, "why": f"not computed: {len(verts)} vertices of a closed loop of {N} states "
+                f"(the analysis is posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)"}  # fmt: skip
+    Cx = np.hstack([np.zeros((n, n)), np.eye(n), np.zeros((n, N - 2 * n))])
+    names, sizes = channel_names(verts)
+    found, how = None, ""
+    if start and start.get("holds") and list(start["gains"]) == names:
+        P0 = np.asarray(start["P"], float)
+        found, how = _from_scratch(
+            verts, Cx, names, sizes, (P0, np.array([start["gains"][c] ** 2 for c in names]))
+        )
+    if found is None:
+        found, how = _from_scratch(verts, Cx, names, sizes)
+    if found is None:
+        found, why = _conic(verts, Cx, names, sizes, solver)
+        if found is None:
+            return {"holds": False, "why": f"{how}; {why}"}
+        how = f"common ({solver})"
+    Pv, gv, worst = found
+    return {
+        "holds": True,
+        "what": "E int |x - xhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
+        "P_structure": how,
         "gains": {c: float(np.sqrt(gv[k])) for k, c in enumerate(names)},
         "channels": sizes,
         "P": Pv.tolist(),

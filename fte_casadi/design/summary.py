@@ -36,13 +36,14 @@ def design_summary(d) -> str:
             + ("proven stable" if disc["holds"] else "NOT proven stable")
             + f" for any blending of the rules (Pbar decreases for Ts < {disc['ts_max_lyapunov']:.4g})"
         )
-    fb = (d.bounds or {}).get("fault_error")
-    if fb and fb.get("holds"):
-        lines.append("  certified bound on the fault-estimation error: E int |f - fhat|^2 dt <= "
-                     + " + ".join(f"{g:.3g}^2 t" if c == "const" else f"{g:.3g}^2 E int |{c}|^2" for c, g in fb["gains"].items())
-                     + " + E xi0' P xi0 (docs/tune.md)")  # fmt: skip
-    elif fb:
-        lines.append(f"  no bound on the fault-estimation error: {fb.get('why')}")
+    for key, what, err in (("fault_error", "fault", "f - fhat"), ("state_error", "state", "x - xhat")):
+        fb = (d.bounds or {}).get(key)
+        if fb and fb.get("holds"):
+            lines.append(f"  certified bound on the {what}-estimation error: E int |{err}|^2 dt <= "
+                         + " + ".join(f"{g:.3g}^2 t" if c == "const" else f"{g:.3g}^2 E int |{c}|^2" for c, g in fb["gains"].items())
+                         + " + E xi0' P xi0 (docs/tune.md)")  # fmt: skip
+        elif fb:
+            lines.append(f"  no bound on the {what}-estimation error: {fb.get('why')}")
     if obs.alpha is not None:
         lines.append(f"  observer decay rate alpha = {obs.alpha:.4g}: {obs.why or ''}")
     solves = f", {d.solves.get('total')} conic solves" if d.solves else ""
