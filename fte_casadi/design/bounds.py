@@ -243,6 +243,33 @@ def _from_point(verts, Cz, names, sizes, P0, g0):
     return u["P"], np.asarray(u["g"], float)
 
 
+def _posed(design) -> tuple:
+    """``(verts, Cz, None)`` of the closed loop, or ``(None, None, {"holds": False, "why"})`` where the analysis
+    is not posed (Theorem 5's diffusion; beyond the size limits)."""
+    if any(lm.has_diffusion_extension for lm in design.local_models):
+        return None, None, {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
+    verts, Cz = _vertices(design)
+    N = Cz.shape[1]
+    if N > MAX_STATES or len(verts) > MAX_VERTICES:
+        return None, None, {"holds": False, "why": f"not computed: {len(verts)} vertices of a closed loop of {N} "
+                            f"states (the analysis is posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)"}  # fmt: skip
+    return verts, Cz, None
+
+
+def _record(found: tuple, err: str, structure: str, names: list, sizes: dict) -> dict:
+    """The document's record of a bound on ``E int |err|^2 dt`` found at ``(P, g, worst)``."""
+    Pv, gv, worst = found
+    return {
+        "holds": True,
+        "what": f"E int |{err}|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
+        "P_structure": structure,
+        "gains": {c: float(np.sqrt(gv[k])) for k, c in enumerate(names)},
+        "channels": sizes,
+        "P": Pv.tolist(),
+        "lmi_max_eig": worst,
+    }
+
+
 def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = None) -> dict:
     """The bound of the module docstring at ``design``: ``{"holds", "gains": {channel: sqrt(g)},
     "channels": {channel: size}, "P": M, "lmi_max_eig", "what"}``; ``{"holds": False, "why"}`` when
@@ -252,13 +279,9 @@ def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = 
     the numpy check there, the Schur form of the same set is solved too. When neither passes, ``fallback``
     (``{"P", "g", "names"}``: step 5's block-diagonal certificate, :mod:`~fte_casadi.design.bound_objective`)
     is checked the same way and recorded (``"P_structure": "block-diagonal"``)."""
-    if any(lm.has_diffusion_extension for lm in design.local_models):
-        return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
-    verts, Cz = _vertices(design)
-    N = Cz.shape[1]
-    if N > MAX_STATES or len(verts) > MAX_VERTICES:
-        return {"holds": False, "why": f"not computed: {len(verts)} vertices of a closed loop of {N} states "
-                f"(the analysis is posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)"}  # fmt: skip
+    verts, Cz, why = _posed(design)
+    if why:
+        return why
     names, sizes = channel_names(verts)
     found, why, structure = None, "", "common"
     point = None
@@ -277,16 +300,7 @@ def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = 
             found, structure = (point[0], *ok), "block-diagonal (step 5's)"
     if found is None:
         return {"holds": False, "why": why}
-    Pv, gv, worst = found
-    return {
-        "holds": True,
-        "what": "E int |f - fhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
-        "P_structure": structure,
-        "gains": {c: float(np.sqrt(gv[k])) for k, c in enumerate(names)},
-        "channels": sizes,
-        "P": Pv.tolist(),
-        "lmi_max_eig": worst,
-    }
+    return _record(found, "f - fhat", structure, names, sizes)
 
 
 def _conic(verts, Cz, names, sizes, solver: str) -> tuple[tuple | None, str]:
@@ -349,13 +363,10 @@ def state_error_bound(design, solver: str = "CLARABEL", start: dict | None = Non
     + E xi0' P xi0``. Found in numpy (phase 1 and centring: no conic solve, the same answer on any machine),
     from ``start`` (the fault-error bound's dict, whose P satisfies these LMIs but for the output term) and
     then from ``P = I``; the conic solver when both fail. The same dict as :func:`fault_error_bound`."""
-    if any(lm.has_diffusion_extension for lm in design.local_models):
-        return {"holds": False, "why": "not computed for Theorem 5 diffusion (G, Gf, M)"}
-    verts, Cz = _vertices(design)
+    verts, Cz, why = _posed(design)
+    if why:
+        return why
     n, N = int(design.dims.n), Cz.shape[1]
-    if N > MAX_STATES or len(verts) > MAX_VERTICES:
-        return {"holds": False, "why": f"not computed: {len(verts)} vertices of a closed loop of {N} states "
-                f"(the analysis is posed for at most {MAX_VERTICES} vertices and {MAX_STATES} states)"}  # fmt: skip
     Cx = np.hstack([np.zeros((n, n)), np.eye(n), np.zeros((n, N - 2 * n))])
     names, sizes = channel_names(verts)
     found, how = None, ""
@@ -371,16 +382,7 @@ def state_error_bound(design, solver: str = "CLARABEL", start: dict | None = Non
         if found is None:
             return {"holds": False, "why": f"{how}; {why}"}
         how = f"common ({solver})"
-    Pv, gv, worst = found
-    return {
-        "holds": True,
-        "what": "E int |x - xhat|^2 dt <= sum_k gain_k^2 E int |w_k|^2 dt + E xi0' P xi0, xi = [x; xbar - xbarhat]",
-        "P_structure": how,
-        "gains": {c: float(np.sqrt(gv[k])) for k, c in enumerate(names)},
-        "channels": sizes,
-        "P": Pv.tolist(),
-        "lmi_max_eig": worst,
-    }
+    return _record(found, "x - xhat", how, names, sizes)
 
 
 def bound_value(bounds: dict, energies: dict, v0: float) -> float:
