@@ -205,38 +205,35 @@ def _checked(verts, Cz, names, sizes, Pv, gv):
 POINT_ETA = 1e-4
 
 
-def _from_point(verts, Cz, names, sizes, P0, g0):
-    """``min sum g`` over a common P by the barrier method in numpy (:func:`~fte_casadi.design.barrier.centre`)
-    from the strictly feasible ``(P0, g0)`` (step 5's block-diagonal certificate): ``(P, g)`` or ``(None, None)``."""
-    from ..errors import CentringError
-    from .barrier import centre
+def _analysis(verts, Cz, names, sizes):
+    """The analysis LMIs in numpy: ``(layout, soft, hard, c)`` with ``layout = (P, g)``, one LMI per vertex
+    (``soft``), ``P > 0`` (``hard``) and the objective ``c`` of ``sum g``."""
     from .sdp import Layout, Var, affine_lmi, positive
 
     N = Cz.shape[1]
     layout = Layout(Var("P", (N, N), True), Var("g", (len(names),)))
 
     def builder(Ac, Bc, Wc):
-        def f(P, g):
-            return _lmi(
-                Ac,
-                Bc,
-                Wc,
-                Cz,
-                P,
-                gain_diag(g, names, sizes),
-            )
+        return lambda P, g: _lmi(Ac, Bc, Wc, Cz, P, gain_diag(g, names, sizes))
 
-        return f
-
-    lmis = [
+    soft = [
         affine_lmi("bound", layout, builder(Ac, np.hstack([ch[c] for c in names]), Wc))
         for _, _, Ac, ch, Wc in verts
     ]
-    lmis.append(positive(layout, "P"))
     c = np.zeros(layout.size)
     c[layout.index("g")] = 1.0
+    return layout, soft, [positive(layout, "P")], c
+
+
+def _from_point(verts, Cz, names, sizes, P0, g0):
+    """``min sum g`` over a common P by the barrier method in numpy (:func:`~fte_casadi.design.barrier.centre`)
+    from the strictly feasible ``(P0, g0)`` (step 5's block-diagonal certificate): ``(P, g)`` or ``(None, None)``."""
+    from ..errors import CentringError
+    from .barrier import centre
+
+    layout, soft, hard, c = _analysis(verts, Cz, names, sizes)
     try:
-        cen = centre(lmis, c, layout.pack(P=P0, g=g0), eta=POINT_ETA)
+        cen = centre(soft + hard, c, layout.pack(P=P0, g=g0), eta=POINT_ETA)
     except CentringError:
         return None, None
     u = layout.unpack(cen.v)
@@ -323,28 +320,15 @@ def _from_scratch(verts, Cz, names, sizes, start=None) -> tuple[tuple | None, st
     that passes the numpy check (the phase-1 point itself when the centring fails), or ``(None, why)``."""
     from ..errors import CentringError
     from .barrier import centre, phase1
-    from .sdp import Layout, Var, affine_lmi, positive
 
-    N = Cz.shape[1]
-    layout = Layout(Var("P", (N, N), True), Var("g", (len(names),)))
-
-    def builder(Ac, Bc, Wc):
-        return lambda P, g: _lmi(Ac, Bc, Wc, Cz, P, gain_diag(g, names, sizes))
-
-    soft = [
-        affine_lmi("bound", layout, builder(Ac, np.hstack([ch[c] for c in names]), Wc))
-        for _, _, Ac, ch, Wc in verts
-    ]
-    hard = [positive(layout, "P")]
+    layout, soft, hard, c = _analysis(verts, Cz, names, sizes)
     try:
-        P0, g0 = (np.eye(N), np.ones(len(names))) if start is None else start
+        P0, g0 = (np.eye(Cz.shape[1]), np.ones(len(names))) if start is None else start
         v = phase1(soft, hard, layout.pack(P=P0, g=g0))
     except CentringError as exc:
         return None, f"phase 1 in numpy failed ({exc})"
     if v is None:
         return None, "the analysis LMI has no point (phase 1 in numpy)"
-    c = np.zeros(layout.size)
-    c[layout.index("g")] = 1.0
     how = "common (numpy, phase 1 and centring)"
     try:
         v = centre(soft + hard, c, v, eta=POINT_ETA).v
