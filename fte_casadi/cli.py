@@ -408,38 +408,73 @@ def _fmt_list(v) -> str:
     return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
 
 
+def _with_noise(scenario, noise: str | None):
+    """The scenario with ``--measurement-noise`` (comma-separated standard deviations) when given."""
+    if not noise:
+        return scenario
+    import dataclasses
+
+    try:
+        stds = [float(v) for v in noise.split(",")]
+    except ValueError:
+        raise ParameterError(
+            f"--measurement-noise {noise!r}: give one standard deviation per output, comma-separated (e.g. 0.01,0,0.02)"
+        ) from None
+    return dataclasses.replace(scenario, measurement_noise=tuple(stds))
+
+
+def _summary(plant: str, m: dict) -> str:
+    """The metrics document in words (docs/interface.md gives each formula)."""
+    lines = [
+        f"{plant}: {m['paths']} paths x 3 runs, T = {m['T']:g}, dt = {m['dt']:g}, seed {m['seed']}, {m['wall_s']:.2f} s",
+        f"  allowances: start-up transient {m['transient']:.4g}, after each window {m['settle_after']:.4g}",
+        f"  state RMS error (t >= transient, FTC run): {_fmt_list(m['state_rms_error'])}",
+        f"  fault error, relative RMS over whole windows: {_fmt_list(m['fault_rel_rms_error'])} "
+        f"(settled part, each window minus its first 20 %: {_fmt_list(m['fault_rel_rms_error_settled'])})",
+        f"  false alarms, estimate outside its windows: peak / fault's peak {_fmt_list(m['false_alarm_peak'])}, "
+        f"relative RMS {_fmt_list(m['false_alarm_rel_rms'])}",
+        f"  tolerant control, true outputs C x (ftc_true_ratio, < 1: better than none): {_num(m['ftc_true_ratio'])}; "
+        f"compensated reading yc (ftc_compensated_ratio, estimation only): {_num(m['ftc_compensated_ratio'])}",
+    ]
+    for e in m.get("detection") or []:
+        lines.append(
+            f"  detection of {e['fault']}: threshold {_num(e['threshold'])}, false alarms per unit time "
+            f"{_num(e['false_alarm_rate'])} on fault-free paths (asked {_num(e['false_alarm_rate_asked'])}), "
+            f"{_num(e.get('false_alarm_rate_ftc_run'))} outside its windows with the other faults"
+        )
+    if m.get("measurement_noise") is not None:
+        lines.append(f"  measurement noise (std per output): {_fmt_list(m['measurement_noise'])}")
+    lines.append(f"  samples outside the plant's region: {100 * m['outside_region']:.2g} %")
+    lines.append(f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}")
+    return "\n".join(lines)
+
+
+def _num(v, fmt: str = ".3g") -> str:
+    return "n/a" if v is None else format(v, fmt)
+
+
 def _window_lines(m: dict) -> list[str]:
-    """Per fault window: its fault relative RMS error and FTC deviation ratio."""
+    """Per fault window: its estimation error, settling, detection and tolerant-control figures."""
     out = []
     for w in m.get("windows", []):
+        det = w.get("detection_delay")
+        miss = w.get("missed_detections")
         out.append(
-            f"  window {w['fault']} [{w['start']:g}, {w['stop']:g}): fault relative RMS error "
-            f"{'n/a' if w['fault_rel_rms_error'] is None else format(w['fault_rel_rms_error'], '.3g')}, FTC deviation "
-            f"ratio {'n/a' if w['ftc_deviation_ratio'] is None else format(w['ftc_deviation_ratio'], '.3g')}"
+            f"  window {w['fault']} [{w['start']:g}, {w['stop']:g}): fault error (relative RMS, whole window) "
+            f"{_num(w['fault_rel_rms_error'])}, settled part {_num(w.get('fault_rel_rms_error_settled'))}, "
+            f"settling time {_num(w.get('settling_time'))}; FTC true ratio {_num(w.get('ftc_true_ratio'))} "
+            f"(per output {_fmt_list(w.get('ftc_true_ratio_per_output') or [])}), compensated "
+            f"{_num(w.get('ftc_compensated_ratio'))}"
+            + ("" if miss is None else f"; detected after {_num(det)} on average, missed on {miss} paths")
         )
     return out
 
 
-def _warnings(m: dict, inputs, faults=()) -> list[str]:
-    """Where tolerant control is worse than none, a fault estimate raises false alarms, or an input
-    sits at a limit (the thresholds of :mod:`fte_casadi.sim.metrics`)."""
-    from .verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+def _warnings(m: dict, inputs, faults=(), outputs=()) -> list[str]:
+    """The verdicts of :func:`fte_casadi.verdicts.verdicts`, as warnings."""
+    from .verdicts import verdicts
 
-    out = []
-    for name, v in zip(faults, m.get("false_alarm_rel_rms") or ()):
-        if v is not None and v > FALSE_ALARM:
-            out.append(f"warning: the estimate of {name} outside its fault windows is as large as the fault itself "
-                       f"(relative RMS {v:.3g} > {FALSE_ALARM:g}): false alarms, e.g. cross-talk from another fault; see the figures")  # fmt: skip
-    for w in m.get("windows", []):
-        r = w.get("ftc_deviation_ratio")
-        if r is not None and r > WORSE_THAN_NONE:
-            out.append(f"warning: in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) tolerant control makes "
-                       f"the outputs worse than none (FTC deviation ratio {r:.3g} > {WORSE_THAN_NONE:g})")  # fmt: skip
-        for i, frac in enumerate(w.get("input_saturation", [])):
-            if frac > SATURATED:
-                out.append(f"warning: input {inputs[i]} is at a limit for {100 * frac:.0f} % of the window of "
-                           f"{w['fault']} [{w['start']:g}, {w['stop']:g}): tolerance is that of a saturated actuator")  # fmt: skip
-    return out
+    return ["warning: " + v["text"] for v in verdicts(m, inputs, faults, outputs)]
 
 
 def _why(d, m: dict) -> list[str]:
@@ -471,10 +506,24 @@ def _why(d, m: dict) -> list[str]:
 @click.option("--fast-math", "fast_math", is_flag=True,
               help="Fast mode: fused multiply-adds and a vector math library (equal to the default within "
                    "the tolerance of docs/simulation.md; the same numbers for any split of the paths).")  # fmt: skip
+@click.option("--measurement-noise", "noise",
+              help="Standard deviations of white noise on the outputs, one per output (e.g. 0.01,0,0.02), in the "
+                   "outputs' units; overrides the scenario's.")  # fmt: skip
+@click.option("--false-alarm-rate", "fa_rate", type=float,
+              help="False alarms per unit of the plant's time the detection thresholds are set for "
+                   "(default: one per hour of operation).")  # fmt: skip
+@click.option(
+    "--no-detection",
+    "no_detect",
+    is_flag=True,
+    help="No detection thresholds (skips the fault-free calibration paths).",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics document (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @_guard
-def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json, quiet):
+def simulate(
+    target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, no_detect, as_json, quiet
+):
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .plants.loader import load_plant, load_scenario
@@ -491,9 +540,10 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
         _writable_target(save, "--save", "result.npz")
     d = _design_or_plant(target, progress=not quiet)
     plant = load_plant(d.plant_spec)
-    scenario = load_scenario(d.plant_spec)
+    scenario = _with_noise(load_scenario(d.plant_spec), noise)
     res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
-                  record_all=bool(save), scheduler=scheduler, exact=not fast_math)  # fmt: skip
+                  record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
+                  false_alarm_rate=fa_rate)  # fmt: skip
     m = res.metrics
     if save:
         save_result(res, save)
@@ -502,7 +552,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
         from .plot import write_figures
 
         figs = write_figures(res, plots)
-    warn = _warnings(m, list(plant.input_names), list(plant.fault_names))
+    warn = _warnings(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names))
     warn += _why(d, m)
     change = m.get("dt_change")
     if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
@@ -514,16 +564,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
     if as_json:
         click.echo(json.dumps(m, indent=1))
     else:
-        click.echo(
-            f"{d.plant}: {m['paths']} paths x 3 runs, T = {m['T']:g}, dt = {m['dt']:g}, seed {m['seed']}, "
-            f"{m['wall_s']:.2f} s\n"
-            f"  state RMS error (t >= 1 s, FTC run): {_fmt_list(m['state_rms_error'])}\n"
-            f"  fault relative RMS error: {_fmt_list(m['fault_rel_rms_error'])}\n"
-            f"  fault estimate outside its windows (false alarm, relative RMS): {_fmt_list(m['false_alarm_rel_rms'])}\n"
-            f"  FTC deviation ratio (smaller is better): "
-            f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}\n"
-            f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}"
-        )
+        click.echo(_summary(d.plant, m))
         for line in _window_lines(m):
             click.echo(line)
         for note in getattr(res, "notes", ()) or ():
@@ -542,7 +583,8 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
 @main.command()
 @click.argument("target", metavar="DESIGN.json|PLANT")
 @click.option("--vary", "vary", multiple=True, required=True,
-              help="NAME=V1,V2,... with NAME one of fault_scale, noise_scale, d_scale; repeat for a grid.")  # fmt: skip
+              help="NAME=V1,V2,... with NAME one of fault_scale, noise_scale, d_scale, measurement_noise_scale; "
+                   "repeat for a grid.")  # fmt: skip
 @click.option("--paths", type=int, help="Brownian paths per point (default: the scenario's).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the random generator.")
 @click.option("--scheduler", help="Address of a dask.distributed scheduler: run the paths on its workers.")
@@ -589,12 +631,14 @@ def sweep(target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, qui
     else:
         for p in points:
             m = p["metrics"]
-            click.echo(", ".join(f"{k} = {v:g}" for k, v in p["point"].items()) + ": fault relative RMS error "
-                       f"{_fmt_list(m['fault_rel_rms_error'])}, FTC deviation ratio "
-                       f"{'n/a' if m['ftc_deviation_ratio'] is None else format(m['ftc_deviation_ratio'], '.3g')}")  # fmt: skip
+            click.echo(", ".join(f"{k} = {v:g}" for k, v in p["point"].items()) + ": fault error (relative RMS, "
+                       f"whole windows) {_fmt_list(m['fault_rel_rms_error'])}, false-alarm peak "
+                       f"{_fmt_list(m['false_alarm_peak'])}, FTC true ratio {_num(m['ftc_true_ratio'])}")  # fmt: skip
     for p in points:  # the per-window verdicts, as fte simulate gives them, named by their point
         at = ", ".join(f"{k} = {v:g}" for k, v in p["point"].items())
-        for w in _warnings(p["metrics"], list(plant.input_names), list(plant.fault_names)):
+        for w in _warnings(
+            p["metrics"], list(plant.input_names), list(plant.fault_names), list(plant.output_names)
+        ):
             click.echo(textwrap.fill(f"fte: at {at}: {w}", width=100), err=True)
 
 

@@ -3,17 +3,97 @@
 ``fte simulate`` warns by them, the report marks by them, ``fte tune`` chooses by them and
 :func:`fte_casadi.design.limits.explain_metrics` explains the windows and faults they single out.
 A module of its own (as :mod:`fte_casadi.rounding`), so that every step of the package can read them
-without importing the simulator.
+without importing the simulator. Every verdict is judged on the figures measured on the true plant.
 """
 
 from __future__ import annotations
 
-__all__ = ["WORSE_THAN_NONE", "FALSE_ALARM", "SATURATED"]
+__all__ = ["WORSE_THAN_NONE", "FALSE_ALARM", "SATURATED", "OUTSIDE_REGION", "verdicts"]
 
-#: an FTC deviation ratio above this: tolerant control leaves the outputs worse than none (below it:
-#: better than none)
+#: a window's ``ftc_true_ratio`` above this: tolerant control leaves the TRUE outputs worse than none
 WORSE_THAN_NONE = 1.0
-#: a fault estimate outside its windows above this fraction of the fault's RMS: false alarms
-FALSE_ALARM = 1.0
+#: a fault estimate's peak outside its windows (``false_alarm_peak``) at or above this fraction of the
+#: fault's peak: false alarms (an alarm set between the two cannot tell them from the fault)
+FALSE_ALARM = 0.5
 #: an input at a limit for more than this fraction of a window: the tolerance is that of a saturated actuator
 SATURATED = 0.05
+#: more than this fraction of the samples outside the plant's region: the T-S model is not exact there
+OUTSIDE_REGION = 0.01
+
+
+def _where(w: dict) -> str:
+    return f"the window of {w['fault']} [{w['start']:g}, {w['stop']:g})"
+
+
+def _crosstalk(w: dict, faults) -> str:
+    """The other faults' estimates in a window, relative to their own peaks: what Kf feeds into the plant there."""
+    xs = [(faults[q] if q < len(faults) else str(q), v) for q, v in enumerate(w.get("crosstalk_peak") or [])
+          if v is not None and v > 0.05]  # fmt: skip
+    if not xs:
+        return ""
+    txt = ", ".join(f"{nm} {v:.3g}" for nm, v in xs)
+    return (
+        f"; the estimates of the other faults show cross-talk there (peak relative to their own faults: {txt}), "
+        "which the tolerant control term Kf fhat feeds into the plant"
+    )
+
+
+def verdicts(m: dict, inputs=(), faults=(), outputs=()) -> list[dict]:
+    """The verdicts on metrics document ``m``: a list of ``{"verdict", "where", "value", "text"}`` with
+    ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``, ``saturated``,
+    ``not settled``, ``missed``, ``outside region``."""
+    out = []
+
+    def add(verdict, where, value, text):
+        out.append({"verdict": verdict, "where": where, "value": value, "text": text})
+
+    for name, v in zip(faults, m.get("false_alarm_peak") or ()):
+        if v is not None and v >= FALSE_ALARM:
+            add("false alarm", name, v,
+                f"the estimate of {name} outside its fault windows peaks at {v:.3g} x the fault's own peak "
+                f"(>= {FALSE_ALARM:g}): false alarms, e.g. cross-talk from another fault")  # fmt: skip
+    for w in m.get("windows", []):
+        where = _where(w)
+        r = w.get("ftc_true_ratio")
+        if r is not None and r > WORSE_THAN_NONE:
+            per = w.get("ftc_true_ratio_per_output") or []
+            worst = ", ".join(
+                f"{outputs[k] if k < len(outputs) else k}: {v:.4g}"
+                for k, v in enumerate(per)
+                if v is not None
+            )
+            add("worse than none", where, r,
+                f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {r:.4g} > "
+                f"{WORSE_THAN_NONE:g}; per output {worst}){_crosstalk(w, faults)}")  # fmt: skip
+        elif r is not None:
+            for k, v in enumerate(w.get("ftc_true_ratio_per_output") or []):
+                if v is not None and v > WORSE_THAN_NONE:
+                    name = outputs[k] if k < len(outputs) else f"output {k}"
+                    add("worse than none on an output", f"{where}, {name}", v,
+                        f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
+                        f"{WORSE_THAN_NONE:g}), though the outputs as a whole are better (ftc_true_ratio {r:.3g})"
+                        f"{_crosstalk(w, faults)}")  # fmt: skip
+        if w.get("fault_rel_rms_error") is not None and w.get("settling_time") is None:
+            add("not settled", where, None,
+                f"in {where} the fault estimate does not settle: its mean error over the paths is not within 10 % of "
+                "the fault's peak by the window's end")  # fmt: skip
+        miss = w.get("missed_detections")
+        if miss:
+            add(
+                "missed",
+                where,
+                miss,
+                f"in {where} the fault is not detected on {miss} of {m.get('paths')} paths",
+            )
+        for i, frac in enumerate(w.get("input_saturation", [])):
+            if frac > SATURATED:
+                name = inputs[i] if i < len(inputs) else str(i)
+                add("saturated", where, frac,
+                    f"input {name} is at a limit for {100 * frac:.0f} % of {where}: the tolerance is that of a "
+                    "saturated actuator")  # fmt: skip
+    frac = m.get("outside_region")
+    if frac is not None and frac > OUTSIDE_REGION:
+        add("outside region", "run", frac,
+            f"{100 * frac:.1f} % of the samples leave the plant's region, where the T-S model (and the design's "
+            "certificate) is not exact")  # fmt: skip
+    return out

@@ -7,33 +7,31 @@ import pytest
 
 from fte_casadi.errors import SimulationError
 from fte_casadi.sim import Bias, RunData, Scenario, SimulationResult, load_result, metrics, save_result
-from fte_casadi.sim.metrics import (
-    false_alarm_rel_rms,
-    fault_rel_rms_error,
-    ftc_deviation_ratio,
-    state_rms_error,
-)
 
 
 def _hand_made(design, names):
-    """2 paths, 1 state, 1 fault, 1 output; t = 0 .. 10 in steps of 0.5 (21 samples)."""
+    """2 paths, 1 state, 1 fault, 1 output; t = 0 .. 10 in steps of 0.5 (21 samples); the observer's slowest
+    time constant 1/3, so the start-up allowance and the one after a window are 3 x 1/3 = 1."""
+    design = dataclasses.replace(design, C=np.array([[1.0]]),
+                                 checks={**design.checks, "R_max_real_eig": -3.0})  # fmt: skip
     t = np.arange(21) * 0.5
     P, S = 2, len(t)
-    win = (t >= 4.0) & (t < 9.0)  # fault window [4, 9)
+    win = (t >= 4.0) & (t < 9.0)  # fault window [4, 9): 10 samples
     f = np.zeros((P, S, 1))
     f[:, win, 0] = 2.0
     x = np.zeros((P, S, 1))
     x[0, :, 0], x[1, :, 0] = 1.0, -1.0
     xbh = np.zeros((P, S, 3))  # [xhat, fdothat, fhat]
     xbh[0, :, 0], xbh[1, :, 0] = 1.1, -1.3  # errors 0.1 and 0.3 everywhere
-    xbh[:, :, 2] = f[:, :, 0] + 0.5 * win  # fhat = f + 0.5 in the window
+    xbh[:, :, 2] = f[:, :, 0] + 0.1 * win  # fhat = f + 0.1 in the window ...
+    xbh[:, (t >= 4.0) & (t < 5.0), 2] += 0.4  # ... + 0.5 in its first second (4, 4.5)
     xbh[:, (t >= 1.0) & (t < 2.5), 2] = 0.4  # and a false alarm of 0.4 at t = 1, 1.5, 2
     y_free = np.zeros((P, S, 1))
     y_nf = y_free + 2.0 * win[None, :, None]
     yc = y_free + 0.5 * win[None, :, None]
 
-    def run(y, yc_):
-        return RunData(x=x, xbarhat=xbh, f=f, u=np.zeros((P, S, 1)), y=y, yc=yc_)
+    def run(xr, y, yc_):
+        return RunData(x=xr, xbarhat=xbh, f=f, u=np.zeros((P, S, 1)), y=y, yc=yc_)
 
     sc = Scenario(name="hand", T=10.0, dt=0.5, faults=(Bias("fa", 2.0, 4.0, 9.0),))
     return SimulationResult(
@@ -44,14 +42,15 @@ def _hand_made(design, names):
         seed=3,
         paths=P,
         record_every=1,
-        free=run(y_free, y_free),
-        no_ftc=run(y_nf, y_nf),
-        ftc=run(y_nf, yc),
+        free=run(x - 0.5 * win[None, :, None], y_free, y_free),  # C x_FTC - C x_free = 0.5 in the window
+        no_ftc=run(x + 1.5 * win[None, :, None], y_nf, y_nf),  # C x_noFTC - C x_free = 2
+        ftc=run(x, y_nf, yc),
         scenario=sc,
         design=design,
         names=names,
         wall_s=1.5,
         compiled=True,
+        region=(np.array([-1.2]), np.array([1.2])),  # the no-FTC run leaves it at 2.5 in the window
     )
 
 
@@ -70,51 +69,46 @@ NAMES = {
 def test_metrics_hand_made(lqr_designs):
     res = _hand_made(lqr_designs["manipulator"], NAMES)
     m = metrics(res)
-    assert set(m) == {
-        "paths",
-        "dt",
-        "T",
-        "seed",
-        "state_rms_error",
-        "fault_rel_rms_error",
-        "false_alarm_rel_rms",
-        "ftc_deviation_ratio",
-        "windows",
-        "input_saturation",
-        "wall_s",
-    }
+    assert {"transient", "settle_after", "fault_rel_rms_error_settled", "false_alarm_peak", "ftc_true_ratio",
+            "ftc_compensated_ratio", "detection", "outside_region"} <= set(m)  # fmt: skip
+    assert "ftc_deviation_ratio" not in m
     assert (m["paths"], m["dt"], m["T"], m["seed"], m["wall_s"]) == (2, 0.5, 10.0, 3, 1.5)
-    # one window per fault profile, with the same numbers as the pooled ones here (one window)
+    assert (m["transient"], m["settle_after"]) == (pytest.approx(1.0), pytest.approx(1.0))
     (w,) = m["windows"]
     assert (w["fault"], w["start"], w["stop"]) == ("fa", 4.0, 9.0)
-    assert w["fault_rel_rms_error"] == pytest.approx(0.25, abs=1e-12)
-    assert w["ftc_deviation_ratio"] == pytest.approx(0.25, abs=1e-12)
+    whole = np.sqrt((2 * 0.5**2 + 8 * 0.1**2) / 10) / 2  # the WHOLE window, start-up included
+    assert w["fault_rel_rms_error"] == pytest.approx(whole, abs=1e-12)
+    assert m["fault_rel_rms_error"] == pytest.approx([whole], abs=1e-12)
+    # the settled part [5, 9): error 0.1 against 2
+    assert w["fault_rel_rms_error_settled"] == pytest.approx(0.05, abs=1e-12)
+    assert m["fault_rel_rms_error_settled"] == pytest.approx([0.05], abs=1e-12)
+    assert w["settling_time"] == pytest.approx(1.0)  # the error 0.5 > 10 % of 2 at 4, 4.5; 0.1 from 5 on
+    assert w["release_time"] == pytest.approx(0.0)  # the estimate is 0 from t = 9 on
     assert m["input_saturation"] == [0.0] and w["input_saturation"] == [0.0]  # the fixture has no limits
-    # state error: RMS 0.1 on path 0, 0.3 on path 1 -> mean 0.2
+    # state error after the transient (t >= 1): RMS 0.1 on path 0, 0.3 on path 1 -> mean 0.2
     assert m["state_rms_error"] == pytest.approx([0.2], abs=1e-12)
-    # fault: window [4, 9) minus its first 20 % -> [5, 9): fhat - f = 0.5, f = 2 -> 0.25
-    assert m["fault_rel_rms_error"] == pytest.approx([0.25], abs=1e-12)
-    # false alarm: t >= 1 outside [4, 9) is 9 samples (1 .. 3.5 and 9 .. 10), fhat = 0.4 on 3 of them:
-    # RMS 0.4 / sqrt(3), against RMS(f) = 2 over [5, 9)
-    assert m["false_alarm_rel_rms"] == pytest.approx([0.4 / np.sqrt(3) / 2], abs=1e-12)
-    # outputs: yc - y_free = 0.5, y_noFTC - y_free = 2 over the window -> 0.25
-    assert m["ftc_deviation_ratio"] == pytest.approx(0.25, abs=1e-12)
+    # outside the fault: t >= 1, outside [4, 9) and not within 1 of its end: 1 .. 3.5 and 10 (7 samples);
+    # fhat = 0.4 on 3 of them: peak 0.4 against the fault's 2, RMS 0.4 sqrt(3 / 7) against 2
+    assert m["false_alarm_peak"] == pytest.approx([0.2], abs=1e-12)
+    assert m["false_alarm_rel_rms"] == pytest.approx([0.4 * np.sqrt(3 / 7) / 2], abs=1e-12)
+    # the true outputs: C x_FTC - C x_free = 0.5, C x_noFTC - C x_free = 2 over the window -> 0.25
+    assert m["ftc_true_ratio"] == pytest.approx(0.25, abs=1e-12)
+    assert w["ftc_true_ratio"] == pytest.approx(0.25, abs=1e-12)
+    assert w["ftc_true_ratio_per_output"] == pytest.approx([0.25], abs=1e-12)
+    # the compensated reading: yc - y_free = 0.5, y_noFTC - y_free = 2 -> 0.25
+    assert m["ftc_compensated_ratio"] == pytest.approx(0.25, abs=1e-12)
+    # the no-FTC run at 2.5 (> 1.2) on the window's 10 of 21 samples, on both paths
+    assert m["outside_region"] == pytest.approx(10 / 21, abs=1e-12)
 
 
-def test_metric_functions_edge_cases():
-    t = np.linspace(0, 2, 5)  # 0, .5, 1, 1.5, 2
-    x = np.zeros((1, 5, 2))
-    xh = np.zeros((1, 5, 2))
-    xh[0, :, 1] = [9, 9, 1, 1, 1]  # start-up transient before t = 1 is ignored
-    assert state_rms_error(x, xh, t) == pytest.approx([0.0, 1.0])
-    f = np.zeros((1, 5, 1))
-    assert fault_rel_rms_error(f, f, t, [[(0.0, 2.0)]]) == [None]  # no fault: undefined
-    assert fault_rel_rms_error(f, f, t, [[]]) == [None]
-    assert false_alarm_rel_rms(f, f, t, [[(0.0, 2.0)]]) == [None]  # no fault: undefined
-    f[0, 2:4, 0] = 1.0
-    assert false_alarm_rel_rms(f, f, t, [[(0.0, 2.5)]]) == [None]  # no sample outside the window
-    y = np.zeros((1, 5, 1))
-    assert ftc_deviation_ratio(y, y, y, t, [[(0.0, 1.0)]]) is None
+def test_a_fault_of_size_zero_gets_no_ratio(lqr_designs):
+    res = _hand_made(lqr_designs["manipulator"], NAMES)
+    zero = dataclasses.replace(res.ftc, f=np.zeros_like(res.ftc.f))
+    m = metrics(dataclasses.replace(res, ftc=zero, no_ftc=dataclasses.replace(res.no_ftc, f=zero.f)))
+    (w,) = m["windows"]
+    assert m["fault_rel_rms_error"] == [None] and w["fault_rel_rms_error"] is None
+    assert w["ftc_true_ratio"] is None and w["ftc_compensated_ratio"] is None and m["ftc_true_ratio"] is None
+    assert m["false_alarm_peak"] == [None]
 
 
 def test_npz_round_trip(tmp_path, lqr_designs):

@@ -185,18 +185,18 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
     out = []
     wins = metrics.get("windows") or []
     if windows is None:
-        windows = [k for k, w in enumerate(wins) if (w.get("ftc_deviation_ratio") or 0.0) >= WORSE_THAN_NONE]
+        windows = [k for k, w in enumerate(wins) if (w.get("ftc_true_ratio") or 0.0) >= WORSE_THAN_NONE]
     for k in windows:
         w = wins[k]
         j = names.index(w["fault"]) if w["fault"] in names else 0
         lim = fault_limits(design, j)
         found, seen = causes(lim, float(w["stop"]) - float(w["start"]))
-        r = w.get("ftc_deviation_ratio")
+        r = w.get("ftc_true_ratio")
         head = (f"in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) (FTC ratio "
                 f"{'n/a' if r is None else format(r, '.3g')})")  # fmt: skip
         out.append(head + (": " + "; ".join(found) if found else ": no structural cause found")
                    + f" ({seen})")  # fmt: skip
-    fa = metrics.get("false_alarm_rel_rms") or []
+    fa = metrics.get("false_alarm_peak") or []
     if faults is None:
         faults = [j for j, v in enumerate(fa) if v is not None and v >= FALSE_ALARM]
     for j in faults:

@@ -1,4 +1,4 @@
-"""The figure of a robustness sweep (``fte sweep``): fault estimation error and FTC deviation ratio
+"""The figure of a robustness sweep (``fte sweep``): fault estimation error and FTC true ratio
 over the grid — curves for one varying factor, heat maps for two."""
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def sweep_plot(points: list[dict], plant: str, fault_names=None) -> Figure:
         fig = Figure(figsize=(10, 4), layout="constrained")
         FigureCanvasAgg(fig)
         panels = [("mean fault relative RMS error", lambda m: np.nanmean([_val(v) for v in m["fault_rel_rms_error"]])),
-                  ("FTC deviation ratio", lambda m: _val(m["ftc_deviation_ratio"]))]  # fmt: skip
+                  ("FTC true ratio", lambda m: _val(m["ftc_true_ratio"]))]  # fmt: skip
         for k, (title, get) in enumerate(panels):
             Z = np.full((len(ys), len(xs)), np.nan)
             for p in points:
@@ -63,10 +63,10 @@ def sweep_plot(points: list[dict], plant: str, fault_names=None) -> Figure:
                 label=f"fault relative RMS error, {names[j]}")  # fmt: skip
     ax.plot(
         x,
-        [_val(p["metrics"]["ftc_deviation_ratio"]) for p in points],
+        [_val(p["metrics"]["ftc_true_ratio"]) for p in points],
         "s--",
         color="k",
-        label="FTC deviation ratio",
+        label="FTC true ratio",
     )
     ax.axhline(1.0, color="tab:red", lw=0.8, ls=":")
     ax.set_title(f"{plant}: robustness sweep", fontsize=10)

@@ -18,8 +18,6 @@ import json
 import pickle
 from collections.abc import Callable, Iterator
 
-import numpy as np
-
 from ..errors import MissingDependencyError, SimulationError
 from .vector import auto_chunk
 
@@ -75,8 +73,9 @@ def _threads(client) -> int:
 
 def run_on_cluster(scheduler, design, plant, scenario, dt: float, scales: dict, seed: int, paths: int,
                    chunk: int | None, task: Callable, on_done: Callable[[int], None] = lambda k: None,
-                   ) -> Iterator[tuple[int, tuple[np.ndarray, np.ndarray]]]:  # fmt: skip
-    """Submit the chunks to the cluster and yield ``(path0, (acc, div))`` in path order.
+                   path0: int = 0) -> Iterator[tuple[int, tuple]]:  # fmt: skip
+    """Submit the chunks of paths ``path0 .. path0 + paths - 1`` to the cluster and yield ``(a, task's
+    result)`` in path order, ``a`` the chunk's first path relative to ``path0``.
 
     ``scheduler``: an address (a client is opened and closed here) or a ``distributed.Client``.
     ``chunk``: paths per task; ``None``: about four tasks per worker thread (:func:`.engine.auto_chunk`)."""
@@ -90,7 +89,10 @@ def run_on_cluster(scheduler, design, plant, scenario, dt: float, scales: dict, 
                 json.dumps(scales, sort_keys=True), int(seed))  # fmt: skip
         starts = list(range(0, paths, chunk))
         # every chunk is submitted at once (the workers run them in parallel); results come back in path order
-        futs = [client.submit(task, *args, a, min(chunk, paths - a), pure=False, retries=2) for a in starts]
+        futs = [
+            client.submit(task, *args, path0 + a, min(chunk, paths - a), pure=False, retries=2)
+            for a in starts
+        ]
         for a, fut in zip(starts, futs):
             try:
                 out = fut.result()

@@ -42,7 +42,8 @@ from ..model import Plant
 from ..rounding import series_floor
 from ..step import step_function
 from .cluster import plant_from_bytes, run_on_cluster
-from .reduce import finalize, increments, masks
+from .detect import calibrate, default_rate
+from .reduce import allowances, finalize, masks, monitor
 from .result import RUNS, RunData, SimulationResult
 from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, UniformNoise, fault_schedule
 from .vector import CHUNK as CHUNK
@@ -57,20 +58,20 @@ __all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_path
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
 #: the factors a sweep may vary, and their defaults
-SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0}
+SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0, "measurement_noise_scale": 1.0}
 
 
 class PathLayout:
     """Sizes and offsets of the closed-loop state and record of one path."""
 
-    def __init__(self, n: int, nbar: int, lf: int, m: int, p: int, ld: int):
-        self.n, self.nbar, self.lf, self.m, self.p, self.ld = n, nbar, lf, m, p, ld
+    def __init__(self, n: int, nbar: int, lf: int, m: int, p: int, ld: int, nv: int = 0):
+        self.n, self.nbar, self.lf, self.m, self.p, self.ld, self.nv = n, nbar, lf, m, p, ld, nv
         self.run_state = n + nbar + lf  # x, z, sensor memory
         self.ns = 3 * self.run_state
         self.sizes = {"x": n, "xbarhat": nbar, "f": lf, "u": m, "y": p, "yc": p}
         self.run_rec = sum(self.sizes.values())
         self.nrec = 3 * self.run_rec
-        self.nw = 1 + ld  # dW, d
+        self.nw = 1 + ld + nv  # dW, d, measurement noise
 
     def split_record(self, rec: np.ndarray) -> dict[str, RunData]:
         """``rec``: (paths, samples, nrec) -> one RunData per run, arrays (paths, samples, size) (views)."""
@@ -86,15 +87,17 @@ class PathLayout:
 
 
 def closed_loop_sample(
-    design: Design, plant: Plant, dt: float, sched: FaultSchedule
+    design: Design, plant: Plant, dt: float, sched: FaultSchedule, noise: bool = False
 ) -> tuple[ca.Function, PathLayout]:
     """``(state, w, fp) -> (state_next, record)``: one sample of all three runs for one path.
 
-    ``w = [dW; d]``, ``fp`` the fault coefficients of this sample (:meth:`FaultSchedule.stacked`).
+    ``w = [dW; d]``, or with ``noise`` ``[dW; d; v]`` (``v``: the measurement noise of each output, added
+    to ``y``; the three runs share it), ``fp`` the fault coefficients of this sample
+    (:meth:`FaultSchedule.stacked`). A stuck sensor freezes the reading it had, noise included.
     """
     n, m, p, lf, ld = plant.n, plant.m, plant.p, plant.lf, plant.ld
     nbar = int(design.dims.nbar)
-    lay = PathLayout(n, nbar, lf, m, p, ld)
+    lay = PathLayout(n, nbar, lf, m, p, ld, nv=p if noise else 0)
     drift = plant.drift_function()
     diff = plant.diffusion_function()
     steps = {
@@ -105,14 +108,15 @@ def closed_loop_sample(
     S = ca.SX.sym("state", lay.ns)
     w = ca.SX.sym("w", lay.nw)
     fp = ca.SX.sym("fp", 4 * lf)
-    dW, d = w[0], w[1:]
+    dW, d = w[0], w[1 : 1 + ld]
+    v = w[1 + ld :] if noise else ca.DM.zeros(p)
     a, lu, st, la = fp[:lf], fp[lf : 2 * lf], fp[2 * lf : 3 * lf], fp[3 * lf :]
     d2 = ca.DM.zeros(plant.d2.numel())
     nexts, recs = [], []
     for r, run in enumerate(RUNS):
         o = r * lay.run_state
         x, z, mem = S[o : o + n], S[o + n : o + n + nbar], S[o + n + nbar : o + lay.run_state]
-        Cx = ca.mtimes(ca.DM(C), x)
+        Cx = ca.mtimes(ca.DM(C), x) + v  # the reading before sensor faults
         faulty = run != "free"
         fs, mem_next = [], []
         for j in range(lf):
@@ -259,6 +263,11 @@ def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
         if not (math.isfinite(fv) and fv >= 0):
             raise ParameterError(f"{k} must be a non-negative finite number; got {v!r}")
         out[k] = fv
+    if scenario is not None and scenario.measurement_noise is None and out["measurement_noise_scale"] != 1.0:
+        raise ParameterError(
+            f"measurement_noise_scale = {out['measurement_noise_scale']:g}: scenario {scenario.name!r} has no measurement "
+            "noise to scale; give the scenario measurement_noise=[std per output] (or fte simulate --measurement-noise)"
+        )
     for fp in scenario.faults if scenario is not None else ():
         if isinstance(fp, LossOfEffectiveness) and fp.loss * out["fault_scale"] > 1.0:
             raise ParameterError(
@@ -271,11 +280,15 @@ def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
 
 class Prepared:
     """Everything a run needs that does not depend on the paths: built once per (design, scenario, dt),
-    the same in-process and on a cluster worker (which rebuilds it from the documents)."""
+    the same in-process and on a cluster worker (which rebuilds it from the documents).
+
+    The shared inputs ``SH`` (samples, columns): the fault coefficients, the masks, the deterministic
+    unknown input, the time, the detection thresholds (per fault; inf: none) and the measurement
+    noise's standard deviations (per output, when the scenario has noise)."""
 
     def __init__(
         self, design: Design, plant: Plant, scenario: Scenario, dt: float, nsteps: int, scales: dict,
-        exact: bool = True,
+        exact: bool = True, thresholds=None,
     ):  # fmt: skip
         from .vector import VectorEngine
 
@@ -285,14 +298,15 @@ class Prepared:
         nsamp = nsteps + 1
         self.t = np.arange(nsamp) * dt
         sched = plant_schedule(design, plant, scenario, self.t, dt)
-        sample, lay = closed_loop_sample(design, plant, dt, sched)
+        noise = scenario.measurement_noise is not None
+        sample, lay = closed_loop_sample(design, plant, dt, sched, noise=noise)
         self.lay = lay
         FP = sched.stacked()  # (4 lf, samples): rows a, lu, st, la
-        lf = plant.lf
+        lf, ld = plant.lf, plant.ld
         FP[: 3 * lf] *= scales["fault_scale"]  # bias/drift, loss, stuck deviation; not the latch
-        self.masks = masks(self.t, scenario, plant.fault_names)
+        self.allowances = allowances(design, scenario)
+        self.masks = masks(self.t, scenario, plant.fault_names, self.allowances)
         ui = scenario.unknown_input
-        ld = plant.ld
         ddet = np.zeros((ld, nsamp))
         self.damp = 0.0
         if ld and isinstance(ui, UniformNoise):
@@ -300,22 +314,57 @@ class Prepared:
         elif ld and isinstance(ui, Sinusoid):
             ddet[:] = scales["d_scale"] * ui.amplitude * np.sin(2 * np.pi * ui.frequency * self.t + ui.phase)
         self.sqdt = math.sqrt(dt) * scales["noise_scale"]
-        self.SH = np.ascontiguousarray(np.vstack([FP, self.masks.M, ddet]).T)
-        inc, self.names = increments(lay, self.masks, design.input_limits)
-        nfp, nm = FP.shape[0], self.masks.M.shape[0]
-        S = ca.SX.sym("state", lay.ns)
+        thr = np.full(lf, np.inf) if thresholds is None else np.asarray(thresholds, dtype=float)
+        vstd = np.zeros((lay.nv, nsamp))
+        if noise:
+            vstd[:] = (
+                np.asarray(scenario.measurement_noise, dtype=float) * scales["measurement_noise_scale"]
+            )[:, None]
+        nm = self.masks.M.shape[0]
+        self.cols = {"fp": (0, 4 * lf)}
+        self.cols["mask"] = (4 * lf, 4 * lf + nm)
+        self.cols["t"] = (self.cols["mask"][1], self.cols["mask"][1] + 1)
+        self.cols["thr"] = (self.cols["t"][1], self.cols["t"][1] + lf)
+        self.cols["d"] = (self.cols["thr"][1], self.cols["thr"][1] + ld)
+        self.cols["vstd"] = (self.cols["d"][1], self.cols["d"][1] + lay.nv)
+        self.SH = np.ascontiguousarray(
+            np.vstack([FP, self.masks.M, self.t[None, :], np.repeat(thr[:, None], nsamp, 1), ddet, vstd]).T
+        )
+        region = (np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float))
+        self.monitor = monitor(lay, self.masks, np.asarray(plant.C, float), design.input_limits, region)
+        self.names = self.monitor.names
+        nsh = self.SH.shape[1]
+        S = ca.SX.sym("state", lay.ns + self.monitor.nmon)
         w = ca.SX.sym("w", lay.nw)
-        sh = ca.SX.sym("sh", nfp + nm + ld)
-        wd = ca.vertcat(w[0], w[1:] + sh[nfp + nm :]) if ld else w
-        nxt, rec = sample(S, wd, sh[:nfp])
+        sh = ca.SX.sym("sh", nsh)
+        c = self.cols
+        wd = ca.vertcat(w[0], w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]],
+                        w[1 + ld :] * sh[c["vstd"][0] : c["vstd"][1]])  # fmt: skip
+        nxt, rec = sample(S[: lay.ns], wd, sh[: 4 * lf])
+        mon_next, inc, pm = self.monitor.fn(rec, S[lay.ns :], sh[c["mask"][0] : c["thr"][1]])
         # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)
         F = ca.Function(
-            "fte_cl", [S, w, sh], [nxt, rec, inc(rec, sh[nfp : nfp + nm])], {"cse": True}
+            "fte_cl", [S, w, sh], [ca.vertcat(nxt, mon_next), rec, inc, pm], {"cse": True}
         ).expand()
         self.engine_function = F
         xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
-        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact)
+        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv)
         self.notes = (self.engine.note,) if self.engine.note else ()
+
+    @property
+    def thresholds(self) -> np.ndarray:
+        a, b = self.cols["thr"]
+        return self.SH[0, a:b].copy()
+
+    def with_thresholds(self, thresholds) -> Prepared:
+        """The same compiled engine with other detection thresholds (per fault; inf: none)."""
+        import copy
+
+        out = copy.copy(self)
+        out.SH = self.SH.copy()
+        a, b = self.cols["thr"]
+        out.SH[:, a:b] = np.asarray(thresholds, dtype=float)[None, :]
+        return out
 
     def rescaled(self, scales: dict) -> Prepared:
         """The same compiled engine with other factors: only the shared inputs change (no recompilation)."""
@@ -323,22 +372,21 @@ class Prepared:
 
         out = copy.copy(self)
         out.scales = scales
-        nf = 4 * self.plant.lf
-        FP = self.SH[:, :nf].T.copy()
-        FP[: 3 * self.plant.lf] *= (
-            scales["fault_scale"] / self.scales["fault_scale"] if self.scales["fault_scale"] else 0.0
-        )
+        lf = self.plant.lf
         out.SH = self.SH.copy()
-        out.SH[:, :nf] = FP.T
-        nm = self.masks.M.shape[0]
-        r = scales["d_scale"] / self.scales["d_scale"] if self.scales["d_scale"] else 0.0
-        out.SH[:, nf + nm :] *= r
-        out.damp = self.damp * r
+        ratio = lambda k: scales[k] / self.scales[k] if self.scales[k] else 0.0  # noqa: E731
+        out.SH[:, : 3 * lf] *= ratio("fault_scale")
+        a, b = self.cols["d"]
+        out.SH[:, a:b] *= ratio("d_scale")
+        out.damp = self.damp * ratio("d_scale")
+        a, b = self.cols["vstd"]
+        out.SH[:, a:b] *= ratio("measurement_noise_scale")
         out.sqdt = math.sqrt(self.dt) * scales["noise_scale"]
         return out
 
     def initial_states(self, paths: np.ndarray, seed: int) -> np.ndarray:
-        """(len(paths), ns): x0 plus its noise (drawn from (seed, path)), observer initialised per scenario."""
+        """(len(paths), ns + nmon): x0 plus its noise (drawn from (seed, path)), observer initialised per
+        scenario, the monitor's start."""
         from .rng import x0_normals
 
         plant, sc, lay = self.plant, self.scenario, self.lay
@@ -346,7 +394,7 @@ class Prepared:
         if x0n.shape != (plant.n,):
             raise SimulationError(f"scenario x0 has {x0n.size} entries; the plant has {plant.n} states")
         x0 = x0n + sc.x0_noise * x0_normals(seed, paths, plant.n)
-        state = np.zeros((len(paths), lay.ns))
+        state = np.zeros((len(paths), lay.ns + self.monitor.nmon))
         H = np.asarray(self.design.H)
         xb_nom = np.concatenate([x0n, np.zeros(lay.nbar - plant.n)])
         # a single row would take another BLAS route (a matrix-vector product, rounded differently): a path
@@ -358,16 +406,21 @@ class Prepared:
             state[:, o : o + plant.n] = x0
             if sc.observer_init == "nominal":
                 state[:, o + plant.n : o + plant.n + lay.nbar] = zb
+        state[:, lay.ns :] = self.monitor.mon0()[None, :]
         return state
 
 
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
-    """Paths ``path0 .. path0 + count - 1``: ``(ACC, DIV, REC)`` (REC only when ``every > 0``)."""
+    """Paths ``path0 .. path0 + count - 1``: ``(ACC, DIV, REC, MON, PM)`` (REC only when ``every > 0``):
+    the per-path sums, divergence marks, records, final monitor states, and the per-sample sums over
+    these paths."""
     paths = np.arange(path0, path0 + count)
     S0 = prep.initial_states(paths, seed)
-    _, acc, div, rec = prep.engine.run(path0, S0, seed, prep.SH, prep.sqdt, prep.damp,
-                                       prep.scenario.divergence_bound, every)  # fmt: skip
-    return acc, div, rec
+    S1, acc, div, rec, pm = prep.engine.run(path0, S0, seed, prep.SH, prep.sqdt, prep.damp,
+                                            prep.scenario.divergence_bound, every, pm=True)  # fmt: skip
+    if pm is None:
+        pm = np.zeros((prep.SH.shape[0], 0))
+    return acc, div, rec, S1[:, prep.lay.ns :], pm
 
 
 @functools.lru_cache(maxsize=8)
@@ -382,11 +435,82 @@ def _prepared(design_json: str, plant_blob: bytes, scenario_json: str, dt: float
 
 
 def chunk_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str, seed: int,
-               path0: int, count: int, exact: bool = True) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """One chunk on a worker: the per-path metric sums and divergence marks of ``path0 .. path0 + count - 1``."""
+               path0: int, count: int, exact: bool = True, thresholds: tuple = ()):  # fmt: skip
+    """One chunk on a worker: the per-path metric sums, divergence marks, monitor states and the per-sample
+    maxima of ``path0 .. path0 + count - 1`` (``thresholds``: the detection thresholds; empty: none)."""
     prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json, bool(exact))
-    acc, div, _ = run_paths(prep, path0, count, seed)
-    return acc, div
+    if thresholds:
+        prep = prep.with_thresholds(thresholds)
+    acc, div, _, mon, pm = run_paths(prep, path0, count, seed)
+    return acc, div, mon, pm
+
+
+def check_scenario(plant: Plant, scenario: Scenario) -> None:
+    """Refuse a fault window outside [0, T), measurement noise of the wrong size and an x0 outside the
+    plant's region, each with what to do."""
+    for fp in scenario.faults:
+        if fp.start < 0 or fp.stop > scenario.T:
+            raise ParameterError(
+                f"scenario {scenario.name!r}: the window [{fp.start:g}, {fp.stop:g}) of fault {fp.fault!r} does not lie "
+                f"inside the horizon [0, {scenario.T:g}); shorten the window or lengthen T"
+            )
+    mn = scenario.measurement_noise
+    if mn is not None and len(mn) != plant.p:
+        raise ParameterError(
+            f"scenario {scenario.name!r}: measurement_noise has {len(mn)} entries; the plant has {plant.p} outputs "
+            f"({', '.join(plant.output_names)}): give one standard deviation per output, in the output's units"
+        )
+    x0 = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
+    lo, hi = np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float)
+    bad = [k for k in range(plant.n) if not (lo[k] <= x0[k] <= hi[k])] if x0.shape == lo.shape else []
+    if bad:
+        txt = ", ".join(f"{plant.state_names[k]} = {x0[k]:g} outside [{lo[k]:g}, {hi[k]:g}]" for k in bad)
+        raise ParameterError(
+            f"scenario {scenario.name!r}: the initial state lies outside the plant's region ({txt}), where the T-S model "
+            "is not exact; start inside the region or widen the region (b.region(...)) and design again"
+        )
+
+
+def _run_chunks(prep: Prepared, plant: Plant, paths: int, seed: int, path0: int, chunk, threads, scheduler,
+                every_all: int, bar) -> tuple:  # fmt: skip
+    """Run paths ``path0 .. path0 + paths - 1`` in chunks (threads or a cluster): per-path sums, divergence
+    marks, monitor states, the per-sample sums over all of them, and the records when ``every_all``."""
+    acc = np.empty((paths, len(prep.names)))
+    div = np.empty(paths, dtype=np.int_)
+    mon = np.empty((paths, prep.monitor.nmon))
+    pm = np.zeros((prep.SH.shape[0], len(prep.monitor.pm_names)))
+    nsamp = prep.SH.shape[0]
+    rec = np.empty((paths, (nsamp - 1) // every_all + 1, prep.lay.nrec)) if every_all else None
+
+    def keep(a, out):
+        ca_, dv, rc, mo, pmx = out
+        acc[a : a + len(dv)], div[a : a + len(dv)], mon[a : a + len(dv)] = ca_, dv, mo
+        pm[...] += pmx  # chunk by chunk, in path order
+        if rc is not None:
+            rec[a : a + len(dv)] = rc
+        bar.update(len(dv))
+
+    if scheduler is not None:
+        thr = tuple(float(v) for v in prep.thresholds)
+        task = functools.partial(chunk_task, exact=prep.exact, thresholds=thr)
+        for a, (ca_, dv, mo, pmx) in run_on_cluster(scheduler, prep.design, plant, prep.scenario, prep.dt,
+                                                    prep.scales, seed, paths, chunk, task,
+                                                    path0=path0):  # fmt: skip
+            keep(a, (ca_, dv, None, mo, pmx))
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        nthreads = threads or min(8, os.cpu_count() or 1)
+        chunk = chunk or auto_chunk(paths, nthreads)
+        starts = list(range(0, paths, chunk))
+        with ThreadPoolExecutor(max_workers=nthreads) as pool:
+            futs = {
+                a: pool.submit(run_paths, prep, path0 + a, min(chunk, paths - a), seed, every_all)
+                for a in starts
+            }
+            for a in starts:
+                keep(a, futs[a].result())
+    return acc, div, mon, pm, rec
 
 
 def simulate(
@@ -407,6 +531,8 @@ def simulate(
     scales: dict | None = None,
     prepared: Prepared | None = None,
     exact: bool = True,
+    detect: bool = True,
+    false_alarm_rate: float | None = None,
 ) -> SimulationResult:
     """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
 
@@ -447,6 +573,14 @@ def simulate(
         the documented tolerance, still the same numbers for any chunk size, thread count or
         cluster. The metrics document records the mode (``exact``).
 
+    detect : bool
+        True (default): detection thresholds per fault, calibrated on independent fault-free paths
+        (:mod:`.detect`) before the run, and the run's detection delays and false-alarm rates. False: none
+        (the document's ``detection`` is empty and the delays null).
+    false_alarm_rate : float, optional
+        False alarms per unit of the plant's time the thresholds are set for (default: one per hour of
+        operation, in the plant's time unit; :func:`.detect.default_rate`).
+
     Returns
     -------
     SimulationResult
@@ -454,6 +588,7 @@ def simulate(
     """
     t_wall = time.perf_counter()
     _check_settings(design, plant, paths, seed, dt)
+    check_scenario(plant, scenario)
     paths, seed = int(paths), int(seed)
     if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
         raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
@@ -476,61 +611,55 @@ def simulate(
     nrec_paths = (
         paths if record_all else min(paths, scenario.paths if record_paths is None else int(record_paths))
     )
+    if nrec_paths and record_every > 1:
+        notes.append(f"trajectories recorded every {record_every} samples (dt {record_every * dt:g}), at most "
+                     f"{_RECORD_PER_PATH} per path; the metrics use every sample; record_every=1 keeps all")  # fmt: skip
     prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc, exact=exact)
     notes += list(prep.notes)
+    if prep.allowances.capped:
+        notes.append(prep.allowances.why)
     if not exact:
         notes.append("fast mode: fused multiply-adds and a vector math library; equal to the exact mode within "
                      "the tolerance of docs/simulation.md, not bit for bit")  # fmt: skip
-    acc = np.empty((paths, len(prep.names)))
-    div = np.empty(paths, dtype=np.int_)
+    rate = default_rate(plant.time_unit) if false_alarm_rate is None else float(false_alarm_rate)
+    if detect and not (math.isfinite(rate) and rate > 0):
+        raise ParameterError(
+            f"false_alarm_rate must be a positive number of alarms per time unit; got {false_alarm_rate!r}"
+        )
     # all paths recorded (--save) in-process: the chunks record as they run; else the examples run again below
     every_all = record_every if (record_all and scheduler is None) else 0
-    rec = np.empty((paths, (nsamp - 1) // record_every + 1, prep.lay.nrec)) if every_all else None
-    bar = tqdm(
-        total=paths,
-        disable=not progress,
-        delay=1.0,
-        file=sys.stderr,
-        unit=" paths",
-        desc=f"simulate {plant.name}",
-    )
+    ncal = max(paths, 8) if detect and plant.lf else 0
+    bar = tqdm(total=paths + ncal, disable=not progress, delay=1.0, file=sys.stderr, unit=" paths",
+               desc=f"simulate {plant.name}")  # fmt: skip
+    detection = []
     try:
-        if scheduler is not None:
-            task = chunk_task if exact else functools.partial(chunk_task, exact=False)
-            for a, (ca_, dv) in run_on_cluster(scheduler, design, plant, scenario, dt, sc, seed, paths, chunk, task,
-                                               on_done=lambda k: bar.update(k)):  # fmt: skip
-                acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
-        else:
-            from concurrent.futures import ThreadPoolExecutor
-
-            nthreads = threads or min(8, os.cpu_count() or 1)
-            chunk = chunk or auto_chunk(paths, nthreads)
-            starts = list(range(0, paths, chunk))
-            with ThreadPoolExecutor(max_workers=nthreads) as pool:
-                futs = {
-                    a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed, every_all) for a in starts
-                }
-                for a in starts:
-                    ca_, dv, rc = futs[a].result()
-                    acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
-                    if rc is not None:
-                        rec[a : a + len(dv)] = rc
-                    bar.update(len(dv))
+        thresholds = np.full(plant.lf, np.inf)
+        if ncal:
+            # calibration: fault-free runs of other paths (path ncal.. of the same seed, after the run's own)
+            cal = prep.rescaled({**sc, "fault_scale": 0.0}).with_thresholds(thresholds)
+            _, cdiv, cmon, _, _ = _run_chunks(
+                cal, plant, ncal, seed, paths, chunk, threads, scheduler, 0, bar
+            )
+            _diverged(cdiv, plant, scenario, dt, paths)
+            t_after = nsteps * dt - prep.masks.transient
+            thresholds, detection = calibrate(cmon, prep.monitor.mon_names, plant.fault_names, t_after, rate)
+        prep_run = prep.with_thresholds(thresholds)
+        acc, div, mon, pm, rec = _run_chunks(
+            prep_run, plant, paths, seed, 0, chunk, threads, scheduler, every_all, bar
+        )
     finally:
         bar.close()
-    bad = np.flatnonzero(div >= 0)
-    if len(bad):
-        p0 = int(bad[np.argmin(div[bad])])
-        raise SimulationError(
-            f"{plant.name}: path {p0} diverged at t = {div[p0] * dt:.6g} (a state NaN/Inf or |x| > "
-            f"{scenario.divergence_bound:g}); the closed loop is unstable for this design and step: check the "
-            "design's certificates, lower dt, or shorten the fault"
-        )
+    _diverged(div, plant, scenario, dt, 0)
     if nrec_paths and rec is None:
-        _, _, rec = run_paths(prep, 0, nrec_paths, seed, record_every)
+        _, _, rec, _, _ = run_paths(prep_run, 0, nrec_paths, seed, record_every)
     wall = time.perf_counter() - t_wall
-    doc = finalize(acc, prep.names, prep.masks, {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed,
-                                                 "wall_s": wall, "m": plant.m})  # fmt: skip
+    meta = {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed, "wall_s": wall, "m": plant.m,
+            "thresholds": [float(v) for v in thresholds], "detection": detection}  # fmt: skip
+    doc = finalize(acc, mon, pm, prep.t, prep.monitor, prep.masks, meta)
+    doc["measurement_noise"] = (
+        None if scenario.measurement_noise is None
+        else [float(v) * sc["measurement_noise_scale"] for v in scenario.measurement_noise]
+    )  # fmt: skip
     doc["dt_change"] = step_change(design, scenario, dt, given_dt)
     doc["exact"] = exact
     names = result_names(plant)
@@ -553,5 +682,17 @@ def simulate(
         notes=tuple(notes),
         metrics=doc,
         scales=sc,
+        region=(np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float)),
         **runs,
     )
+
+
+def _diverged(div: np.ndarray, plant: Plant, scenario: Scenario, dt: float, path0: int) -> None:
+    bad = np.flatnonzero(div >= 0)
+    if len(bad):
+        p0 = int(bad[np.argmin(div[bad])])
+        raise SimulationError(
+            f"{plant.name}: path {path0 + p0} diverged at t = {div[p0] * dt:.6g} (a state NaN/Inf or |x| > "
+            f"{scenario.divergence_bound:g}); the closed loop is unstable for this design and step: check the "
+            "design's certificates, lower dt, or shorten the fault"
+        )

@@ -1,17 +1,22 @@
-"""The metrics document of ``fte simulate`` (docs/interface.md), computed from a SimulationResult."""
+"""The metrics document of ``fte simulate`` (docs/interface.md), computed from a SimulationResult's arrays.
+
+:func:`metrics_from_arrays` is the reference: every figure by its plain definition over the recorded
+paths and samples, equal to the document the engine streamed (:mod:`.reduce`) when every path and every
+sample was recorded (``record_all=True, record_every=1``).
+"""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from ..verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+from .reduce import HYSTERESIS, SETTLE_FRACTION, _mask, allowances, outside_mask, settling_time
 from .result import SimulationResult
 
-__all__ = ["metrics", "metrics_from_arrays", "windows", "input_saturation", "fault_windows", "state_rms_error",
-           "fault_rel_rms_error", "false_alarm_rel_rms", "ftc_deviation_ratio", "WORSE_THAN_NONE", "FALSE_ALARM",
-           "SATURATED"]  # fmt: skip
-
-from ..verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE  # re-exported: the verdicts of this document
-from .reduce import SETTLE_FRACTION, SETTLE_T, _mask
+__all__ = ["metrics", "metrics_from_arrays", "fault_windows", "input_saturation", "alarms",
+           "WORSE_THAN_NONE", "FALSE_ALARM", "SATURATED"]  # fmt: skip
 
 
 def fault_windows(result: SimulationResult) -> list[list[tuple[float, float]]]:
@@ -19,55 +24,9 @@ def fault_windows(result: SimulationResult) -> list[list[tuple[float, float]]]:
     return [result.scenario.windows(name) for name in result.names["faults"]]
 
 
-def state_rms_error(x: np.ndarray, xhat: np.ndarray, t: np.ndarray, t_from: float = SETTLE_T) -> list[float]:
-    """RMS over ``t >= t_from`` of ``x - xhat`` per state and path, then mean over paths. Arrays (paths, samples, n)."""
-    keep = t >= t_from
-    e = x[:, keep, :] - xhat[:, keep, :]
-    return [float(v) for v in np.sqrt(np.mean(e**2, axis=1)).mean(axis=0)]
-
-
-def fault_rel_rms_error(f: np.ndarray, fhat: np.ndarray, t: np.ndarray, windows) -> list[float | None]:
-    """Per fault j: RMS(fhat - f) / RMS(f) over its windows minus their first 20 %, all paths pooled.
-
-    ``None`` for a fault with no window (or identically zero there): the ratio is undefined.
-    """
-    out = []
-    for j, wins in enumerate(windows):
-        keep = _mask(t, wins, SETTLE_FRACTION)
-        fj = f[:, keep, j]
-        den = np.sqrt(np.mean(fj**2)) if fj.size else 0.0
-        if den == 0.0:
-            out.append(None)
-            continue
-        out.append(float(np.sqrt(np.mean((fhat[:, keep, j] - fj) ** 2)) / den))
-    return out
-
-
-def false_alarm_rel_rms(f: np.ndarray, fhat: np.ndarray, t: np.ndarray, windows) -> list[float | None]:
-    """Per fault j: RMS(fhat_j) over ``t >= 1 s`` outside all of its windows (where f_j = 0: what the
-    estimate shows there is a false alarm, e.g. cross-talk from another fault) divided by RMS(f_j) over
-    its windows minus their first 20 % (the denominator of :func:`fault_rel_rms_error`), paths pooled.
-
-    ``None`` when either set of samples is empty or f_j is zero in its windows."""
-    out = []
-    for j, wins in enumerate(windows):
-        inside, outside = _mask(t, wins, SETTLE_FRACTION), (t >= SETTLE_T) & ~_mask(t, wins)
-        fj = f[:, inside, j]
-        den = np.sqrt(np.mean(fj**2)) if fj.size else 0.0
-        if den == 0.0 or not outside.any():
-            out.append(None)
-            continue
-        out.append(float(np.sqrt(np.mean(fhat[:, outside, j] ** 2)) / den))
-    return out
-
-
-def ftc_deviation_ratio(y_free, y_noftc, yc_ftc, t, windows) -> float | None:
-    """``||yc_FTC - y_free|| / ||y_noFTC - y_free||`` over the union of all fault windows and outputs."""
-    keep = _mask(t, [w for ws in windows for w in ws])
-    den = np.linalg.norm(y_noftc[:, keep, :] - y_free[:, keep, :])
-    if den == 0.0:
-        return None
-    return float(np.linalg.norm(yc_ftc[:, keep, :] - y_free[:, keep, :]) / den)
+def _rms_ratio(num: np.ndarray, den: np.ndarray) -> float | None:
+    d = float(np.sum(den**2))
+    return None if d == 0.0 else float(math.sqrt(float(np.sum(num**2)) / d))
 
 
 def input_saturation(u: np.ndarray, limits, mask: np.ndarray | None = None) -> list[float]:
@@ -83,44 +42,140 @@ def input_saturation(u: np.ndarray, limits, mask: np.ndarray | None = None) -> l
     return [float(v) for v in at.mean(axis=(0, 1))]
 
 
-def windows(result: SimulationResult) -> list[dict]:
-    """One entry per fault profile of the scenario (in its order): the fault's relative RMS error over
-    the window minus its first 20 % and the FTC deviation ratio over the window, FTC run, paths pooled;
-    and per input the fraction of the window's samples at a limit."""
-    t, ftc = result.t, result.ftc
-    names = list(result.names["faults"])
-    out = []
-    for fp in result.scenario.faults:
-        j = names.index(fp.fault)
-        err = fault_rel_rms_error(
-            ftc.f[:, :, j : j + 1], ftc.fhat[:, :, j : j + 1], t, [[(fp.start, fp.stop)]]
-        )[0]
-        ratio = ftc_deviation_ratio(result.free.y, result.no_ftc.y, ftc.yc, t, [[(fp.start, fp.stop)]])
-        m = _mask(t, [(fp.start, fp.stop)])
-        out.append({"fault": fp.fault, "start": float(fp.start), "stop": float(fp.stop), "fault_rel_rms_error": err,
-                    "ftc_deviation_ratio": ratio,
-                    "input_saturation": input_saturation(ftc.u, result.design.input_limits, m)})  # fmt: skip
-    return out
+def alarms(r: np.ndarray, thr: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(raised, on)`` of the residual ``r`` (paths, samples): an alarm raised at ``|r| >= thr``, cleared
+    below ``HYSTERESIS thr``; ``raised`` marks the samples where it is raised."""
+    a = np.abs(r)
+    on = np.zeros(a.shape, bool)
+    raised = np.zeros(a.shape, bool)
+    prev = np.zeros(a.shape[0], bool)
+    for k in range(a.shape[1]):
+        raised[:, k] = ~prev & (a[:, k] >= thr)
+        prev = np.where(prev, a[:, k] >= HYSTERESIS * thr, a[:, k] >= thr)
+        on[:, k] = prev
+    return raised, on
+
+
+def _release(t, sc, fp, err, size) -> float | None:
+    later = [q.start for q in sc.faults if q.start >= fp.stop]
+    tail = (t >= fp.stop) & (t < (min(later) if later else math.inf))
+    return settling_time(err[tail], size, t[tail], fp.stop) if tail.any() else None
 
 
 def metrics_from_arrays(result: SimulationResult) -> dict:
     """The metrics document (docs/interface.md) recomputed from the recorded arrays (the reference).
 
-    Over the recorded paths and samples only: equal to the streamed document of the run when every
-    path and every sample was recorded (``record_all=True, record_every=1``)."""
+    The detection thresholds are the run's own (``result.metrics["detection"]``); without them, none."""
     t = result.t
+    dt = float(result.dt) * int(result.record_every)
+    sc = result.scenario
+    allow = allowances(result.design, sc)
     wins = fault_windows(result)
-    ftc = result.ftc
+    free, no, ftc = result.free, result.no_ftc, result.ftc
+    C = np.asarray(result.design.C, dtype=float)
+    P = ftc.x.shape[0]
+    lf = ftc.f.shape[2]
+    after = t >= allow.transient
+    det_doc = list((result.metrics or {}).get("detection") or [])
+    thr = [
+        float(det_doc[j]["threshold"])
+        if j < len(det_doc) and det_doc[j].get("threshold") is not None
+        else math.inf
+        for j in range(lf)
+    ]
+    e = ftc.fhat - ftc.f
+    n_after = int(after.sum())
+    srms = [float(v) for v in np.sqrt(np.mean((ftc.x[:, after] - ftc.xhat[:, after]) ** 2, axis=1)).mean(axis=0)] if n_after else [None] * ftc.n  # fmt: skip
+    rel, rel_s, fa_rms, fa_peak, detection = [], [], [], [], []
+    for j in range(lf):
+        w, ws = _mask(t, wins[j]), _mask(t, wins[j], SETTLE_FRACTION)
+        out = outside_mask(t, wins[j], allow.transient, allow.settle_after)
+        rel.append(_rms_ratio(e[:, w, j], ftc.f[:, w, j]))
+        rel_s.append(_rms_ratio(e[:, ws, j], ftc.f[:, ws, j]))
+        f_rms = float(np.sqrt(np.mean(ftc.f[:, w, j] ** 2))) if w.any() else 0.0
+        fa_rms.append(
+            float(np.sqrt(np.mean(ftc.fhat[:, out, j] ** 2))) / f_rms if out.any() and f_rms else None
+        )
+        f_peak = float(np.max(np.abs(ftc.f[:, w, j]))) if w.any() else 0.0
+        fa_peak.append(float(np.max(np.abs(ftc.fhat[:, out, j]))) / f_peak if out.any() and f_peak else None)
+        if j < len(det_doc):
+            entry = dict(det_doc[j])
+            if math.isfinite(thr[j]):
+                raised_free, _ = alarms(free.fhat[:, :, j], thr[j])
+                raised_ftc, _ = alarms(ftc.fhat[:, :, j], thr[j])
+                entry["false_alarm_rate"] = (
+                    float(raised_free[:, after].sum()) / (P * n_after * dt) if n_after else None
+                )
+                entry["false_alarm_rate_ftc_run"] = (float(raised_ftc[:, out].sum()) / (P * int(out.sum()) * dt)
+                                                     if out.any() else None)  # fmt: skip
+            detection.append(entry)
+    union = _mask(t, [w for ws in wins for w in ws])
+    dC_ftc = (ftc.x - free.x) @ C.T
+    dC_no = (no.x - free.x) @ C.T
+    has = any(r is not None for r in rel)
+    windows = []
+    peaks = [
+        float(np.max(np.abs(ftc.f[:, _mask(t, wins[q]), q]))) if _mask(t, wins[q]).any() else 0.0
+        for q in range(lf)
+    ]
+    for fp in sc.faults:
+        j = list(result.names["faults"]).index(fp.fault)
+        w = _mask(t, [(fp.start, fp.stop)])
+        ws = _mask(t, [(fp.start, fp.stop)], SETTLE_FRACTION)
+        r = _rms_ratio(e[:, w, j], ftc.f[:, w, j])
+        size = float(np.max(np.mean(np.abs(ftc.f[:, w, j]), axis=0))) if w.any() else 0.0
+        err = np.mean(np.abs(e[:, w, j]), axis=0) if w.any() else np.zeros(0)
+        hit_t = []
+        if math.isfinite(thr[j]):
+            for q in range(P):
+                k = np.flatnonzero(w & (np.abs(ftc.fhat[q, :, j]) >= thr[j]))
+                if len(k):
+                    hit_t.append(float(t[k[0]]) - fp.start)
+        windows.append({
+            "fault": fp.fault, "start": float(fp.start), "stop": float(fp.stop),
+            "fault_rel_rms_error": r,
+            "fault_rel_rms_error_settled": _rms_ratio(e[:, ws, j], ftc.f[:, ws, j]),
+            "settling_time": settling_time(err, size, t[w], fp.start),
+            "release_time": _release(t, sc, fp, np.mean(np.abs(e[:, :, j]), axis=0), size),
+            "ftc_true_ratio": _rms_ratio(dC_ftc[:, w], dC_no[:, w]) if r is not None else None,
+            "ftc_true_ratio_per_output": [_rms_ratio(dC_ftc[:, w, k], dC_no[:, w, k]) if r is not None else None
+                                          for k in range(C.shape[0])],  # fmt: skip
+            "ftc_compensated_ratio": _rms_ratio(ftc.yc[:, w] - free.y[:, w], no.y[:, w] - free.y[:, w]) if r is not None else None,  # fmt: skip
+            "crosstalk_peak": [
+                None if q == j or not peaks[q] else float(np.max(np.abs(ftc.fhat[:, w, q]))) / peaks[q]
+                for q in range(lf)
+            ],
+            "detection_delay": math.fsum(hit_t) / len(hit_t) if hit_t else None,
+            "missed_detections": P - len(hit_t) if math.isfinite(thr[j]) else None,
+            "input_saturation": input_saturation(ftc.u, result.design.input_limits, w),
+        })  # fmt: skip
+    xs = np.stack([free.x, no.x, ftc.x])
+    if result.region is None:
+        outside = np.zeros(xs.shape[1:3], bool)
+    else:
+        lo, hi = (np.asarray(v, dtype=float) for v in result.region)
+        outside = np.any((xs < lo) | (xs > hi), axis=(0, 3))
     return {
-        "paths": int(ftc.x.shape[0]),
+        "paths": int(P),
         "dt": float(result.dt),
         "T": float(result.T),
         "seed": int(result.seed),
-        "state_rms_error": state_rms_error(ftc.x, ftc.xhat, t),
-        "fault_rel_rms_error": fault_rel_rms_error(ftc.f, ftc.fhat, t, wins),
-        "false_alarm_rel_rms": false_alarm_rel_rms(ftc.f, ftc.fhat, t, wins),
-        "ftc_deviation_ratio": ftc_deviation_ratio(result.free.y, result.no_ftc.y, ftc.yc, t, wins),
-        "windows": windows(result),
+        "transient": float(allow.transient),
+        "settle_after": float(allow.settle_after),
+        "state_rms_error": srms,
+        "fault_rel_rms_error": rel,
+        "fault_rel_rms_error_settled": rel_s,
+        "false_alarm_peak": fa_peak,
+        "false_alarm_rel_rms": fa_rms,
+        "ftc_true_ratio": _rms_ratio(dC_ftc[:, union], dC_no[:, union]) if has else None,
+        "ftc_compensated_ratio": _rms_ratio(
+            ftc.yc[:, union] - free.y[:, union], no.y[:, union] - free.y[:, union]
+        )
+        if has
+        else None,  # fmt: skip
+        "detection": detection,
+        "windows": windows,
+        "outside_region": float(outside.mean()),
         "input_saturation": input_saturation(ftc.u, result.design.input_limits),
         "wall_s": float(result.wall_s),
     }

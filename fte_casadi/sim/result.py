@@ -80,8 +80,10 @@ class SimulationResult:
     notes: tuple = ()
     #: the metrics document over all paths (streamed by the engine); None for a per-path run
     metrics: dict | None = None
-    #: fault_scale, noise_scale, d_scale of the run
+    #: fault_scale, noise_scale, d_scale, measurement_noise_scale of the run
     scales: dict = field(default_factory=dict)
+    #: the plant's region ``(lo, hi)`` per state (where the T-S model is exact); None if unknown
+    region: tuple | None = None
 
     @property
     def recorded_paths(self) -> int:
@@ -116,6 +118,7 @@ def save_result(result: SimulationResult, path: str | os.PathLike) -> Path:
         "notes": list(result.notes),
         "metrics": result.metrics,
         "scales": result.scales,
+        "region": None if result.region is None else [list(map(float, v)) for v in result.region],
     }
     arrays["meta"] = np.array(json.dumps(meta))
     arrays["scenario"] = np.array(result.scenario.to_json())
@@ -148,8 +151,9 @@ def load_result(path: str | os.PathLike) -> SimulationResult:
     kw = {
         f.name: meta[f.name]
         for f in fields(SimulationResult)
-        if f.name in meta and f.name not in ("notes", "scales")
+        if f.name in meta and f.name not in ("notes", "scales", "region")
     }
+    kw["region"] = None if meta.get("region") is None else tuple(np.asarray(v, float) for v in meta["region"])
     kw["scales"] = dict(meta.get("scales") or {})
     kw.pop("format", None)
     return SimulationResult(

@@ -185,6 +185,9 @@ class Scenario:
         (what an engineer who knows x0 but not its noise does); ``"zero"``: z0 = 0.
     divergence_bound : float
         A path whose |x| exceeds this (or turns NaN/Inf) stops the run.
+    measurement_noise : sequence of float or None
+        Standard deviation of white Gaussian noise added to each output at every step, in the output's
+        units (one per output; 0 for a noiseless output), reproducible by seed. ``None``: no noise.
     """
 
     name: str
@@ -197,6 +200,7 @@ class Scenario:
     paths: int = 5
     observer_init: str = "nominal"
     divergence_bound: float = 1e6
+    measurement_noise: tuple | None = None
 
     def __post_init__(self):
         _positive("horizon T", self.T)
@@ -217,6 +221,16 @@ class Scenario:
                 )
         if self.x0 is not None:
             object.__setattr__(self, "x0", tuple(float(v) for v in self.x0))
+        if self.measurement_noise is not None:
+            try:
+                mn = tuple(float(v) for v in self.measurement_noise)
+            except (TypeError, ValueError):
+                raise ParameterError(
+                    f"measurement_noise must be a list of standard deviations, one per output; got {self.measurement_noise!r}"
+                ) from None
+            for k, v in enumerate(mn):
+                _positive(f"measurement_noise[{k}]", v, allow_zero=True)
+            object.__setattr__(self, "measurement_noise", mn)
 
     def windows(self, fault: str) -> list[tuple[float, float]]:
         """The (start, stop) windows of every profile acting on ``fault``."""

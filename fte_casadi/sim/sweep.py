@@ -97,18 +97,18 @@ def to_csv(points: list[dict]) -> str:
     factors = list(points[0]["point"])
     m0 = points[0]["metrics"]
     lf = len(m0["fault_rel_rms_error"])
-    cols = factors + [f"fault_rel_rms_error_{j}" for j in range(lf)] + ["ftc_deviation_ratio"]
+    cols = factors + [f"fault_rel_rms_error_{j}" for j in range(lf)] + ["ftc_true_ratio"]
     for w in m0["windows"]:
         tag = f"{w['fault']}_{w['start']:g}_{w['stop']:g}"
-        cols += [f"window_{tag}_fault_rel_rms_error", f"window_{tag}_ftc_deviation_ratio"]
+        cols += [f"window_{tag}_fault_rel_rms_error", f"window_{tag}_ftc_true_ratio"]
     buf = io.StringIO()
     wr = csv.writer(buf)
     wr.writerow(cols)
     for p in points:
         m = p["metrics"]
-        row = [p["point"][f] for f in factors] + list(m["fault_rel_rms_error"]) + [m["ftc_deviation_ratio"]]
+        row = [p["point"][f] for f in factors] + list(m["fault_rel_rms_error"]) + [m["ftc_true_ratio"]]
         for w in m["windows"]:
-            row += [w["fault_rel_rms_error"], w["ftc_deviation_ratio"]]
+            row += [w["fault_rel_rms_error"], w["ftc_true_ratio"]]
         wr.writerow(["" if v is None else v for v in row])
     return buf.getvalue()
 

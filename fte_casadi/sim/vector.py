@@ -198,11 +198,12 @@ def _c_double(v: float) -> str:
     return repr(v)
 
 
-def _body(F: ca.Function, exact: bool = True) -> list[str]:
+def _body(F: ca.Function, exact: bool = True, ld: int | None = None) -> list[str]:
     """The sample as C statements on lane vectors, one per instruction of ``F``; work slots are
     CasADi's (``F.sz_w()`` vector variables, reused as CasADi reuses them). Not ``exact``: the
     functions of :data:`_VMATH` one call per lane vector (``fte_v_sin(w3)``)."""
     names = _op_names()
+    ld = F.size1_in(1) - 1 if ld is None else ld
     lines = [f"  fte_vd {', '.join(f'w{i}' for i in range(max(F.sz_w(), 1)))};", "  int l;"]
     for k in range(F.n_instructions()):
         op = F.instruction_id(k)
@@ -210,8 +211,16 @@ def _body(F: ca.Function, exact: bool = True) -> list[str]:
         ins, outs = list(F.instruction_input(k)), list(F.instruction_output(k))
         if op == ca.OP_INPUT:
             i, nz = ins
-            src = f"FTE_LD(st[{nz}])" if i == 0 else (
-                ("FTE_LD(dw)" if nz == 0 else f"FTE_LD(dd[{nz - 1}])") if i == 1 else f"FTE_BC(sh[{nz}])")  # fmt: skip
+            if i == 0:
+                src = f"FTE_LD(st[{nz}])"
+            elif i == 1:
+                src = (
+                    "FTE_LD(dw)"
+                    if nz == 0
+                    else (f"FTE_LD(dd[{nz - 1}])" if nz <= ld else f"FTE_LD(dv[{nz - 1 - ld}])")
+                )
+            else:
+                src = f"FTE_BC(sh[{nz}])"
             lines.append(f"  w{outs[0]} = {src};")
         elif op == ca.OP_CONST:
             lines.append(f"  w{outs[0]} = FTE_BC({_c_double(float(F.instruction_constant(k)))});")
@@ -219,7 +228,8 @@ def _body(F: ca.Function, exact: bool = True) -> list[str]:
             i, nz = outs
             a = f"w{ins[0]}"
             lines.append({0: f"  FTE_ST(nx[{nz}], {a});", 1: f"  if (recnow) FTE_ST(rb[{nz}], {a});",
-                          2: f"  FTE_ST(acc[{nz}], FTE_LD(acc[{nz}]) + {a});"}[min(i, 2)])  # fmt: skip
+                          2: f"  FTE_ST(acc[{nz}], FTE_LD(acc[{nz}]) + {a});",
+                          3: f"  FTE_ST(pm[{nz}], {a});"}[min(i, 3)])  # fmt: skip
         elif nm in _VEC:
             b = f"w{ins[1]}" if len(ins) > 1 else ""
             lines.append(f"  w{outs[0]} = {_VEC[nm].format(a=f'w{ins[0]}', b=b)};")
@@ -234,56 +244,72 @@ def _body(F: ca.Function, exact: bool = True) -> list[str]:
     return lines
 
 
-def _casadi_body(F: ca.Function) -> tuple[str, list[str]]:
+def _casadi_body(F: ca.Function, ld: int) -> tuple[str, list[str]]:
     """CasADi's own C of ``F`` and the statements that call it lane by lane (the fallback)."""
     cg = ca.CodeGenerator("fte_cl_lane.c", {"with_header": False, "prefix": "fte_lane_"})
     G = ca.Function("fte_lane_f", [F.sx_in(i) for i in range(3)], F.call([F.sx_in(i) for i in range(3)]))
     cg.add(G)
+    nout = G.n_out()
     ns, nw, nrec, ninc = F.size1_in(0), F.size1_in(1), F.size1_out(1), F.size1_out(2)
+    npm = F.size1_out(3) if nout > 3 else 0
     lines = [
-        f"  const double *arg[{max(G.sz_arg(), 3)}]; double *res[{max(G.sz_res(), 3)}];",
+        f"  const double *arg[{max(G.sz_arg(), 3)}]; double *res[{max(G.sz_res(), 4)}];",
         f"  long long iw[{max(G.sz_iw(), 1)}]; double wk[{max(G.sz_w(), 1)}];",
-        f"  double a0[{max(ns, 1)}], a1[{max(nw, 1)}], r0[{max(ns, 1)}], r1[{max(nrec, 1)}], r2[{max(ninc, 1)}];",
+        f"  double a0[{max(ns, 1)}], a1[{max(nw, 1)}], r0[{max(ns, 1)}], r1[{max(nrec, 1)}], r2[{max(ninc, 1)}], "
+        f"r3[{max(npm, 1)}];",
         "  int l, j;",
-        "  arg[0] = a0; arg[1] = a1; arg[2] = sh; res[0] = r0; res[1] = r1; res[2] = r2;",
+        "  arg[0] = a0; arg[1] = a1; arg[2] = sh; res[0] = r0; res[1] = r1; res[2] = r2; res[3] = r3;",
         "  for (l = 0; l < V; ++l) {",
         f"    for (j = 0; j < {ns}; ++j) a0[j] = st[j][l];",
         "    a1[0] = dw[l];",
-        f"    for (j = 1; j < {nw}; ++j) a1[j] = dd[j - 1][l];",
+        f"    for (j = 1; j < {nw}; ++j) a1[j] = j <= {ld} ? dd[j - 1][l] : dv[j - 1 - {ld}][l];",
         "    fte_lane_f((const casadi_real **)arg, res, (casadi_int *)iw, wk, 0);",
         f"    for (j = 0; j < {ns}; ++j) nx[j][l] = r0[j];",
         f"    if (recnow) for (j = 0; j < {nrec}; ++j) rb[j][l] = r1[j];",
         f"    for (j = 0; j < {ninc}; ++j) acc[j][l] += r2[j];",
+        f"    for (j = 0; j < {npm}; ++j) pm[j][l] = r3[j];",
         "  }",
     ]
     return cg.dump(), lines
 
 
-def _driver(exact: bool, ld: int) -> dict[str, str]:
+def _driver(exact: bool, ld: int, nv: int = 0) -> dict[str, str]:
     """The parts of the sample loop that differ between the modes. Exact: the random numbers drawn
     lane by lane, the divergence check lane by lane, the next state copied. Fast: the same uniforms
     computed on integer lane vectors, the normal's tails on the lane vector (through the vector
     ``log``, when any lane needs them; each lane keeps its own), the check as lane masks, the state
-    buffers swapped."""
+    buffers swapped. ``nv`` standard normals of the measurement noise follow the unknown inputs
+    (counters ``k NSLOT + 2 + ld + j``)."""
     bc = lambda c: f"FTE_BC({c!r})"  # noqa: E731
     if exact:
+
+        def normal(dest: str, counter: str, ind: str) -> str:
+            return f"""{ind}{{  /* N by AS 241 (rng.py): the central formula for 8 paths at once, the tail by path */
+{ind}  double p[V] FTE_AL;
+{ind}  fte_vd q, q_r;
+{ind}  for (l = 0; l < V; ++l) p[l] = fte_p01(key[l], {counter});
+{ind}  q = FTE_LD(p) - FTE_BC(0.5);
+{ind}  q_r = FTE_BC(0.180625) - q * q;
+{ind}  FTE_ST({dest}, {rng.central_c("q", "q_r", bc)});
+{ind}  for (l = 0; l < V; ++l)
+{ind}    if (!(fabs(p[l] - 0.5) <= {rng.TAIL!r})) {dest}[l] = fte_ndtri_tail(p[l]);
+{ind}}}
+"""
+
+        noise = (
+            (f"        for (j = 0; j < {nv}; ++j)\n" + normal("dv[j]", f"cb + {2 + ld} + j", "        "))
+            if nv
+            else ""
+        )
         return {
             "decl": "  double st[NS][V] FTE_AL, nx[NS][V] FTE_AL, acc[NINC][V] FTE_AL, rb[NREC][V] FTE_AL, "
-            "dw[V] FTE_AL, dd[LD][V] FTE_AL;",
+            "pm[NPM][V] FTE_AL, dw[V] FTE_AL, dd[LD][V] FTE_AL, dv[NV][V] FTE_AL;",
             "init": "",
-            "rand": f"""      {{  /* dW = sqrt(dt) N, N by AS 241 (rng.py): the central formula for 8 paths at once, the tail by path */
-        double p[V] FTE_AL;
-        fte_vd q, q_r;
-        for (l = 0; l < V; ++l) p[l] = fte_p01(key[l], cb + 1);
-        q = FTE_LD(p) - FTE_BC(0.5);
-        q_r = FTE_BC(0.180625) - q * q;
-        FTE_ST(dw, {rng.central_c("q", "q_r", bc)});
-        for (l = 0; l < V; ++l)
-          if (!(fabs(p[l] - 0.5) <= {rng.TAIL!r})) dw[l] = fte_ndtri_tail(p[l]);
-        for (l = 0; l < V; ++l) dw[l] = sqdt * dw[l];
+            "rand": f"""      {{  /* dW = sqrt(dt) N */
+{normal("dw", "cb + 1", "        ")}        for (l = 0; l < V; ++l) dw[l] = sqdt * dw[l];
         for (j = 0; j < {ld}; ++j)
           for (l = 0; l < V; ++l) dd[j][l] = damp * (2.0 * fte_u01(key[l], cb + 2 + j) - 1.0);
-      }}
+{noise}      }}
 """,
             "after": """      for (j = 0; j < (int)(sizeof(XS) / sizeof(XS[0])); ++j)
         for (l = 0; l < V; ++l)
@@ -298,50 +324,65 @@ def _driver(exact: bool, ld: int) -> dict[str, str]:
         f"        FTE_ST(dd[{j}], FTE_BC(damp) * (FTE_BC(2.0) * fte_u01v(kv, cb + {2 + j}) - FTE_BC(1.0)));\n"
         for j in range(ld)
     )
+
+    def normal_v(dest: str, counter: str, ind: str) -> str:
+        return f"""{ind}{{  /* N by AS 241 (rng.py): the same uniforms, drawn on integer lane vectors */
+{ind}  fte_vd p = fte_p01v(kv, {counter}), q, q_r;
+{ind}  q = p - FTE_BC(0.5);
+{ind}  q_r = FTE_BC(0.180625) - q * q;
+{ind}  FTE_ST({dest}, {rng.central_c("q", "q_r", bc)});
+{ind}  {{  /* the tails on the lane vector, when any lane needs them: each lane selects its own */
+{ind}    fte_vl tl = ~(fte_vl)(FTE_ABS(q) <= FTE_BC({rng.TAIL!r}));
+{ind}    long long any = 0;
+{ind}    for (l = 0; l < V; ++l) any |= tl[l];
+{ind}    if (any) {{
+{ind}      fte_vd lg = fte_v_log(FTE_SEL(q < FTE_BC(0.0), p, FTE_BC(1.0) - p)), rr, r1, r2, v;
+{ind}      for (l = 0; l < V; ++l) rr[l] = sqrt(-lg[l]);
+{ind}      r1 = rr - FTE_BC(1.6);
+{ind}      r2 = rr - FTE_BC(5.0);
+{ind}      v = FTE_SEL(rr <= FTE_BC(5.0), {h(rng._C, "r1", bc)} / {h(rng._D, "r1", bc)},
+{ind}                  {h(rng._E, "r2", bc)} / {h(rng._F, "r2", bc)});
+{ind}      v = FTE_SEL(q < FTE_BC(0.0), -v, v);
+{ind}      FTE_ST({dest}, FTE_SEL(tl, v, FTE_LD({dest})));
+{ind}    }}
+{ind}  }}
+{ind}}}
+"""
+
+    noise = (
+        (f"        for (j = 0; j < {nv}; ++j)\n" + normal_v("dv[j]", f"cb + {2 + ld} + j", "        "))
+        if nv
+        else ""
+    )
     return {
         "decl": "  double bufa[NS][V] FTE_AL, bufb[NS][V] FTE_AL, (*st)[V] = bufa, (*nx)[V] = bufb, (*tp)[V];\n"
-        "  double acc[NINC][V] FTE_AL, rb[NREC][V] FTE_AL, dw[V] FTE_AL, dd[LD][V] FTE_AL;\n"
-        "  fte_vu kv;\n  fte_vl dv;",
-        "init": "    for (l = 0; l < V; ++l) kv[l] = key[l];\n    dv = (fte_vl)FTE_BC(0.0) - 1;\n",
-        "rand": f"""      {{  /* dW = sqrt(dt) N, N by AS 241 (rng.py): the same uniforms, drawn on integer lane vectors */
-        fte_vd p = fte_p01v(kv, cb + 1), q, q_r;
-        q = p - FTE_BC(0.5);
-        q_r = FTE_BC(0.180625) - q * q;
-        FTE_ST(dw, {rng.central_c("q", "q_r", bc)});
-        {{  /* the tails on the lane vector, when any lane needs them: each lane selects its own */
-          fte_vl tl = ~(fte_vl)(FTE_ABS(q) <= FTE_BC({rng.TAIL!r}));
-          long long any = 0;
-          for (l = 0; l < V; ++l) any |= tl[l];
-          if (any) {{
-            fte_vd lg = fte_v_log(FTE_SEL(q < FTE_BC(0.0), p, FTE_BC(1.0) - p)), rr, r1, r2, v;
-            for (l = 0; l < V; ++l) rr[l] = sqrt(-lg[l]);
-            r1 = rr - FTE_BC(1.6);
-            r2 = rr - FTE_BC(5.0);
-            v = FTE_SEL(rr <= FTE_BC(5.0), {h(rng._C, "r1", bc)} / {h(rng._D, "r1", bc)},
-                        {h(rng._E, "r2", bc)} / {h(rng._F, "r2", bc)});
-            v = FTE_SEL(q < FTE_BC(0.0), -v, v);
-            FTE_ST(dw, FTE_SEL(tl, v, FTE_LD(dw)));
-          }}
-        }}
-        FTE_ST(dw, FTE_BC(sqdt) * FTE_LD(dw));
-{dd}      }}
+        "  double acc[NINC][V] FTE_AL, rb[NREC][V] FTE_AL, pm[NPM][V] FTE_AL, dw[V] FTE_AL, dd[LD][V] FTE_AL, "
+        "dv[NV][V] FTE_AL;\n"
+        "  fte_vu kv;\n  fte_vl dv_;",
+        "init": "    for (l = 0; l < V; ++l) kv[l] = key[l];\n    dv_ = (fte_vl)FTE_BC(0.0) - 1;\n",
+        "rand": f"""      {{  /* dW = sqrt(dt) N */
+{normal_v("dw", "cb + 1", "        ")}        FTE_ST(dw, FTE_BC(sqdt) * FTE_LD(dw));
+{dd}{noise}      }}
 """,
         "after": """      {  /* the first sample at which a plant state is NaN, infinite or beyond the bound, per lane */
         fte_vl bad = (fte_vl)FTE_BC(0.0), m;
         for (j = 0; j < (int)(sizeof(XS) / sizeof(XS[0])); ++j)
           bad |= ~(fte_vl)(FTE_ABS(FTE_LD(st[XS[j]])) <= FTE_BC(bound));
-        m = bad & (dv < 0);
-        dv = (dv & ~m) | (((fte_vl)FTE_BC(0.0) + k) & m);
+        m = bad & (dv_ < 0);
+        dv_ = (dv_ & ~m) | (((fte_vl)FTE_BC(0.0) + k) & m);
       }
       tp = st; st = nx; nx = tp;
 """,
-        "final": "    for (l = 0; l < V; ++l) div[l] = dv[l];\n",
+        "final": "    for (l = 0; l < V; ++l) div[l] = dv_[l];\n",
     }
 
 
 def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool = False, exact: bool = True,
-         vmath: bool = True, lanes: int = LANES) -> str:  # fmt: skip
-    """C source of the lane engine of ``F: (state, w, sh) -> (next, rec, incr)``.
+         vmath: bool = True, lanes: int = LANES, nv: int = 0) -> str:  # fmt: skip
+    """C source of the lane engine of ``F: (state, w, sh) -> (next, rec, incr[, pm])``.
+
+    ``w = [dW; d; v]``: ``v`` the last ``nv`` entries, standard normals of the measurement noise.
+    ``pm`` (optional): per-sample values summed over the paths (``PM``, samples x npm), in path order.
 
     ``x_slots``: the entries of ``state`` that are plant states (checked for divergence).
     ``casadi_c``: call CasADi's generated C of ``F`` lane by lane instead of emitting lane vectors.
@@ -353,8 +394,9 @@ def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: 
         F = F.expand()
     ns, nw, nsh = F.size1_in(0), F.size1_in(1), F.size1_in(2)
     nrec, ninc = F.size1_out(1), F.size1_out(2)
-    ld = nw - 1
-    head, body = _casadi_body(F) if casadi_c else ("", _body(F, exact))
+    npm = F.size1_out(3) if F.n_out() > 3 else 0
+    ld = nw - 1 - nv
+    head, body = _casadi_body(F, ld) if casadi_c else ("", _body(F, exact, ld))
     vm = ""
     if not exact:
         names = _op_names()
@@ -366,8 +408,8 @@ def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: 
             + _fast_rng(lanes)
         )
     xs = ", ".join(str(j) for j in x_slots) or "0"
-    nslot = 1 + ld
-    drv = _driver(exact, ld)
+    nslot = 1 + ld + nv
+    drv = _driver(exact, ld, nv)
     return f"""/* generated by fte_casadi.sim.vector from a CasADi Function: do not edit */
 {head}
 #include <math.h>
@@ -378,20 +420,25 @@ def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: 
 #define NINC {max(ninc, 1)}
 #define NSH {nsh}
 #define LD {max(ld, 1)}
+#define NV {max(nv, 1)}
+#define NPM {max(npm, 1)}
 #define FTE_AL __attribute__((aligned({8 * lanes})))
 {_prelude(lanes)}{vm}
 {rng.C_SOURCE}
 static const int XS[] = {{{xs}}};
 static void fte_sample(double st[NS][V], double nx[NS][V], double acc[NINC][V], double rb[NREC][V],
-                       const double *sh, const double *dw, double dd[LD][V], int recnow) {{
+                       double pm[NPM][V], const double *sh, const double *dw, double dd[LD][V], double dv[NV][V],
+                       int recnow) {{
 {chr(10).join(body)}
 }}
 
 /* paths [path0, path0 + npaths): state S0 (npaths x NS) -> S1; sums ACC (npaths x NINC) over samples
    0 .. nsamp - 1; REC (npaths x nrs x NREC) every `every` samples when REC is not NULL; DIV: first
-   diverging sample or -1. SH: (nsamp x NSH) shared inputs. Random numbers: rng.py. */
+   diverging sample or -1. SH: (nsamp x NSH) shared inputs. PM (nsamp x NPM, when not NULL): each per-sample
+   value added up over the paths, in path order (the caller initialises it). Random numbers: rng.py. */
 void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH, double sqdt, double damp,
-            const double *S0, double *S1, double *ACC, long every, double *REC, long *DIV, double bound) {{
+            const double *S0, double *S1, double *ACC, long every, double *REC, long *DIV, double bound,
+            double *PM) {{
 {drv["decl"]}
   uint64_t key[V];
   long div[V];
@@ -405,6 +452,7 @@ void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH
       for (j = 0; j < NS; ++j) st[j][l] = S0[p * NS + j];
       for (j = 0; j < NINC; ++j) acc[j][l] = 0.0;
       for (j = 0; j < LD; ++j) dd[j][l] = 0.0;
+      for (j = 0; j < NV; ++j) dv[j][l] = 0.0;
       key[l] = fte_key(seed, (uint64_t)(path0 + p));
       div[l] = -1;
     }}
@@ -412,7 +460,12 @@ void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH
       const double *sh = SH + k * NSH;
       int recnow = REC != 0 && k % every == 0;
       uint64_t cb = (uint64_t)k * {nslot};
-{drv["rand"]}      fte_sample(st, nx, acc, rb, sh, dw, dd, recnow);
+{drv["rand"]}      fte_sample(st, nx, acc, rb, pm, sh, dw, dd, dv, recnow);
+      if (PM != 0 && {npm} > 0) {{
+        for (j = 0; j < {npm}; ++j)
+          for (l = 0; l < nl; ++l)
+            PM[k * {npm} + j] += pm[j][l];
+      }}
       if (recnow) {{
         for (l = 0; l < nl; ++l)
           for (j = 0; j < NREC; ++j) REC[((c0 + l) * nrs + k / every) * NREC + j] = rb[j][l];
@@ -480,7 +533,7 @@ class VectorEngine:
     says whether it found glibc's vector math library)."""
 
     def __init__(self, F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool | None = None,
-                 source_filter=None, exact: bool = True, lanes: int = LANES):  # fmt: skip
+                 source_filter=None, exact: bool = True, lanes: int = LANES, nv: int = 0):  # fmt: skip
         if not F.is_a("SXFunction"):
             F = F.expand()
         missing = unsupported(F)
@@ -503,7 +556,7 @@ class VectorEngine:
         # the fast mode links glibc's vector math library; where there is none, it calls the C library lane by lane
         tries = [True] if exact else [True, False]
         for k, vmath in enumerate(tries):
-            src = emit(F, x_slots, name, casadi_c=casadi_c, exact=exact, vmath=vmath, lanes=lanes)
+            src = emit(F, x_slots, name, casadi_c=casadi_c, exact=exact, vmath=vmath, lanes=lanes, nv=nv)
             if source_filter is not None:  # the benchmark's anatomy: the same engine with parts left out
                 src = source_filter(src)
             flags = FLAGS if exact else FAST_FLAGS
@@ -523,16 +576,18 @@ class VectorEngine:
         dp = ctypes.POINTER(ctypes.c_double)
         lp = ctypes.POINTER(ctypes.c_long)
         self.fn.argtypes = [ctypes.c_long, ctypes.c_long, ctypes.c_uint64, ctypes.c_long, dp, ctypes.c_double,
-                            ctypes.c_double, dp, dp, dp, ctypes.c_long, dp, lp, ctypes.c_double]  # fmt: skip
+                            ctypes.c_double, dp, dp, dp, ctypes.c_long, dp, lp, ctypes.c_double, dp]  # fmt: skip
         self.fn.restype = None
         self.ns, self.nrec, self.ninc, self.nsh = F.size1_in(0), F.size1_out(1), F.size1_out(2), F.size1_in(2)
+        self.npm = F.size1_out(3) if F.n_out() > 3 else 0
         self.source = src
 
     def run(self, path0: int, S0: np.ndarray, seed: int, SH: np.ndarray, sqdt: float, damp: float,
-            bound: float, every: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:  # fmt: skip
+            bound: float, every: int = 0, pm: bool = False):  # fmt: skip
         """Run paths ``path0 ..`` from states ``S0`` (paths, ns) over the samples of ``SH``.
 
-        Returns ``(S1, ACC, DIV, REC)``; ``REC`` (paths, samples, nrec) only when ``every > 0``."""
+        Returns ``(S1, ACC, DIV, REC)``; ``REC`` (paths, samples, nrec) only when ``every > 0``; with ``pm``
+        also ``PM`` (samples, npm), each per-sample value summed over these paths in path order."""
         P, nsamp = S0.shape[0], SH.shape[0]
         S0 = np.ascontiguousarray(S0, dtype=np.float64)
         SH = np.ascontiguousarray(SH, dtype=np.float64)
@@ -540,9 +595,13 @@ class VectorEngine:
         ACC = np.empty((P, self.ninc))
         DIV = np.empty(P, dtype=np.int_)
         REC = np.empty((P, (nsamp - 1) // every + 1, self.nrec)) if every > 0 else None
+        PM = np.zeros((nsamp, self.npm)) if (pm and self.npm) else None
         dp = ctypes.POINTER(ctypes.c_double)
         self.fn(P, int(path0), ctypes.c_uint64(int(seed) & 0xFFFFFFFFFFFFFFFF), nsamp, SH.ctypes.data_as(dp),
                 float(sqdt), float(damp), S0.ctypes.data_as(dp), S1.ctypes.data_as(dp), ACC.ctypes.data_as(dp),
                 int(every), REC.ctypes.data_as(dp) if REC is not None else None,
-                DIV.ctypes.data_as(ctypes.POINTER(ctypes.c_long)), float(bound))  # fmt: skip
+                DIV.ctypes.data_as(ctypes.POINTER(ctypes.c_long)), float(bound),
+                PM.ctypes.data_as(dp) if PM is not None else None)  # fmt: skip
+        if pm:
+            return S1, ACC, DIV, REC, PM
         return S1, ACC, DIV, REC

@@ -103,12 +103,12 @@ def comparison(
     for j, f in enumerate(fault_names):
         rows.append((f"fault error {f}", base["fault_rel_rms_error"][j], chosen["fault_rel_rms_error"][j]))
     for j, f in enumerate(fault_names):
-        rows.append((f"false alarms {f}", base["false_alarm_rel_rms"][j], chosen["false_alarm_rel_rms"][j]))
+        rows.append((f"false alarms {f}", base["false_alarm_peak"][j], chosen["false_alarm_peak"][j]))
     for wb, wc in zip(base["windows"], chosen["windows"]):
         tag = f"{wb['fault']} [{wb['start']:g}, {wb['stop']:g})"
         rows.append((f"fault error in window {tag}", wb["fault_rel_rms_error"], wc["fault_rel_rms_error"]))
-        rows.append((f"FTC ratio in window {tag}", wb["ftc_deviation_ratio"], wc["ftc_deviation_ratio"]))
-    rows.append(("FTC ratio, all windows", base["ftc_deviation_ratio"], chosen["ftc_deviation_ratio"]))
+        rows.append((f"FTC ratio in window {tag}", wb["ftc_true_ratio"], wc["ftc_true_ratio"]))
+    rows.append(("FTC ratio, all windows", base["ftc_true_ratio"], chosen["ftc_true_ratio"]))
     for i, u in enumerate(input_names):
         rows.append((f"peak |{u}|", base["input_peak"][i], chosen["input_peak"][i]))
         rows.append((f"saturation {u}", base["input_saturation"][i], chosen["input_saturation"][i]))

@@ -9,9 +9,9 @@ the same front and the same chosen design, wherever the candidates ran.
 Objectives (all minimised; those the base design leaves undefined are dropped):
 
 - ``fault_error[F]``: fault F's relative RMS error in its windows (metrics ``fault_rel_rms_error``);
-- ``false_alarm[F]``: F's estimate outside its windows relative to F (``false_alarm_rel_rms``);
-- ``ftc[F@t0]``: the FTC deviation ratio in the window of F starting at t0
-  (``windows[].ftc_deviation_ratio``; one objective per window, so that the worst window, and every
+- ``false_alarm[F]``: F's estimate outside its windows relative to F (``false_alarm_peak``);
+- ``ftc[F@t0]``: the FTC true ratio in the window of F starting at t0
+  (``windows[].ftc_true_ratio``; one objective per window, so that the worst window, and every
   window, can be read off the front);
 - ``input_peak``: the largest ``max |u_i|`` over the inputs, each relative to the base design's;
 - ``input_saturation``: the largest fraction of samples an input spends at a limit (plants with limits);
@@ -129,7 +129,7 @@ def objectives_for(
     """The objective names defined at the base design, and the function from a metrics document to
     their values (``UNDEFINED`` where a candidate leaves one undefined)."""
     names, getters = [], []
-    for key, kind in (("fault_rel_rms_error", "fault_error"), ("false_alarm_rel_rms", "false_alarm")):
+    for key, kind in (("fault_rel_rms_error", "fault_error"), ("false_alarm_peak", "false_alarm")):
         for j, f in enumerate(fault_names):
             v = (base_metrics.get(key) or [None] * len(fault_names))[j]
             if v is not None:
@@ -138,9 +138,9 @@ def objectives_for(
                     lambda m, key=key, j=j: (m.get(key) or [])[j] if j < len(m.get(key) or []) else None
                 )
     for k, w in enumerate(base_metrics.get("windows") or []):
-        if w.get("ftc_deviation_ratio") is not None:
+        if w.get("ftc_true_ratio") is not None:
             names.append(f"ftc[{_window_tag(w)}]")
-            getters.append(lambda m, k=k: m["windows"][k]["ftc_deviation_ratio"])
+            getters.append(lambda m, k=k: m["windows"][k]["ftc_true_ratio"])
     base_peak = np.asarray(base_metrics["input_peak"], float)
     if np.any(base_peak > 0):
         names.append("input_peak")
@@ -206,11 +206,11 @@ def _within_inputs(values: tuple, base: tuple, names: tuple) -> bool:
 def _admissible(m: dict) -> tuple[bool, bool]:
     """(every window's FTC ratio < 1, every false-alarm ratio < 1): the thresholds of :mod:`fte_casadi.verdicts`."""
     ftc = all(
-        w["ftc_deviation_ratio"] < WORSE_THAN_NONE
+        w["ftc_true_ratio"] < WORSE_THAN_NONE
         for w in m.get("windows") or []
-        if w.get("ftc_deviation_ratio") is not None
+        if w.get("ftc_true_ratio") is not None
     )
-    fa = all(v < FALSE_ALARM for v in m.get("false_alarm_rel_rms") or [] if v is not None)
+    fa = all(v < FALSE_ALARM for v in m.get("false_alarm_peak") or [] if v is not None)
     return ftc, fa
 
 
@@ -440,13 +440,13 @@ def _limits(done, plant) -> list[str]:
     nwin = len(done[0].metrics.get("windows") or [])
     out = []
     for k in range(nwin):
-        best = min(done, key=lambda r: r.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf)
-        if (best.metrics["windows"][k]["ftc_deviation_ratio"] or math.inf) >= WORSE_THAN_NONE:
+        best = min(done, key=lambda r: r.metrics["windows"][k]["ftc_true_ratio"] or math.inf)
+        if (best.metrics["windows"][k]["ftc_true_ratio"] or math.inf) >= WORSE_THAN_NONE:
             d = Design.from_dict(json.loads(best.design))
             out += [f"no certified candidate makes tolerant control better than none here (best: trial {best.number}); "
                     + s for s in explain_metrics(d, best.metrics, windows=[k], faults=[])]  # fmt: skip
     for j in range(len(plant.fault_names)):
-        vals = [(r.metrics["false_alarm_rel_rms"] or [None] * (j + 1))[j] for r in done]
+        vals = [(r.metrics["false_alarm_peak"] or [None] * (j + 1))[j] for r in done]
         if all(v is None for v in vals):
             continue
         i = int(np.argmin([math.inf if v is None else v for v in vals]))
