@@ -351,16 +351,53 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
         click.echo("(design document not saved: add -o FILE)")
 
 
-def _design_or_plant(target: str, progress: bool = True):
-    """A design document path, or a plant spec designed on the fly (conditioned variant)."""
+def _design_or_plant(
+    target: str, progress: bool = True, plant: str | None = None, allow_uncertified: bool = False
+):
+    """A design document path, or a plant spec designed on the fly (conditioned variant).
+
+    A document is checked before use (:func:`fte_casadi.trust.check_loaded`): re-certified at its numbers,
+    against its plant when that is a built-in one or named with ``plant`` (--plant), never running code it
+    names. Returns ``(design, plant spec or None)``: the spec of the plant it may be simulated on.
+    """
     from .design.record import Design
+    from .trust import check_loaded
 
     p = Path(target)
     if target.endswith(".json") or p.is_file():
-        return Design.load(p)
+        trusted = check_loaded(Design.load(p), plant, allow_uncertified)
+        for note in trusted.notes:
+            click.echo(textwrap.fill("fte: " + note, width=100, break_on_hyphens=False), err=True)
+        return trusted.design, trusted.plant_spec
+    if plant is not None:
+        raise ParameterError(
+            f"--plant names the plant of a design document; {target} is a plant: give one of them"
+        )
     if progress:
         click.echo(f"designing {target} (conditioned variant) ...", err=True)
-    return _make_design(target, "conditioned", "CLARABEL", {})
+    return _make_design(target, "conditioned", "CLARABEL", {}), target
+
+
+def _need_plant(d, spec: str | None, command: str) -> str:
+    """The plant spec ``command`` simulates ``d`` on; a document's own non-built-in spec is not imported."""
+    if spec is None:
+        raise ParameterError(
+            f"fte {command} simulates the true nonlinear plant, and the document names {d.plant_spec!r}, which fte does "
+            f"not import on a document's word (it would run that code): name the plant yourself with "
+            f"--plant {d.plant_spec} if you trust it"
+        )
+    return spec
+
+
+_plant_option = click.option(
+    "--plant", "plant_opt", metavar="PLANT",
+    help="The plant of a design document (built-in name, FILE.py:FUNCTION or module:function): checked against "
+    "the document; needed to simulate a document whose plant is not a built-in one (docs/interface.md, Trust model).",
+)  # fmt: skip
+_allow_option = click.option(
+    "--allow-uncertified", "allow_uncertified", is_flag=True,
+    help="Use a design document that does not re-certify at its own numbers (marked NOT CERTIFIED).",
+)  # fmt: skip
 
 
 # -- codegen ------------------------------------------------------------------------------
@@ -377,15 +414,17 @@ def _design_or_plant(target: str, progress: bool = True):
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
 @click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
+@_plant_option
+@_allow_option
 @_guard
-def codegen(target, out_dir, sample_time, real, boundary_layer, fmu):
+def codegen(target, out_dir, sample_time, real, boundary_layer, fmu, plant_opt, allow_uncertified):
     """Generate the embedded C of the observer/controller step."""
     from .codegen import default_sample_time, generate_c
     from .codegen.fmu import check_fmu_target, generate_fmu
 
     _positive("ts", sample_time)
     _positive("boundary-layer", boundary_layer)
-    d = _design_or_plant(target)
+    d, _ = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
     files = generate_c(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
@@ -473,8 +512,11 @@ def _why(d, m: dict) -> list[str]:
                    "the tolerance of docs/simulation.md; the same numbers for any split of the paths).")  # fmt: skip
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics document (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
+@_allow_option
 @_guard
-def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json, quiet):
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json, quiet, plant_opt,
+             allow_uncertified):  # fmt: skip
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .plants.loader import load_plant, load_scenario
@@ -489,9 +531,12 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
         _positive("dt", dt)
     if save:
         _writable_target(save, "--save", "result.npz")
-    d = _design_or_plant(target, progress=not quiet)
-    plant = load_plant(d.plant_spec)
-    scenario = load_scenario(d.plant_spec)
+    d, spec = _design_or_plant(
+        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
+    )
+    spec = _need_plant(d, spec, "simulate")
+    plant = load_plant(spec)
+    scenario = load_scenario(spec)
     res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
                   record_all=bool(save), scheduler=scheduler, exact=not fast_math)  # fmt: skip
     m = res.metrics
@@ -557,8 +602,12 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the list of points (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
+@_allow_option
 @_guard
-def sweep(target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet):
+def sweep(
+    target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet, plant_opt, allow_uncertified
+):
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
     from .design.record import atomic_write_text
     from .plants.loader import load_plant, load_scenario
@@ -570,9 +619,12 @@ def sweep(target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, qui
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
     if seed < 0:
         raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
-    d = _design_or_plant(target, progress=not quiet)
-    plant = load_plant(d.plant_spec)
-    scenario = load_scenario(d.plant_spec)
+    d, spec = _design_or_plant(
+        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
+    )
+    spec = _need_plant(d, spec, "sweep")
+    plant = load_plant(spec)
+    scenario = load_scenario(spec)
     points = run_sweep(d, plant, scenario, grid, paths=paths or scenario.paths, seed=seed, scheduler=scheduler,
                        progress=not quiet, exact=not fast_math)  # fmt: skip
     if out_dir:
@@ -699,8 +751,9 @@ def _tune_target(out_dir: str) -> None:
     "--json", "as_json", is_flag=True, help="Print the front (JSON list) on stdout; the tables go to stderr."
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
 @_guard
-def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
+def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, plant_opt):
     """Multi-objective search over the design's knobs (gamma, gamma1, sigma, alpha, kappa, sliding gain,
     boundary layer): each candidate designed, certified and simulated with the same random numbers;
     the Pareto front, and the chosen design in DIR/tuned.json (see docs/tune.md for the rule)."""
@@ -726,10 +779,11 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
         raise MissingDependencyError("fte tune needs optuna: pip install 'fte_casadi[tune]'") from None
     _tune_target(out_dir)
     given = target.endswith(".json") or Path(target).is_file()
-    d = _design_or_plant(target, progress=not quiet)
-    plant = load_plant(d.plant_spec)
+    d, spec = _design_or_plant(target, progress=not quiet, plant=plant_opt)
+    spec = _need_plant(d, spec, "tune")
+    plant = load_plant(spec)
     try:
-        scenario = load_scenario(d.plant_spec)
+        scenario = load_scenario(spec)
     except FteError as exc:
         raise ParameterError(f"fte tune simulates every candidate on the plant's scenario, and {d.plant_spec} has "
                              f"none ({exc}); add a scenario() beside the plant function") from None  # fmt: skip

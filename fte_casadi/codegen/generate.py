@@ -290,7 +290,7 @@ def _wrapper(
     ]
     setup += [f"res[{k}] = 0;" for k in range(5, sizes["SZ_RES"])]
     mem = _memory(c_src, real, nbar, sizes)
-    certified = "certified" if design.certified else "NOT certified"
+    certified = "certified" if design.certified else "NOT CERTIFIED (no guarantee: see the design's status)"
     affine = any(np.any(lm.a) for lm in design.local_models)
     sub = {
         "name": name,

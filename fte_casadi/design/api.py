@@ -12,6 +12,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ..errors import FteError, InfeasibleDesignError, ParameterError
+from ..model.fingerprint import plant_fingerprint
 from ..rounding import nice_ceil, nice_floor
 from ..ts import TSModel, scheduling_from_measurements
 from . import conditioned, paper
@@ -399,7 +400,8 @@ def design(
         timings={"total_s": total, "solver_s": s3.seconds + s5.seconds},
         u_ref=u_ref,
         x_ref=x_ref,
-        scheduling=sched.serialize(),
+        scheduling=sched,  # the record keeps it as data (scheduling_ops) and, for older readers, serialised
+        plant_hash=plant_fingerprint(plant),
         names={
             "states": list(plant.state_names),
             "inputs": list(plant.input_names),

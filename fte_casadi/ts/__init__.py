@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..model import Plant
@@ -15,6 +17,36 @@ from .model import LocalModel as LocalModel
 from .model import Premise as Premise
 from .model import TSModel as TSModel
 from .sector import sector_local_models
+
+
+def structure(plant: Plant, *, seed: int = 0) -> TSModel:
+    """The T-S model of ``plant`` without its fidelity check (``fidelity`` holds NaN): premises, local
+    models and memberships, as :func:`derive` finds them. Rebuilding a design's scheduling map from its
+    plant needs this much, in milliseconds to a few seconds, not the fidelity integration."""
+    kind = plant.method  # "sector" or "linearisation"
+    auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
+    notes: tuple[str, ...] = ()
+    if auto:
+        form = premise_form(plant, seed=seed)
+        premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
+        kind = "sector_auto" if premises else "linear"
+        notes = form.notes
+    elif plant.method == "sector":
+        premises, models, premise_fn, membership_fn = sector_local_models(plant)
+    else:
+        premises, models, premise_fn, membership_fn = linearised_local_models(plant)
+    return TSModel(
+        plant,
+        kind,
+        premises,
+        models,
+        plant.C,
+        plant.Df,
+        premise_fn,
+        membership_fn,
+        Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
+        notes,
+    )
 
 
 def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TSModel:
@@ -32,38 +64,17 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     >>> ts.r, round(ts.premises[0].min, 4)
     (2, -0.2172)
     """
-    kind = plant.method  # "sector" or "linearisation"
-    auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
-    notes: tuple[str, ...] = ()
-    if auto:
-        form = premise_form(plant, seed=seed)
-        premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
-        kind = "sector_auto" if premises else "linear"
-        notes = form.notes
-    elif plant.method == "sector":
-        premises, models, premise_fn, membership_fn = sector_local_models(plant)
-    else:
-        premises, models, premise_fn, membership_fn = linearised_local_models(plant)
-    tmp = TSModel(
-        plant,
-        kind,
-        premises,
-        models,
-        plant.C,
-        plant.Df,
-        premise_fn,
-        membership_fn,
-        Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
-    )
+    tmp = structure(plant, seed=seed)
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
-    ts = TSModel(plant, kind, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid, notes)
-    if auto:
+    ts = dataclasses.replace(tmp, fidelity=fid)
+    if tmp.kind in ("sector_auto", "linear") and plant.method == "sector":
         check_exact(ts, seed=seed)  # the proof: exact to round-off, or refused with the row and the point
     return ts
 
 
 __all__ = [
     "derive",
+    "structure",
     "TSModel",
     "LocalModel",
     "Premise",
