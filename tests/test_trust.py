@@ -144,7 +144,9 @@ def test_edited_plant_file_is_refused(tmp_path):
 def test_a_documents_plant_spec_is_never_imported(tmp_path, monkeypatch):
     marker = tmp_path / "ran"
     evil = tmp_path / "evil.py"
-    evil.write_text(f"open({str(marker)!r}, 'w').write('x')\ndef plant():\n    open({str(marker)!r}, 'w').write('y')\n")
+    evil.write_text(
+        f"open({str(marker)!r}, 'w').write('x')\ndef plant():\n    open({str(marker)!r}, 'w').write('y')\n"
+    )
     for spec in (f"{evil}:plant", "os:getpid"):
         f = tampered(tmp_path, plant_spec=spec, name="e.json")
         for cmd in (["simulate", f, "--paths", "1"], ["sweep", f, "--vary", "fault_scale=1"]):
