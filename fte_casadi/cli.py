@@ -46,7 +46,7 @@ def _ours(path: Path) -> bool:
             with zipfile.ZipFile(path) as z:
                 return {"meta.npy", "design.npy", "scenario.npy"} <= set(z.namelist())
         doc = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, ValueError, zipfile.BadZipFile):
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError, zipfile.BadZipFile):
         return False
     return isinstance(doc, dict) and all(k in doc for k in REQUIRED_KEYS)
 
@@ -85,6 +85,11 @@ def _guard(fn):
             sys.exit(0)
         except KeyboardInterrupt:
             _fail("interrupted; nothing was written", 130)
+        except MemoryError:
+            if debug:
+                raise
+            _fail("out of memory: the run asks for more than this machine has; use fewer --paths (or a cluster "
+                  "with --scheduler), or leave out --save")  # fmt: skip
         except Exception as exc:  # noqa: BLE001 - the last line of defence: no traceback for users
             if debug:
                 raise
@@ -95,6 +100,12 @@ def _guard(fn):
             )
 
     return wrapper
+
+
+def _check_seed(seed: int) -> None:
+    """A seed numpy's generators take: 0 <= seed < 2**63."""
+    if not 0 <= seed < 2**63:
+        raise ParameterError(f"--seed must be an integer from 0 to 2**63 - 1 = {2**63 - 1}; got {seed}")
 
 
 def _positive(name: str, value, allow_zero: bool = False):
@@ -520,13 +531,13 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .plants.loader import load_plant, load_scenario
+    from .resources import check_paths_memory
     from .sim import save_result
     from .sim import simulate as run_sim
 
     if paths is not None and paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    if seed < 0:
-        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    _check_seed(seed)
     if dt is not None:
         _positive("dt", dt)
     if save:
@@ -537,6 +548,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
     spec = _need_plant(d, spec, "simulate")
     plant = load_plant(spec)
     scenario = load_scenario(spec)
+    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
     res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
                   record_all=bool(save), scheduler=scheduler, exact=not fast_math)  # fmt: skip
     m = res.metrics
@@ -611,20 +623,21 @@ def sweep(
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
     from .design.record import atomic_write_text
     from .plants.loader import load_plant, load_scenario
+    from .resources import check_paths_memory
     from .sim.sweep import parse_vary, to_csv, to_json
     from .sim.sweep import sweep as run_sweep
 
     grid = parse_vary(vary)
     if paths is not None and paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    if seed < 0:
-        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    _check_seed(seed)
     d, spec = _design_or_plant(
         target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
     )
     spec = _need_plant(d, spec, "sweep")
     plant = load_plant(spec)
     scenario = load_scenario(spec)
+    check_paths_memory(d, scenario, paths or scenario.paths, None, False)
     points = run_sweep(d, plant, scenario, grid, paths=paths or scenario.paths, seed=seed, scheduler=scheduler,
                        progress=not quiet, exact=not fast_math)  # fmt: skip
     if out_dir:
@@ -663,8 +676,7 @@ def reproduce(which, out_dir, seed, paths):
     """The main job: the paper's examples end to end, and a Markdown report with tables and figures."""
     from .report import reproduce as run
 
-    if seed < 0:
-        raise ParameterError(f"--seed must be non-negative; got {seed}")
+    _check_seed(seed)
     if paths is not None and paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
     t0 = time.perf_counter()
@@ -766,8 +778,7 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
     if trials < 2:
         raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "
                              f"got {trials}")  # fmt: skip
-    if seed < 0:
-        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    _check_seed(seed)
     if rule not in RULES:
         raise ParameterError(f"unknown --objective {rule!r}: choose one of {', '.join(RULES)} (docs/tune.md says "
                              "what each picks)")  # fmt: skip

@@ -46,8 +46,8 @@ def _leaves_numeric(v, depth: int = 0) -> bool:
 def _matrix(source: str, key: str, v, shape: tuple[int, ...]) -> np.ndarray:
     """A list of rows (or a vector for a 1-tuple ``shape``) of finite numbers, of exactly ``shape``."""
     if not isinstance(v, list) or not _leaves_numeric(v):
-        raise _fail(source, key, "must be a matrix (a list of rows) of numbers; it holds something else "
-                    "(a string such as \"inf\", a boolean, null or a deeper list)")  # fmt: skip
+        raise _fail(source, key, "holds a NaN, null or other non-number entry (a string such as \"inf\", a boolean, "
+                    "or a deeper list): it must be a matrix (a list of rows) of finite numbers")  # fmt: skip
     try:
         a = np.array(v, dtype=float)
     except ValueError:
