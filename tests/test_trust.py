@@ -208,3 +208,20 @@ def test_copy_of_generated_folder_unchanged(tmp_path):
     """The tests above never write into generated/."""
     shutil.copy(MANIP, tmp_path / "m.json")
     assert Design.load(tmp_path / "m.json").certified
+
+
+@pytest.mark.parametrize(
+    "edit, expect",
+    [
+        (("b_u = 9.81, 0.8, 2.0", "b_u = 9.81, float('inf'), 2.0"), "is infinite or NaN"),
+        (("b_u = 9.81, 0.8, 2.0", "b_u = 9.81, 0.8, 1e12"), "orders of magnitude"),
+    ],
+)
+def test_bad_plant_coefficients_exit_2_with_a_true_message(tmp_path, edit, expect):
+    src = (ROOT / "examples" / "pendulum_plain.py").read_text()
+    assert edit[0] in src
+    plant = tmp_path / "pend.py"
+    plant.write_text(src.replace(*edit))
+    code, out = run("design", f"{plant}:pendulum")
+    assert code == 2, out
+    assert expect in out and "internal error" not in out

@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 
+from ..errors import DerivationError
 from ..model import Plant
 from .auto import premise_form
 from .auto_checks import check_exact
@@ -17,6 +18,21 @@ from .model import LocalModel as LocalModel
 from .model import Premise as Premise
 from .model import TSModel as TSModel
 from .sector import sector_local_models
+
+
+def _finite_models(plant: Plant, models) -> None:
+    """Refuse local models with an infinite or NaN entry: a coefficient of the plant is not finite."""
+    for i, lm in enumerate(models):
+        for key in ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M"):
+            M = np.asarray(lm[key], dtype=float)
+            bad = np.argwhere(~np.isfinite(M))
+            if bad.size:
+                at = ", ".join(str(int(v) + 1) for v in bad[0])
+                raise DerivationError(
+                    f"plant {plant.name}: rule {i + 1}'s local model has {key}[{at}] = {M[tuple(bad[0])]}: a coefficient "
+                    "of the plant's equations is infinite or NaN (a parameter set to inf or nan, or a division by zero "
+                    "at the rule's premise values); fix the plant's parameters"
+                )
 
 
 def structure(plant: Plant, *, seed: int = 0) -> TSModel:
@@ -35,6 +51,7 @@ def structure(plant: Plant, *, seed: int = 0) -> TSModel:
         premises, models, premise_fn, membership_fn = sector_local_models(plant)
     else:
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
+    _finite_models(plant, models)
     return TSModel(
         plant,
         kind,
