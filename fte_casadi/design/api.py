@@ -444,7 +444,7 @@ def _scaling_note(ts: TSModel) -> str:
     if not (big > 0 and small < np.inf and big / small > 1e10):
         return ""
     return (
-        f" Note: the plant's coefficients span {math.log10(big / small):.0f} orders of magnitude (largest {where}, "
+        f" Note: the plant's coefficients span a factor {big / small:.1e} (largest {where}, "
         f"smallest {small:.3g}); the rank decisions behind this verdict use a tolerance relative to the largest, so "
         "it may come from that scaling rather than from the plant's structure: rescale its units (states, inputs) "
         "so that its coefficients lie within about 1e6 of each other, and design again."

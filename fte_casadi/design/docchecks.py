@@ -126,6 +126,9 @@ def check_document(doc: dict, source: str) -> None:
         k5 = len(bdu[0])
         _matrix(source, "remark5.Bdu", bdu, (nbar, k5))
         _matrix(source, "remark5.gain", r5.get("gain"), (k5,))
+    ls = doc["Ls"]
+    if not k5 and isinstance(ls, list) and ls and isinstance(ls[0], list) and len(ls[0]) > lf:
+        raise _fail(source, "Ls", f"has {len(ls[0]) - lf} more columns than faults but 'remark5' is not used")
     ns = lf + k5
     shapes = {"C": (p, n), "Df": (p, lf), "H": (nbar, p), "T": (nbar, nbar), "X": (n, n), "P": (n, n),
               "Kf": (m, lf), "Pbar": (nbar, nbar), "N": (ns, p), "Ls": (nbar, ns)}  # fmt: skip
