@@ -46,7 +46,7 @@ def _ours(path: Path) -> bool:
             with zipfile.ZipFile(path) as z:
                 return {"meta.npy", "design.npy", "scenario.npy"} <= set(z.namelist())
         doc = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, ValueError, zipfile.BadZipFile):
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError, zipfile.BadZipFile):
         return False
     return isinstance(doc, dict) and all(k in doc for k in REQUIRED_KEYS)
 
@@ -85,6 +85,11 @@ def _guard(fn):
             sys.exit(0)
         except KeyboardInterrupt:
             _fail("interrupted; nothing was written", 130)
+        except MemoryError:
+            if debug:
+                raise
+            _fail("out of memory: the run asks for more than this machine has; use fewer --paths (or a cluster "
+                  "with --scheduler), or leave out --save")  # fmt: skip
         except Exception as exc:  # noqa: BLE001 - the last line of defence: no traceback for users
             if debug:
                 raise
@@ -95,6 +100,12 @@ def _guard(fn):
             )
 
     return wrapper
+
+
+def _check_seed(seed: int) -> None:
+    """A seed numpy's generators take: 0 <= seed < 2**63."""
+    if not 0 <= seed < 2**63:
+        raise ParameterError(f"--seed must be an integer from 0 to 2**63 - 1 = {2**63 - 1}; got {seed}")
 
 
 def _positive(name: str, value, allow_zero: bool = False):
@@ -351,16 +362,53 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
         click.echo("(design document not saved: add -o FILE)")
 
 
-def _design_or_plant(target: str, progress: bool = True):
-    """A design document path, or a plant spec designed on the fly (conditioned variant)."""
+def _design_or_plant(
+    target: str, progress: bool = True, plant: str | None = None, allow_uncertified: bool = False
+):
+    """A design document path, or a plant spec designed on the fly (conditioned variant).
+
+    A document is checked before use (:func:`fte_casadi.trust.check_loaded`): re-certified at its numbers,
+    against its plant when that is a built-in one or named with ``plant`` (--plant), never running code it
+    names. Returns ``(design, plant spec or None)``: the spec of the plant it may be simulated on.
+    """
     from .design.record import Design
+    from .trust import check_loaded
 
     p = Path(target)
     if target.endswith(".json") or p.is_file():
-        return Design.load(p)
+        trusted = check_loaded(Design.load(p), plant, allow_uncertified)
+        for note in trusted.notes:
+            click.echo(textwrap.fill("fte: " + note, width=100, break_on_hyphens=False), err=True)
+        return trusted.design, trusted.plant_spec
+    if plant is not None:
+        raise ParameterError(
+            f"--plant names the plant of a design document; {target} is a plant: give one of them"
+        )
     if progress:
         click.echo(f"designing {target} (conditioned variant) ...", err=True)
-    return _make_design(target, "conditioned", "CLARABEL", {})
+    return _make_design(target, "conditioned", "CLARABEL", {}), target
+
+
+def _need_plant(d, spec: str | None, command: str) -> str:
+    """The plant spec ``command`` simulates ``d`` on; a document's own non-built-in spec is not imported."""
+    if spec is None:
+        raise ParameterError(
+            f"fte {command} simulates the true nonlinear plant, and the document names {d.plant_spec!r}, which fte does "
+            f"not import on a document's word (it would run that code): name the plant yourself with "
+            f"--plant {d.plant_spec} if you trust it"
+        )
+    return spec
+
+
+_plant_option = click.option(
+    "--plant", "plant_opt", metavar="PLANT",
+    help="The plant of a design document (built-in name, FILE.py:FUNCTION or module:function): checked against "
+    "the document; needed to simulate a document whose plant is not a built-in one (docs/interface.md, Trust model).",
+)  # fmt: skip
+_allow_option = click.option(
+    "--allow-uncertified", "allow_uncertified", is_flag=True,
+    help="Use a design document that does not re-certify at its own numbers (marked NOT CERTIFIED).",
+)  # fmt: skip
 
 
 # -- codegen ------------------------------------------------------------------------------
@@ -377,15 +425,17 @@ def _design_or_plant(target: str, progress: bool = True):
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
 @click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
+@_plant_option
+@_allow_option
 @_guard
-def codegen(target, out_dir, sample_time, real, boundary_layer, fmu):
+def codegen(target, out_dir, sample_time, real, boundary_layer, fmu, plant_opt, allow_uncertified):
     """Generate the embedded C of the observer/controller step."""
     from .codegen import default_sample_time, generate_c
     from .codegen.fmu import check_fmu_target, generate_fmu
 
     _positive("ts", sample_time)
     _positive("boundary-layer", boundary_layer)
-    d = _design_or_plant(target)
+    d, _ = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
     files = generate_c(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
@@ -520,27 +570,32 @@ def _why(d, m: dict) -> list[str]:
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the metrics document (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
+@_allow_option
 @_guard
-def simulate(
-    target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, no_detect, as_json, quiet
-):
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, no_detect, as_json, quiet,
+             plant_opt, allow_uncertified):  # fmt: skip
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .plants.loader import load_plant, load_scenario
+    from .resources import check_paths_memory
     from .sim import save_result
     from .sim import simulate as run_sim
 
     if paths is not None and paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    if seed < 0:
-        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    _check_seed(seed)
     if dt is not None:
         _positive("dt", dt)
     if save:
         _writable_target(save, "--save", "result.npz")
-    d = _design_or_plant(target, progress=not quiet)
-    plant = load_plant(d.plant_spec)
-    scenario = _with_noise(load_scenario(d.plant_spec), noise)
+    d, spec = _design_or_plant(
+        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
+    )
+    spec = _need_plant(d, spec, "simulate")
+    plant = load_plant(spec)
+    scenario = _with_noise(load_scenario(spec), noise)
+    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
     res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
                   record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
                   false_alarm_rate=fa_rate)  # fmt: skip
@@ -599,22 +654,30 @@ def simulate(
 )
 @click.option("--json", "as_json", is_flag=True, help="Print the list of points (JSON) on stdout.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
+@_allow_option
 @_guard
-def sweep(target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet):
+def sweep(
+    target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet, plant_opt, allow_uncertified
+):
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
     from .design.record import atomic_write_text
     from .plants.loader import load_plant, load_scenario
+    from .resources import check_paths_memory
     from .sim.sweep import parse_vary, to_csv, to_json
     from .sim.sweep import sweep as run_sweep
 
     grid = parse_vary(vary)
     if paths is not None and paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    if seed < 0:
-        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
-    d = _design_or_plant(target, progress=not quiet)
-    plant = load_plant(d.plant_spec)
-    scenario = load_scenario(d.plant_spec)
+    _check_seed(seed)
+    d, spec = _design_or_plant(
+        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
+    )
+    spec = _need_plant(d, spec, "sweep")
+    plant = load_plant(spec)
+    scenario = load_scenario(spec)
+    check_paths_memory(d, scenario, paths or scenario.paths, None, False)
     points = run_sweep(d, plant, scenario, grid, paths=paths or scenario.paths, seed=seed, scheduler=scheduler,
                        progress=not quiet, exact=not fast_math)  # fmt: skip
     if out_dir:
@@ -655,8 +718,7 @@ def reproduce(which, out_dir, seed, paths):
     """The main job: the paper's examples end to end, and a Markdown report with tables and figures."""
     from .report import reproduce as run
 
-    if seed < 0:
-        raise ParameterError(f"--seed must be non-negative; got {seed}")
+    _check_seed(seed)
     if paths is not None and paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
     t0 = time.perf_counter()
@@ -743,8 +805,9 @@ def _tune_target(out_dir: str) -> None:
     "--json", "as_json", is_flag=True, help="Print the front (JSON list) on stdout; the tables go to stderr."
 )
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
 @_guard
-def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
+def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, plant_opt):
     """Multi-objective search over the design's knobs (gamma, gamma1, sigma, alpha, kappa, sliding gain,
     boundary layer): each candidate designed, certified and simulated with the same random numbers;
     the Pareto front, and the chosen design in DIR/tuned.json (see docs/tune.md for the rule)."""
@@ -757,8 +820,7 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
     if trials < 2:
         raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "
                              f"got {trials}")  # fmt: skip
-    if seed < 0:
-        raise ParameterError(f"--seed must be a non-negative integer; got {seed}")
+    _check_seed(seed)
     if rule not in RULES:
         raise ParameterError(f"unknown --objective {rule!r}: choose one of {', '.join(RULES)} (docs/tune.md says "
                              "what each picks)")  # fmt: skip
@@ -770,10 +832,11 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet):
         raise MissingDependencyError("fte tune needs optuna: pip install 'fte_casadi[tune]'") from None
     _tune_target(out_dir)
     given = target.endswith(".json") or Path(target).is_file()
-    d = _design_or_plant(target, progress=not quiet)
-    plant = load_plant(d.plant_spec)
+    d, spec = _design_or_plant(target, progress=not quiet, plant=plant_opt)
+    spec = _need_plant(d, spec, "tune")
+    plant = load_plant(spec)
     try:
-        scenario = load_scenario(d.plant_spec)
+        scenario = load_scenario(spec)
     except FteError as exc:
         raise ParameterError(f"fte tune simulates every candidate on the plant's scenario, and {d.plant_spec} has "
                              f"none ({exc}); add a scenario() beside the plant function") from None  # fmt: skip

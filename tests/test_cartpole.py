@@ -34,7 +34,9 @@ def test_designs_at_its_1_ms_step_with_the_discrete_step_proven(ts, tmp_path):
     d.save(f)
     assert default_sample_time(d) == 1e-3
     runner = CliRunner()
-    r = runner.invoke(main, ["simulate", str(f), "--paths", "2", "--seed", "1", "--json", "--quiet"])
+    r = runner.invoke(
+        main, ["simulate", str(f), "--plant", SPEC, "--paths", "2", "--seed", "1", "--json", "--quiet"]
+    )
     assert r.exit_code == 0, r.output
     m = json.loads(r.stdout)
     assert m["dt"] == 1e-3 and m["dt_change"] is None

@@ -137,7 +137,8 @@ def test_cli_json_files_and_tuned_design_simulates(tmp_path):
     record = json.loads((out / "tune.json").read_text())
     assert len(record["trials"]) == 6 and record["chosen"] == front[0]["trial"]
     assert "default (trial 0) vs chosen" in r.stderr
-    sim = CliRunner().invoke(main, ["simulate", str(out / "tuned.json"), "--paths", "2", "--json", "--quiet"])
+    sim = CliRunner().invoke(main, ["simulate", str(out / "tuned.json"), "--plant", SPEC, "--paths", "2", "--json",
+                                    "--quiet"])  # fmt: skip
     assert sim.exit_code == 0, sim.output
     m = json.loads(sim.stdout)
     chosen = front[0]["metrics"]  # the same seed? fte simulate's default seed is 0, tune's was 2: shapes only

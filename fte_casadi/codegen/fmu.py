@@ -172,7 +172,7 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
             "modelName": design.plant,
             "guid": guid,
             "description": f"observer / fault estimator / tolerant controller of plant {design.plant} "
-            f"(design variant {design.variant}, {'certified' if design.certified else 'NOT certified'}); "
+            f"(design variant {design.variant}, {'certified' if design.certified else 'NOT CERTIFIED'}); "
             f"one fmi2DoStep = one sample, fixed step Ts = {sample_time!r}",
             "generationTool": f"{_TOOL} {_version()}",
             "variableNamingConvention": "flat",

@@ -70,8 +70,12 @@ def _version() -> str:
 
 
 def c_name(plant: str) -> str:
-    """C identifier part for a plant name (``three-tank`` -> ``three_tank``)."""
-    out = "".join(ch if (ch.isalnum() or ch == "_") else "_" for ch in plant)
+    """C identifier part for a plant name (``three-tank`` -> ``three_tank``; ``pendül`` -> ``pendul``: C99
+    identifiers are ASCII letters, digits and ``_``, so accents are dropped and other characters become ``_``)."""
+    import unicodedata
+
+    plain = unicodedata.normalize("NFKD", plant).encode("ascii", "ignore").decode()
+    out = "".join(ch if (ch.isascii() and (ch.isalnum() or ch == "_")) else "_" for ch in plain)
     if not out or out[0].isdigit():
         out = "p_" + out
     return out
@@ -290,7 +294,7 @@ def _wrapper(
     ]
     setup += [f"res[{k}] = 0;" for k in range(5, sizes["SZ_RES"])]
     mem = _memory(c_src, real, nbar, sizes)
-    certified = "certified" if design.certified else "NOT certified"
+    certified = "certified" if design.certified else "NOT CERTIFIED (no guarantee: see the design's status)"
     affine = any(np.any(lm.a) for lm in design.local_models)
     sub = {
         "name": name,

@@ -11,7 +11,8 @@ import casadi as ca
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ..errors import FteError, InfeasibleDesignError, ParameterError
+from ..errors import AssumptionError, FteError, InfeasibleDesignError, ParameterError
+from ..model.fingerprint import plant_fingerprint
 from ..rounding import nice_ceil, nice_floor
 from ..ts import TSModel, scheduling_from_measurements
 from . import conditioned, paper
@@ -271,7 +272,10 @@ def design(
         H, T, aug = r5.H, r5.T, with_remark5(aug, r5)
         checks_a = check_assumptions(aug, T, remark5=r5)
     checks_a = explain_causes(_named(checks_a, aug, ts.plant), aug, ts.plant, remark5)
-    status += enforce(checks_a, accept_assumptions)
+    try:
+        status += enforce(checks_a, accept_assumptions)
+    except AssumptionError as exc:
+        raise AssumptionError(str(exc) + _scaling_note(ts)) from None
     r5doc = {} if r5 is None else remark5_record(r5, d_bound, params, ts.plant.unknown_input_names)
     status += [r5doc["message"]] if r5doc else []
     if not all(c.holds for c in checks_a):
@@ -399,7 +403,8 @@ def design(
         timings={"total_s": total, "solver_s": s3.seconds + s5.seconds},
         u_ref=u_ref,
         x_ref=x_ref,
-        scheduling=sched.serialize(),
+        scheduling=sched,  # the record keeps it as data (scheduling_ops) and, for older readers, serialised
+        plant_hash=plant_fingerprint(plant),
         names={
             "states": list(plant.state_names),
             "inputs": list(plant.input_names),
@@ -417,6 +422,32 @@ def design(
         x0=_initial_state(plant, initial_state),
         bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, getattr(s5, "bound", None)),
         remark5=r5doc,
+    )
+
+
+def _scaling_note(ts: TSModel) -> str:
+    """Where the local models' coefficients span more than 1e10, a sentence saying that the rank decisions
+    behind an assumption's verdict are made at a tolerance relative to the largest one ('' otherwise)."""
+    big, small, where = 0.0, np.inf, ""
+    for i, lm in enumerate(ts.local_models):
+        for key in ("A", "B", "Bd", "Bf"):
+            M = np.abs(np.asarray(lm[key], dtype=float))
+            nz = M[M > 1e-12 * M.max()] if M.size else M  # not the round-off of an exact zero
+            if nz.size and nz.max() > big:
+                k = np.unravel_index(np.argmax(M), M.shape)
+                big, where = (
+                    float(nz.max()),
+                    f"{key}[{k[0] + 1}, {k[1] + 1}] = {float(lm[key][k]):.3g} in rule {i + 1}",
+                )
+            if nz.size:
+                small = min(small, float(nz.min()))
+    if not (big > 0 and small < np.inf and big / small > 1e10):
+        return ""
+    return (
+        f" Note: the plant's coefficients span a factor {big / small:.1e} (largest {where}, "
+        f"smallest {small:.3g}); the rank decisions behind this verdict use a tolerance relative to the largest, so "
+        "it may come from that scaling rather than from the plant's structure: rescale its units (states, inputs) "
+        "so that its coefficients lie within about 1e6 of each other, and design again."
     )
 
 

@@ -3,8 +3,14 @@
 Every key of the design document (docs/interface.md) is here under its contract name. Extra keys
 (all additions, none renamed) carry what the simulator and the C generator need to rebuild
 the step without the plant's Python code: the affine offsets ``a`` of each local model, the
-reference input, the scheduling map (y, xhat) -> h as a serialised CasADi Function, signal
-names, and the certificate's full report.
+reference input, the scheduling map (y, xhat) -> h as an instruction tape of arithmetic operations
+(``scheduling_ops``, :mod:`fte_casadi.model.tape`), signal names, and the certificate's full report.
+
+A document is data (docs/interface.md, "Trust model"): reading one never deserialises an executable
+object. Documents also carry ``scheduling``, the same map as a serialised CasADi Function, for older
+versions of fte; it is never read back. ``schema`` is the document's version (:data:`SCHEMA`) and
+``plant_hash`` the fingerprint of the plant's equations it was designed for
+(:mod:`fte_casadi.model.fingerprint`).
 """
 
 from __future__ import annotations
@@ -23,7 +29,10 @@ from ..errors import DesignFileError
 from ..ts.model import LocalModel
 from .records import Dims, Observer, Params, _Record
 
-__all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "atomic_write_text"]
+__all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "SCHEMA", "atomic_write_text"]
+
+#: the version of the design document this fte writes (documents without ``schema`` predate it: 1)
+SCHEMA = 2
 
 REQUIRED_KEYS = (
     "plant",
@@ -121,7 +130,9 @@ class Design:
     checks: dict
     timings: dict
     u_ref: np.ndarray
-    scheduling: str  # serialised casadi Function (y, xhat) -> h
+    #: the scheduling map (y, xhat) -> h: given in code as a casadi Function (or its serialisation); from
+    #: a document, the serialised Function older versions wrote, kept as text and never deserialised
+    scheduling: object
     names: dict = field(default_factory=dict)  # states, inputs, outputs, faults, units
     certified: bool = True
     status: list = field(default_factory=list)  # what was done: solver statuses, retries, fallbacks
@@ -145,8 +156,29 @@ class Design:
     remark5: dict = field(default_factory=dict)
     #: certified performance bounds at the design (:mod:`fte_casadi.design.bounds`): {"fault_error": {...}}
     bounds: dict = field(default_factory=dict)
+    #: the scheduling map as data (:func:`fte_casadi.model.tape.write_tape`); None: a document older than it
+    scheduling_ops: dict | None = None
+    #: the fingerprint of the plant's equations (:func:`fte_casadi.model.fingerprint.plant_fingerprint`);
+    #: empty for documents older than it
+    plant_hash: dict = field(default_factory=dict)
+    #: how a loaded document read (not a document key): {"source", "schema", "certified"}, the last as the
+    #: document wrote it (None: absent); empty for a design made in this process
+    loaded: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.scheduling_ops is None and not self.loaded:
+            # made in code (a design, a test fixture): the map is a Function, or its serialisation made by the
+            # same program; a document's (self.loaded set) is never deserialised
+            import casadi as ca
+
+            from ..model.tape import write_tape
+
+            fn = self.scheduling
+            if isinstance(fn, str) and fn:
+                fn = ca.Function.deserialize(fn)
+            if isinstance(fn, ca.Function):
+                object.__setattr__(self, "scheduling_ops", write_tape(fn))
+                object.__setattr__(self, "scheduling", fn.serialize())
         # dicts (older callers, dataclasses.replace(d, params={...})) become the typed records
         for name, rec in (("params", Params), ("dims", Dims), ("observer", Observer)):
             value = getattr(self, name)
@@ -201,10 +233,19 @@ class Design:
         return out
 
     def scheduling_function(self):
-        """The CasADi Function ``(y, xhat) -> h``."""
-        import casadi as ca
+        """The CasADi Function ``(y, xhat) -> h``, replayed from :attr:`scheduling_ops` (data, never a
+        deserialised Function). A document older than ``scheduling_ops`` needs its plant:
+        :func:`fte_casadi.trust.with_plant` rebuilds the map from it."""
+        from ..model.tape import read_tape
 
-        return ca.Function.deserialize(self.scheduling)
+        if self.scheduling_ops is None:
+            raise DesignFileError(
+                f"the design of {self.plant} carries its scheduling map only as a serialised CasADi Function (a "
+                "document older than 'scheduling_ops'), which fte does not deserialise: it can load a shared library. "
+                "Name the plant the map is rebuilt from (fte: --plant FILE.py:FUNCTION; Python: "
+                "fte_casadi.trust.with_plant(design, plant)), or make the document again with `fte design`"
+            )
+        return read_tape(self.scheduling_ops, "scheduling")
 
     @renamed_keyword("dt", "sample_time")
     def to_control(self, i: int = 0, j: int = 0, sample_time: float | None = None):
@@ -258,7 +299,12 @@ class Design:
             out["Kf_rules"] = [_arr(M).tolist() for M in self.Kf_rules]
         if self.remark5.get("used"):
             out["remark5"] = _jsonable(self.remark5)
-        out["scheduling"] = self.scheduling
+        out["scheduling"] = self.scheduling if isinstance(self.scheduling, str) else ""
+        if self.scheduling_ops is not None:
+            out["scheduling_ops"] = self.scheduling_ops
+        out["schema"] = SCHEMA
+        if self.plant_hash:
+            out["plant_hash"] = dict(self.plant_hash)
         out["names"] = self.names
         out["certified"] = bool(self.certified)
         out["status"] = list(self.status)
@@ -312,6 +358,19 @@ class Design:
             lack = rec.missing(entry)
             if lack:
                 raise DesignFileError(f"{source}: {name!r} lacks {lack}; make it again with `fte design`")
+        from .docchecks import check_document
+
+        check_document(doc, source)
+        if isinstance(doc.get("schema"), int) and doc["schema"] > SCHEMA:
+            raise DesignFileError(
+                f"{source} is a design document of schema {doc['schema']}, written by a newer fte than this one "
+                f"(which reads schema {SCHEMA} and older); upgrade fte_casadi"
+            )
+        ops = doc.get("scheduling_ops")
+        if ops is not None and not isinstance(ops, dict):
+            raise DesignFileError(
+                f"{source}: 'scheduling_ops' must be a JSON object; make it again with `fte design`"
+            )
         try:
             params = Params.from_mapping(doc["params"])
             dims = Dims.from_mapping(doc["dims"])
@@ -352,9 +411,12 @@ class Design:
             Kf_rules=None
             if doc.get("Kf_rules") is None
             else tuple(_finite(source, "Kf_rules", M) for M in doc["Kf_rules"]),
-            scheduling=str(doc["scheduling"]),
+            scheduling=doc["scheduling"] if isinstance(doc["scheduling"], str) else "",
+            scheduling_ops=ops,
+            plant_hash=dict(doc.get("plant_hash") or {}),
+            loaded={"source": source, "schema": int(doc.get("schema", 1)), "certified": doc.get("certified")},
             names=dict(doc.get("names", {})),
-            certified=bool(doc.get("certified", True)),
+            certified=doc.get("certified") is True,
             status=list(doc.get("status", [])),
             solves=dict(doc.get("solves", {})),
             observer=observer,
@@ -380,6 +442,11 @@ class Design:
             ) from None
         except UnicodeDecodeError:
             raise DesignFileError(f"design file {str(p)!r} is not a text file") from None
+        except RecursionError:
+            raise DesignFileError(
+                f"design file {str(p)!r} nests its JSON too deeply to be a design document (fte writes matrices as "
+                "lists of rows, three levels deep); make it again with `fte design`"
+            ) from None
         return cls.from_dict(doc, source=f"design file {str(p)!r}")
 
 

@@ -113,7 +113,14 @@ class Plant:
 
 
 def _cname(name: str) -> str:
-    return "".join(c if c.isalnum() else "_" for c in name)
+    """A CasADi Function name from a plant name: ASCII letters and digits (accents dropped: ``pendül`` ->
+    ``pendul``), any other character one ``_``, never two in a row, starting with a letter."""
+    import re
+    import unicodedata
+
+    plain = unicodedata.normalize("NFKD", name).encode("ascii", "ignore").decode()
+    out = re.sub(r"_+", "_", "".join(c if c.isalnum() else "_" for c in plain)).strip("_")
+    return out if out[:1].isalpha() else "p_" + out
 
 
 def _names(kind: str, names: Sequence[str]) -> tuple[str, ...]:

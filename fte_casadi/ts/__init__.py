@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from ..errors import DerivationError
 from ..model import Plant
 from .auto import premise_form
 from .auto_checks import check_exact
@@ -15,6 +18,52 @@ from .model import LocalModel as LocalModel
 from .model import Premise as Premise
 from .model import TSModel as TSModel
 from .sector import sector_local_models
+
+
+def _finite_models(plant: Plant, models) -> None:
+    """Refuse local models with an infinite or NaN entry: a coefficient of the plant is not finite."""
+    for i, lm in enumerate(models):
+        for key in ("A", "B", "Bd", "Bf", "W", "a", "G", "Gf", "M"):
+            M = np.asarray(lm[key], dtype=float)
+            bad = np.argwhere(~np.isfinite(M))
+            if bad.size:
+                at = ", ".join(str(int(v) + 1) for v in bad[0])
+                raise DerivationError(
+                    f"plant {plant.name}: rule {i + 1}'s local model has {key}[{at}] = {M[tuple(bad[0])]}: a coefficient "
+                    "of the plant's equations is infinite or NaN (a parameter set to inf or nan, or a division by zero "
+                    "at the rule's premise values); fix the plant's parameters"
+                )
+
+
+def structure(plant: Plant, *, seed: int = 0) -> TSModel:
+    """The T-S model of ``plant`` without its fidelity check (``fidelity`` holds NaN): premises, local
+    models and memberships, as :func:`derive` finds them. Rebuilding a design's scheduling map from its
+    plant needs this much, in milliseconds to a few seconds, not the fidelity integration."""
+    kind = plant.method  # "sector" or "linearisation"
+    auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
+    notes: tuple[str, ...] = ()
+    if auto:
+        form = premise_form(plant, seed=seed)
+        premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
+        kind = "sector_auto" if premises else "linear"
+        notes = form.notes
+    elif plant.method == "sector":
+        premises, models, premise_fn, membership_fn = sector_local_models(plant)
+    else:
+        premises, models, premise_fn, membership_fn = linearised_local_models(plant)
+    _finite_models(plant, models)
+    return TSModel(
+        plant,
+        kind,
+        premises,
+        models,
+        plant.C,
+        plant.Df,
+        premise_fn,
+        membership_fn,
+        Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
+        notes,
+    )
 
 
 def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TSModel:
@@ -32,38 +81,17 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     >>> ts.r, round(ts.premises[0].min, 4)
     (2, -0.2172)
     """
-    kind = plant.method  # "sector" or "linearisation"
-    auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
-    notes: tuple[str, ...] = ()
-    if auto:
-        form = premise_form(plant, seed=seed)
-        premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
-        kind = "sector_auto" if premises else "linear"
-        notes = form.notes
-    elif plant.method == "sector":
-        premises, models, premise_fn, membership_fn = sector_local_models(plant)
-    else:
-        premises, models, premise_fn, membership_fn = linearised_local_models(plant)
-    tmp = TSModel(
-        plant,
-        kind,
-        premises,
-        models,
-        plant.C,
-        plant.Df,
-        premise_fn,
-        membership_fn,
-        Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
-    )
+    tmp = structure(plant, seed=seed)
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
-    ts = TSModel(plant, kind, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid, notes)
-    if auto:
+    ts = dataclasses.replace(tmp, fidelity=fid)
+    if tmp.kind in ("sector_auto", "linear") and plant.method == "sector":
         check_exact(ts, seed=seed)  # the proof: exact to round-off, or refused with the row and the point
     return ts
 
 
 __all__ = [
     "derive",
+    "structure",
     "TSModel",
     "LocalModel",
     "Premise",
