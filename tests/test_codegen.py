@@ -209,6 +209,8 @@ def test_strict_compile_with_callers_main(plant, real, designs, libs, tmp_path):
         f"  fte_real u[FTE_{name.upper()}_NU];\n"
         "  int k, rc = 0;\n"
         f"  fte_{name}_init(&s, 0);\n"
+        # a measurement in the middle of the accepted range (0 is outside the three-tank's)
+        f"  for (k = 0; k < FTE_{name.upper()}_NY; ++k) y[k] = (fte_{name}_Y_MIN[k] + fte_{name}_Y_MAX[k]) / 2;\n"
         f"  for (k = 0; k < 10; ++k) rc |= fte_{name}_step(&s, y, u, 0, 0);\n"
         f"  y[0] = (fte_real)(0.0 / (double)(k - k));\n"
         f"  return rc == 0 && fte_{name}_step(&s, y, u, 0, 0) == 1 && FTE_{name.upper()}_TS > 0 ? 0 : 1;\n"

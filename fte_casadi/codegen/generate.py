@@ -50,6 +50,10 @@ __all__ = [
     "BUILTIN_DIRS",
     "write_files",
     "file_mode",
+    "output_range",
+    "single_precision",
+    "Y_MARGIN",
+    "Y_FAULT_MARGIN",
 ]
 
 #: directory name under ``generated/`` of each built-in plant
@@ -196,6 +200,8 @@ def _casadi_sources(fn: ca.Function, name: str, real: str) -> tuple[str, str]:
         c_src = Path(tmp, f"{base}.c").read_text()
         h_src = Path(tmp, f"{base}.h").read_text()
     c_src = _void_unused(c_src)
+    if real == "float":
+        c_src = single_precision(c_src)
     c_src = c_src.replace("#include <math.h>\n", f'#include <math.h>\n#include "{base}.h"\n', 1)
     for text in (c_src, h_src):
         low = text.lower()
@@ -205,6 +211,35 @@ def _casadi_sources(fn: ca.Function, name: str, real: str) -> tuple[str, str]:
                 f"CasADi's generated code contains {hits}; this CasADi version cannot be used for embedded C"
             )
     return c_src, h_src
+
+
+#: the <math.h> functions CasADi may call; with ``--real float`` each becomes its float version (sinf...)
+_MATH = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh", "asinh", "acosh",
+         "atanh", "exp", "expm1", "log", "log1p", "log10", "log2", "sqrt", "cbrt", "pow", "fabs", "fmax",
+         "fmin", "fmod", "floor", "ceil", "round", "trunc", "erf", "erfc", "copysign", "hypot", "remainder",
+         "lgamma", "tgamma")  # fmt: skip
+_MATH_RE = re.compile(r"\b(" + "|".join(_MATH) + r")\(")
+#: a decimal floating literal that is not part of a name or of a longer number (CasADi writes ``1.``,
+#: ``6.``, ``1.0000000000000000e-03``); integers (sparsity tables, ``? ... : 0``) are left alone
+_REAL_LITERAL_RE = re.compile(r"(?<![\w.])(\d+\.\d*(?:[eE][-+]?\d+)?|\d+[eE][-+]?\d+)(?![\w.])")
+
+
+def single_precision(c_src: str) -> str:
+    """CasADi's C made float throughout: ``sinf``/``fabsf``/``sqrtf``... and ``f``-suffixed literals.
+
+    CasADi's ``casadi_real`` option changes the type only: the maths still calls the double functions
+    and writes double literals, so every operation would be promoted to double and rounded back
+    (``-Wdouble-promotion`` warns on each). Code lines only; comments and preprocessor lines are kept.
+    """
+    out = []
+    for line in c_src.splitlines(keepends=True):
+        head = line.lstrip()
+        if head.startswith(("#", "/*", "*")):
+            out.append(line)
+            continue
+        line = _MATH_RE.sub(lambda mt: mt.group(1) + "f(", line)
+        out.append(_REAL_LITERAL_RE.sub(lambda mt: mt.group(1) + "f", line))
+    return "".join(out)
 
 
 def _sizes(h_src: str, fname: str) -> dict:
@@ -244,13 +279,17 @@ def _memory(c_src: str, real: str, nxbar: int, sizes: dict) -> dict:
     }
 
 
-def _fmt(v: float) -> str:
-    return repr(float(v))
+def _fmt(v: float, real: str = "double") -> str:
+    text = repr(float(v))
+    if real == "float":
+        text += "" if ("." in text or "e" in text) else ".0"
+        return text + "f"
+    return text
 
 
-def _c_values(values) -> str:
-    """Numbers as a C initialiser list, 17 significant digits, four to a line."""
-    items = [_fmt(float(v)) for v in values]
+def _c_values(values, real: str = "double") -> str:
+    """Numbers as a C initialiser list, 17 significant digits, four to a line (``f``-suffixed in float)."""
+    items = [_fmt(float(v), real) for v in values]
     return ",\n".join("  " + ", ".join(items[k : k + 4]) for k in range(0, len(items), 4))
 
 
@@ -263,6 +302,7 @@ def _wrapper(
     boundary_layer,
     c_src: str,
     h_src: str,
+    y_range: dict,
 ):
     fname = f"fte_{name}_casadi_step"
     sizes = _sizes(h_src, fname)
@@ -309,7 +349,14 @@ def _wrapper(
         "nxbar": nbar,
         "n": n,
         "lf": lf,
-        "sample_time_c": f"({_fmt(sample_time)})",
+        "sample_time_c": f"({_fmt(sample_time, real)})",
+        "bits": "uint64_t" if real == "double" else "uint32_t",
+        "exp_mask": "UINT64_C(0x7FF0000000000000)" if real == "double" else "UINT32_C(0x7F800000)",
+        "ymin_values": _c_values(y_range["lo"], real),
+        "ymax_values": _c_values(y_range["hi"], real),
+        "y_range_text": _range_text(design, y_range, real)[0],
+        "y_margin_text": f"{Y_MARGIN:g}",
+        "y_fault_margin_text": f"{Y_FAULT_MARGIN:g}",
         "sample_time_text": _fmt(sample_time),
         "ts_max_text": f"{ts_max:.6g}",
         "time_unit": names.get("time_unit", "s"),
@@ -330,8 +377,8 @@ def _wrapper(
         "affine": " + T abar_i" if affine else "",
         "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
         "saturation_text": _saturation_text(design),
-        "H_values": _c_values(np.asarray(design.H, dtype=float).ravel()),
-        "xbar0_values": _c_values(design.xbar0),
+        "H_values": _c_values(np.asarray(design.H, dtype=float).ravel(), real),
+        "xbar0_values": _c_values(design.xbar0, real),
         "x0_text": ", ".join(_fmt(v) for v in design.xbar0[:n]),
         **mem,
     }
@@ -382,6 +429,112 @@ def _saturation_text(design: Design) -> str:
         + ", ".join(parts).replace("inf", "infinity")
         + "; the observer is fed the clipped u."
     )
+
+
+#: the margin the range check of y adds on each side of an output's range over the region, as a
+#: fraction of that range's width: an output free of sensor faults ...
+Y_MARGIN = 0.1
+#: ... and an output with a sensor fault, whose size the plant does not declare
+Y_FAULT_MARGIN = 1.0
+#: the bound on |y| where the range is not known (a state without bounds, a design document without
+#: the region): no product of two such numbers overflows (1e150^2 < DBL_MAX, 1e18^2 < FLT_MAX)
+Y_FALLBACK = {"double": 1e150, "float": 1e18}
+#: points per output along each side of its margin where the step is evaluated before that margin is kept
+_MARGIN_POINTS = 17
+
+
+def output_range(design: Design, fn: ca.Function | None = None, real: str = "double") -> dict:
+    """The range the generated C accepts for each measurement ``y_k`` (outside it the step returns 3 and
+    changes nothing).
+
+    It is ``C_k x`` over the plant's region (the box ``checks["region"]`` of the design document),
+    widened on each side by :data:`Y_MARGIN` of its width (:data:`Y_FAULT_MARGIN` for an output with a
+    sensor fault, whose size is not declared). When ``fn`` (the step) is given, the step is evaluated
+    along each widened side, the other outputs at the middle of their ranges and ``z`` such that
+    ``xbarhat`` is the nominal start: where it is not finite (a premise outside its domain, such as the
+    square root of a negative level), the margin of that side is halved until it is, down to none.
+    Where the range is unknown, ``|y_k| <=`` :data:`Y_FALLBACK`. Returns ``{"lo", "hi", "margin_lo",
+    "margin_hi", "known"}``, per output.
+    """
+    C, Df = np.asarray(design.C, float), np.asarray(design.Df, float)
+    p, n = C.shape
+    region = design.checks.get("region") if isinstance(design.checks, dict) else None
+    big = Y_FALLBACK[real]
+    xlo = np.full(n, np.nan)
+    xhi = np.full(n, np.nan)
+    if isinstance(region, dict):
+        try:
+            xlo = np.array([np.nan if v is None else float(v) for v in region.get("lo", [])], float)
+            xhi = np.array([np.nan if v is None else float(v) for v in region.get("hi", [])], float)
+        except (TypeError, ValueError):
+            xlo = xhi = np.full(n, np.nan)
+        if xlo.shape != (n,) or xhi.shape != (n,) or np.any(xlo > xhi):
+            xlo = xhi = np.full(n, np.nan)
+    lo, hi = np.zeros(p), np.zeros(p)
+    for k in range(p):
+        a = np.where(C[k] > 0, xlo, xhi) * C[k]
+        b = np.where(C[k] > 0, xhi, xlo) * C[k]
+        used = C[k] != 0
+        lo[k], hi[k] = np.sum(a[used]), np.sum(b[used])
+    known = np.isfinite(lo) & np.isfinite(hi) & (np.abs(lo) < big) & (np.abs(hi) < big)
+    width = np.where(known, hi - lo, 0.0)
+    frac = np.where(np.any(Df != 0, axis=1), Y_FAULT_MARGIN, Y_MARGIN)
+    m_lo, m_hi = frac * width, frac * width
+    if fn is not None and np.any(known):
+        H = np.asarray(design.H, float)
+        xbar0 = np.asarray(design.xbar0, float)
+
+        every = _every_value(fn)
+
+        def finite(ys: np.ndarray) -> bool:
+            N = ys.shape[1]
+            zs = xbar0[:, None] - H @ ys
+            return bool(np.all(np.isfinite(np.array(every.map(N)(zs, ys)))))
+
+        mid = np.where(known, 0.5 * (lo + hi), 0.0)
+        for k in np.flatnonzero(known):
+            for side, edge, margin in (("lo", lo[k], m_lo), ("hi", hi[k], m_hi)):
+                sign = -1.0 if side == "lo" else 1.0
+                while True:
+                    ys = np.tile(mid[:, None], (1, _MARGIN_POINTS))
+                    ys[k] = edge + sign * np.linspace(0.0, margin[k], _MARGIN_POINTS)
+                    if finite(ys) or margin[k] == 0.0:
+                        break
+                    margin[k] = 0.0 if margin[k] < 1e-3 * width[k] else 0.5 * margin[k]
+    ylo = np.where(known, lo - m_lo, -big)
+    yhi = np.where(known, hi + m_hi, big)
+    return {"lo": ylo, "hi": yhi, "margin_lo": m_lo, "margin_hi": m_hi, "known": known}
+
+
+def _every_value(fn: ca.Function) -> ca.Function:
+    """``(z, y) ->`` every intermediate value of the step ``fn`` (an ``SX`` Function), branches that an
+    ``if_else`` discards included: a NaN swallowed later (``fmax(NaN, lo)`` is ``lo``) still shows, as it
+    would as a floating-point exception in the C."""
+    z, y = ca.SX.sym("z", fn.size1_in(0)), ca.SX.sym("y", fn.size1_in(1))
+    outs = ca.vertcat(*[ca.vec(o) for o in fn.call([z, y])])
+    seen, nodes = set(), []
+    stack = [outs[k] for k in range(outs.numel())]
+    while stack:
+        e = stack.pop()
+        key = e.element_hash()
+        if key in seen:
+            continue
+        seen.add(key)
+        nodes.append(e)
+        stack.extend(e.dep(i) for i in range(e.n_dep()))
+    return ca.Function("every", [z, y], [ca.vertcat(*nodes)])
+
+
+def _range_text(design: Design, rng: dict, real: str) -> tuple[str, str]:
+    """The header's and the README's lines on the accepted range of y."""
+    names = (design.names or {}).get("outputs") or [f"y{k}" for k in range(len(rng["lo"]))]
+    parts = []
+    for k, nm in enumerate(names):
+        if rng["known"][k]:
+            parts.append(f"{nm} in [{rng['lo'][k]:.6g}, {rng['hi'][k]:.6g}]")
+        else:
+            parts.append(f"|{nm}| <= {rng['hi'][k]:.0e} (range unknown)")
+    return "; ".join(parts), ", ".join(parts)
 
 
 def prepare_dir(out_dir: Path) -> None:
@@ -502,7 +655,8 @@ def generate_c(
             f"cannot build the step of this design ({exc}); make the design again with `fte design`"
         ) from None
     c_src, h_src = _casadi_sources(fn, name, real)
-    texts, _ = _wrapper(design, name, real, sample_time, ts_max, boundary_layer, c_src, h_src)
+    y_range = output_range(design, fn, real)
+    texts, _ = _wrapper(design, name, real, sample_time, ts_max, boundary_layer, c_src, h_src, y_range)
     files = output_files(design.plant)
     ordered = {
         files[0]: texts[files[0]],

@@ -351,6 +351,11 @@ def design(
     if sample_time is not None:  # the step that runs: z+ = z + Ts (...), checked with Pbar for any blending
         checks["discrete"] = discrete_certificate(R, s5.Pbar, float(sample_time))
     checks["assumptions"] = [c.to_dict() for c in checks_a]
+    # the plant's region (null: a state without bounds): the generated C checks y against its image
+    checks["region"] = {
+        side: [None if np.isnan(v) else float(v) for v in vals]
+        for side, vals in (("lo", ts.plant.region_lo), ("hi", ts.plant.region_hi))
+    }
     checks["alpha"] = float(s5.alpha)
     bad = failures(checks)
     certified = not bad

@@ -8,6 +8,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import PlantError
+from .finite import check_finite
 from .record import Plant, _column, _units
 
 if TYPE_CHECKING:
@@ -215,6 +216,14 @@ def validate(b: PlantBuilder) -> Plant:
     if xref is not None and (xref.shape != (n,) or not np.all(np.isfinite(xref))):
         raise PlantError(f"reference state must hold {n} finite numbers; got {xref.tolist()}")
 
+    zn = list(b._zn) if len(b._zn) == z_expr.numel() else [f"z{k + 1}" for k in range(z_expr.numel())]
+    check_finite(
+        params=b._params, C=C, Df=Df, state_names=xn, output_names=yn, fault_names=list(b._fn),
+        x=x, u=u, d=d, f=f, d2=d2, lo=lo, hi=hi, x0=x0, u_nominal=np.zeros(m) if uref is None else uref,
+        rows={"premise": (z_expr, zn),  # first: a premise's coefficient shows in every row using it
+              "drift row": (ca.substitute(drift, z, z_expr) if z.numel() else drift, xn),
+              "diffusion row": (ca.substitute(diff, z, z_expr) if z.numel() else diff, xn)},
+    )  # fmt: skip
     ulim = _input_limits(b, m, uref)
     uop = b._uop
     if uop is not None and (uop.shape != (m,) or not np.all(np.isfinite(uop))):

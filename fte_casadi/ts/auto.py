@@ -169,12 +169,25 @@ def _coefficient(h: ca.SX, x: ca.SX, j: int, smooth: bool) -> tuple[ca.SX, str]:
         return q, expr_text(q)
     d1 = ca.jacobian(upto, xj)
     if not smooth:
-        return ca.if_else(xj == 0, ca.substitute(d1, xj, ca.DM(0.0)), q), expr_text(q)
+        return ca.if_else(xj == 0, ca.substitute(d1, xj, ca.DM(0.0)), guarded(q, xj, xj == 0)), expr_text(q)
     d2 = ca.jacobian(d1, xj)
     d3 = ca.jacobian(d2, xj)
     t1, t2, t3 = (ca.substitute(v, xj, ca.DM(0.0)) for v in (d1, d2, d3))
     taylor = t1 + t2 * xj / 2 + t3 * xj**2 / 6
-    return ca.if_else(ca.fabs(xj) < TAYLOR_BAND, taylor, q), expr_text(q)
+    near = ca.fabs(xj) < TAYLOR_BAND
+    return ca.if_else(near, taylor, guarded(q, xj, near)), expr_text(q)
+
+
+def guarded(q: ca.SX, xj: ca.SX, near: ca.SX) -> ca.SX:
+    """``q`` with ``xj`` moved to ``TAYLOR_BAND`` where ``near`` holds: the branch ``if_else`` discards.
+
+    An ``SX`` ``if_else`` evaluates both branches (so does the C CasADi generates from it) and then
+    keeps one; the quotient ``q = [h(xj) - h(0)] / xj`` evaluated at ``xj = 0`` is ``0/0`` there, a NaN
+    that is thrown away but raises ``FE_INVALID`` (a trap, with floating-point exceptions enabled).
+    Evaluated at ``TAYLOR_BAND`` instead it is finite, and where the quotient is kept (``near`` false)
+    ``xj`` is itself: ``if_else`` adds ``0 + xj``, exact, so the numbers do not change.
+    """
+    return ca.substitute(q, xj, ca.if_else(near, TAYLOR_BAND, xj))
 
 
 def _value(e: ca.SX) -> float:

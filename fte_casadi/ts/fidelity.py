@@ -139,6 +139,13 @@ def fidelity(
 MAX_EVALUATIONS = 60_000
 #: how far (in region spans) the open loop may wander before the trajectory stops
 ESCAPE = 1000.0
+#: evaluations beyond the budget an integrator's last step may take (RK45: 6 per trial step, LSODA's
+#: Jacobian n + 1) before it is stopped in the middle of that step
+_STEP_SLACK = 256
+
+
+class _Stop(Exception):
+    """Ends an integration from inside the right-hand side (budget spent, or not finite)."""
 
 
 def _trajectory(fun, start, horizon, points, lo, hi, max_evaluations=MAX_EVALUATIONS):
@@ -164,13 +171,37 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
     steps -- and when ``max_evaluations`` right-hand sides have been spent (a stiff plant over a long
     horizon)."""
     t_eval = np.linspace(0.0, horizon, points)
+    x_start = np.asarray(start, float)
+    spent = [0]
+
+    def rhs(t, xx):
+        # every trial step of the integrator comes through here, also the ones its inner loop
+        # rejects while shrinking the step: the budget bounds that loop too, and a non-finite
+        # right-hand side ends it at once (a step size it would otherwise shrink towards 0)
+        spent[0] += 1
+        if spent[0] > max_evaluations + _STEP_SLACK:
+            raise _Stop(f"stiff: {max_evaluations} evaluations spent by t = {t:.4g} ({method.__name__})")
+        v = fun(t, xx)
+        if not np.all(np.isfinite(v)):
+            raise _Stop(
+                f"the drift is not finite at t = {t:.4g} (x = {np.array2string(np.asarray(xx), precision=4)})"
+            )
+        return v
+
     free = np.isnan(lo)
     centre = np.where(free, 0.0, 0.5 * (np.nan_to_num(lo) + np.nan_to_num(hi)))
     scale = np.where(free, np.maximum(1.0, np.abs(start)), np.nan_to_num(hi) - np.nan_to_num(lo))
-    solver = method(fun, 0.0, np.asarray(start, float), horizon, rtol=1e-8, atol=1e-10)
     times, ys, i, stop = [], [], 0, ""
+    try:
+        solver = method(rhs, 0.0, x_start, horizon, rtol=1e-8, atol=1e-10)
+    except _Stop as exc:
+        return x_start[:, None], np.zeros(1), str(exc)
     while solver.status == "running":
-        solver.step()
+        try:
+            solver.step()
+        except _Stop as exc:
+            stop = str(exc)
+            break
         if solver.status == "failed":
             stop = f"the integrator failed at t = {solver.t:.4g}"
             break
@@ -190,5 +221,5 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
                 ys.append(np.asarray(y, float)[:, None])
             break
     if not times:
-        return np.asarray(start, float)[:, None], np.zeros(1), stop
+        return x_start[:, None], np.zeros(1), stop
     return np.hstack(ys), np.hstack(times), stop

@@ -3,7 +3,18 @@
  * Design: variant conditioned, certified.
  * Sample time Ts = 0.01 s (the design allows Ts < 0.934181).
  * Actuator limits: u is clipped to Q1 in [0, 100], Q2 in [0, 100]; the observer is fed the clipped u.
- * Plain C99: no malloc, no global mutable state, no I/O. All memory is the state struct. */
+ * Plain C99: no malloc, no global mutable state, no I/O. All memory is the state struct.
+ *
+ * Measurements the step refuses (it returns non-zero and changes neither the state nor the outputs):
+ *  - a NaN or an infinity (return 1), recognised from the bits of the number (all exponent bits set),
+ *    not by arithmetic: no floating-point exception is raised, and -ffast-math cannot remove the check;
+ *  - a finite y outside the accepted range FTE_THREE_TANK_Y_MIN .. FTE_THREE_TANK_Y_MAX (return 3): the
+ *    range of C x over the plant's region, widened on each side by 0.1 of its width
+ *    (1 for an output with a sensor fault, whose size the plant does not declare), less
+ *    where the step would not be finite there; |y| <= 1e150 (float: 1e18) where the range is unknown.
+ *    Accepted: h1 in [14, 26]; h2 in [4, 16].
+ *    A huge finite reading (DBL_MAX) would otherwise turn the state into infinities and NaNs for good.
+ * After a refused sample the next accepted one continues exactly as if the refused one had not come. */
 #ifndef FTE_THREE_TANK_H
 #define FTE_THREE_TANK_H
 
@@ -12,6 +23,10 @@ extern "C" {
 #endif
 
 typedef double fte_real;
+
+/* The accepted range of each measurement (see above); a y outside it is refused with return 3. */
+extern const fte_real fte_three_tank_Y_MIN[2];
+extern const fte_real fte_three_tank_Y_MAX[2];
 
 #define FTE_THREE_TANK_NY 2      /* measurements y: h1, h2 */
 #define FTE_THREE_TANK_NU 2      /* control inputs u: Q1, Q2 */
@@ -40,7 +55,8 @@ void fte_three_tank_init(fte_three_tank_state *s, const fte_real *z0);
  * z_0 = xbar0 - H y0, so that the first xbarhat = z_0 + H y0 is xbar0 (FTE_THREE_TANK_NXBAR values;
  * NULL: the nominal fte_three_tank_XBAR0). Call it once, then fte_three_tank_step with y0 itself.
  * Returns 0; returns 1 and leaves the state untouched when y0 or xbar0 holds a NaN or an
- * infinity; returns -1 (state untouched) when s or y0 is NULL. */
+ * infinity, 3 (state untouched) when y0 is outside the accepted range; returns -1 (state
+ * untouched) when s or y0 is NULL. */
 int fte_three_tank_init_from_y(fte_three_tank_state *s, const fte_real *y0, const fte_real *xbar0);
 
 /* One sample of the discrete step (fte_casadi's docs/method.md, "The discrete step"):
@@ -48,8 +64,10 @@ int fte_three_tank_init_from_y(fte_three_tank_state *s, const fte_real *y0, cons
  * u_k (FTE_THREE_TANK_NU), xbarhat_k (FTE_THREE_TANK_NXBAR) and the compensated output yc_k
  * (FTE_THREE_TANK_NY), and advance the state to z_{k+1}. Any output pointer may be NULL.
  * Returns 0; returns 1 and leaves the state and outputs untouched when y holds a NaN or an
- * infinity; returns -1 when s or y is NULL; returns 2 (state untouched) if the generated
- * maths reports an error (it does not for this step: no division, no iteration). */
+ * infinity, 3 (state and outputs untouched) when y is outside FTE_THREE_TANK_Y_MIN .. _Y_MAX;
+ * returns -1 when s or y is NULL; returns 2 (state untouched) if the generated maths reports
+ * an error (it does not for this step: no iteration, and no division by a value that can be 0,
+ * not even in a branch whose result is discarded). */
 int fte_three_tank_step(fte_three_tank_state *s, const fte_real *y,
                      fte_real *u, fte_real *xbarhat, fte_real *yc);
 
