@@ -520,11 +520,11 @@ def _window_lines(m: dict) -> list[str]:
     return out
 
 
-def _warnings(m: dict, inputs, faults=(), outputs=()) -> list[str]:
+def _warnings(m: dict, inputs, faults=(), outputs=(), units=()) -> list[str]:
     """The verdicts of :func:`fte_casadi.verdicts.verdicts`, as warnings."""
     from .verdicts import verdicts
 
-    return ["warning: " + v["text"] for v in verdicts(m, inputs, faults, outputs)]
+    return ["warning: " + v["text"] for v in verdicts(m, inputs, faults, outputs, units)]
 
 
 def _why(d, m: dict) -> list[str]:
@@ -562,6 +562,15 @@ def _why(d, m: dict) -> list[str]:
 @click.option("--false-alarm-rate", "fa_rate", type=float,
               help="False alarms per unit of the plant's time the detection thresholds are set for "
                    "(default: one per hour of operation).")  # fmt: skip
+@click.option("--accommodate", is_flag=True,
+              help="Compensate a fault in the control only while it is detected and isolated (thresholds calibrated "
+                   "on fault-free paths at --false-alarm-rate); the C and FMU of --save-design's document do the same.")  # fmt: skip
+@click.option(
+    "--save-design",
+    "save_design",
+    type=click.Path(dir_okay=False),
+    help="With --accommodate: write the design with its accommodation thresholds (for fte codegen).",
+)
 @click.option(
     "--no-detection",
     "no_detect",
@@ -573,8 +582,8 @@ def _why(d, m: dict) -> list[str]:
 @_plant_option
 @_allow_option
 @_guard
-def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, no_detect, as_json, quiet,
-             plant_opt, allow_uncertified):  # fmt: skip
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, accommodate, save_design,
+             no_detect, as_json, quiet, plant_opt, allow_uncertified):  # fmt: skip
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .plants.loader import load_plant, load_scenario
@@ -596,6 +605,22 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     plant = load_plant(spec)
     scenario = _with_noise(load_scenario(spec), noise)
     check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
+    if save_design and not accommodate:
+        raise ParameterError(
+            "--save-design writes the design with its accommodation thresholds: give --accommodate"
+        )
+    if save_design:
+        _writable_target(save_design, "--save-design", "design.json")
+    if accommodate:
+        from .sim.accommodate import accommodated
+
+        d = accommodated(
+            d, plant, scenario, paths=paths or scenario.paths, seed=seed, false_alarm_rate=fa_rate, dt=dt
+        )
+        click.echo(f"note: {d.status[-1]}", err=True)
+        if save_design:
+            d.save(save_design)
+            click.echo(f"design with accommodation written to {save_design}", err=True)
     res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
                   record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
                   false_alarm_rate=fa_rate)  # fmt: skip
@@ -607,7 +632,8 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
         from .plot import write_figures
 
         figs = write_figures(res, plots)
-    warn = _warnings(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names))
+    warn = _warnings(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names),
+                     list(plant.output_units))  # fmt: skip
     warn += _why(d, m)
     change = m.get("dt_change")
     if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)

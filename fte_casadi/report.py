@@ -239,7 +239,8 @@ def _windows_section(m: dict, plant) -> list[str]:
         out.append(f"- detection of {e['fault']}: threshold {_g(e['threshold'])}, {_g(e['false_alarm_rate'])} false "
                    f"alarms per unit time on fault-free paths (asked {_g(e['false_alarm_rate_asked'])}), "
                    f"{_g(e.get('false_alarm_rate_ftc_run'))} outside its windows in the faulty run; {e['rule']}")  # fmt: skip
-    vs = verdicts(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names))
+    vs = verdicts(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names),
+                  list(plant.output_units))  # fmt: skip
     if vs:
         out += ["", "Verdicts:", ""] + [f"- **{v['verdict']}**: {v['text']}" for v in vs]
     return out + [""]

@@ -8,7 +8,8 @@ measurement ``y`` and observer state ``z``::
     h       = h(y, xhat)                                memberships from measured signals
     s       = N (y - Cbar xbarhat),  us = g .* sgn(s)   (or a boundary layer); g = delta + eps,
                                                          with Remark 5 first the gains of the undecoupled d
-    u       = sat(u_ref + sum_j h_j (K_j xhat + Kf_j fhat))   (no Kf term without tolerant control;
+    u       = sat(u_ref + sum_j h_j (K_j xhat + Kf_j G fhat)) (no Kf term without tolerant control;
+                                                         G = I, or diag(accommodation_gate) of the design;
                                                          Kf_j = Kf unless the rules' Kf_i differ;
                                                          sat: the actuator limits, if any)
     yc      = y - Df fhat                               (y itself without tolerant control)
@@ -57,6 +58,22 @@ def saturate(u: ca.SX, limits) -> ca.SX:
             uk = ca.fmin(uk, float(lim[k, 1]))
         out.append(uk)
     return ca.vertcat(*out)
+
+
+def accommodation_gate(fhat: ca.SX, acc: dict) -> ca.SX:
+    """Per fault, 1 while its estimate is detected and isolated, else 0: ``|fhat_j| >= threshold_j`` and
+    ``|fhat_j| / threshold_j >= |fhat_q| / threshold_q`` for every other fault q (the largest normalised
+    residual wins; a tie keeps both). Memoryless, so the C and the FMU compute it from the same sample."""
+    thr = [float(v) for v in acc["thresholds"]]
+    rr = [ca.fabs(fhat[j]) / thr[j] for j in range(len(thr))]
+    gates = []
+    for j in range(len(thr)):
+        g = rr[j] >= 1.0
+        for q in range(len(thr)):
+            if q != j:
+                g = g * (rr[j] >= rr[q])
+        gates.append(g)
+    return ca.vertcat(*gates)
 
 
 @renamed_keyword("ts", "sample_time")
@@ -114,12 +131,13 @@ def step_function(
     for j in range(r):
         uj = ca.mtimes(_dm(design.K[j]), xhat)
         u = u + h[j] * uj
+    fcomp = fhat if design.accommodation is None else fhat * accommodation_gate(fhat, design.accommodation)
     if tolerant and design.Kf_rules is not None:  # Kf(h) = sum_i h_i Kf_i where the rules' Kf_i differ
         for i in range(r):
-            u = u + h[i] * ca.mtimes(_dm(design.Kf_rules[i]), fhat)
+            u = u + h[i] * ca.mtimes(_dm(design.Kf_rules[i]), fcomp)
         yc = y - ca.mtimes(_dm(design.Df), fhat)
     elif tolerant:
-        u = u + ca.mtimes(_dm(design.Kf), fhat)
+        u = u + ca.mtimes(_dm(design.Kf), fcomp)
         yc = y - ca.mtimes(_dm(design.Df), fhat)
     else:
         yc = y

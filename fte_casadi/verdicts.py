@@ -38,7 +38,7 @@ def _crosstalk(w: dict, faults) -> str:
     )
 
 
-def verdicts(m: dict, inputs=(), faults=(), outputs=()) -> list[dict]:
+def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     """The verdicts on metrics document ``m``: a list of ``{"verdict", "where", "value", "text"}`` with
     ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``, ``saturated``,
     ``not settled``, ``missed``, ``outside region``."""
@@ -66,13 +66,19 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=()) -> list[dict]:
                 f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {r:.4g} > "
                 f"{WORSE_THAN_NONE:g}; per output {worst}){_crosstalk(w, faults)}")  # fmt: skip
         elif r is not None:
+            rms = w.get("ftc_true_rms_per_output") or {}
             for k, v in enumerate(w.get("ftc_true_ratio_per_output") or []):
                 if v is not None and v > WORSE_THAN_NONE:
                     name = outputs[k] if k < len(outputs) else f"output {k}"
+                    size = ""
+                    if rms.get("ftc") and rms.get("no_ftc"):
+                        unit = f" {units[k]}" if k < len(units) and units[k] else ""
+                        size = (f": RMS deviation from the fault-free run {rms['ftc'][k]:.3g}{unit} with it against "
+                                f"{rms['no_ftc'][k]:.3g}{unit} without")  # fmt: skip
                     add("worse than none on an output", f"{where}, {name}", v,
                         f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
-                        f"{WORSE_THAN_NONE:g}), though the outputs as a whole are better (ftc_true_ratio {r:.3g})"
-                        f"{_crosstalk(w, faults)}")  # fmt: skip
+                        f"{WORSE_THAN_NONE:g}{size}), though the outputs as a whole are better (ftc_true_ratio "
+                        f"{r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
         if w.get("fault_rel_rms_error") is not None and w.get("settling_time") is None:
             add("not settled", where, None,
                 f"in {where} the fault estimate does not settle: its mean error over the paths is not within 10 % of "

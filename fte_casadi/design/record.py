@@ -161,6 +161,10 @@ class Design:
     #: the fingerprint of the plant's equations (:func:`fte_casadi.model.fingerprint.plant_fingerprint`);
     #: empty for documents older than it
     plant_hash: dict = field(default_factory=dict)
+    #: accommodation after detection (:mod:`fte_casadi.sim.accommodate`): {"rule": "isolate", "thresholds":
+    #: [one per fault], ...}: fault j is compensated in u only while |fhat_j| >= threshold_j and its normalised
+    #: residual |fhat_j| / threshold_j is the largest; None: every estimate is compensated always (the paper)
+    accommodation: dict | None = None
     #: how a loaded document read (not a document key): {"source", "schema", "certified"}, the last as the
     #: document wrote it (None: absent); empty for a design made in this process
     loaded: dict = field(default_factory=dict, compare=False, repr=False)
@@ -305,6 +309,8 @@ class Design:
         out["schema"] = SCHEMA
         if self.plant_hash:
             out["plant_hash"] = dict(self.plant_hash)
+        if self.accommodation is not None:
+            out["accommodation"] = _jsonable(self.accommodation)
         out["names"] = self.names
         out["certified"] = bool(self.certified)
         out["status"] = list(self.status)
@@ -414,6 +420,7 @@ class Design:
             scheduling=doc["scheduling"] if isinstance(doc["scheduling"], str) else "",
             scheduling_ops=ops,
             plant_hash=dict(doc.get("plant_hash") or {}),
+            accommodation=_accommodation(source, doc.get("accommodation"), int(dims.lf)),
             loaded={"source": source, "schema": int(doc.get("schema", 1)), "certified": doc.get("certified")},
             names=dict(doc.get("names", {})),
             certified=doc.get("certified") is True,
@@ -448,6 +455,29 @@ class Design:
                 "lists of rows, three levels deep); make it again with `fte design`"
             ) from None
         return cls.from_dict(doc, source=f"design file {str(p)!r}")
+
+
+def _accommodation(source: str, value, lf: int) -> dict | None:
+    """The document's ``accommodation``: None, or a rule fte knows with ``lf`` finite positive thresholds."""
+    if value is None:
+        return None
+    if not isinstance(value, dict) or value.get("rule") != "isolate":
+        raise DesignFileError(
+            f"{source}: 'accommodation' must be null or an object with rule 'isolate'; got {value!r}"
+        )
+    thr = value.get("thresholds")
+    ok = (
+        isinstance(thr, list)
+        and len(thr) == lf
+        and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and v > 0 for v in thr
+        )
+    )
+    if not ok:
+        raise DesignFileError(
+            f"{source}: 'accommodation.thresholds' must be {lf} finite positive numbers (one per fault); got {thr!r}"
+        )
+    return {**value, "thresholds": [float(v) for v in thr]}
 
 
 def _limits(source: str, value, m: int) -> np.ndarray | None:

@@ -471,6 +471,34 @@ def check_scenario(plant: Plant, scenario: Scenario) -> None:
         )
 
 
+def calibrate_thresholds(design: Design, plant: Plant, scenario: Scenario, *, paths: int, seed: int,
+                         false_alarm_rate: float | None = None, dt: float | None = None, threads: int | None = None,
+                         prepared: Prepared | None = None, bar=None, chunk: int | None = None,
+                         scheduler=None):  # fmt: skip
+    """Detection thresholds per fault and the metrics document's ``detection`` entries, from ``max(paths, 8)``
+    fault-free paths ``paths, paths + 1, ...`` of ``seed`` (those after the run's own; :mod:`.detect`)."""
+    from types import SimpleNamespace
+
+    rate = default_rate(plant.time_unit) if false_alarm_rate is None else float(false_alarm_rate)
+    if not (math.isfinite(rate) and rate > 0):
+        raise ParameterError(
+            f"false_alarm_rate must be a positive number of alarms per time unit; got {false_alarm_rate!r}"
+        )
+    if prepared is None:
+        check_scenario(plant, scenario)
+        dt, nsteps, _ = resolve_dt(design, scenario, dt)
+        prepared = Prepared(design, plant, scenario, dt, nsteps, _scales(None, scenario))
+    ncal = max(int(paths), 8)
+    cal = prepared.rescaled({**prepared.scales, "fault_scale": 0.0}).with_thresholds(
+        np.full(plant.lf, np.inf)
+    )
+    bar = bar or SimpleNamespace(update=lambda k: None)
+    _, cdiv, cmon, _, _ = _run_chunks(cal, plant, ncal, seed, int(paths), chunk, threads, scheduler, 0, bar)
+    _diverged(cdiv, plant, prepared.scenario, prepared.dt, int(paths))
+    t_after = prepared.nsteps * prepared.dt - prepared.masks.transient
+    return calibrate(cmon, prepared.monitor.mon_names, plant.fault_names, t_after, rate)
+
+
 def _run_chunks(prep: Prepared, plant: Plant, paths: int, seed: int, path0: int, chunk, threads, scheduler,
                 every_all: int, bar) -> tuple:  # fmt: skip
     """Run paths ``path0 .. path0 + paths - 1`` in chunks (threads or a cluster): per-path sums, divergence
@@ -634,15 +662,10 @@ def simulate(
     detection = []
     try:
         thresholds = np.full(plant.lf, np.inf)
-        if ncal:
-            # calibration: fault-free runs of other paths (path ncal.. of the same seed, after the run's own)
-            cal = prep.rescaled({**sc, "fault_scale": 0.0}).with_thresholds(thresholds)
-            _, cdiv, cmon, _, _ = _run_chunks(
-                cal, plant, ncal, seed, paths, chunk, threads, scheduler, 0, bar
-            )
-            _diverged(cdiv, plant, scenario, dt, paths)
-            t_after = nsteps * dt - prep.masks.transient
-            thresholds, detection = calibrate(cmon, prep.monitor.mon_names, plant.fault_names, t_after, rate)
+        if ncal:  # fault-free runs of other paths (paths P, P + 1, ... of the same seed, after the run's own)
+            thresholds, detection = calibrate_thresholds(design, plant, scenario, paths=paths, seed=seed,
+                                                         false_alarm_rate=rate, threads=threads, prepared=prep,
+                                                         bar=bar, chunk=chunk, scheduler=scheduler)  # fmt: skip
         prep_run = prep.with_thresholds(thresholds)
         acc, div, mon, pm, rec = _run_chunks(
             prep_run, plant, paths, seed, 0, chunk, threads, scheduler, every_all, bar

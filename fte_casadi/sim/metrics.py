@@ -140,6 +140,10 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
             "ftc_true_ratio": _rms_ratio(dC_ftc[:, w], dC_no[:, w]) if r is not None else None,
             "ftc_true_ratio_per_output": [_rms_ratio(dC_ftc[:, w, k], dC_no[:, w, k]) if r is not None else None
                                           for k in range(C.shape[0])],  # fmt: skip
+            "ftc_true_rms_per_output": {
+                "ftc": [float(np.sqrt(np.mean(dC_ftc[:, w, k] ** 2))) if w.any() else None for k in range(C.shape[0])],
+                "no_ftc": [float(np.sqrt(np.mean(dC_no[:, w, k] ** 2))) if w.any() else None for k in range(C.shape[0])],
+            },
             "ftc_compensated_ratio": _rms_ratio(ftc.yc[:, w] - free.y[:, w], no.y[:, w] - free.y[:, w]) if r is not None else None,  # fmt: skip
             "crosstalk_peak": [
                 None if q == j or not peaks[q] else float(np.max(np.abs(ftc.fhat[:, w, q]))) / peaks[q]

@@ -395,6 +395,10 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
                 _ratio(_fsum(col[f"at{w}_{k}"]), _fsum(col[f"bt{w}_{k}"])) if rel is not None else None
                 for k in range(p_out)
             ],
+            "ftc_true_rms_per_output": {
+                run: [math.sqrt(_fsum(col[f"{c}{w}_{k}"]) / (P * nw)) if nw else None for k in range(p_out)]
+                for run, c in (("ftc", "at"), ("no_ftc", "bt"))
+            },
             "ftc_compensated_ratio": _ratio(_fsum(col[f"acw{w}"]), _fsum(col[f"bcw{w}"])) if rel is not None else None,
             "crosstalk_peak": [
                 None if q == j or not float(np.max(mcol[f"pkf{q}"])) else
