@@ -33,9 +33,11 @@ def test_readme_plant_and_scenario_run(tmp_path):
     assert {f.fault for f in sc.faults} == {"fa", "fs"}
     d = design(ts, sample_time=sc.dt)
     assert d.certified
+    assert sc.measurement_noise == (0.002, 0.01, 0.003)
     m = simulate(d, ts.plant, sc, paths=2, seed=0, progress=False).metrics
     assert len(m["windows"]) == 2 and all(e is not None and e < 1.0 for e in m["fault_rel_rms_error"])
-    assert m["ftc_deviation_ratio"] < 1.0
+    assert m["ftc_true_ratio"] < 1.0  # over both windows, on the true outputs
+    assert m["measurement_noise"] == [0.002, 0.01, 0.003]
 
 
 def test_your_plant_page_shows_the_same_plant_and_scenario():
