@@ -9,7 +9,6 @@ writes by hand around CasADi) — on a few paths, and are scaled to path-steps p
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import time
 
@@ -98,7 +97,7 @@ def bench(
     """
     scen = scenario
     if horizon is not None:
-        scen = dataclasses.replace(scen, T=float(horizon))
+        scen = scen.until(float(horizon))
     dt, nsteps, _ = resolve_dt(design, scen, None)
     kw = dict(paths=paths, seed=seed, progress=False, threads=threads)
 

@@ -1,7 +1,6 @@
 """Every example in examples/ runs, on a short horizon: the user plant through derive, design,
 simulate and the generated C (compiled under the strict flags, equal to the Python step)."""
 
-import dataclasses
 import subprocess
 import sys
 from pathlib import Path
@@ -52,7 +51,7 @@ def test_example_simulates_and_estimates_its_faults(pendulum_design):
     # both faults are estimated and tolerant control reduces the output deviation
     assert all(e is not None and e < 0.5 for e in m["fault_rel_rms_error"])
     assert m["ftc_deviation_ratio"] < 0.8
-    short = dataclasses.replace(sc, T=1.0)
+    short = sc.until(1.0)
     assert simulate(pendulum_design, load_plant(spec), short, paths=2, seed=0, progress=False).t[
         -1
     ] == pytest.approx(1.0)

@@ -79,7 +79,7 @@ def test_three_tank_saturation_from_the_saved_arrays(plants, real_designs, tmp_p
     from fte_casadi.sim import load_result, save_result, simulate
     from fte_casadi.sim.metrics import metrics_from_arrays
 
-    sc = dataclasses.replace(SCENARIOS["three-tank"](), T=300.0, x0_noise=2.0)  # a start that saturates
+    sc = dataclasses.replace(SCENARIOS["three-tank"]().until(300.0), x0_noise=2.0)  # a start that saturates
     res = simulate(real_designs["three-tank"], plants["three-tank"], sc, paths=4, seed=5, progress=False,
                    record_all=True, record_every=1)  # fmt: skip
     save_result(res, tmp_path / "r.npz")

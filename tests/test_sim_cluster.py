@@ -98,13 +98,12 @@ def test_unreachable_scheduler_is_a_clear_error(plants, real_designs):
 
 def test_sweep_on_the_cluster_equals_in_process(cluster, plants, real_designs):
     """One client for all points of a sweep; each point's metrics as in-process."""
-    import dataclasses
 
     from fte_casadi.plants import SCENARIOS
     from fte_casadi.sim.sweep import sweep
 
     d, p = real_designs["manipulator"], plants["manipulator"]
-    sc = dataclasses.replace(SCENARIOS["manipulator"](), T=3.0)
+    sc = SCENARIOS["manipulator"]().until(3.0)
     kw = dict(paths=24, seed=6, progress=False)
     here = sweep(d, p, sc, {"d_scale": [0.0, 2.0]}, **kw)
     there = sweep(d, p, sc, {"d_scale": [0.0, 2.0]}, scheduler=cluster.scheduler_address, **kw)

@@ -235,7 +235,7 @@ def test_vectorised_engine_equals_the_per_path_engine(plants, real_designs, name
 
     plant, design = plants[name], real_designs[name]
     sc = SCENARIOS[name]()
-    sc = dataclasses.replace(sc, T=2.0 if name == "manipulator" else 60.0)  # covers the first fault window
+    sc = sc.until(2.0 if name == "manipulator" else 60.0)  # covers the first fault window
     sc = dataclasses.replace(sc, faults=tuple(dataclasses.replace(f, start=f.start / 5, stop=f.stop / 5)
                                               for f in sc.faults))  # fmt: skip
     res = simulate(design, plant, sc, paths=3, seed=11, progress=False, record_all=True, record_every=1)
@@ -290,7 +290,7 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
 
     for name in ("manipulator", "three-tank"):
         sc = SCENARIOS[name]()
-        sc = dataclasses.replace(sc, T=sc.T / 2 if name == "manipulator" else 300.0)
+        sc = sc.until(sc.T / 2 if name == "manipulator" else 300.0)
         res = simulate(real_designs[name], plants[name], sc, paths=6, seed=2, progress=False, record_all=True,
                        record_every=1)  # fmt: skip
         save_result(res, tmp_path / f"{name}.npz")  # recompute from the saved per-path arrays

@@ -25,12 +25,11 @@ def test_parse_vary_validates():
 
 
 def test_sweep_over_two_factors(plants, real_designs, tmp_path):
-    import dataclasses
 
     from fte_casadi.plants import SCENARIOS
 
     d, p = real_designs["manipulator"], plants["manipulator"]
-    sc = dataclasses.replace(SCENARIOS["manipulator"](), T=6.0)  # the actuator window only
+    sc = SCENARIOS["manipulator"]().until(6.0)  # the actuator window only
     pts = sweep(
         d, p, sc, {"fault_scale": [0.5, 2.0], "noise_scale": [0.0, 1.0]}, paths=8, seed=2, progress=False
     )

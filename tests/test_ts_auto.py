@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 
 import casadi as ca
@@ -64,7 +63,7 @@ def test_plain_manipulator_designs_simulates_and_generates_like_the_builtin(
     assert d.certified
     for a, b in zip(d.K + d.L1 + (d.N,), ref.K + ref.L1 + (ref.N,)):  # the design is a function of the model
         assert np.max(np.abs(a - b)) <= 1e-6 * np.max(np.abs(b))
-    sc = dataclasses.replace(SCENARIOS["manipulator"](), T=4.0)
+    sc = SCENARIOS["manipulator"]().until(4.0)
     m = simulate(d, ts.plant, sc, paths=4, seed=1, progress=False).metrics
     assert m["fault_rel_rms_error"][0] < 0.3
     if build.find_compiler() is not None:

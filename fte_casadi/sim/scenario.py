@@ -232,6 +232,14 @@ class Scenario:
                 _positive(f"measurement_noise[{k}]", v, allow_zero=True)
             object.__setattr__(self, "measurement_noise", mn)
 
+    def until(self, T: float) -> Scenario:
+        """The same experiment over the shorter horizon ``T``: the fault windows that start before ``T``, each
+        ending at ``T`` at the latest (a window must lie inside [0, T))."""
+        from dataclasses import replace
+
+        faults = tuple(replace(fp, stop=min(float(fp.stop), float(T))) for fp in self.faults if fp.start < T)
+        return replace(self, T=float(T), faults=faults)
+
     def windows(self, fault: str) -> list[tuple[float, float]]:
         """The (start, stop) windows of every profile acting on ``fault``."""
         return [(fp.start, fp.stop) for fp in self.faults if fp.fault == fault]
