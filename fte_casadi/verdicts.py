@@ -8,7 +8,15 @@ without importing the simulator. Every verdict is judged on the figures measured
 
 from __future__ import annotations
 
-__all__ = ["WORSE_THAN_NONE", "FALSE_ALARM", "SATURATED", "OUTSIDE_REGION", "verdicts"]
+__all__ = [
+    "WORSE_THAN_NONE",
+    "FALSE_ALARM",
+    "SATURATED",
+    "OUTSIDE_REGION",
+    "POOR_ESTIMATE",
+    "SLOW_OBSERVER",
+    "verdicts",
+]
 
 #: a window's ``ftc_true_ratio`` above this: tolerant control leaves the TRUE outputs worse than none
 WORSE_THAN_NONE = 1.0
@@ -19,6 +27,10 @@ FALSE_ALARM = 0.5
 SATURATED = 0.05
 #: more than this fraction of the samples outside the plant's region: the T-S model is not exact there
 OUTSIDE_REGION = 0.01
+#: a window's fault error (relative RMS over the whole window) at or above this: the estimate misses half the fault
+POOR_ESTIMATE = 0.5
+#: the observer's slowest time constant times this longer than a fault window: it cannot settle inside it
+SLOW_OBSERVER = 3.0
 
 
 def _where(w: dict) -> str:
@@ -41,7 +53,7 @@ def _crosstalk(w: dict, faults) -> str:
 def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     """The verdicts on metrics document ``m``: a list of ``{"verdict", "where", "value", "text"}`` with
     ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``, ``saturated``,
-    ``not settled``, ``missed``, ``outside region``."""
+    ``poor estimate``, ``slow observer``, ``not settled``, ``missed``, ``outside region``."""
     out = []
 
     def add(verdict, where, value, text):
@@ -79,6 +91,17 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
                         f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
                         f"{WORSE_THAN_NONE:g}{size}), though the outputs as a whole are better (ftc_true_ratio "
                         f"{r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
+        err = w.get("fault_rel_rms_error")
+        if err is not None and err >= POOR_ESTIMATE:
+            add("poor estimate", where, err,
+                f"in {where} the fault estimate misses {100 * min(err, 9.99):.0f} % of the fault (relative RMS error "
+                f"{err:.3g} over the window): this design does not estimate this fault in this scenario")  # fmt: skip
+        tau = m.get("observer_time_constant")
+        span = float(w["stop"]) - float(w["start"])
+        if tau is not None and SLOW_OBSERVER * tau > span:
+            add("slow observer", where, tau,
+                f"the observer's slowest time constant {tau:.3g} is too slow for {where}: {SLOW_OBSERVER:g} time "
+                f"constants ({SLOW_OBSERVER * tau:.3g}) are longer than the window ({span:.3g})")  # fmt: skip
         if w.get("fault_rel_rms_error") is not None and w.get("settling_time") is None:
             add("not settled", where, None,
                 f"in {where} the fault estimate does not settle: its mean error over the paths is not within 10 % of "

@@ -677,7 +677,8 @@ def simulate(
         _, _, rec, _, _ = run_paths(prep_run, 0, nrec_paths, seed, record_every)
     wall = time.perf_counter() - t_wall
     meta = {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed, "wall_s": wall, "m": plant.m,
-            "thresholds": [float(v) for v in thresholds], "detection": detection}  # fmt: skip
+            "thresholds": [float(v) for v in thresholds], "detection": detection,
+            "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None}  # fmt: skip
     doc = finalize(acc, mon, pm, prep.t, prep.monitor, prep.masks, meta)
     doc["measurement_noise"] = (
         None if scenario.measurement_noise is None

@@ -164,6 +164,7 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         "dt": float(result.dt),
         "T": float(result.T),
         "seed": int(result.seed),
+        "observer_time_constant": allow.tau if math.isfinite(allow.tau) else None,
         "transient": float(allow.transient),
         "settle_after": float(allow.settle_after),
         "state_rms_error": srms,

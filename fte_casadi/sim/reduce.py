@@ -427,6 +427,7 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
         "dt": dt,
         "T": float(meta["T"]),
         "seed": int(meta["seed"]),
+        "observer_time_constant": meta.get("tau"),
         "transient": float(mk.transient),
         "settle_after": float(mk.settle_after),
         "state_rms_error": srms,
