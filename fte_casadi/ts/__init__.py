@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ParameterError
 from ..model import Plant
 from .auto import premise_form
 from .auto_checks import check_exact
+from .cover import VERTEX_CHOICES as VERTEX_CHOICES
+from .cover import group_notes
 from .fidelity import fidelity as fidelity
 from .linearise import linearised_local_models
 from .memberships import scheduling_from_measurements as scheduling_from_measurements
@@ -17,7 +20,9 @@ from .model import TSModel as TSModel
 from .sector import sector_local_models
 
 
-def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TSModel:
+def derive(
+    plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0, vertices: str | None = None
+) -> TSModel:
     """Derive the T-S fuzzy model of ``plant`` and check its fidelity.
 
     Sector nonlinearity when the plant declares premises, or when it declares neither premises nor
@@ -32,16 +37,24 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     >>> ts.r, round(ts.premises[0].min, 4)
     (2, -0.2172)
     """
+    if vertices is not None and vertices not in VERTEX_CHOICES:
+        raise ParameterError(f"vertices must be one of {', '.join(VERTEX_CHOICES)}; got {vertices!r}")
     kind = plant.method  # "sector" or "linearisation"
     auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
     notes: tuple[str, ...] = ()
+    groups = ()
     if auto:
         form = premise_form(plant, seed=seed)
-        premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
+        premises, models, premise_fn, membership_fn, groups = sector_local_models(
+            form.plant, form.bounds, vertices or "grouped", seed
+        )
         kind = "sector_auto" if premises else "linear"
-        notes = form.notes
+        notes = form.notes + group_notes(premises, groups)
     elif plant.method == "sector":
-        premises, models, premise_fn, membership_fn = sector_local_models(plant)
+        premises, models, premise_fn, membership_fn, groups = sector_local_models(
+            plant, None, vertices or "box", seed
+        )
+        notes = group_notes(premises, groups) if len(groups) < len(premises) else ()
     else:
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
     tmp = TSModel(
@@ -54,9 +67,12 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
         premise_fn,
         membership_fn,
         Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
+        groups=groups,
     )
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
-    ts = TSModel(plant, kind, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid, notes)
+    ts = TSModel(
+        plant, kind, premises, models, plant.C, plant.Df, premise_fn, membership_fn, fid, notes, groups
+    )
     if auto:
         check_exact(ts, seed=seed)  # the proof: exact to round-off, or refused with the row and the point
     return ts
@@ -70,4 +86,5 @@ __all__ = [
     "Fidelity",
     "fidelity",
     "scheduling_from_measurements",
+    "VERTEX_CHOICES",
 ]

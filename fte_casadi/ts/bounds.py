@@ -18,7 +18,7 @@ from scipy.optimize import minimize
 
 from ..errors import BoundsError
 
-__all__ = ["premise_bounds"]
+__all__ = ["premise_bounds", "certified_max"]
 
 _SAMPLES = 200_001
 _MAX_SEARCHES = 200
@@ -38,7 +38,7 @@ def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return (2.0 * out.reshape(k, -1) + 1e-12).T
 
 
-def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
+def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_SEARCHES):
     """Minimum of sign*f over the box; returns (value, gap)."""
     v = sign * vals
     cell_lb = v - _local_lipschitz(grads, shape) @ hw
@@ -53,7 +53,7 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
     def fun(xx):
         return sign * float(F(xx)), sign * np.array(G(xx)).ravel()
 
-    for k in starts[:_MAX_SEARCHES]:
+    for k in starts[:max_searches]:
         searched.add(int(k))
         res = minimize(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
         if np.isfinite(res.fun) and res.fun < best:
@@ -124,3 +124,33 @@ def premise_bounds(
             "constant",
         )
     return mn, mx, idx, max(gap1, gap2)
+
+
+def certified_max(
+    expr: ca.SX, x: ca.SX, lo: np.ndarray, hi: np.ndarray, samples: int = 20_001, max_searches: int = 20
+) -> float:
+    """An upper bound of ``expr(x)`` over the box ``[lo, hi]`` by the same search as :func:`premise_bounds`
+    (a grid of ``samples`` points, every cell whose Lipschitz bound could beat the best value searched
+    locally, the bound widened by whatever was not searched). Used to grow a polytope's facets until they
+    provably contain the premises' image."""
+    idx = tuple(j for j in range(x.numel()) if ca.depends_on(expr, x[j]))
+    if not idx:
+        return float(ca.Function("c", [x], [expr])(np.zeros(x.numel())))
+    xs = ca.vertcat(*[x[j] for j in idx])
+    others = [j for j in range(x.numel()) if j not in idx]
+    e = ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others))) if others else expr
+    F = ca.Function("F", [xs], [e])
+    G = ca.Function("G", [xs], [ca.gradient(e, xs)])
+    k = len(idx)
+    per = max(3, int(round(samples ** (1.0 / k))))
+    lo_s, hi_s = lo[list(idx)], hi[list(idx)]
+    grid = np.array(
+        np.meshgrid(*[np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)], indexing="ij")
+    ).reshape(k, -1)
+    N = grid.shape[1]
+    vals = np.array(F.map(N)(grid)).ravel()
+    grads = np.array(G.map(N)(grid)).reshape(k, N)
+    grads[~np.isfinite(grads)] = 0.0
+    hw = (hi_s - lo_s) / (per - 1) / 2
+    mx, _ = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
+    return float(mx)
