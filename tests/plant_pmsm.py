@@ -3,7 +3,6 @@ Electric Machinery, 2013, ch. 15), written twice as a new user might: states (i_
 (w, i_d, i_q). The same plant: only the order of the states differs. w is the electrical speed; the
 load torque is an unknown input and the q-axis voltage has an actuator fault."""
 
-
 from fte_casadi import PlantBuilder
 
 R, L, PSI, POLES, J, B = 0.5, 2e-3, 0.1, 4, 2e-3, 1e-3  # ohm, H, Wb, pole pairs, kg m^2, N m s
