@@ -63,6 +63,8 @@ __all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYL
 #: above this many premises (64 rules) derive warns; above MAX_PREMISES it refuses
 WARN_PREMISES = 6
 MAX_PREMISES = 10
+#: local searches per bound of a premise (the bound is widened by what could not be searched, and says so)
+SEARCHES = 200
 #: the orders of the states tried for the telescoping (all of them up to 6 states in shared terms)
 MAX_ORDERS = 720
 #: the quotient of a smooth term is replaced by its Taylor expansion where |x_j| < TAYLOR_BAND
@@ -361,7 +363,7 @@ def _bounds(plant: Plant, expr: ca.SX, text: str, where: list[str]):
     """Bounds of a premise candidate, refusals naming the coefficients it stands for."""
     try:
         return premise_bounds(text, expr, plant.x, plant.region_lo, plant.region_hi, plant.state_names,
-                              allow_constant=True)  # fmt: skip
+                              allow_constant=True, max_searches=SEARCHES)  # fmt: skip
     except BoundsError as exc:
         what = "; ".join(where[:3]) + (f" (and {len(where) - 3} more)" if len(where) > 3 else "")
         at = f"at {exc.where}" if exc.where else "on the region"
@@ -432,8 +434,9 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     texts = tuple(cand[r].text if sign[r] > 0 else f"-({cand[r].text})" for r in live)
     if q > WARN_PREMISES:
         warnings.warn(
-            f"the automatic sector method found {q} premises ({2**q} rules): {'; '.join(texts)}; the design will be "
-            "slow and conservative: consider declaring premises yourself, narrowing the region, or linearising",
+            f"the automatic sector method found {q} premises ({2**q} rules as one box each, fewer where premises "
+            f"that depend on the same states are covered together): {'; '.join(texts)}; the design may be slow and "
+            "conservative: consider declaring premises yourself, narrowing the region, or linearising",
             RuntimeWarning,
             stacklevel=3,
         )
@@ -466,8 +469,8 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     work = dataclasses.replace(plant, z=z if q else ca.SX(0, 1), z_names=names, z_exprs=z_exprs, z_texts=texts,
                                drift_z=drift, diffusion_z=diff)  # fmt: skip
     if q:
-        notes = [f"found automatically in the plain equations (sector nonlinearity): {q} premise{'s' * (q > 1)}, "
-                 f"{2**q} rules; each oriented so that rule 1 weighs most at the origin"]  # fmt: skip
+        notes = [f"found automatically in the plain equations (sector nonlinearity): {q} premise{'s' * (q > 1)}"
+                 f"{f', {2**q} rules' if q == 1 else ''}; each oriented so that rule 1 weighs most at the origin"]  # fmt: skip
         notes += [f"{nm} schedules {', '.join(uses[r])}" for nm, r in zip(names, live)]
     else:
         notes = ["no nonlinear term in the states: one rule (the plant is linear)"]

@@ -47,18 +47,32 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MA
     tol = 1e-9 * (1.0 + abs(best))  # a cell must be able to beat the best value by more than round-off
     cand = np.flatnonzero(cell_lb < best - tol)
     cand = cand[np.argsort(v[cand])]
-    starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]
+    starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]  # noqa: C401
     searched = set()
 
+    FG = (
+        ca.Function("FG", F.sx_in(), [F.call(F.sx_in())[0], G.call(F.sx_in())[0]])
+        if F.is_a("SXFunction")
+        else None
+    )
+
     def fun(xx):
+        if FG is not None:
+            f, g = FG(xx)
+            return sign * float(f), sign * np.array(g).ravel()
         return sign * float(F(xx)), sign * np.array(G(xx)).ravel()
 
-    for k in starts[:max_searches]:
+    top = set(order[:10])
+    for k in starts:
+        if len(searched) >= max_searches:
+            break
+        if cell_lb[k] >= best - tol and k not in top:
+            continue  # the best value found since cannot be beaten in this cell: nothing to search
         searched.add(int(k))
         res = minimize(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
         if np.isfinite(res.fun) and res.fun < best:
             best = float(res.fun)
-    rest = [c for c in cand if int(c) not in searched]
+    rest = [c for c in cand if int(c) not in searched and cell_lb[c] < best - tol]
     gap = 0.0
     if rest:
         lb = float(np.min(cell_lb[rest]))
@@ -76,6 +90,7 @@ def premise_bounds(
     hi: np.ndarray,
     state_names,
     allow_constant: bool = False,
+    max_searches: int = _MAX_SEARCHES,
 ) -> tuple[float, float, tuple[int, ...], float]:
     """Global min and max of ``expr(x)`` over the box ``[lo, hi]`` (only the states it uses).
 
@@ -113,8 +128,8 @@ def premise_bounds(
     grads = np.array(G.map(N)(grid)).reshape(k, N)
     grads[~np.isfinite(grads)] = 0.0
     hw = (hi_s - lo_s) / (per - 1) / 2
-    mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k)
-    mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k)
+    mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k, max_searches)
+    mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
     if not (np.isfinite(mn) and np.isfinite(mx)):
         raise BoundsError(f"premise {name!r} is unbounded over the region; shrink the region", "unbounded")
     if mx - mn < 1e-12 and not allow_constant:

@@ -325,8 +325,8 @@ def memberships_of(groups, q: int) -> ca.Function:
     :func:`rule_vertices_of`."""
     z = ca.SX.sym("z", q)
     per = [g.weights(ca.vertcat(*[z[i] for i in g.premises])) for g in groups]
-    h = [ca.SX(1.0)] if not groups else []
-    for combo in itertools.product(*per):
+    h = []
+    for combo in itertools.product(*per):  # no group: one empty product, the single rule's weight 1
         term = ca.SX(1.0)
         for w in combo:
             term = term * w
