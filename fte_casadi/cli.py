@@ -137,17 +137,27 @@ def _fmt_matrix(M: np.ndarray, indent: str = "    ") -> str:
     return "\n".join(indent + r for r in rows)
 
 
+_VERTICES = click.option(
+    "--vertices", type=click.Choice(["grouped", "box", "fewest"]), default=None,
+    help="How the premises of a sector model are covered: grouped (premises that depend on the same states "
+    "together, a simplex or a box per group, whichever has fewer vertices; the default for premises found "
+    "automatically), box (each premise its own sector: 2^q rules, the most vertices; the default for declared "
+    "premises), fewest (one simplex over all premises: q + 1 rules, the loosest).",
+)  # fmt: skip
+
+
 @main.command()
 @click.argument("plant")
 @click.option("--json", "as_json", is_flag=True, help="Print the derive document (JSON) on stdout.")
+@_VERTICES
 @_guard
-def derive(plant: str, as_json: bool) -> None:
+def derive(plant: str, as_json: bool, vertices: str | None) -> None:
     """Derive the T-S fuzzy model of PLANT and check its fidelity."""
     from .plants.loader import load_plant
     from .ts import derive as derive_ts
 
     p = load_plant(plant)
-    ts = derive_ts(p)
+    ts = derive_ts(p, vertices=vertices)
     if as_json:
         click.echo(json.dumps(ts.to_dict(), indent=1))
         return
@@ -218,13 +228,14 @@ def _absolute_spec(plant_spec: str) -> str:
 
 
 def _make_design(
-    plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=()
-):
+    plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
+    vertices: str | None = None,
+):  # fmt: skip
     from .design import design as run_design
     from .plants.loader import load_plant
     from .ts import derive as derive_ts
 
-    ts = derive_ts(load_plant(plant_spec))
+    ts = derive_ts(load_plant(plant_spec), vertices=vertices)
     params = dict(params)
     sc = _scenario(plant_spec)
     if params.get("sample_time") is None and sc is not None:
@@ -326,11 +337,12 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 @click.option(
     "--explore", is_flag=True, help="Print and plot the feasible frontier (smallest gamma over sigma)."
 )
+@_VERTICES
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
 def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, bound_weight,
-           allow_uncertified, accept, no_remark5, d_bound, output, explore, out_dir):  # fmt: skip
+           allow_uncertified, accept, no_remark5, d_bound, output, explore, out_dir, vertices):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
                            sample_time=sample_time, d_bound=d_bound, bound_weight=bound_weight)  # fmt: skip
@@ -345,7 +357,7 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
         )
     if output is not None:
         _writable_target(output, "-o", "design.json")
-    d = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept)
+    d = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices)
     from .design.summary import design_summary
 
     click.echo(design_summary(d))

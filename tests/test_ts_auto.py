@@ -86,8 +86,12 @@ def test_plain_pendulum_equals_the_premise_form():
 
 
 def test_bilinear_and_saturation_derive_with_four_rules():
-    ts = derive(two_state(lambda x1, x2, u, fa: [x2, -x1 * x2 - 2 * ca.tanh(x1) - 0.5 * x2 + u + fa],
-                          diff_rows=(lambda x1, x2: 0.01 * x1, 0.0)))  # fmt: skip
+    """One box per premise (vertices="box") gives four rules; both premises depend on x1 alone, so the
+    default covers their image (a curve) with a simplex of three (tests/test_ts_groups.py)."""
+    plant = two_state(lambda x1, x2, u, fa: [x2, -x1 * x2 - 2 * ca.tanh(x1) - 0.5 * x2 + u + fa],
+                      diff_rows=(lambda x1, x2: 0.01 * x1, 0.0))  # fmt: skip
+    assert derive(plant).r == 3
+    ts = derive(plant, vertices="box")
     assert ts.r == 4
     assert [p.expr for p in ts.premises] == ["x1", "tanh(x1)/x1"]  # the coefficients of x2 and x1 in row 2
     assert ts.fidelity.max_abs_error <= ROUNDOFF
@@ -232,8 +236,11 @@ def _many(k):
 
 def test_many_premises_warn_then_refuse():
     with pytest.warns(RuntimeWarning, match="found 7 premises"):
-        ts = derive(_many(7), fidelity_samples=200)
+        ts = derive(_many(7), fidelity_samples=200, vertices="box")
     assert ts.r == 2**7
+    with pytest.warns(RuntimeWarning, match="found 7 premises"):
+        ts = derive(_many(7), fidelity_samples=200)  # all seven depend on x1 alone: one simplex
+    assert ts.r <= 8 and ts.groups[0].polytope == "simplex" and ts.fidelity.max_abs_error <= ROUNDOFF
     with pytest.raises(DerivationError, match=r"needs 11 premises \(2048 rules\), more than 10: tanh\(x1\)/x1; "
                                               r".*Declare some premises yourself .*narrow the region.*linearise"):  # fmt: skip
         derive(_many(11), fidelity_samples=200)

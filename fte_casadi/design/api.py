@@ -665,7 +665,7 @@ def explain_45(
         sup, _ = sigma_max(aug, None, g1, solver)
         parts.append(f"no gamma makes (45) feasible at sigma = {sg:g}"
                      + (f" (any gamma needs sigma < {sup:.3g})" if sup else ""))  # fmt: skip
-        if sup is None and (why := reachability(aug)):
+        if sup is None and (why := reachability(aug, getattr(ts, "rule_distances", None))):
             parts.append(why)
     else:
         given = {k: retry.get(k) for k in ("gamma", "gamma1", "sigma")}

@@ -26,7 +26,8 @@ import scipy.linalg as sla
 
 from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 
-__all__ = ["FaultLimits", "channel_zeros", "fault_limits", "separation", "explain_metrics", "reachability"]
+__all__ = ["FaultLimits", "channel_zeros", "fault_limits", "separation", "explain_metrics", "reachability",
+           "vertex_reach"]  # fmt: skip
 
 #: a normalised separation below this is "weak" (the outputs tell the columns apart only slowly)
 WEAK_SEPARATION = 5e-2
@@ -209,7 +210,24 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
     return out
 
 
-def reachability(aug) -> str:
+def vertex_reach(distances, i: int) -> str:
+    """Whether a state of the region reaches rule ``i``'s vertex: its distance to the premises' image
+    relative to the image's extent (``TSModel.rule_distances``); "" when not known."""
+    if distances is None or i >= len(distances):
+        return ""
+    v = float(distances[i])
+    if v <= NEAR_IMAGE:
+        return f"rule {i + 1}'s vertex is one a state of the region reaches (distance {v:.2g} of the image's extent)"
+    return (f"rule {i + 1}'s vertex is {v:.2g} of the image's extent away from every premise value a state of the "
+            "region takes: no real state reaches it, it is there to enclose the image (fte derive --vertices box "
+            "or grouped may give a tighter cover)")  # fmt: skip
+
+
+#: a vertex this close to the premises' image (relative to its extent) is taken as reached by a state
+NEAR_IMAGE = 0.05
+
+
+def reachability(aug, distances=None) -> str:
     """Why (45) may allow no sigma > 0 at all: per rule, the open-loop unstable modes of ``A_i`` and how
     well the inputs reach them (the smallest singular value of the PBH test ``[A_i - lambda I, B_i]``,
     relative to ``||[A_i, B_i]||``). A mode the inputs barely reach leaves (45) a margin sigma too small
@@ -229,7 +247,8 @@ def reachability(aug) -> str:
     if worst is None:
         return ""
     i, lam, pbh, count = worst
+    reach = vertex_reach(distances, i)
     return (f"the open loop is unstable ({count} mode(s) of rule {i + 1} in the right half plane, the least reachable at "
             f"{lam.real:.3g}{lam.imag:+.3g}j), and the inputs reach it only as much as the relative PBH test "
             f"sigma_min([A - lambda I, B]) / ||[A, B]|| = {pbh:.2g} says: a controller must stabilise it through that, "
-            "which leaves (45) little or no margin sigma")  # fmt: skip
+            "which leaves (45) little or no margin sigma" + (f"; {reach}" if reach else ""))  # fmt: skip

@@ -6,10 +6,12 @@ import dataclasses
 
 import numpy as np
 
-from ..errors import DerivationError
+from ..errors import DerivationError, ParameterError
 from ..model import Plant
 from .auto import premise_form
 from .auto_checks import check_exact
+from .cover import VERTEX_CHOICES as VERTEX_CHOICES
+from .cover import group_notes
 from .fidelity import fidelity as fidelity
 from .linearise import linearised_local_models
 from .memberships import scheduling_from_measurements as scheduling_from_measurements
@@ -35,20 +37,28 @@ def _finite_models(plant: Plant, models) -> None:
                 )
 
 
-def structure(plant: Plant, *, seed: int = 0) -> TSModel:
+def structure(plant: Plant, *, seed: int = 0, vertices: str | None = None) -> TSModel:
     """The T-S model of ``plant`` without its fidelity check (``fidelity`` holds NaN): premises, local
     models and memberships, as :func:`derive` finds them. Rebuilding a design's scheduling map from its
     plant needs this much, in milliseconds to a few seconds, not the fidelity integration."""
+    if vertices is not None and vertices not in VERTEX_CHOICES:
+        raise ParameterError(f"vertices must be one of {', '.join(VERTEX_CHOICES)}; got {vertices!r}")
     kind = plant.method  # "sector" or "linearisation"
     auto = plant.method == "sector" and plant.z.numel() == 0  # no premise declared: find them
     notes: tuple[str, ...] = ()
+    groups = ()
     if auto:
         form = premise_form(plant, seed=seed)
-        premises, models, premise_fn, membership_fn = sector_local_models(form.plant, form.bounds)
+        premises, models, premise_fn, membership_fn, groups = sector_local_models(
+            form.plant, form.bounds, vertices or "grouped", seed
+        )
         kind = "sector_auto" if premises else "linear"
-        notes = form.notes
+        notes = form.notes + group_notes(premises, groups)
     elif plant.method == "sector":
-        premises, models, premise_fn, membership_fn = sector_local_models(plant)
+        premises, models, premise_fn, membership_fn, groups = sector_local_models(
+            plant, None, vertices or "box", seed
+        )
+        notes = group_notes(premises, groups) if len(groups) < len(premises) else ()
     else:
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
     _finite_models(plant, models)
@@ -63,10 +73,13 @@ def structure(plant: Plant, *, seed: int = 0) -> TSModel:
         membership_fn,
         Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
         notes,
+        groups,
     )
 
 
-def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TSModel:
+def derive(
+    plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0, vertices: str | None = None
+) -> TSModel:
     """Derive the T-S fuzzy model of ``plant`` and check its fidelity.
 
     Sector nonlinearity when the plant declares premises, or when it declares neither premises nor
@@ -81,10 +94,10 @@ def derive(plant: Plant, *, fidelity_samples: int = 20_000, seed: int = 0) -> TS
     >>> ts.r, round(ts.premises[0].min, 4)
     (2, -0.2172)
     """
-    tmp = structure(plant, seed=seed)
+    tmp = structure(plant, seed=seed, vertices=vertices)
     fid = fidelity(tmp, samples=fidelity_samples, seed=seed)
     ts = dataclasses.replace(tmp, fidelity=fid)
-    if tmp.kind in ("sector_auto", "linear") and plant.method == "sector":
+    if tmp.kind in ("sector_auto", "linear") and plant.method == "sector" and plant.z.numel() == 0:
         check_exact(ts, seed=seed)  # the proof: exact to round-off, or refused with the row and the point
     return ts
 
@@ -98,4 +111,5 @@ __all__ = [
     "Fidelity",
     "fidelity",
     "scheduling_from_measurements",
+    "VERTEX_CHOICES",
 ]

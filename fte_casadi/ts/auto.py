@@ -46,6 +46,8 @@ equations and refuses it unless it is exact to round-off (:func:`.auto_checks.ch
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import math
 import warnings
 
 import casadi as ca
@@ -61,6 +63,10 @@ __all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYL
 #: above this many premises (64 rules) derive warns; above MAX_PREMISES it refuses
 WARN_PREMISES = 6
 MAX_PREMISES = 10
+#: local searches per bound of a premise (the bound is widened by what could not be searched, and says so)
+SEARCHES = 200
+#: the orders of the states tried for the telescoping (all of them up to 6 states in shared terms)
+MAX_ORDERS = 720
 #: the quotient of a smooth term is replaced by its Taylor expansion where |x_j| < TAYLOR_BAND
 TAYLOR_BAND = 1e-4
 #: operations with a kink or a jump: such a term keeps its exact quotient (filled at 0 only)
@@ -90,6 +96,8 @@ class _Piece:
     expr: ca.SX
     text: str  # "" when the coefficient is a constant
     where: str  # e.g. "drift row 'w_l', the coefficient of 'theta_l' in the term -3.33*sin(theta_l)"
+    #: (drift 0 / diffusion 1, row, term, inputs 0 / states 1): pieces are taken in this order
+    seq: tuple = (0, 0, 0, 0)
 
 
 def _terms(e: ca.SX, scale: float = 1.0) -> list[tuple[float, ca.SX]]:
@@ -154,12 +162,15 @@ def _divide(h: ca.SX, xj: ca.SX) -> ca.SX | None:
     return None
 
 
-def _coefficient(h: ca.SX, x: ca.SX, j: int, smooth: bool) -> tuple[ca.SX, str]:
-    """``(c_j, text)``: ``[h(.., xj, 0..) - h(.., 0, 0..)] / xj``, its singularity at ``xj = 0`` filled."""
+def _coefficient(h: ca.SX, x: ca.SX, j: int, smooth: bool, later=None) -> tuple[ca.SX, str]:
+    """``(c_j, text)``: ``[h(.., xj, 0..) - h(.., 0, 0..)] / xj``, its singularity at ``xj = 0`` filled.
+
+    ``later``: the states telescoped after ``xj`` (set to 0 in both values); by default those after it
+    in the plant's order."""
     n = x.numel()
     xj = x[j]
-    later = ca.vertcat(*[x[k] for k in range(j + 1, n)]) if j < n - 1 else None
-    upto = ca.substitute(h, later, ca.DM.zeros(n - j - 1)) if later is not None else h
+    later = list(range(j + 1, n)) if later is None else list(later)
+    upto = ca.substitute(h, ca.vertcat(*[x[k] for k in later]), ca.DM.zeros(len(later))) if later else h
     if not ca.depends_on(upto, xj):
         return ca.SX(0.0), ""
     below = ca.substitute(upto, xj, ca.DM(0.0))
@@ -194,26 +205,41 @@ def _value(e: ca.SX) -> float:
     return float(ca.DM(ca.evalf(e)))
 
 
-def _split(plant: Plant, kind: str) -> tuple[list[_Piece], np.ndarray]:
-    """Coefficient pieces of the drift or the diffusion, and its constant offset."""
+@dataclasses.dataclass(frozen=True)
+class _Term:
+    """The x-part ``h0`` of one additive term of a row (inputs set to 0), to be telescoped."""
+
+    kind: str  # "drift" or "diffusion"
+    row: int
+    factor: float
+    h0: ca.SX
+    smooth: bool
+    states: tuple[int, ...]
+    where: str  # "drift row 'w_l'"
+    text: str
+    seq: tuple
+
+
+def _split(plant: Plant, kind: str) -> tuple[list[_Piece], list[_Term], np.ndarray]:
+    """Coefficient pieces of the inputs of the drift or the diffusion, its terms in x (telescoped by
+    :func:`_state_pieces` along an order of the states), and its constant offset."""
     x = plant.x
     if kind == "drift":
         rows = plant.drift_z
         vars_ = (("B", plant.u, plant.input_names), ("Bd", plant.d, plant.unknown_input_names),
                  ("Bf", plant.f, plant.fault_names))  # fmt: skip
-        xmat = "A"
     else:
         rows = plant.diffusion_z
         vars_ = (("G", plant.u, plant.input_names), ("Gf", plant.f, plant.fault_names),
                  ("M", plant.d2, plant.diffusion_input_names))  # fmt: skip
-        xmat = "W"
     others = (
         ca.vertcat(*[v for _, v, _ in vars_ if v.numel()]) if any(v.numel() for _, v, _ in vars_) else None
     )
-    pieces, offset = [], np.zeros(plant.n)
+    pieces, terms, offset = [], [], np.zeros(plant.n)
+    kr = 0 if kind == "drift" else 1
     for i in range(plant.n):
         row = f"{kind} row {plant.state_names[i]!r}"
-        for k, h in _terms(rows[i]):
+        for ti, (k, h) in enumerate(_terms(rows[i])):
             term = expr_text(k * h)
             if ca.depends_on(h, x):
                 check_term(h, plant, f"{row}: the term {term}")
@@ -225,7 +251,9 @@ def _split(plant: Plant, kind: str) -> tuple[list[_Piece], np.ndarray]:
                         continue
                     nonconst = ca.depends_on(b, x)
                     where = f"{row}: the coefficient of {vnames[c]!r} in the term {term}"
-                    pieces.append(_Piece(mat, i, c, k, b, expr_text(b) if nonconst else "", where))
+                    pieces.append(
+                        _Piece(mat, i, c, k, b, expr_text(b) if nonconst else "", where, (kr, i, ti, 0))
+                    )
             h0 = ca.substitute(h, others, ca.DM.zeros(others.numel())) if others is not None else h
             if not ca.depends_on(h0, x):
                 offset[i] += k * _value(h0)
@@ -238,26 +266,89 @@ def _split(plant: Plant, kind: str) -> tuple[list[_Piece], np.ndarray]:
                     "that the plant is finite at 0, or declare premises yourself (b.premise)"
                 )
             offset[i] += k * z0
-            smooth = _smooth(h0)
-            for j in range(plant.n):
-                if not ca.depends_on(h0, x[j]):
-                    continue
-                c, text = _coefficient(h0, x, j, smooth)
-                where = f"{row}: the coefficient of {plant.state_names[j]!r} in the term {term}"
-                if ca.depends_on(c, x):
-                    pieces.append(_Piece(xmat, i, j, k, c, text, where))
-                elif _value(c) != 0.0:
-                    pieces.append(_Piece(xmat, i, j, k, ca.SX(_value(c)), "", where))
-    return pieces, offset
+            states = tuple(j for j in range(plant.n) if ca.depends_on(h0, x[j]))
+            terms.append(_Term(kind, i, k, h0, _smooth(h0), states, row, term, (kr, i, ti, 1)))
+    return pieces, terms, offset
 
 
-def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator):
-    """A representative per candidate and ``(alpha, beta)`` with ``c = alpha + beta * rep``."""
+def _state_pieces(plant: Plant, terms: list[_Term], order, cache: dict) -> list[_Piece]:
+    """The coefficient pieces of the states: each term telescoped along ``order`` (a permutation of the
+    states; the coefficient of ``x_j`` depends only on which of the term's states come after ``x_j``,
+    so ``cache`` keeps each once)."""
+    x = plant.x
+    pos = {j: k for k, j in enumerate(order)}
+    xmat = {"drift": "A", "diffusion": "W"}
+    out = []
+    for t_i, t in enumerate(terms):
+        for j in t.states:
+            later = tuple(sorted(k for k in t.states if pos[k] > pos[j]))
+            key = (t_i, j, later)
+            if key not in cache:
+                c, text = _coefficient(t.h0, x, j, t.smooth, later)
+                cache[key] = (c, text) if ca.depends_on(c, x) else (ca.SX(_value(c)), "")
+            c, text = cache[key]
+            where = f"{t.where}: the coefficient of {plant.state_names[j]!r} in the term {t.text}"
+            if text or _value(c) != 0.0:
+                out.append(_Piece(xmat[t.kind], t.row, j, t.factor, c, text, where, t.seq))
+    return out
+
+
+def _order(plant: Plant, terms: list[_Term], inputs: list[_Piece], rng: np.random.Generator):
+    """The order of the states to telescope along, and the state pieces it gives.
+
+    Which state of a product ``x_i x_j`` becomes the premise depends on the order (the earlier one),
+    so the plant's own order would decide the rules: ``(i_d, i_q, w)`` of a motor gives the premises
+    ``i_d`` and ``i_q``, ``(w, i_d, i_q)`` the single premise ``w``. Every order of the states that
+    share a term with another is tried (up to :data:`MAX_ORDERS`), the one with the fewest premises
+    kept (then the fewest rules of the grouped cover, then the first by state names), so that the same
+    plant gets the same premises whatever the order its states are written in."""
+    n = plant.n
+    cache: dict = {}
+    names = plant.state_names
+    mixed = sorted({j for t in terms if len(t.states) > 1 for j in t.states}, key=lambda j: names[j])
+    rest = [j for j in range(n) if j not in mixed]
+    if len(mixed) < 2:
+        order = tuple(range(n))
+        return order, _state_pieces(plant, terms, order, cache)
+    perms = itertools.permutations(mixed) if math.factorial(len(mixed)) <= MAX_ORDERS else [tuple(mixed)]
+    pts = _sample_points(plant, rng)
+    best = None
+    for perm in perms:  # in the order of the state names: the first best is the same for any plant order
+        order = tuple(perm) + tuple(rest)
+        pieces = _state_pieces(plant, terms, order, cache)
+        cand = [p for p in inputs + pieces if p.text]
+        reps, _, _ = _group(plant, [p.expr for p in cand], None, pts)
+        deps = [frozenset(j for j in range(n) if ca.depends_on(cand[r].expr, plant.x[j])) for r in reps]
+        score = (len(reps), _estimate_rules(deps))
+        if best is None or score < best[0]:
+            best = (score, order, pieces)
+    return best[1], best[2]
+
+
+def _estimate_rules(deps: list[frozenset]) -> int:
+    """Rules of the grouped cover of premises with these state sets (a simplex per connected group)."""
+    groups: list[tuple[set, int]] = []
+    for d in deps:
+        merged = [g for g in groups if g[0] & d]
+        rest = [g for g in groups if not g[0] & d]
+        states = set(d).union(*[g[0] for g in merged])
+        groups = rest + [(states, 1 + sum(g[1] for g in merged))]
+    return int(np.prod([min(2**k, k + 1) for _, k in groups])) if groups else 1
+
+
+def _sample_points(plant: Plant, rng: np.random.Generator, N: int = 64) -> np.ndarray:
+    """``N`` random states of the region (0 for a state without bounds)."""
     lo, hi = plant.region_lo, plant.region_hi
-    N = 64
     pts = np.zeros((plant.n, N))
-    for j in range(plant.n):  # candidates depend on bounded states only (checked before)
+    for j in range(plant.n):
         pts[j] = 0.0 if np.isnan(lo[j]) else lo[j] + (hi[j] - lo[j]) * rng.random(N)
+    return pts
+
+
+def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator | None, pts=None):
+    """A representative per candidate and ``(alpha, beta)`` with ``c = alpha + beta * rep``."""
+    pts = _sample_points(plant, rng) if pts is None else pts
+    N = pts.shape[1]
     vals = (
         np.array(ca.Function("cands", [plant.x], [ca.vertcat(*candidates)]).map(N)(pts))
         if candidates
@@ -285,7 +376,7 @@ def _bounds(plant: Plant, expr: ca.SX, text: str, where: list[str]):
     """Bounds of a premise candidate, refusals naming the coefficients it stands for."""
     try:
         return premise_bounds(text, expr, plant.x, plant.region_lo, plant.region_hi, plant.state_names,
-                              allow_constant=True)  # fmt: skip
+                              allow_constant=True, max_searches=SEARCHES)  # fmt: skip
     except BoundsError as exc:
         what = "; ".join(where[:3]) + (f" (and {len(where) - 3} more)" if len(where) > 3 else "")
         at = f"at {exc.where}" if exc.where else "on the region"
@@ -312,15 +403,17 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     :class:`~fte_casadi.errors.DerivationError` naming the term that cannot be written so, or
     listing the premises when more than :data:`MAX_PREMISES` would be needed.
     """
-    pieces_f, off_f = _split(plant, "drift")
-    pieces_g, off_g = _split(plant, "diffusion")
+    rng = np.random.default_rng(seed)
+    inputs_f, terms_f, off_f = _split(plant, "drift")
+    inputs_g, terms_g, off_g = _split(plant, "diffusion")
     if np.any(off_g):
         rows = [plant.state_names[i] for i in np.flatnonzero(off_g)]
         raise DerivationError(
             f"the diffusion rows {rows} have a term that is not proportional to x, u, f or d2 (additive noise, "
             f"{off_g[np.flatnonzero(off_g)].tolist()} at x = 0): the paper's model has none; remove it"
         )
-    pieces = pieces_f + pieces_g
+    order, states = _order(plant, terms_f + terms_g, inputs_f + inputs_g, rng)
+    pieces = sorted(inputs_f + inputs_g + states, key=lambda p: p.seq)  # stable: row, term, inputs, states
     cand = [p for p in pieces if p.text]
     for p in cand:
         free = [plant.state_names[j] for j in range(plant.n) if ca.depends_on(p.expr, plant.x[j]) and np.isnan(plant.region_lo[j])]  # fmt: skip
@@ -329,7 +422,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
                 f"{p.where}: the coefficient {p.text} depends on {free}, which have no bounds: give them with "
                 f"b.region({free[0]}=(lower, upper))"
             )
-    reps, rep_of, coef = _group(plant, [p.expr for p in cand], np.random.default_rng(seed))
+    reps, rep_of, coef = _group(plant, [p.expr for p in cand], rng)
     texts = [cand[r].text for r in reps]
     if len(reps) > MAX_PREMISES:
         raise DerivationError(
@@ -354,8 +447,9 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     texts = tuple(cand[r].text if sign[r] > 0 else f"-({cand[r].text})" for r in live)
     if q > WARN_PREMISES:
         warnings.warn(
-            f"the automatic sector method found {q} premises ({2**q} rules): {'; '.join(texts)}; the design will be "
-            "slow and conservative: consider declaring premises yourself, narrowing the region, or linearising",
+            f"the automatic sector method found {q} premises ({2**q} rules as one box each, fewer where premises "
+            f"that depend on the same states are covered together): {'; '.join(texts)}; the design may be slow and "
+            "conservative: consider declaring premises yourself, narrowing the region, or linearising",
             RuntimeWarning,
             stacklevel=3,
         )
@@ -388,8 +482,8 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     work = dataclasses.replace(plant, z=z if q else ca.SX(0, 1), z_names=names, z_exprs=z_exprs, z_texts=texts,
                                drift_z=drift, diffusion_z=diff)  # fmt: skip
     if q:
-        notes = [f"found automatically in the plain equations (sector nonlinearity): {q} premise{'s' * (q > 1)}, "
-                 f"{2**q} rules; each oriented so that rule 1 weighs most at the origin"]  # fmt: skip
+        notes = [f"found automatically in the plain equations (sector nonlinearity): {q} premise{'s' * (q > 1)}"
+                 f"{f', {2**q} rules' if q == 1 else ''}; each oriented so that rule 1 weighs most at the origin"]  # fmt: skip
         notes += [f"{nm} schedules {', '.join(uses[r])}" for nm, r in zip(names, live)]
     else:
         notes = ["no nonlinear term in the states: one rule (the plant is linear)"]

@@ -18,7 +18,7 @@ from scipy.optimize import minimize
 
 from ..errors import BoundsError
 
-__all__ = ["premise_bounds"]
+__all__ = ["premise_bounds", "certified_max"]
 
 _SAMPLES = 200_001
 _MAX_SEARCHES = 200
@@ -38,7 +38,7 @@ def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return (2.0 * out.reshape(k, -1) + 1e-12).T
 
 
-def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
+def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_SEARCHES):
     """Minimum of sign*f over the box; returns (value, gap)."""
     v = sign * vals
     cell_lb = v - _local_lipschitz(grads, shape) @ hw
@@ -47,18 +47,32 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape):
     tol = 1e-9 * (1.0 + abs(best))  # a cell must be able to beat the best value by more than round-off
     cand = np.flatnonzero(cell_lb < best - tol)
     cand = cand[np.argsort(v[cand])]
-    starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]
+    starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]  # noqa: C401
     searched = set()
 
+    FG = (
+        ca.Function("FG", F.sx_in(), [F.call(F.sx_in())[0], G.call(F.sx_in())[0]])
+        if F.is_a("SXFunction")
+        else None
+    )
+
     def fun(xx):
+        if FG is not None:
+            f, g = FG(xx)
+            return sign * float(f), sign * np.array(g).ravel()
         return sign * float(F(xx)), sign * np.array(G(xx)).ravel()
 
-    for k in starts[:_MAX_SEARCHES]:
+    top = set(order[:10])
+    for k in starts:
+        if len(searched) >= max_searches:
+            break
+        if cell_lb[k] >= best - tol and k not in top:
+            continue  # the best value found since cannot be beaten in this cell: nothing to search
         searched.add(int(k))
         res = minimize(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
         if np.isfinite(res.fun) and res.fun < best:
             best = float(res.fun)
-    rest = [c for c in cand if int(c) not in searched]
+    rest = [c for c in cand if int(c) not in searched and cell_lb[c] < best - tol]
     gap = 0.0
     if rest:
         lb = float(np.min(cell_lb[rest]))
@@ -76,6 +90,7 @@ def premise_bounds(
     hi: np.ndarray,
     state_names,
     allow_constant: bool = False,
+    max_searches: int = _MAX_SEARCHES,
 ) -> tuple[float, float, tuple[int, ...], float]:
     """Global min and max of ``expr(x)`` over the box ``[lo, hi]`` (only the states it uses).
 
@@ -113,8 +128,8 @@ def premise_bounds(
     grads = np.array(G.map(N)(grid)).reshape(k, N)
     grads[~np.isfinite(grads)] = 0.0
     hw = (hi_s - lo_s) / (per - 1) / 2
-    mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k)
-    mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k)
+    mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k, max_searches)
+    mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
     if not (np.isfinite(mn) and np.isfinite(mx)):
         raise BoundsError(f"premise {name!r} is unbounded over the region; shrink the region", "unbounded")
     if mx - mn < 1e-12 and not allow_constant:
@@ -124,3 +139,33 @@ def premise_bounds(
             "constant",
         )
     return mn, mx, idx, max(gap1, gap2)
+
+
+def certified_max(
+    expr: ca.SX, x: ca.SX, lo: np.ndarray, hi: np.ndarray, samples: int = 20_001, max_searches: int = 20
+) -> float:
+    """An upper bound of ``expr(x)`` over the box ``[lo, hi]`` by the same search as :func:`premise_bounds`
+    (a grid of ``samples`` points, every cell whose Lipschitz bound could beat the best value searched
+    locally, the bound widened by whatever was not searched). Used to grow a polytope's facets until they
+    provably contain the premises' image."""
+    idx = tuple(j for j in range(x.numel()) if ca.depends_on(expr, x[j]))
+    if not idx:
+        return float(ca.Function("c", [x], [expr])(np.zeros(x.numel())))
+    xs = ca.vertcat(*[x[j] for j in idx])
+    others = [j for j in range(x.numel()) if j not in idx]
+    e = ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others))) if others else expr
+    F = ca.Function("F", [xs], [e])
+    G = ca.Function("G", [xs], [ca.gradient(e, xs)])
+    k = len(idx)
+    per = max(3, int(round(samples ** (1.0 / k))))
+    lo_s, hi_s = lo[list(idx)], hi[list(idx)]
+    grid = np.array(
+        np.meshgrid(*[np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)], indexing="ij")
+    ).reshape(k, -1)
+    N = grid.shape[1]
+    vals = np.array(F.map(N)(grid)).ravel()
+    grads = np.array(G.map(N)(grid)).reshape(k, N)
+    grads[~np.isfinite(grads)] = 0.0
+    hw = (hi_s - lo_s) / (per - 1) / 2
+    mx, _ = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
+    return float(mx)

@@ -101,6 +101,9 @@ def fidelity(
         mx = np.array([p.max for p in ts.premises])[:, None]
         tol = 1e-9 * (1.0 + np.maximum(np.abs(mn), np.abs(mx)))
         within = (Z >= mn - tol) & (Z <= mx + tol)  # (premises, points)
+        for g in ts.groups:  # and within the polytope of each group
+            if g.polytope != "box":
+                within[list(g.premises)] &= g.inside(Z[list(g.premises)])[None, :]
         inside = np.all(within, axis=0)
         keep = max(1, X.shape[1] if np.all(inside) else int(np.argmin(inside)))
         if keep < X.shape[1]:
@@ -108,7 +111,7 @@ def fidelity(
             bad = ts.premises[int(np.argmin(within[:, k]))]
             stop = (
                 f"the open loop leaves the region: premise {bad.expr} leaves its bounds [{bad.min:.4g}, {bad.max:.4g}] "
-                f"by t = {T[k]:.4g}, beyond which the model is not claimed"
+                f"or its group's polytope by t = {T[k]:.4g}, beyond which the model is not claimed"
                 + (f"; later {stop}" if stop else "")
             )
         X, T = X[:, :keep], T[:keep]

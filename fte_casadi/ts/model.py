@@ -167,6 +167,23 @@ class TSModel:
     fidelity: Fidelity
     #: how the premises were found, for reports (the automatic method's choices; empty otherwise)
     notes: tuple[str, ...] = ()
+    #: the groups of premises and the polytope covering each (:mod:`.cover`); empty without premises
+    groups: tuple = ()
+
+    @property
+    def rule_premises(self) -> np.ndarray:
+        """Premise values of each rule's vertex, (r, q) (sector models)."""
+        from .cover import rule_vertices_of
+
+        return rule_vertices_of(self.groups, len(self.premises))
+
+    @property
+    def rule_distances(self) -> np.ndarray | None:
+        """Per rule, how far its vertex lies from the premises' image over the region, relative to the
+        image's extent (0: a state of the region takes it); None when the model has no groups."""
+        from .cover import rule_distances
+
+        return rule_distances(self.groups) if self.groups else None
 
     @property
     def method(self) -> str:
@@ -220,6 +237,16 @@ class TSModel:
             local_model_ss(lm, self.C, self.Df, names, i, pl.name) for i, lm in enumerate(self.local_models)
         ]
 
+    def _groups_dict(self) -> dict:
+        if not self.groups:
+            return {}
+        names = [p.name for p in self.premises]
+        return {
+            "premise_groups": [g.to_dict(names) for g in self.groups],
+            "rule_premises": self.rule_premises.tolist(),
+            "rule_vertex_distance": self.rule_distances.tolist(),
+        }
+
     def to_dict(self) -> dict:
         """The derive document (docs/interface.md)."""
         return {
@@ -232,6 +259,7 @@ class TSModel:
             "Df": self.Df.tolist(),
             "fidelity": self.fidelity.to_dict(),
             "premises_found_automatically": self.kind == "sector_auto",
+            **self._groups_dict(),
             "notes": list(self.notes),
             "states": list(self.plant.state_names),
             "inputs": list(self.plant.input_names),

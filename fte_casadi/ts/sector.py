@@ -8,7 +8,7 @@ import numpy as np
 from ..errors import DerivationError
 from ..model import Plant
 from .bounds import premise_bounds
-from .memberships import rule_vertices, sector_memberships
+from .cover import cover_premises, memberships_of, rule_vertices_of
 from .model import LocalModel, Premise
 
 __all__ = ["sector_local_models"]
@@ -36,13 +36,14 @@ def _coefficients(plant: Plant):
     return mats, c
 
 
-def sector_local_models(
-    plant: Plant, bounds=None
-) -> tuple[tuple[Premise, ...], tuple[LocalModel, ...], ca.Function, ca.Function]:
-    """Local models at the vertices of the premises' bounds, memberships, premise Function.
+def sector_local_models(plant: Plant, bounds=None, vertices: str = "box", seed: int = 0):
+    """Local models at the vertices of the polytopes covering the premises, memberships, premise Function,
+    and the groups (:mod:`.cover`): ``(premises, models, premise_fn, membership_fn, groups)``.
 
     ``bounds``: per premise ``(min, max, states, gap)`` when already known (the automatic method
     finds them to orient its premises); otherwise they come from the global bound search.
+    ``vertices``: how the premises are covered (:data:`~fte_casadi.ts.cover.VERTEX_CHOICES`); ``box``
+    is each premise on its own bounds, 2^q rules.
     """
     mats, c = _coefficients(plant)
     z = plant.z
@@ -78,8 +79,10 @@ def sector_local_models(
         maxs.append(mx)
         premises.append(Premise(plant.z_names[k], plant.z_texts[k], float(mn), float(mx), idx, float(gap)))
     fn = ca.Function("coeffs", [z], [mats[k] for k in mats])
+    groups = cover_premises(plant.z_exprs, plant.x, plant.region_lo, plant.region_hi, mins, maxs,
+                            [p.states for p in premises], vertices, seed)  # fmt: skip
     models = []
-    for zi in rule_vertices(mins, maxs):
+    for zi in rule_vertices_of(groups, q):
         vals = dict(zip(mats, (np.array(v, dtype=float) for v in fn(zi))))
         models.append(
             LocalModel(
@@ -95,4 +98,4 @@ def sector_local_models(
             )
         )
     premise_fn = ca.Function("premises", [plant.x], [plant.z_exprs], ["x"], ["premises"])
-    return tuple(premises), tuple(models), premise_fn, sector_memberships(mins, maxs)
+    return tuple(premises), tuple(models), premise_fn, memberships_of(groups, q), groups
