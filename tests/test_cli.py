@@ -119,7 +119,7 @@ def test_simulate_json_contract(design_files):
         and len(m["state_rms_error"]) == 4
         and len(m["fault_rel_rms_error"]) == 2
     )
-    assert 0 <= m["ftc_deviation_ratio"] < 0.3
+    assert 0 <= m["ftc_true_ratio"] < 0.3
 
 
 @pytest.mark.parametrize(

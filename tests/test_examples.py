@@ -50,7 +50,7 @@ def test_example_simulates_and_estimates_its_faults(pendulum_design):
     assert m["paths"] == 4
     # both faults are estimated and tolerant control reduces the output deviation
     assert all(e is not None and e < 0.5 for e in m["fault_rel_rms_error"])
-    assert m["ftc_deviation_ratio"] < 0.8
+    assert m["ftc_true_ratio"] < 0.8
     short = sc.until(1.0)
     assert simulate(pendulum_design, load_plant(spec), short, paths=2, seed=0, progress=False).t[
         -1

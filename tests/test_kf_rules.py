@@ -77,7 +77,7 @@ def test_c_and_simulation_run_the_scheduled_term(kf_design, tmp_path):
         assert np.max(np.abs(uc - u)) <= C_DOUBLE and np.max(np.abs(c.z - zn)) <= C_DOUBLE
         z = zn
     m = simulate(d, plant(), scenario(), paths=4, seed=1, progress=False).metrics
-    assert m["fault_rel_rms_error"][0] < 0.3 and m["ftc_deviation_ratio"] < 0.5
+    assert m["fault_rel_rms_error"][0] < 0.3 and m["ftc_true_ratio"] < 0.5
 
 
 def test_parameters_the_user_did_not_set_are_found_by_the_tool(tmp_path):

@@ -35,7 +35,7 @@ def test_the_loss_is_seen_and_compensated(deviation_design):
     p, d = deviation_design
     m = simulate(d, p, scenario(), paths=4, seed=1, progress=False).metrics
     assert m["fault_rel_rms_error"][0] < 0.3  # the estimate follows a fault of about -0.9
-    assert m["ftc_deviation_ratio"] < 0.5  # tolerant control removes most of its effect
+    assert m["ftc_true_ratio"] < 0.5  # tolerant control removes most of its effect
 
 
 def test_a_loss_that_would_do_nothing_is_refused():

@@ -296,15 +296,18 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
         save_result(res, tmp_path / f"{name}.npz")  # recompute from the saved per-path arrays
         res = load_result(tmp_path / f"{name}.npz")
         ref, got = metrics_from_arrays(res), res.metrics
-        for key in ("state_rms_error", "fault_rel_rms_error", "false_alarm_rel_rms", "input_saturation"):
+        for key in ("state_rms_error", "fault_rel_rms_error", "fault_rel_rms_error_settled", "false_alarm_rel_rms",
+                    "false_alarm_peak", "input_saturation"):  # fmt: skip
             assert [v is None for v in got[key]] == [v is None for v in ref[key]]
             np.testing.assert_allclose([v for v in got[key] if v is not None], [v for v in ref[key] if v is not None],
                                        rtol=1e-12, atol=1e-15)  # fmt: skip
-        assert got["ftc_deviation_ratio"] == pytest.approx(ref["ftc_deviation_ratio"], rel=1e-12)
+        for key in ("ftc_true_ratio", "ftc_compensated_ratio", "outside_region", "transient", "settle_after"):
+            assert got[key] == pytest.approx(ref[key], rel=1e-12), key
         assert len(got["windows"]) == len(sc.faults) == len(ref["windows"])
         for w, v in zip(got["windows"], ref["windows"]):
             assert (w["fault"], w["start"], w["stop"]) == (v["fault"], v["start"], v["stop"])
-            for k in ("fault_rel_rms_error", "ftc_deviation_ratio"):
+            for k in ("fault_rel_rms_error", "fault_rel_rms_error_settled", "ftc_true_ratio", "ftc_compensated_ratio",
+                      "settling_time", "release_time", "detection_delay", "missed_detections"):  # fmt: skip
                 assert (w[k] is None and v[k] is None) or w[k] == pytest.approx(v[k], rel=1e-12)
             np.testing.assert_allclose(w["input_saturation"], v["input_saturation"], rtol=1e-12, atol=0)
 

@@ -56,7 +56,7 @@ def test_cli_sweep_prints_points_and_writes_figure(tmp_path):
     assert r.exit_code == 0, r.output
     pts = json.loads(r.stdout)
     assert [p["point"] for p in pts] == [{"fault_scale": 0.5}, {"fault_scale": 1.0}, {"fault_scale": 2.0}]
-    assert all({"windows", "input_saturation", "ftc_deviation_ratio"} <= set(p["metrics"]) for p in pts)
+    assert all({"windows", "input_saturation", "ftc_true_ratio"} <= set(p["metrics"]) for p in pts)
     assert (tmp_path / "sweep.png").stat().st_size > 10_000
     assert json.loads((tmp_path / "sweep.json").read_text()) == pts
     assert (tmp_path / "sweep.csv").read_text().count("\n") == 4
@@ -83,7 +83,7 @@ def test_cli_sweep_warns_by_point_where_tolerant_control_is_worse_than_none(monk
 
     def fake(d, plant, scenario, grid, **kw):
         w = {"fault": "fa", "start": 2.0, "stop": 4.0, "fault_rel_rms_error": 0.1, "input_saturation": [0.0]}
-        return [{"point": {"fault_scale": s}, "metrics": {"windows": [dict(w, ftc_deviation_ratio=r)]}}
+        return [{"point": {"fault_scale": s}, "metrics": {"windows": [dict(w, ftc_true_ratio=r)]}}
                 for s, r in ((1.0, 0.3), (3.0, 1.75))]  # fmt: skip
 
     monkeypatch.setattr(sweep_module, "sweep", fake)

@@ -217,7 +217,7 @@ def test_linear_plant_is_one_rule_with_a_certified_design_simulation_and_working
     assert d.certified and all(v < 0 for v in d.checks["lmi_max_eig"].values())
     assert d.checks["R_max_real_eig"] < 0 and d.checks["closed_loop_max_real_eig"] < 0
     m = simulate(d, ts.plant, linear_scenario(), paths=3, seed=2, progress=False).metrics
-    assert all(e is not None and e < 0.5 for e in m["fault_rel_rms_error"]) and m["ftc_deviation_ratio"] < 0.8
+    assert all(e is not None and e < 0.5 for e in m["fault_rel_rms_error"]) and m["ftc_true_ratio"] < 0.8
     if build.find_compiler() is not None:
         generate_c(d, tmp_path, sample_time=1e-3)
         lib = build.compile_shared(tmp_path, tmp_path / "lib.so")
