@@ -171,8 +171,9 @@ def test_run_and_allowances(res):
     transient, settle_after = allowances(res)
     check("transient", doc["transient"], transient)
     check("settle_after", doc["settle_after"], settle_after)
-    noise = res.scenario.measurement_noise
-    check("measurement_noise", doc["measurement_noise"], None if noise is None else list(noise))
+    noise = res.scenario.measurement_noise  # a GaussianNoise model: one standard deviation per output
+    noise = None if noise is None else list(noise.std)
+    check("measurement_noise", doc["measurement_noise"], noise)
     if noise is not None:  # the noise is really on y, and only there
         e = res.free.y - res.free.x @ np.asarray(res.design.C).T
         np.testing.assert_allclose(e.std(axis=(0, 1)), noise, rtol=0.1)

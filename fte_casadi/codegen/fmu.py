@@ -2,7 +2,7 @@
 
 The FMU wraps exactly the C that :func:`~fte_casadi.codegen.generate.generate_c` writes (same
 sample time, real type and boundary layer) in a small FMI wrapper
-(:data:`~fte_casadi.codegen.fmu_template.WRAPPER`), compiled for this platform with the system C
+(the template ``codegen/templates/MID_fmi2.c.in``, :mod:`.template`), compiled for this platform with the system C
 compiler. What it holds (a zip file, ``<model identifier>.fmu``)::
 
     modelDescription.xml                   FMI 2.0, <CoSimulation>, fixed step Ts
@@ -46,8 +46,7 @@ from ..deprecation import renamed_keyword
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
-from . import build
-from .fmu_template import FMI2_HEADER, FMI2_HEADER_NAME, WRAPPER
+from . import build, template
 from .generate import _check_sample_time, _version, c_name, file_mode, generate_c, output_files, prepare_dir
 
 __all__ = [
@@ -62,6 +61,8 @@ __all__ = [
 
 _TOOL = "fte_casadi"
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed timestamps: the same design gives the same archive
+#: file name of the FMI 2.0 declarations in the FMU's sources
+FMI2_HEADER_NAME = template.TEMPLATES["fmi2_header"]
 
 
 @dataclass(frozen=True)
@@ -394,22 +395,25 @@ def generate_fmu(
         md_draft = _model_description(design, variables, sample_time, deps, "{GUID}", c_files, mid)
         guid = _guid([md_draft, *generated.values()])
         p = int(design.dims.p)
-        wrapper = WRAPPER.substitute(
-            mid=mid,
-            name=name,
-            NAME=name.upper(),
-            plant=design.plant,
-            version=_version(),
-            guid=guid,
-            ny=p,
-            ny_last=p - 1,
-            nvar_last=len(variables) - 1,
-            sample_time_text=repr(sample_time),
-            y_start=_c_reals(v.start for v in variables[:p]),
-            var_names=_c_strings(v.name for v in variables),
+        wrapper = template.fill(
+            template.TEMPLATES["fmu_wrapper"],
+            dict(
+                mid=mid,
+                name=name,
+                NAME=name.upper(),
+                plant=design.plant,
+                version=_version(),
+                guid=guid,
+                ny=p,
+                ny_last=p - 1,
+                nvar_last=len(variables) - 1,
+                sample_time_text=repr(sample_time),
+                y_start=_c_reals(v.start for v in variables[:p]),
+                var_names=_c_strings(v.name for v in variables),
+            ),
         )
         (src / wrapper_name).write_text(wrapper)
-        (src / FMI2_HEADER_NAME).write_text(FMI2_HEADER)
+        (src / FMI2_HEADER_NAME).write_text(template.read(template.TEMPLATES["fmi2_header"]))
         (src / "README.md").unlink()
         lib = Path(tmp, mid + suffix)
         build.compile_shared(src, lib, extra_flags=("-fvisibility=hidden",))

@@ -2,8 +2,8 @@
 
 CasADi's :class:`casadi.CodeGenerator` writes the maths of :func:`fte_casadi.step.step_function`
 (the single source of truth that the simulator uses too) into ``fte_NAME_casadi.c``/``.h``;
-:mod:`fte_casadi.codegen.template` writes the human-facing wrapper ``fte_NAME.h``/``.c`` of
-docs/interface.md and a README. What the CasADi output is made to satisfy, and how:
+:mod:`fte_casadi.codegen.template` fills the template files of ``codegen/templates/``: the
+human-facing wrapper ``fte_NAME.h``/``.c`` of docs/interface.md and a README. What the CasADi output is made to satisfy, and how:
 
 - no heap, no static mutable data: an ``SX`` Function is generated as straight-line code on
   scalar locals (``casadi_real a0, a1, ...``); the only statics are ``const`` sparsity tables.
@@ -392,9 +392,9 @@ def _wrapper(
     }
     sub["file_table"] = "\n".join(f"| `{k}` | {v} |" for k, v in table.items())
     return {
-        files[0]: template.HEADER.substitute(sub),
-        files[1]: template.SOURCE.substitute(sub),
-        files[4]: template.README.substitute(sub),
+        files[0]: template.fill(template.TEMPLATES["header"], sub),
+        files[1]: template.fill(template.TEMPLATES["source"], sub),
+        files[4]: template.fill(template.TEMPLATES["readme"], sub),
     }, mem
 
 

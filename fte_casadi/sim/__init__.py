@@ -18,8 +18,15 @@ Two names for time steps, one meaning each (issue #20, "one name per concept"):
 """
 
 from .engine import simulate as simulate
+from .fault_shapes import FaultRows as FaultRows
+from .fault_shapes import FaultShape as FaultShape
+from .fault_shapes import FaultSite as FaultSite
 from .metrics import metrics as metrics
 from .metrics import metrics_from_arrays as metrics_from_arrays
+from .noise import GaussianNoise as GaussianNoise
+from .noise import MeasurementNoise as MeasurementNoise
+from .noise import UnknownInput as UnknownInput
+from .noise import UnknownInputTerms as UnknownInputTerms
 from .result import RunData as RunData
 from .result import SimulationResult as SimulationResult
 from .result import load_result as load_result

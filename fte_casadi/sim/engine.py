@@ -45,7 +45,7 @@ from .cluster import plant_from_bytes, run_on_cluster
 from .detect import calibrate, default_rate
 from .reduce import allowances, finalize, masks, monitor
 from .result import RUNS, RunData, SimulationResult
-from .scenario import FaultSchedule, LossOfEffectiveness, Scenario, Sinusoid, UniformNoise, fault_schedule
+from .scenario import FaultSchedule, Scenario, fault_schedule
 from .vector import CHUNK as CHUNK
 from .vector import auto_chunk as auto_chunk
 
@@ -269,12 +269,7 @@ def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
             "noise to scale; give the scenario measurement_noise=[std per output] (or fte simulate --measurement-noise)"
         )
     for fp in scenario.faults if scenario is not None else ():
-        if isinstance(fp, LossOfEffectiveness) and fp.loss * out["fault_scale"] > 1.0:
-            raise ParameterError(
-                f"fault_scale = {out['fault_scale']:g} makes the {100 * fp.loss:g} % loss of effectiveness of "
-                f"{fp.fault!r} ({fp.start:g} to {fp.stop:g}) a loss of {100 * fp.loss * out['fault_scale']:g} %; "
-                f"a loss is at most 100 %: use fault_scale <= {1.0 / fp.loss:g}"
-            )
+        fp.check_scale(out["fault_scale"])
     return out
 
 
@@ -309,17 +304,16 @@ class Prepared:
         ui = scenario.unknown_input
         ddet = np.zeros((ld, nsamp))
         self.damp = 0.0
-        if ld and isinstance(ui, UniformNoise):
-            self.damp = float(ui.amplitude) * scales["d_scale"]
-        elif ld and isinstance(ui, Sinusoid):
-            ddet[:] = scales["d_scale"] * ui.amplitude * np.sin(2 * np.pi * ui.frequency * self.t + ui.phase)
+        if ld and ui is not None:  # d = damp * U[-1, 1] + ddet
+            terms = ui.terms(self.t, scales["d_scale"])
+            self.damp = float(terms.uniform)
+            if terms.deterministic is not None:
+                ddet[:] = terms.deterministic
         self.sqdt = math.sqrt(dt) * scales["noise_scale"]
         thr = np.full(lf, np.inf) if thresholds is None else np.asarray(thresholds, dtype=float)
         vstd = np.zeros((lay.nv, nsamp))
-        if noise:
-            vstd[:] = (
-                np.asarray(scenario.measurement_noise, dtype=float) * scales["measurement_noise_scale"]
-            )[:, None]
+        if noise:  # v = vstd * N(0, 1)
+            vstd[:] = scenario.measurement_noise.deviations(self.t, scales["measurement_noise_scale"])
         nm = self.masks.M.shape[0]
         self.cols = {"fp": (0, 4 * lf)}
         self.cols["mask"] = (4 * lf, 4 * lf + nm)
@@ -454,12 +448,8 @@ def check_scenario(plant: Plant, scenario: Scenario) -> None:
                 f"scenario {scenario.name!r}: the window [{fp.start:g}, {fp.stop:g}) of fault {fp.fault!r} does not lie "
                 f"inside the horizon [0, {scenario.T:g}); shorten the window or lengthen T"
             )
-    mn = scenario.measurement_noise
-    if mn is not None and len(mn) != plant.p:
-        raise ParameterError(
-            f"scenario {scenario.name!r}: measurement_noise has {len(mn)} entries; the plant has {plant.p} outputs "
-            f"({', '.join(plant.output_names)}): give one standard deviation per output, in the output's units"
-        )
+    if scenario.measurement_noise is not None:
+        scenario.measurement_noise.check(scenario.name, plant.output_names)
     x0 = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
     lo, hi = np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float)
     bad = [k for k in range(plant.n) if not (lo[k] <= x0[k] <= hi[k])] if x0.shape == lo.shape else []
@@ -680,10 +670,8 @@ def simulate(
             "thresholds": [float(v) for v in thresholds], "detection": detection,
             "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None}  # fmt: skip
     doc = finalize(acc, mon, pm, prep.t, prep.monitor, prep.masks, meta)
-    doc["measurement_noise"] = (
-        None if scenario.measurement_noise is None
-        else [float(v) * sc["measurement_noise_scale"] for v in scenario.measurement_noise]
-    )  # fmt: skip
+    mn = scenario.measurement_noise
+    doc["measurement_noise"] = None if mn is None else mn.reported(sc["measurement_noise_scale"])
     doc["dt_change"] = step_change(design, scenario, dt, given_dt)
     doc["exact"] = exact
     names = result_names(plant)

@@ -1,25 +1,35 @@
-"""Scenarios: fault profiles, unknown inputs, initial-state noise, horizon and step.
+"""Scenarios: fault profiles, unknown inputs, measurement noise, initial-state noise, horizon and step.
 
 Everything is a frozen dataclass, validated once when it is made. A scenario is resolved
 against a plant (fault names -> indices, the input an actuator fault acts on, the output a
-sensor fault acts on) by :func:`fault_schedule`, which turns the profiles into per-sample
-coefficients the compiled closed-loop sample consumes::
+sensor fault acts on) by :func:`fault_schedule`, which asks each fault profile for its rows
+(:mod:`.fault_shapes`) and adds them into per-sample coefficients the compiled closed-loop sample
+consumes::
 
     f_j(t_k) = a_j(t_k) + lu_j(t_k) * u_k[iu_j] + st_j(t_k) * (m_j - (C x_k)[k_j]) / Df[k_j, j]
 
 ``a`` carries biases and drifts, ``lu`` loss of effectiveness, ``st`` a stuck sensor, whose
-remembered reading ``m_j`` is latched (``la_j = 1``) at the first sample of its window.
+remembered reading ``m_j`` is latched (``la_j = 1``) at the first sample of its window. The
+unknown input and the measurement noise are models of :mod:`.noise`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
-import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from ..errors import ParameterError
+from .fault_shapes import FAULT_SHAPES, FaultShape, FaultSite
+from .fault_shapes import Bias as Bias
+from .fault_shapes import Drift as Drift
+from .fault_shapes import LossOfEffectiveness as LossOfEffectiveness
+from .fault_shapes import Stuck as Stuck
+from .noise import MEASUREMENT_NOISES, UNKNOWN_INPUTS, GaussianNoise, MeasurementNoise, UnknownInput, positive
+from .noise import Sinusoid as Sinusoid
+from .noise import UniformNoise as UniformNoise
 
 __all__ = [
     "LossOfEffectiveness",
@@ -34,128 +44,32 @@ __all__ = [
 ]
 
 
-def _positive(name: str, value: float, *, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} must be a number; got {value!r}") from None
-    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        kind = "non-negative" if allow_zero else "positive"
-        raise ParameterError(f"{name} must be a {kind} finite number; got {value!r}")
-    return v
+def _kinds(registry: dict) -> str:
+    names = [c.__name__ for c in registry.values()]
+    return ", ".join(names[:-1]) + " or " + names[-1] if len(names) > 1 else "".join(names)
 
 
-def _window(kind: str, start: float, stop: float) -> None:
-    for nm, v in (("start", start), ("stop", stop)):
-        if not (isinstance(v, (int, float)) and math.isfinite(v)):
-            raise ParameterError(f"{kind}: {nm} must be a finite number; got {v!r}")
-    if not start < stop:
-        raise ParameterError(f"{kind}: the window must have start < stop; got [{start}, {stop})")
+def _model(value, base: type, registry: dict, what: str):
+    """``value`` if it is a model of ``base`` (a dataclass instance), else a ParameterError naming the kinds."""
+    if isinstance(value, base) and dataclasses.is_dataclass(value):
+        return value
+    raise ParameterError(f"unknown {what} {value!r}; use {_kinds(registry)} (or a dataclass subclass of "
+                         f"{base.__name__})")  # fmt: skip
 
 
-@dataclass(frozen=True)
-class LossOfEffectiveness:
-    """The actuator delivers ``(1 - loss) u`` for ``start <= t < stop``.
-
-    The plant receives the fault ``fa = -loss * u / c``, where ``c`` is the ratio of the
-    fault's column of Bf to the input's column of B (1 when ``Bf = B``). ``fault`` names an
-    actuator fault of the plant; ``input`` names the input it degrades (default: the input
-    whose column of B is parallel to the fault's column of Bf).
-    """
-
-    fault: str
-    loss: float
-    start: float
-    stop: float
-    input: str | None = None
-    kind: str = field(default="loss", init=False)
-
-    def __post_init__(self):
-        _window("loss of effectiveness", self.start, self.stop)
-        if not (0.0 <= float(self.loss) <= 1.0):
-            raise ParameterError(f"loss of effectiveness must lie in [0, 1]; got {self.loss!r}")
+def _document(model) -> dict:
+    return {**asdict(model), "kind": model.kind}
 
 
-@dataclass(frozen=True)
-class Bias:
-    """Additive fault of constant ``value`` for ``start <= t < stop`` (actuator or sensor)."""
-
-    fault: str
-    value: float
-    start: float
-    stop: float
-    kind: str = field(default="bias", init=False)
-
-    def __post_init__(self):
-        _window("bias", self.start, self.stop)
-        if not math.isfinite(float(self.value)):
-            raise ParameterError(f"bias value must be finite; got {self.value!r}")
-
-
-@dataclass(frozen=True)
-class Drift:
-    """Slowly drifting fault ``f = rate * (t - start)`` for ``start <= t < stop``."""
-
-    fault: str
-    rate: float
-    start: float
-    stop: float
-    kind: str = field(default="drift", init=False)
-
-    def __post_init__(self):
-        _window("drift", self.start, self.stop)
-        if not math.isfinite(float(self.rate)):
-            raise ParameterError(f"drift rate must be finite; got {self.rate!r}")
-
-
-@dataclass(frozen=True)
-class Stuck:
-    """A sensor stuck for ``start <= t < stop``.
-
-    "Stuck" means: the sensor's output freezes at the value it read at the first sample
-    ``t0`` of the window (``t0`` = first sample time ``>= start``); while stuck the plant
-    carries the sensor fault ``fs(t) = y_k(t0) - (C x)_k(t)`` (divided by ``Df[k, j]`` when
-    that is not 1), so ``fs(t0) = 0`` and ``y_k(t) = y_k(t0)`` throughout the window.
-    ``fault`` names a sensor fault of the plant; the output is the row of Df it enters.
-    """
-
-    fault: str
-    start: float
-    stop: float
-    kind: str = field(default="stuck", init=False)
-
-    def __post_init__(self):
-        _window("stuck sensor", self.start, self.stop)
-
-
-@dataclass(frozen=True)
-class UniformNoise:
-    """Unknown input drawn afresh each simulation step, uniform in ``[-amplitude, amplitude]``
-    independently per entry of d (the paper's "d uniform in [-0.1, 0.1]")."""
-
-    amplitude: float
-    kind: str = field(default="uniform", init=False)
-
-    def __post_init__(self):
-        _positive("unknown-input amplitude", self.amplitude, allow_zero=True)
-
-
-@dataclass(frozen=True)
-class Sinusoid:
-    """Deterministic unknown input ``amplitude * sin(2 pi frequency t + phase)`` on every entry of d."""
-
-    amplitude: float
-    frequency: float
-    phase: float = 0.0
-    kind: str = field(default="sinusoid", init=False)
-
-    def __post_init__(self):
-        _positive("sinusoid amplitude", self.amplitude, allow_zero=True)
-        _positive("sinusoid frequency", self.frequency, allow_zero=True)
-
-
-_FAULTS = {"loss": LossOfEffectiveness, "bias": Bias, "drift": Drift, "stuck": Stuck}
-_INPUTS = {"uniform": UniformNoise, "sinusoid": Sinusoid}
+def _from_document(doc: dict, registry: dict, what: str):
+    doc = dict(doc)
+    kind = doc.pop("kind", None)
+    if kind not in registry:
+        raise ParameterError(
+            f"a scenario document names the {what} kind {kind!r}, which is not defined here (the kinds are "
+            f"{sorted(registry)}); import the module that defines it before reading the document"
+        )
+    return registry[kind](**doc)
 
 
 @dataclass(frozen=True)
@@ -171,9 +85,10 @@ class Scenario:
         Default Euler-Maruyama step, which the simulated controller also samples at (see
         :mod:`fte_casadi.sim` for ``dt`` and ``sample_time``).
     faults : tuple
-        Fault profiles (:class:`LossOfEffectiveness`, :class:`Bias`, :class:`Drift`, :class:`Stuck`).
+        Fault profiles (:class:`LossOfEffectiveness`, :class:`Bias`, :class:`Drift`, :class:`Stuck`, or
+        any other :class:`~fte_casadi.sim.fault_shapes.FaultShape`).
     unknown_input : UniformNoise | Sinusoid | None
-        ``None``: d = 0.
+        A model of :class:`~fte_casadi.sim.noise.UnknownInput`; ``None``: d = 0.
     x0 : tuple or None
         Nominal initial state; ``None`` takes the plant's.
     x0_noise : float
@@ -185,51 +100,48 @@ class Scenario:
         (what an engineer who knows x0 but not its noise does); ``"zero"``: z0 = 0.
     divergence_bound : float
         A path whose |x| exceeds this (or turns NaN/Inf) stops the run.
-    measurement_noise : sequence of float or None
+    measurement_noise : sequence of float, MeasurementNoise or None
         Standard deviation of white Gaussian noise added to each output at every step, in the output's
-        units (one per output; 0 for a noiseless output), reproducible by seed. ``None``: no noise.
+        units (one per output; 0 for a noiseless output), reproducible by seed: held as a
+        :class:`~fte_casadi.sim.noise.GaussianNoise`; or another model of
+        :class:`~fte_casadi.sim.noise.MeasurementNoise`. ``None``: no noise.
     """
 
     name: str
     T: float
     dt: float
     faults: tuple = ()
-    unknown_input: UniformNoise | Sinusoid | None = None
+    unknown_input: UnknownInput | None = None
     x0: tuple | None = None
     x0_noise: float = 0.0
     paths: int = 5
     observer_init: str = "nominal"
     divergence_bound: float = 1e6
-    measurement_noise: tuple | None = None
+    measurement_noise: MeasurementNoise | None = None
 
     def __post_init__(self):
-        _positive("horizon T", self.T)
-        _positive("time step dt", self.dt)
+        positive("horizon T", self.T)
+        positive("time step dt", self.dt)
         if self.dt > self.T:
             raise ParameterError(f"time step dt = {self.dt} is longer than the horizon T = {self.T}")
-        _positive("initial-state noise", self.x0_noise, allow_zero=True)
-        _positive("divergence bound", self.divergence_bound)
+        positive("initial-state noise", self.x0_noise, allow_zero=True)
+        positive("divergence bound", self.divergence_bound)
         if not isinstance(self.paths, int) or self.paths < 1:
             raise ParameterError(f"scenario paths must be a positive integer; got {self.paths!r}")
         if self.observer_init not in ("nominal", "zero"):
             raise ParameterError(f"observer_init must be 'nominal' or 'zero'; got {self.observer_init!r}")
         object.__setattr__(self, "faults", tuple(self.faults))
         for fp in self.faults:
-            if not isinstance(fp, tuple(_FAULTS.values())):
-                raise ParameterError(
-                    f"unknown fault profile {fp!r}; use LossOfEffectiveness, Bias, Drift or Stuck"
-                )
+            _model(fp, FaultShape, FAULT_SHAPES, "fault profile")
+        if self.unknown_input is not None:
+            _model(self.unknown_input, UnknownInput, UNKNOWN_INPUTS, "unknown-input model")
         if self.x0 is not None:
             object.__setattr__(self, "x0", tuple(float(v) for v in self.x0))
-        if self.measurement_noise is not None:
-            try:
-                mn = tuple(float(v) for v in self.measurement_noise)
-            except (TypeError, ValueError):
-                raise ParameterError(
-                    f"measurement_noise must be a list of standard deviations, one per output; got {self.measurement_noise!r}"
-                ) from None
-            for k, v in enumerate(mn):
-                _positive(f"measurement_noise[{k}]", v, allow_zero=True)
+        mn = self.measurement_noise
+        if mn is not None:
+            if not isinstance(mn, MeasurementNoise):  # standard deviations per output
+                mn = GaussianNoise(mn)
+            mn = _model(mn, MeasurementNoise, MEASUREMENT_NOISES, "measurement-noise model")
             object.__setattr__(self, "measurement_noise", mn)
 
     def until(self, T: float) -> Scenario:
@@ -247,8 +159,10 @@ class Scenario:
     # -- serialisation (embedded in result files) ---------------------------------------
     def to_dict(self) -> dict:
         d = asdict(self)
-        d["faults"] = [asdict(fp) for fp in self.faults]
-        d["unknown_input"] = None if self.unknown_input is None else asdict(self.unknown_input)
+        d["faults"] = [_document(fp) for fp in self.faults]
+        d["unknown_input"] = None if self.unknown_input is None else _document(self.unknown_input)
+        mn = self.measurement_noise
+        d["measurement_noise"] = None if mn is None else _document(mn)
         return d
 
     def to_json(self) -> str:
@@ -256,16 +170,16 @@ class Scenario:
 
     @classmethod
     def from_dict(cls, doc: dict) -> Scenario:
+        """The scenario of :meth:`to_dict` (a ``measurement_noise`` given as a list is Gaussian noise)."""
         doc = dict(doc)
-        faults = []
-        for fp in doc.pop("faults", []):
-            fp = dict(fp)
-            faults.append(_FAULTS[fp.pop("kind")](**fp))
+        faults = tuple(_from_document(fp, FAULT_SHAPES, "fault shape") for fp in doc.pop("faults", []))
         ui = doc.pop("unknown_input", None)
         if ui is not None:
-            ui = dict(ui)
-            ui = _INPUTS[ui.pop("kind")](**ui)
-        return cls(faults=tuple(faults), unknown_input=ui, **doc)
+            ui = _from_document(ui, UNKNOWN_INPUTS, "unknown-input model")
+        mn = doc.pop("measurement_noise", None)
+        if isinstance(mn, dict):
+            mn = _from_document(mn, MEASUREMENT_NOISES, "measurement-noise model")
+        return cls(faults=faults, unknown_input=ui, measurement_noise=mn, **doc)
 
 
 @dataclass(frozen=True)
@@ -287,11 +201,6 @@ class FaultSchedule:
         return np.concatenate([self.a, self.lu, self.st, self.la], axis=1).T.copy()
 
 
-def _active(t: np.ndarray, start: float, stop: float, dt: float) -> np.ndarray:
-    eps = 1e-9 * dt
-    return (t >= start - eps) & (t < stop - eps)
-
-
 def fault_schedule(
     scenario: Scenario,
     fault_names,
@@ -307,10 +216,9 @@ def fault_schedule(
 ) -> FaultSchedule:
     """Resolve ``scenario``'s fault profiles against a plant and tabulate them at times ``t``.
 
-    A loss of effectiveness scales the input the actuator delivers: ``u_operating + u`` for a plant
-    written in deviations from an operating point (``b.operating_point(u=...)``), else ``u`` itself
-    (which holds the reference input ``u_ref``). Without an operating point and with a zero reference
-    on that input the loss would scale a signal that is zero at rest: it is refused, with what to do.
+    Each profile computes its rows from a :class:`~fte_casadi.sim.fault_shapes.FaultSite` (and refuses a
+    fault it cannot act on); the rows of the profiles on one fault add up (``a``, ``lu``) or combine by
+    "or" (``st``, ``la``). Profiles of one fault acting on different inputs or outputs are refused.
     """
     fault_names = list(fault_names)
     lf, steps = len(fault_names), len(t)
@@ -322,68 +230,23 @@ def fault_schedule(
                 f"scenario {scenario.name!r}: fault {fp.fault!r} is not a fault of the plant; its faults are {fault_names}"
             )
         j = fault_names.index(fp.fault)
-        on = _active(t, fp.start, fp.stop, dt)
-        if isinstance(fp, LossOfEffectiveness):
-            if fault_kinds[j] != "actuator":
+        site = FaultSite(scenario.name, fp.fault, j, fault_kinds[j], B, Bf, Df, tuple(input_names), t, dt,
+                         u_operating, u_ref)  # fmt: skip
+        rows = fp.rows(site)
+        for col, part in ((a, rows.a), (lu, rows.lu)):
+            if part is not None:
+                col[:, j] += part
+        for col, part in ((st, rows.st), (la, rows.la)):
+            if part is not None:
+                col[:, j] = np.maximum(col[:, j], part)
+        for what, idx, new in (("inputs", iu, rows.input_index), ("outputs", ky, rows.output_index)):
+            if new >= 0 and idx[j] not in (-1, new):
                 raise ParameterError(
-                    f"loss of effectiveness needs an actuator fault; {fp.fault!r} is a {fault_kinds[j]} fault"
+                    f"scenario {scenario.name!r}: the profiles of fault {fp.fault!r} act on different {what} "
+                    f"({idx[j]} and {new}); a fault acts through one input or one output"
                 )
-            col = Bf[:, j]
-            if fp.input is not None:
-                if fp.input not in list(input_names):
-                    raise ParameterError(
-                        f"loss of effectiveness: input {fp.input!r} is not one of {list(input_names)}"
-                    )
-                i = list(input_names).index(fp.input)
-            else:
-                i = int(
-                    np.argmax(
-                        [
-                            abs(np.dot(B[:, q], col)) / (np.linalg.norm(B[:, q]) + 1e-300)
-                            for q in range(B.shape[1])
-                        ]
-                    )
-                )
-            bq = B[:, i]
-            c = float(np.dot(bq, col) / np.dot(col, col)) if np.any(col) else 0.0
-            if c == 0.0 or np.linalg.norm(bq - c * col) > 1e-9 * (np.linalg.norm(bq) + 1e-300):
-                raise ParameterError(
-                    f"loss of effectiveness: the column of Bf for {fp.fault!r} is not parallel to the column of B "
-                    f"for input {input_names[i]!r}, so the fault cannot represent a loss on that input"
-                )
-            if iu[j] not in (-1, i):
-                raise ParameterError(
-                    f"fault {fp.fault!r}: loss-of-effectiveness profiles on different inputs"
-                )
-            if u_operating is None and u_ref is not None and float(np.ravel(u_ref)[i]) == 0.0:
-                raise ParameterError(
-                    f"scenario {scenario.name!r}: a loss of effectiveness of {fp.fault!r} scales input "
-                    f"{input_names[i]!r}, which is zero at rest here (no reference input on it and no operating point "
-                    "declared), so the loss would do next to nothing. If the equations are written in deviations from "
-                    f"an operating point, declare it with b.operating_point(u=[...]) so that the loss scales the input "
-                    "the actuator delivers; otherwise describe the fault as a Bias (or Drift) of the delivered input"
-                )
-            iu[j] = i
-            lu[on, j] -= fp.loss * c  # B u + Bf fa = B (1 - loss) u  <=>  fa = -loss * c * u
-            if u_operating is not None:  # delivered input u0 + u: fa = -loss * c * (u0 + u)
-                a[on, j] -= fp.loss * c * float(np.ravel(u_operating)[i])
-        elif isinstance(fp, Bias):
-            a[on, j] += fp.value
-        elif isinstance(fp, Drift):
-            a[on, j] += fp.rate * (t[on] - fp.start)
-        elif isinstance(fp, Stuck):
-            if fault_kinds[j] != "sensor":
-                raise ParameterError(
-                    f"a stuck sensor needs a sensor fault; {fp.fault!r} is a {fault_kinds[j]} fault"
-                )
-            rows = np.flatnonzero(Df[:, j])
-            if len(rows) != 1:
-                raise ParameterError(
-                    f"stuck sensor {fp.fault!r} must enter exactly one output (one non-zero in its Df column)"
-                )
-            ky[j], kg[j] = int(rows[0]), float(Df[rows[0], j])
-            st[on, j] = 1.0
-            first = np.flatnonzero(on)
-            if len(first):
-                la[first[0], j] = 1.0
+            if new >= 0:
+                idx[j] = new
+        if rows.output_index >= 0:
+            kg[j] = float(rows.output_gain)
     return FaultSchedule(a, lu, st, la, tuple(iu), tuple(ky), tuple(kg))
