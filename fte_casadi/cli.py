@@ -560,7 +560,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, as_json
 @_guard
 def sweep(target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet):
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
-    from .design.record import atomic_write_text
+    from .atomic import atomic_write_text
     from .plants.loader import load_plant, load_scenario
     from .sim.sweep import parse_vary, to_csv, to_json
     from .sim.sweep import sweep as run_sweep
