@@ -501,21 +501,38 @@ def simulate(
                                                on_done=lambda k: bar.update(k)):  # fmt: skip
                 acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
         else:
+            from collections import deque
             from concurrent.futures import ThreadPoolExecutor
 
+            from .vector import LANES
+
             nthreads = threads or min(8, os.cpu_count() or 1)
-            chunk = chunk or auto_chunk(paths, nthreads)
-            starts = list(range(0, paths, chunk))
-            with ThreadPoolExecutor(max_workers=nthreads) as pool:
-                futs = {
-                    a: pool.submit(run_paths, prep, a, min(chunk, paths - a), seed, every_all) for a in starts
-                }
-                for a in starts:
-                    ca_, dv, rc = futs[a].result()
-                    acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
-                    if rc is not None:
-                        rec[a : a + len(dv)] = rc
-                    bar.update(len(dv))
+            # a chunk is one uninterruptible call of the C engine: at most ~2.5e5 path-steps (~0.1-0.3 s),
+            # whole lane vectors, so that a Ctrl-C waits for little; the metrics do not depend on it
+            chunk = chunk or min(
+                auto_chunk(paths, nthreads), max(LANES, LANES * (250_000 // (LANES * nsteps)))
+            )
+            pool = ThreadPoolExecutor(max_workers=nthreads)
+            live: deque = deque()  # (first path, future) in path order, a few per thread ahead
+
+            def take(a, fut) -> None:
+                ca_, dv, rc = fut.result()
+                acc[a : a + len(dv)], div[a : a + len(dv)] = ca_, dv
+                if rc is not None:
+                    rec[a : a + len(dv)] = rc
+                bar.update(len(dv))
+
+            try:
+                for a in range(0, paths, chunk):
+                    live.append((a, pool.submit(run_paths, prep, a, min(chunk, paths - a), seed, every_all)))
+                    if len(live) >= 4 * nthreads:
+                        take(*live.popleft())
+                while live:
+                    take(*live.popleft())
+            except BaseException:  # Ctrl-C or a failed chunk: drop the chunks not started, wait for none
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
+            pool.shutdown()
     finally:
         bar.close()
     bad = np.flatnonzero(div >= 0)
