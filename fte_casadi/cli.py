@@ -105,7 +105,7 @@ def _interrupted() -> str:
     else:
         msg = "interrupted; nothing was written (earlier files are as they were)"
     note = ctx.meta.get("fte.on_interrupt")
-    return msg + (f". {note()}" if note else "")
+    return msg + (f"; {note()}" if note else "")
 
 
 def _guard(fn):
@@ -847,16 +847,22 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
     except FteError as exc:
         raise ParameterError(f"fte tune simulates every candidate on the plant's scenario, and {d.plant_spec} has "
                              f"none ({exc}); add a scenario() beside the plant function") from None  # fmt: skip
+    done = [0]  # trials finished and kept, for the message after a Ctrl-C
+
+    def progress(k: int, n: int) -> None:
+        done[0] = k
+        bar.update(k - bar.n)
+
+    click.get_current_context().meta["fte.on_interrupt"] = lambda: (
+        f"the finished trials ({done[0]}) are kept in {work / 'optuna.db'} and {out} is as it was: run the same "
+        "command with --resume to continue" if (work / "optuna.db").exists() else f"{out} is as it was")  # fmt: skip
     with tqdm(total=trials, desc=f"tune {plant.name}", unit=" trials", file=sys.stderr, disable=quiet,
               delay=1.0) as bar:  # fmt: skip
-        click.get_current_context().meta["fte.on_interrupt"] = lambda: (
-            f"the finished trials ({bar.n}) are kept in {work / 'optuna.db'} and {out} is as it was: run the "
-            "same command with --resume to continue" if (work / "optuna.db").exists() else f"{out} is as it was")  # fmt: skip
         storage = _tune_work(out, work, resume)
         try:
             result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths,
-                              scheduler=scheduler, base_is_given=given, progress=lambda k, n: bar.update(k - bar.n),
-                              storage=storage, resume=resume)  # fmt: skip
+                              scheduler=scheduler, base_is_given=given, progress=progress, storage=storage,
+                              resume=resume)  # fmt: skip
         finally:
             if not (work / "optuna.db").exists():  # stopped before a trial was kept: nothing to resume
                 shutil.rmtree(work, ignore_errors=True)
