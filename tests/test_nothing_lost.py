@@ -279,6 +279,8 @@ def test_tune_interrupted_keeps_its_trials_and_resumes(tmp_path, monkeypatch):
 
     r = _tune(out, "--trials", "5")
     assert r.exit_code == 2 and "--resume" in r.stderr  # a fresh run would drop the kept trials
+    r = _tune(out, "--trials", "5", "--resume", "--seed", "3")  # the last --seed counts
+    assert r.exit_code == 2 and "differs from this one in seed (it was run with 2)" in _said(r), _said(r)
     rerun = []
     monkeypatch.setattr(search, "evaluate", lambda task: rerun.append(1) or real(task))
     r = _tune(out, "--trials", "5", "--resume")
