@@ -64,8 +64,53 @@ def _writable_target(path: str, option: str, what: str) -> None:
         )
 
 
+def _stat_tree(path: Path) -> dict[str, tuple]:
+    """Every file at or under ``path``: its identity, time and size (a file renamed into place is a new identity)."""
+    out = {}
+    try:
+        for f in [path] if path.is_file() else path.rglob("*") if path.is_dir() else []:
+            if f.is_file():
+                st = f.stat()
+                out[str(f)] = (st.st_ino, st.st_mtime_ns, st.st_size)
+    except OSError:
+        pass
+    return out
+
+
+def _outputs(*targets) -> None:
+    """Note the files and folders this command may write: after a Ctrl-C the message lists exactly
+    those of them that changed (each complete: every file is renamed into place whole)."""
+    meta = click.get_current_context().meta.setdefault("fte.outputs", {})
+    for t in targets:
+        if t is not None and Path(t) not in meta:
+            meta[Path(t)] = _stat_tree(Path(t))
+
+
+def _interrupted() -> str:
+    """What was written before a Ctrl-C, from the snapshot :func:`_outputs` took, and what to do next."""
+    ctx = click.get_current_context()
+    written, removed = [], []
+    for path, before in ctx.meta.get("fte.outputs", {}).items():
+        after = _stat_tree(path)
+        written += sorted(f for f, v in after.items() if before.get(f) != v)
+        removed += sorted(f for f in before if f not in after)
+
+    def some(names: list[str]) -> str:
+        return ", ".join(names[:8]) + (f" and {len(names) - 8} more" if len(names) > 8 else "")
+
+    parts = [f"written before the interrupt, each file complete: {some(written)}"] if written else []
+    parts += [f"removed: {some(removed)}"] if removed else []
+    if parts:
+        msg = "interrupted; " + "; ".join(parts) + "; nothing else was written"
+    else:
+        msg = "interrupted; nothing was written (earlier files are as they were)"
+    note = ctx.meta.get("fte.on_interrupt")
+    return msg + (f"; {note()}" if note else "")
+
+
 def _guard(fn):
-    """Run a command; on a known error print one paragraph and exit non-zero."""
+    """Run a command; on a known error print one paragraph and exit non-zero (130 after a Ctrl-C,
+    saying exactly which files were written)."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
@@ -84,7 +129,7 @@ def _guard(fn):
             sys.stderr.close()
             sys.exit(0)
         except KeyboardInterrupt:
-            _fail("interrupted; nothing was written", 130)
+            _fail(_interrupted(), 130)
         except MemoryError:
             if debug:
                 raise
@@ -349,6 +394,7 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     if no_remark5:
         params["remark5"] = False
     if explore:
+        _outputs(out_dir or "fte-explore")
         _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore")
         return
     if out_dir is not None:
@@ -357,6 +403,7 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
         )
     if output is not None:
         _writable_target(output, "-o", "design.json")
+    _outputs(output)
     d = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices)
     from .design.summary import design_summary
 
@@ -447,6 +494,7 @@ def codegen(target, out_dir, sample_time, real, boundary_layer, fmu, plant_opt, 
 
     _positive("ts", sample_time)
     _positive("boundary-layer", boundary_layer)
+    _outputs(out_dir)
     d, _ = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
@@ -610,6 +658,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
         _positive("dt", dt)
     if save:
         _writable_target(save, "--save", "result.npz")
+    _outputs(save, plots, save_design)
     d, spec = _design_or_plant(
         target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
     )
@@ -699,13 +748,14 @@ def sweep(
     target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet, plant_opt, allow_uncertified
 ):
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
-    from .design.record import atomic_write_text
+    from .atomic import atomic_write_text
     from .plants.loader import load_plant, load_scenario
     from .resources import check_paths_memory
     from .sim.sweep import parse_vary, to_csv, to_json
     from .sim.sweep import sweep as run_sweep
 
     grid = parse_vary(vary)
+    _outputs(out_dir)
     if paths is not None and paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
     _check_seed(seed)
@@ -764,6 +814,7 @@ def reproduce(which, out_dir, seed, paths):
     def log(msg: str) -> None:
         click.echo(f"{time.perf_counter() - t0:7.1f} s  {msg}", err=True)
 
+    _outputs(out_dir)
     report = run(which, out_dir, seed=seed, paths=paths, log=log)
     click.echo(f"report written to {report} ({time.perf_counter() - t0:.1f} s)")
 
@@ -790,17 +841,39 @@ def bench(as_json, paths):
 
 
 # -- tune ---------------------------------------------------------------------------------
-def _tune_target(out_dir: str) -> None:
-    """Refuse, before any work, to overwrite in DIR a file fte tune did not write."""
+#: what fte tune writes in DIR (and keeps in DIR.partial while it runs); DIR is replaced as a whole
+_TUNE_ENTRIES = ("tuned.json", "tune.json", "pareto.png", "designs", "optuna.db")
+
+
+def _tune_dirs(out_dir: str) -> tuple[Path, Path]:
+    """DIR and the folder beside it where a run keeps its trials (optuna.db) and writes the new set."""
+    out = Path(out_dir)
+    here = Path.cwd().resolve()
+    if out.resolve() in (here, *here.parents):
+        raise ParameterError(f"--out {out_dir} is the current directory or above it; fte tune replaces its --out "
+                             "directory as a whole: give a directory of its own, such as fte-tune")  # fmt: skip
+    return out, out.parent / f"{out.resolve().name}.partial"
+
+
+def _is_optuna_db(path: Path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(16) == b"SQLite format 3\x00"
+    except OSError:
+        return False
+
+
+def _tune_folder(folder: Path, option: str) -> None:
+    """Refuse, before any work, a folder holding anything fte tune did not write: it is replaced as a whole."""
     from .tune.output import is_tune_record
 
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ParameterError(
-            f"--out {out_dir} is a file; give a directory (fte tune writes tuned.json and more there)"
-        )
-    _writable_target(str(out / "tuned.json"), "--out", "design.json")
-    rec, fig, designs = out / "tune.json", out / "pareto.png", out / "designs"
+    if folder.exists() and not folder.is_dir():
+        raise ParameterError(f"{option} {folder} is a file; give a directory (fte tune writes tuned.json and more "
+                             "there)")  # fmt: skip
+    if not folder.is_dir():
+        return
+    _writable_target(str(folder / "tuned.json"), option, "design.json")
+    rec, fig, designs = folder / "tune.json", folder / "pareto.png", folder / "designs"
     if rec.exists() and not is_tune_record(rec):
         raise ParameterError(f"{rec} exists and was not written by fte tune: it is left untouched; choose another "
                              "--out directory, or move that file away first")  # fmt: skip
@@ -811,10 +884,46 @@ def _tune_target(out_dir: str) -> None:
         raise ParameterError(
             f"{designs} is a file; fte tune writes the front's designs into that folder: move it away"
         )
-    for f in designs.glob("trial-*.json") if designs.is_dir() else ():
-        if not _ours(f):
+    # left by a kill while a file was written (and optuna.db-journal by SQLite)
+    temp = re.compile(r"^\..+\.tmp$")
+    for f in designs.iterdir() if designs.is_dir() else ():
+        if not (re.fullmatch(r"trial-\d+\.json", f.name) and _ours(f)) and not temp.match(f.name):
             raise ParameterError(f"{f} exists and was not written by fte (it is not a design document): it is left "
                                  "untouched; choose another --out directory, or move that file away first")  # fmt: skip
+    for f in folder.iterdir():
+        ours = (
+            _is_optuna_db(f)
+            if f.name == "optuna.db"
+            else f.name in _TUNE_ENTRIES or f.name.startswith("optuna.db-") or bool(temp.match(f.name))
+        )
+        if not ours:
+            raise ParameterError(f"{f} was not written by fte tune, which replaces {folder} as a whole: it is left "
+                                 "untouched; choose another --out directory, or move it away first")  # fmt: skip
+
+
+def _tune_target(out_dir: str, resume: bool = False) -> tuple[Path, Path]:
+    """Check DIR and DIR.partial before any work; return them."""
+    out, work = _tune_dirs(out_dir)
+    _tune_folder(out, "--out")
+    _tune_folder(work, "the folder of an interrupted run")
+    if (work / "optuna.db").exists() and not resume:
+        raise ParameterError(f"{work} holds the trials of an interrupted fte tune run (optuna.db): continue it with "
+                             f"--resume, or remove {work} to start afresh")  # fmt: skip
+    return out, work
+
+
+def _tune_work(out: Path, work: Path, resume: bool) -> str:
+    """Make DIR.partial ready for the run (with --resume of a finished run, a copy of its trials);
+    return the optuna storage of the run."""
+    import shutil
+
+    kept = work / "optuna.db"
+    if work.is_dir() and not kept.exists():  # an earlier run stopped before its first trial was kept
+        shutil.rmtree(work)
+    work.mkdir(parents=True, exist_ok=True)
+    if resume and not kept.exists() and _is_optuna_db(out / "optuna.db"):  # a finished run, continued
+        shutil.copyfile(out / "optuna.db", kept)
+    return f"sqlite:///{kept.resolve()}"
 
 
 @main.command()
@@ -842,13 +951,17 @@ def _tune_target(out_dir: str) -> None:
 @click.option(
     "--json", "as_json", is_flag=True, help="Print the front (JSON list) on stdout; the tables go to stderr."
 )
+@click.option("--resume", is_flag=True,
+              help="Continue the run kept in DIR.partial (interrupted) or DIR (finished, for more --trials).")  # fmt: skip
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @_plant_option
 @_guard
-def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, plant_opt):
+def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, plant_opt, resume):
     """Multi-objective search over the design's knobs (gamma, gamma1, sigma, alpha, kappa, sliding gain,
     boundary layer): each candidate designed, certified and simulated with the same random numbers;
     the Pareto front, and the chosen design in DIR/tuned.json (see docs/tune.md for the rule)."""
+    import shutil
+
     from .errors import MissingDependencyError
     from .plants.loader import load_plant, load_scenario
     from .tune.output import comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
@@ -868,7 +981,8 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
         import optuna  # noqa: F401
     except ImportError:
         raise MissingDependencyError("fte tune needs optuna: pip install 'fte_casadi[tune]'") from None
-    _tune_target(out_dir)
+    out, work = _tune_target(out_dir, resume)
+    _outputs(out, work)
     given = target.endswith(".json") or Path(target).is_file()
     d, spec = _design_or_plant(target, progress=not quiet, plant=plant_opt)
     spec = _need_plant(d, spec, "tune")
@@ -878,11 +992,30 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
     except FteError as exc:
         raise ParameterError(f"fte tune simulates every candidate on the plant's scenario, and {d.plant_spec} has "
                              f"none ({exc}); add a scenario() beside the plant function") from None  # fmt: skip
+    done = [0]  # trials finished and kept, for the message after a Ctrl-C
+
+    def progress(k: int, n: int) -> None:
+        done[0] = k
+        bar.update(k - bar.n)
+
+    click.get_current_context().meta["fte.on_interrupt"] = lambda: (
+        f"the finished trials ({done[0]}) are kept in {work / 'optuna.db'} and {out} is as it was: run the same "
+        "command with --resume to continue" if (work / "optuna.db").exists() else f"{out} is as it was")  # fmt: skip
     with tqdm(total=trials, desc=f"tune {plant.name}", unit=" trials", file=sys.stderr, disable=quiet,
               delay=1.0) as bar:  # fmt: skip
-        result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths, scheduler=scheduler,
-                          base_is_given=given, progress=lambda k, n: bar.update(k - bar.n))  # fmt: skip
-    files = write_outputs(result, out_dir)
+        storage = _tune_work(out, work, resume)
+        try:
+            result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths,
+                              scheduler=scheduler, base_is_given=given, progress=progress, storage=storage,
+                              resume=resume)  # fmt: skip
+        finally:
+            if not (work / "optuna.db").exists():  # stopped before a trial was kept: nothing to resume
+                shutil.rmtree(work, ignore_errors=True)
+    try:
+        files = write_outputs(result, out_dir, work=work)
+    except FteError as exc:
+        raise ParameterError(f"{exc}; the trials are kept in {work / 'optuna.db'}: run the same command with "
+                             "--resume to write them") from None  # fmt: skip
     say = functools.partial(click.echo, err=as_json)
     failed = [r for r in result.records if r.state != "ok"]
     say(f"{plant.name}: {len(result.records)} trials ({len(failed)} failed: not designed or not certified), "

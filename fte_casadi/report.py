@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import atomic_write_text
 from .design import design as run_design
-from .design.record import atomic_write_text
 from .errors import InfeasibleDesignError, SolverFailedError
 from .plants import BUILTIN, SCENARIOS
 from .plants.paper import PRINTED

@@ -13,11 +13,10 @@ from __future__ import annotations
 
 import os
 import re
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write
 from ..errors import DesignFileError
 
 __all__ = ["save_mat", "is_fte_mat", "MARKER"]
@@ -90,19 +89,11 @@ def save_mat(doc: dict, path: str | os.PathLike) -> None:
     atomically: a failed write leaves an existing file as it was."""
     from scipy.io import savemat
 
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".mat", dir=folder)
-    os.close(fd)
+    variables = mat_variables(doc)
     try:
-        savemat(tmp, mat_variables(doc), do_compression=True, oned_as="column")
-        os.replace(tmp, path)
+        atomic_write(path, lambda fh: savemat(fh, variables, do_compression=True, oned_as="column"))
     except OSError as exc:
-        Path(tmp).unlink(missing_ok=True)
         raise DesignFileError(f"cannot write the design to {path}: {exc.strerror or exc}") from None
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def is_fte_mat(path: str | os.PathLike) -> bool:

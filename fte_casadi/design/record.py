@@ -18,18 +18,18 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write_text
 from ..deprecation import renamed_keyword
 from ..errors import DesignFileError
 from ..ts.model import LocalModel
 from .records import Dims, Observer, Params, _Record
 
-__all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "SCHEMA", "atomic_write_text"]
+__all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "SCHEMA"]
 
 #: the version of the design document this fte writes (documents without ``schema`` predate it: 1)
 SCHEMA = 2
@@ -63,28 +63,6 @@ REQUIRED_KEYS = (
 )
 _MATS = ("C", "Df", "H", "T", "X", "P", "Kf", "Pbar", "N", "Ls")
 _LISTS = ("K", "Q", "L1", "L2", "R")
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``path`` atomically: a temporary file in the same folder, then a rename.
-
-    A failure leaves any existing file untouched and no partial file behind.
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 def _arr(x) -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..atomic import atomic_write
 from ..sim.result import RUN_TITLES, SimulationResult
 
 __all__ = [
@@ -239,6 +240,6 @@ def write_figures(result: SimulationResult, directory: str | os.PathLike, *, dpi
     for stem, build in figure_set(result):
         fig = build()
         path = folder / f"{stem}.png"
-        fig.savefig(path, dpi=dpi)
+        atomic_write(path, lambda fh, fig=fig: fig.savefig(fh, format="png", dpi=dpi))
         paths.append(path)
     return paths

@@ -9,6 +9,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..atomic import atomic_write
+
 __all__ = ["frontier_figure", "frontier_plot"]
 
 
@@ -50,5 +52,6 @@ def frontier_figure(points, info: dict, plant: str, out_dir: str | os.PathLike) 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"frontier-{''.join(c if c.isalnum() or c in '-_' else '_' for c in plant)}.png"
-    frontier_plot(points, info, plant).savefig(path, dpi=110)
+    fig = frontier_plot(points, info, plant)
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
     return path

@@ -9,6 +9,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..atomic import atomic_write
+
 __all__ = ["pareto_plot", "pareto_figure"]
 
 
@@ -66,5 +68,6 @@ def pareto_figure(result, out_dir: str | os.PathLike) -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "pareto.png"
-    pareto_plot(result).savefig(path, dpi=110)
+    fig = pareto_plot(result)
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
     return path

@@ -10,6 +10,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..atomic import atomic_write
+
 __all__ = ["sweep_plot", "sweep_figure"]
 
 
@@ -79,5 +81,6 @@ def sweep_figure(points: list[dict], plant: str, out_dir: str | os.PathLike, fau
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "sweep.png"
-    sweep_plot(points, plant, fault_names).savefig(path, dpi=110)
+    fig = sweep_plot(points, plant, fault_names)
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110))
     return path

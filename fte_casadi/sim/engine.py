@@ -516,18 +516,33 @@ def _run_chunks(prep: Prepared, plant: Plant, paths: int, seed: int, path0: int,
                                                     path0=path0):  # fmt: skip
             keep(a, (ca_, dv, None, mo, pmx))
     else:
+        from collections import deque
         from concurrent.futures import ThreadPoolExecutor
 
+        from .vector import LANES
+
         nthreads = threads or min(8, os.cpu_count() or 1)
-        chunk = chunk or auto_chunk(paths, nthreads)
-        starts = list(range(0, paths, chunk))
-        with ThreadPoolExecutor(max_workers=nthreads) as pool:
-            futs = {
-                a: pool.submit(run_paths, prep, path0 + a, min(chunk, paths - a), seed, every_all)
-                for a in starts
-            }
-            for a in starts:
-                keep(a, futs[a].result())
+        # a chunk is one uninterruptible call of the C engine: at most ~2.5e5 path-steps (~0.1-0.3 s), whole lane
+        # vectors, so that a Ctrl-C waits for little; the metrics do not depend on it
+        nsteps = max(prep.SH.shape[0] - 1, 1)
+        chunk = chunk or min(auto_chunk(paths, nthreads), max(LANES, LANES * (250_000 // (LANES * nsteps))))
+        pool = ThreadPoolExecutor(max_workers=nthreads)
+        live: deque = deque()  # (first path, future) in path order, a few per thread ahead
+        try:
+            for a in range(0, paths, chunk):
+                live.append(
+                    (a, pool.submit(run_paths, prep, path0 + a, min(chunk, paths - a), seed, every_all))
+                )
+                if len(live) >= 4 * nthreads:
+                    a0, fut = live.popleft()
+                    keep(a0, fut.result())
+            while live:
+                a0, fut = live.popleft()
+                keep(a0, fut.result())
+        except BaseException:  # Ctrl-C or a failed chunk: drop the chunks not started, wait for none
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        pool.shutdown()
     return acc, div, mon, pm, rec
 
 

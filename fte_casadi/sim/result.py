@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
+import zlib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 
+from ..atomic import atomic_write
 from ..design.record import Design
 from ..errors import SimulationError
 from .scenario import Scenario
@@ -97,7 +100,10 @@ class SimulationResult:
 
 
 def save_result(result: SimulationResult, path: str | os.PathLike) -> Path:
-    """Write ``result`` to a compressed ``.npz``; scenario and design are embedded as JSON."""
+    """Write ``result`` to a compressed ``.npz``; scenario and design are embedded as JSON.
+
+    The file is written whole or not at all (:func:`fte_casadi.atomic.atomic_write`): an interrupted
+    save leaves an earlier file at ``path`` as it was."""
     path = Path(path)
     arrays = {"t": result.t}
     for run in RUNS:
@@ -124,8 +130,7 @@ def save_result(result: SimulationResult, path: str | os.PathLike) -> Path:
     arrays["scenario"] = np.array(result.scenario.to_json())
     arrays["design"] = np.array(result.design.to_json())
     try:
-        with open(path, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+        atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
     except OSError as exc:
         raise SimulationError(f"cannot write the result to {str(path)!r}: {exc.strerror or exc}") from None
     return path
@@ -139,8 +144,11 @@ def load_result(path: str | os.PathLike) -> SimulationResult:
     try:
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as exc:
-        raise SimulationError(f"result file {str(path)!r} is not a readable .npz ({exc})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise SimulationError(
+            f"result file {str(path)!r} is not a readable .npz: it is corrupt or truncated "
+            f"({type(exc).__name__}: {exc}); write it again with fte simulate --save"
+        ) from None
     try:
         meta = json.loads(str(data["meta"]))
         scenario = Scenario.from_dict(json.loads(str(data["scenario"])))

@@ -4,9 +4,14 @@ and the rows of the default-vs-chosen comparison."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
-from ..design.record import Design, atomic_write_text
+from ..atomic import atomic_write_text, replace_dir
+from ..design.record import Design
+from ..errors import ParameterError
 
 __all__ = ["MARKER", "is_tune_record", "write_outputs", "front_documents", "front_table", "comparison"]
 
@@ -45,21 +50,45 @@ def _jsonable(d: dict) -> dict:
     return {k: (bool(v) if isinstance(v, bool) else float(v)) for k, v in d.items()}
 
 
-def write_outputs(result, out_dir: str) -> dict:
+def write_outputs(result, out_dir: str, work: str | os.PathLike | None = None) -> dict:
     """Write ``DIR/tuned.json`` (the chosen design), ``DIR/designs/trial-NNNN.json`` (each front
-    member; earlier ones of fte's are removed), ``DIR/tune.json`` (every trial: knobs, params,
-    objectives or the reason it failed; the rule, the front, the limits) and ``DIR/pareto.png``.
-    The caller has checked that nothing there is a file fte did not write. Returns the paths."""
-    from ..plot import pareto_figure
+    member), ``DIR/tune.json`` (every trial: knobs, params, objectives or the reason it failed; the
+    rule, the front, the limits) and ``DIR/pareto.png``, as one set: into the folder ``work`` (default:
+    a new one beside DIR), which then takes DIR's place (:func:`fte_casadi.atomic.replace_dir`). A
+    failure or a kill at any moment leaves the previous DIR as it was, or the complete new one; what
+    else ``work`` holds (``fte tune``'s optuna.db) comes along. The caller has checked that DIR holds
+    nothing fte tune did not write. Returns the paths, in DIR."""
 
     out = Path(out_dir)
-    designs = out / "designs"
-    designs.mkdir(parents=True, exist_ok=True)
-    for old in designs.glob("trial-*.json"):  # a previous run's front (checked to be fte's by the caller)
-        old.unlink()
+    made = work is None
+    if made:
+        out.resolve().parent.mkdir(parents=True, exist_ok=True)
+        work = tempfile.mkdtemp(prefix=f".{out.resolve().name}.", suffix=".new", dir=out.resolve().parent)
+    w = Path(work)
+    try:
+        _write_set(result, w)
+        replace_dir(w, out)
+    except BaseException as exc:
+        if made:
+            shutil.rmtree(w, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise ParameterError(f"cannot write the results of fte tune into {out}: {exc.strerror or exc}; {out} is "
+                                 "as it was") from None  # fmt: skip
+        raise
+    return {"tuned": out / "tuned.json", "record": out / "tune.json", "figure": out / "pareto.png",
+            "designs": out / "designs"}  # fmt: skip
+
+
+def _write_set(result, w: Path) -> None:
+    from ..plot import pareto_figure
+
+    designs = w / "designs"
+    if designs.exists():  # an earlier attempt's, in the same work folder
+        shutil.rmtree(designs)
+    designs.mkdir(parents=True)
     for k in result.front:
         atomic_write_text(designs / _design_name(k), result.record(k).design)
-    Design.from_dict(json.loads(result.record(result.chosen).design)).save(out / "tuned.json")
+    Design.from_dict(json.loads(result.record(result.chosen).design)).save(w / "tuned.json")
     record = {
         MARKER: 1,
         "plant": result.plant,
@@ -86,9 +115,8 @@ def write_outputs(result, out_dir: str) -> dict:
             for r in result.records
         ],  # fmt: skip
     }
-    atomic_write_text(out / "tune.json", json.dumps(record, indent=1))
-    fig = pareto_figure(result, out)
-    return {"tuned": out / "tuned.json", "record": out / "tune.json", "figure": fig, "designs": designs}
+    atomic_write_text(w / "tune.json", json.dumps(record, indent=1))
+    pareto_figure(result, w)
 
 
 def _fmt(v) -> str:

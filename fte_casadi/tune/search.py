@@ -40,6 +40,7 @@ bound among them). The bound is not in the balanced score: that score is the iss
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import time
@@ -276,7 +277,8 @@ def _runner(scheduler):
 
 def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str = "balanced",
          paths: int | None = None, scheduler=None, sigma_sup: float | None = None, base_is_given: bool = False,
-         progress: Callable[[int, int], None] | None = None) -> TuneResult:  # fmt: skip
+         progress: Callable[[int, int], None] | None = None, storage: str | None = None,
+         resume: bool = False) -> TuneResult:  # fmt: skip
     """Search the knobs of ``base_design`` for designs that estimate and tolerate the faults of ``scenario``.
 
     Parameters
@@ -303,6 +305,15 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
         parameters alone would not reproduce).
     progress : callable, optional
         ``progress(done, total)`` after each trial.
+    storage : str, optional
+        An optuna storage URL (``sqlite:///DIR/optuna.db``) where every trial is kept as it finishes,
+        with its design and metrics: an interrupted search can be continued from it (``resume``).
+        Default: in memory.
+    resume : bool
+        Continue the search kept in ``storage`` (when it holds one; else start afresh): its finished
+        trials are taken as they are, the trials that were running are run again, and the search goes
+        on to ``trials`` in all with the sampler's random state as it was, so the trials are those an
+        uninterrupted run asks. The run must have the same plant, base design, seed and paths.
     """
     import optuna
 
@@ -318,8 +329,6 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     if paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
     t0 = time.perf_counter()
-    if sigma_sup is None:
-        sigma_sup = _sigma_sup(plant, base_design)
     fixed = {"delta": float(base_design.params.delta)}
     common = {
         "plant": plant_bytes(plant), "scenario": scenario.to_dict(), "variant": base_design.variant,
@@ -335,64 +344,218 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
             sampler = optuna.samplers.TPESampler(seed=seed, multivariate=True,
                                                  n_startup_trials=max(4, min(12, trials // 4)))  # fmt: skip
-        records: list[Record] = []
-        # trial 0: the base design as it is, alone, so that the objectives are defined against it
-        base_task = dict(common, knobs=space_for(base_design, sigma_sup).base | fixed, e_scale=None,
-                         design=base_design.to_json())  # fmt: skip
-        out0 = run([base_task])[0]
-        if out0["state"] != "ok":
-            raise ParameterError(
-                f"the base design of {plant.name} cannot be evaluated ({out0['reason']}); tune from a design that "
-                "certifies and simulates (fte design, fte simulate)"
-            )
+        key = _fingerprint(plant, scenario, base_design, seed, paths)
+        study = _stored_study(optuna, storage, sampler, key) if resume and storage is not None else None
+        if study is None:  # a fresh search: trial 0 first, alone
+            if sigma_sup is None:
+                sigma_sup = _sigma_sup(plant, base_design)
+            base_task = dict(common, knobs=space_for(base_design, sigma_sup).base | fixed, e_scale=None,
+                             design=base_design.to_json())  # fmt: skip
+            out0 = run([base_task])[0]
+            if out0["state"] != "ok":
+                raise ParameterError(
+                    f"the base design of {plant.name} cannot be evaluated ({out0['reason']}); tune from a design "
+                    "that certifies and simulates (fte design, fte simulate)"
+                )
+        else:
+            sigma_sup = study.user_attrs.get("sigma_sup")
+            base_task = dict(common, knobs=space_for(base_design, sigma_sup).base | fixed, e_scale=None,
+                             design=base_design.to_json())  # fmt: skip
+            out0 = {"state": "ok", "e_scale": study.user_attrs["e_scale"], **study.user_attrs["trial-0"]}
         names, values_of = objectives_for(
             out0["metrics"], list(plant.fault_names), plant.input_limits is not None
         )
         e_scale = out0["e_scale"]
         space: Space = space_for(base_design, sigma_sup, *_base_knobs(base_design, base_task, e_scale))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            study = optuna.create_study(directions=["minimize"] * len(names), sampler=sampler)
-            study.enqueue_trial(space.base)
-            t = study.ask()
-            space.suggest(t)
-            for knobs in space.local_steps(trials - 1):
-                study.enqueue_trial(knobs)
-        v0 = values_of(out0["metrics"])
-        study.tell(t, list(v0))
-        records.append(Record(0, dict(space.base), "ok", out0["params"], out0["metrics"], out0["design"], v0))
-        if progress:
-            progress(1, trials)
+        records: list[Record] = []
+
+        def told(t, kn: dict | None, out: dict) -> None:
+            """Tell optuna (and its storage) how trial ``t`` (a trial or its number) ended; record it."""
+            number = t if isinstance(t, int) else t.number
+            if out["state"] == "ok":
+                v = values_of(out["metrics"])
+                study.set_user_attr(
+                    f"trial-{number}", {k: out[k] for k in ("params", "metrics", "design")} | {"knobs": kn}
+                )
+                study.tell(t, list(v))
+                records.append(Record(number, kn, "ok", out["params"], out["metrics"], out["design"], v))
+            else:
+                study.set_user_attr(f"trial-{number}", {"knobs": kn, "reason": out["reason"]})
+                study.tell(t, state=optuna.trial.TrialState.FAIL)
+                records.append(Record(number, kn or {}, "fail", reason=out["reason"]))
+            if progress:
+                progress(len(records), trials)
+
+        def evaluated(knobs: list) -> list[dict]:
+            """The outcome of each trial of ``knobs`` (None: interrupted before its knobs were drawn)."""
+            todo = [kn for kn in knobs if kn is not None]
+            outs = iter(run([dict(common, knobs=kn | fixed, e_scale=e_scale, design=None) for kn in todo]))
+            return [next(outs) if kn is not None else {"state": "fail", "reason": "interrupted before its knobs "
+                    "were drawn"} for kn in knobs]  # fmt: skip
+
+        wall0 = 0.0
+        if study is None:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                study = _new_study(optuna, storage, sampler, len(names))
+                study.set_user_attr("fte", key)
+                study.set_user_attr("sigma_sup", sigma_sup)
+                study.set_user_attr("e_scale", e_scale)
+                study.enqueue_trial(space.base)
+                t = study.ask()
+                space.suggest(t)
+                for knobs in space.local_steps(trials - 1):
+                    study.enqueue_trial(knobs)
+            told(t, dict(space.base), out0)
+        else:  # the finished trials as they are; those that were running, again
+            wall0 = float(study.user_attrs.get("wall_s", 0.0))
+            running = _restore(optuna, study, records, space)
+            if progress:
+                progress(len(records), trials)
+            for (number, kn), out in zip(running, evaluated([kn for _, kn in running])):
+                told(number, kn, out)
         while len(records) < trials:
             k = min(BATCH, trials - len(records))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
                 asked = [study.ask() for _ in range(k)]
                 knobs = [space.suggest(t) for t in asked]
-            outs = run([dict(common, knobs=kn | fixed, e_scale=e_scale, design=None) for kn in knobs])
-            for t, kn, out in zip(asked, knobs, outs):
-                if out["state"] == "ok":
-                    v = values_of(out["metrics"])
-                    study.tell(t, list(v))
-                    records.append(
-                        Record(t.number, kn, "ok", out["params"], out["metrics"], out["design"], v)
-                    )
-                else:
-                    t.set_user_attr("reason", out["reason"])
-                    study.tell(t, state=optuna.trial.TrialState.FAIL)
-                    records.append(Record(t.number, kn, "fail", reason=out["reason"]))
-                if progress:
-                    progress(len(records), trials)
+            if storage is not None:  # for a resumed run: the knobs, the sampler's state after drawing them
+                for t, kn in zip(asked, knobs):
+                    study.set_user_attr(f"trial-{t.number}", {"knobs": kn})
+                study.set_user_attr("sampler", _random_states(sampler))
+                study.set_user_attr("wall_s", wall0 + time.perf_counter() - t0)
+            for t, kn, out in zip(asked, knobs, evaluated(knobs)):
+                told(t, kn, out)
+        if storage is not None:
+            study.set_user_attr("wall_s", wall0 + time.perf_counter() - t0)
     finally:
         optuna.logging.set_verbosity(level)
         close()
+    records.sort(key=lambda r: r.number)
     done = [r for r in records if r.state == "ok"]
     front = [done[i].number for i in pareto_front([r.values for r in done])]
     chosen, tier = choose(records, front, names, rule)
     limits = _limits(done, plant)
     return TuneResult(plant=plant.name, objectives=names, records=tuple(records), front=tuple(front), chosen=chosen,
-                      rule=rule, tier=tier, seed=seed, paths=paths, space=dict(space.ranges), wall_s=time.perf_counter() - t0,
+                      rule=rule, tier=tier, seed=seed, paths=paths, space=dict(space.ranges),
+                      wall_s=wall0 + time.perf_counter() - t0,
                       limits=tuple(limits))  # fmt: skip
+
+
+#: the name of the study in an optuna storage
+STUDY_NAME = "fte-tune"
+
+
+def _fingerprint(plant, scenario, base_design, seed: int, paths: int) -> dict:
+    """What a resumed search must share with the stored one (as JSON gives it back)."""
+    sc = hashlib.sha256(json.dumps(scenario.to_dict(), sort_keys=True).encode()).hexdigest()
+    doc = {"plant": plant.name, "seed": seed, "paths": paths, "variant": base_design.variant,
+           "solver": base_design.solver, "params": base_design.to_dict()["params"], "scenario": sc}  # fmt: skip
+    return json.loads(json.dumps(doc))
+
+
+def _differs(a, b, at: str = "") -> str | None:
+    """The first key where ``a`` and ``b`` differ (floats to 1e-9), or None."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            d = _differs(a.get(k), b.get(k), f"{at}.{k}" if at else k)
+            if d:
+                return d
+        return None
+    if isinstance(a, float) and isinstance(b, (int, float)) and not isinstance(b, bool):
+        return None if math.isclose(a, b, rel_tol=1e-9, abs_tol=0.0) else at
+    return None if a == b else at
+
+
+def _new_study(optuna, storage, sampler, nobj: int):
+    try:
+        return optuna.create_study(directions=["minimize"] * nobj, sampler=sampler, storage=storage,
+                                   study_name=STUDY_NAME)  # fmt: skip
+    except optuna.exceptions.DuplicatedStudyError:
+        raise ParameterError(f"{storage} holds a search already: continue it (fte tune --resume) or remove it "
+                             "to start afresh") from None  # fmt: skip
+
+
+def _stored_study(optuna, storage: str, sampler, key: dict):
+    """The search kept in ``storage``, its sampler's random state restored; None when there is none
+    to continue (no study, or one whose trial 0 never finished: removed)."""
+    try:
+        study = optuna.load_study(study_name=STUDY_NAME, storage=storage, sampler=sampler)
+    except KeyError:
+        return None
+    attrs = study.user_attrs
+    first = study.get_trials(deepcopy=False)[:1]
+    if not first or first[0].state != optuna.trial.TrialState.COMPLETE or "trial-0" not in attrs:
+        optuna.delete_study(study_name=STUDY_NAME, storage=storage)
+        return None
+    where = _differs(attrs.get("fte") or {}, key)
+    if where:
+        was = (attrs.get("fte") or {}).get(where.split(".")[0])
+        raise ParameterError(
+            f"the search kept in {storage} differs from this one in {where} (it was run with {was!r}): continue it "
+            "with the same target, --seed and --paths, or remove it to start afresh"
+        )
+    _set_random_states(sampler, attrs.get("sampler"))
+    return study
+
+
+def _restore(optuna, study, records: list, space: Space) -> list[tuple[int, dict | None]]:
+    """Append the stored trials that finished to ``records``; return those that were running as
+    ``(number, knobs)`` (knobs None when they were never drawn)."""
+    State = optuna.trial.TrialState
+    attrs = study.user_attrs
+    running = []
+    for ft in study.get_trials(deepcopy=False, states=(State.COMPLETE, State.FAIL, State.RUNNING)):
+        kept = attrs.get(f"trial-{ft.number}") or {}
+        kn = kept.get("knobs")
+        if ft.state == State.COMPLETE:
+            records.append(Record(ft.number, kn, "ok", kept["params"], kept["metrics"], kept["design"],
+                                  tuple(ft.values)))  # fmt: skip
+        elif ft.state == State.FAIL:
+            records.append(Record(ft.number, kn or {}, "fail", reason=kept.get("reason", "failed")))
+        else:
+            if kn is None:
+                try:
+                    kn = space.suggest(optuna.trial.FixedTrial(ft.params))
+                except ValueError:
+                    kn = None
+            running.append((ft.number, kn))
+    return running
+
+
+def _random_generators(obj, path: str = "sampler", depth: int = 0) -> dict:
+    """The numpy generators inside an optuna sampler, by attribute path (optuna keeps them in
+    ``LazyRandomState`` objects); a resumed search restores their states to ask the same trials."""
+    if isinstance(obj, np.random.RandomState):
+        return {path: obj}
+    if isinstance(getattr(type(obj), "rng", None), property):
+        return {path: obj.rng}
+    if depth >= 3 or isinstance(obj, type) or not hasattr(obj, "__dict__"):
+        return {}
+    out: dict = {}
+    for k, v in sorted(vars(obj).items()):
+        out |= _random_generators(v, f"{path}.{k}", depth + 1)
+    return out
+
+
+def _random_states(sampler) -> dict:
+    out = {}
+    for path, g in _random_generators(sampler).items():
+        name, keys, pos, has_gauss, cached = g.get_state()
+        out[path] = [name, [int(v) for v in keys], int(pos), int(has_gauss), float(cached)]
+    return out
+
+
+def _set_random_states(sampler, states: dict | None) -> None:
+    """Restore :func:`_random_states`; where the sampler holds other generators (another optuna),
+    the resumed search goes on from the seed's state instead (other trials than an uninterrupted run)."""
+    found = _random_generators(sampler)
+    if not states or set(states) != set(found):
+        return
+    for path, g in found.items():
+        name, keys, pos, has_gauss, cached = states[path]
+        g.set_state((name, np.asarray(keys, dtype=np.uint32), pos, has_gauss, cached))
 
 
 def _base_knobs(base_design, base_task: dict, e_scale: float | None) -> tuple[float, float | None]:

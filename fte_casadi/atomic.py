@@ -1,0 +1,132 @@
+"""Files and folders written whole or not at all.
+
+Every file fte writes goes through :func:`atomic_write`: the content is written to a temporary file
+in the target's folder, flushed to disk, and renamed over the target (``os.replace``, atomic on
+POSIX and Windows). A kill, a Ctrl-C or a full disk at any moment leaves the previous file or the
+complete new one, never a partial one; an interrupted write removes its temporary file (a SIGKILL
+can leave one behind, named ``.NAME.*.tmp``).
+
+:func:`replace_dir` does the same for a folder written as a set (``fte tune``'s output).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import BinaryIO
+
+__all__ = ["atomic_write", "atomic_write_text", "replace_dir", "file_mode"]
+
+
+def file_mode() -> int:
+    """The permission bits of a newly created file (``0o666`` less the umask): what ``open`` gives."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _folder(path: Path) -> Path:
+    return path.parent if str(path.parent) else Path(".")
+
+
+def _sync_folder(folder: Path) -> None:
+    """Flush a folder's entries (the rename) to disk where the system allows it."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -> Path:
+    """Write ``path`` through ``write(fh)``, ``fh`` a binary file open on a temporary file beside it,
+    then rename that file over ``path``.
+
+    ``write`` may be anything that writes to a binary file object (``np.savez_compressed``,
+    ``scipy.io.savemat``, ``Figure.savefig``). Any error, ``KeyboardInterrupt`` included, removes the
+    temporary file and leaves an existing ``path`` as it was. The new file gets the mode an existing
+    ``path`` had, else the mode ``open`` would give.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.txt"
+    >>> _ = atomic_write(p, lambda fh: fh.write(b"whole"))
+    >>> p.read_bytes()
+    b'whole'
+    """
+    path = Path(path)
+    folder = _folder(path)
+    try:
+        mode = path.stat().st_mode & 0o7777
+    except OSError:
+        mode = file_mode()
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    _sync_folder(folder)
+    return path
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` with :func:`atomic_write`."""
+    data = text.encode("utf-8")
+    return atomic_write(path, lambda fh: fh.write(data))
+
+
+#: ``renameat2``'s flag that swaps two names in one step (Linux 3.15+, glibc 2.28+)
+_RENAME_EXCHANGE = 2
+_AT_FDCWD = -100
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap the names ``a`` and ``b`` in one step; False where the system cannot."""
+    try:
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):
+        return False
+    renameat2.argtypes = (ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint)
+    rc = renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE)
+    return rc == 0
+
+
+def replace_dir(new: str | os.PathLike, target: str | os.PathLike) -> Path:
+    """Put the folder ``new`` in the place of ``target`` as one set, then delete the old ``target``.
+
+    Where the system can swap two names in one step (Linux), a kill at any moment leaves the old
+    folder or the new one at ``target``. Elsewhere the old folder is renamed aside
+    (``.NAME.old-*``) before the new one is renamed in: a kill between the two renames leaves
+    ``target`` missing and both folders beside it. ``new`` and ``target`` must share a parent folder.
+    """
+    new, target = Path(new), Path(target)
+    if not target.exists():
+        os.rename(new, target)
+    elif _exchange(new, target):
+        shutil.rmtree(new)  # now the old folder
+    else:
+        old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=_folder(target)))
+        os.rename(target, old / "dir")
+        os.rename(new, target)
+        shutil.rmtree(old)
+    _sync_folder(_folder(target))
+    return target

@@ -1,0 +1,332 @@
+"""Nothing lost: every output file is written whole or not at all (a kill or a failed write leaves the
+previous file), a Ctrl-C exits 130 saying exactly what was written, and ``fte tune`` replaces its
+directory as one set and resumes an interrupted search (docs/interface.md, docs/tune.md)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fte_casadi import atomic
+from fte_casadi.atomic import atomic_write, atomic_write_text, replace_dir
+from fte_casadi.cli import main
+from fte_casadi.errors import SimulationError
+from fte_casadi.sim import load_result
+
+ROOT = Path(__file__).resolve().parents[1]
+SPEC = f"{Path(__file__).parent / 'plant_tune.py'}:plant"
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` with its bytes, by relative path."""
+    return {str(f.relative_to(folder)): f.read_bytes() for f in sorted(folder.rglob("*")) if f.is_file()}
+
+
+def _fte(*args: str, **kw) -> subprocess.Popen:
+    """``python -m fte_casadi ARGS`` from this checkout, in its own process."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "fte_casadi", *args], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)  # fmt: skip
+
+
+def _said(r) -> str:
+    """stderr as one line (messages are wrapped paragraphs)."""
+    return " ".join(r.stderr.split())
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> Path:
+    """The small plant's design document (fte design)."""
+    path = tmp_path_factory.mktemp("design") / "small.json"
+    r = CliRunner().invoke(main, ["design", SPEC, "-o", str(path)])
+    assert r.exit_code == 0, r.output
+    return path
+
+
+# -- the helper -----------------------------------------------------------------------------
+@pytest.mark.parametrize("error", [OSError(28, "No space left on device"), KeyboardInterrupt()])
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path, error):
+    p = tmp_path / "result.npz"
+    p.write_bytes(b"old and whole")
+
+    def half(fh):
+        fh.write(b"new, half of it")
+        raise error
+
+    with pytest.raises(type(error)):
+        atomic_write(p, half)
+    assert p.read_bytes() == b"old and whole"
+    assert sorted(os.listdir(tmp_path)) == ["result.npz"]
+    atomic_write_text(p, "new, whole ü")
+    assert p.read_text(encoding="utf-8") == "new, whole ü"
+
+
+def test_the_mode_of_the_file_is_kept_or_that_of_open(tmp_path):
+    old = tmp_path / "old.json"
+    old.write_text("{}")
+    old.chmod(0o640)
+    atomic_write_text(old, "[]")
+    assert old.stat().st_mode & 0o777 == 0o640
+    new = tmp_path / "new.json"
+    atomic_write_text(new, "[]")
+    plain = tmp_path / "plain.json"
+    plain.write_text("[]")
+    assert new.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777  # not mkstemp's 0o600
+
+
+_WRITER = """
+import sys, numpy as np
+from fte_casadi.atomic import atomic_write
+big = np.random.default_rng(0).standard_normal(3_000_000)
+for k in range(1, 1000):
+    atomic_write(sys.argv[1], lambda fh: np.savez_compressed(fh, k=np.array(k), big=big + k))
+"""
+
+
+def test_a_kill_while_writing_leaves_the_old_or_the_complete_file(tmp_path):
+    """SIGKILL while a write is under way (its temporary file seen, an earlier one complete): the file
+    loads, whole, and a temporary file is all a kill can leave."""
+    target = tmp_path / "r.npz"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen([sys.executable, "-c", _WRITER, str(target)], env=env)
+    try:
+        deadline = time.monotonic() + 120
+        while not (target.exists() and any(f.name.endswith(".tmp") for f in tmp_path.iterdir())):
+            assert p.poll() is None and time.monotonic() < deadline
+            time.sleep(0.002)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=30)
+    finally:
+        p.kill()
+    with np.load(target) as z:
+        k = int(z["k"])
+        np.testing.assert_array_equal(z["big"][:5], np.random.default_rng(0).standard_normal(5) + k)
+    assert {f.name for f in tmp_path.iterdir()} - {"r.npz"} <= {f.name for f in tmp_path.glob(".r.npz.*.tmp")}
+
+
+@pytest.mark.parametrize("exchange", [True, False])
+def test_replace_dir_puts_the_new_set_in_place(tmp_path, monkeypatch, exchange):
+    old, new = tmp_path / "out", tmp_path / "out.partial"
+    (old / "designs").mkdir(parents=True)
+    (old / "designs" / "trial-0003.json").write_text("old")
+    (old / "tune.json").write_text("old")
+    new.mkdir()
+    (new / "tune.json").write_text("new")
+    if not exchange:
+        monkeypatch.setattr(atomic, "_exchange", lambda a, b: False)
+    replace_dir(new, old)
+    assert _files(old) == {"tune.json": b"new"}
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["out"]
+
+
+# -- simulate --save, load_result, design -o ---------------------------------------------------
+def test_a_kill_during_simulate_save_leaves_the_earlier_result(small, tmp_path):
+    """``fte simulate --save`` killed while the .npz is being written: the earlier result is intact."""
+    target = tmp_path / "r.npz"
+    r = CliRunner().invoke(main, ["simulate", str(small), "--paths", "2", "--save", str(target), "--quiet"])
+    assert r.exit_code == 0, r.output
+    before = target.read_bytes()
+    p = _fte("simulate", str(small), "--paths", "40", "--save", str(target), "--quiet")
+    try:
+        deadline = time.monotonic() + 300
+        while not any(f.name.endswith(".tmp") for f in tmp_path.iterdir()):
+            assert p.poll() is None, p.stderr.read().decode()
+            assert time.monotonic() < deadline
+            time.sleep(0.002)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=30)
+    finally:
+        p.kill()
+        p.communicate()
+    assert target.read_bytes() == before
+    assert load_result(target).paths == 2
+
+
+def test_load_result_names_a_truncated_file(small, tmp_path):
+    target = tmp_path / "r.npz"
+    r = CliRunner().invoke(main, ["simulate", str(small), "--paths", "2", "--save", str(target), "--quiet"])
+    assert r.exit_code == 0, r.output
+    data = target.read_bytes()
+    for cut in (len(data) // 2, len(data) - 100, 30):
+        target.write_bytes(data[:cut])
+        with pytest.raises(SimulationError, match="corrupt or truncated"):
+            load_result(target)
+
+
+@pytest.mark.parametrize("name", ["d.json", "d.mat"])
+def test_ctrl_c_while_design_writes_leaves_the_earlier_document(small, tmp_path, monkeypatch, name):
+    target = tmp_path / name
+    r = CliRunner().invoke(main, ["design", SPEC, "-o", str(target)])
+    assert r.exit_code == 0, r.output
+    before = target.read_bytes()
+
+    real = os.replace
+
+    def interrupted(src, dst):  # the new document is written whole, not yet renamed into place
+        if str(dst).startswith(str(tmp_path)):
+            raise KeyboardInterrupt
+        return real(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", interrupted)
+    r = CliRunner().invoke(main, ["design", SPEC, "--gamma1", "0.5", "-o", str(target)])
+    assert r.exit_code == 130, r.output
+    assert "interrupted; nothing was written" in _said(r)
+    assert target.read_bytes() == before
+    assert sorted(os.listdir(tmp_path)) == [name]
+
+
+def test_ctrl_c_names_what_was_written(small, tmp_path, monkeypatch):
+    """The result was saved before the Ctrl-C came, the figures were not: the message says so."""
+    import fte_casadi.plot as plot
+
+    target, figs = tmp_path / "r.npz", tmp_path / "figs"
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plot, "write_figures", interrupted)
+    r = CliRunner().invoke(main, ["simulate", str(small), "--paths", "2", "--save", str(target), "--plots",
+                                  str(figs), "--quiet"])  # fmt: skip
+    assert r.exit_code == 130, r.output
+    assert f"written before the interrupt, each file complete: {target}; nothing else was written" in _said(r)
+    assert load_result(target).paths == 2
+    assert not figs.exists()
+
+
+def test_sigint_stops_simulate_within_seconds(small, tmp_path):
+    """SIGINT to ``python -m fte_casadi simulate`` in the middle of a long Monte Carlo: exit 130 within
+    a few seconds (docs/interface.md: about a second), the earlier figures untouched."""
+    figs = tmp_path / "figs"
+    figs.mkdir()
+    (figs / "fig01_old.png").write_bytes(b"an earlier figure")
+    p = _fte("simulate", str(small), "--paths", "200000", "--plots", str(figs))
+    err = bytearray()  # the progress bar rewrites its line (\r): read what comes, not lines
+    reader = threading.Thread(target=lambda: [err.extend(b) for b in iter(lambda: p.stderr.read1(4096), b"")],
+                              daemon=True)  # fmt: skip
+    reader.start()
+    try:
+        deadline = time.monotonic() + 300
+        while b"paths" not in err:  # the progress bar: the Monte Carlo is running
+            assert p.poll() is None, err.decode()
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=60)
+        stopped = time.monotonic() - t0
+    finally:
+        p.kill()
+    reader.join(timeout=10)
+    err = err.decode()
+    assert p.returncode == 130, err
+    assert stopped < 5.0, f"stopped {stopped:.2f} s after SIGINT"
+    print(f"stopped {stopped:.2f} s after SIGINT")
+    assert "interrupted; nothing was written" in err
+    assert _files(figs) == {"fig01_old.png": b"an earlier figure"}
+
+
+# -- fte tune ------------------------------------------------------------------------------
+pytest.importorskip("optuna")
+
+
+def _tune(out: Path, *extra: str):
+    return CliRunner().invoke(main, ["tune", SPEC, "--seed", "2", "--paths", "2", "--out", str(out), "--quiet",
+                                     *extra])  # fmt: skip
+
+
+def _trials(out: Path) -> list[tuple]:
+    return [(t["trial"], t["state"], json.dumps(t["knobs"], sort_keys=True), t["objectives"])
+            for t in json.loads((out / "tune.json").read_text())["trials"]]  # fmt: skip
+
+
+def test_tune_interrupted_keeps_its_trials_and_resumes(tmp_path, monkeypatch):
+    """An earlier set in DIR survives a Ctrl-C; the finished trials are kept in DIR.partial; --resume
+    finishes the run, and its trials are those of an uninterrupted run."""
+    import fte_casadi.tune.search as search
+
+    out = tmp_path / "t"
+    r = _tune(out, "--trials", "2")
+    assert r.exit_code == 0, r.output
+    earlier = _files(out)
+    assert "optuna.db" in earlier and len(_trials(out)) == 2
+
+    real, calls = search.evaluate, []
+
+    def interrupted_third(task):  # trial 0 and one trial of the next batch, then Ctrl-C
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(task)
+
+    monkeypatch.setattr(search, "evaluate", interrupted_third)
+    r = _tune(out, "--trials", "5")
+    assert r.exit_code == 130, r.output
+    work = tmp_path / "t.partial"
+    assert "the finished trials (1) are kept in" in _said(r) and "--resume" in _said(r), _said(r)
+    assert f"each file complete: {work / 'optuna.db'};" in _said(r)  # written, and said
+    assert _files(out) == earlier
+
+    r = _tune(out, "--trials", "5")
+    assert r.exit_code == 2 and "--resume" in r.stderr  # a fresh run would drop the kept trials
+    r = _tune(out, "--trials", "5", "--resume", "--seed", "3")  # the last --seed counts
+    assert r.exit_code == 2 and "differs from this one in seed (it was run with 2)" in _said(r), _said(r)
+    rerun = []
+    monkeypatch.setattr(search, "evaluate", lambda task: rerun.append(1) or real(task))
+    r = _tune(out, "--trials", "5", "--resume")
+    assert r.exit_code == 0, r.output
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["t"]  # no DIR.partial, no old set aside
+    resumed = _trials(out)
+    assert len(resumed) == 5 and len(rerun) == 4  # trial 0 kept, not run again
+
+    r = _tune(tmp_path / "u", "--trials", "5")
+    assert r.exit_code == 0, r.output
+    assert resumed == _trials(tmp_path / "u")
+
+
+def test_tune_failed_write_leaves_the_earlier_set(tmp_path, monkeypatch):
+    """Disk full while the new set is written: DIR is the earlier set, whole; --resume writes it later
+    without running a trial again."""
+    import fte_casadi.plot as plot
+    import fte_casadi.tune.search as search
+
+    out = tmp_path / "t"
+    r = _tune(out, "--trials", "2")
+    assert r.exit_code == 0, r.output
+    earlier = _files(out)
+
+    def disk_full(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    real_figure = plot.pareto_figure
+    monkeypatch.setattr(plot, "pareto_figure", disk_full)
+    r = _tune(out, "--trials", "3", "--seed", "5")
+    assert r.exit_code == 2, r.output
+    assert "No space left on device" in _said(r) and "--resume" in _said(r)
+    assert _files(out) == earlier
+
+    monkeypatch.setattr(plot, "pareto_figure", real_figure)
+    monkeypatch.setattr(search, "evaluate", lambda task: pytest.fail("a kept trial was run again"))
+    r = _tune(out, "--trials", "3", "--seed", "5", "--resume")
+    assert r.exit_code == 0, r.output
+    assert len(_trials(out)) == 3 and (out / "pareto.png").stat().st_size > 1000
+
+
+def test_tune_refuses_a_directory_with_other_files(tmp_path):
+    out = tmp_path / "t"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    r = _tune(out, "--trials", "2")
+    assert r.exit_code == 2 and "notes.txt" in _said(r) and "as a whole" in _said(r)
+    assert (out / "notes.txt").read_text() == "mine"
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["t"]
