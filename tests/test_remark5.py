@@ -152,7 +152,8 @@ def test_monte_carlo_estimates_the_fault_with_the_gust_acting(r5):
     achieves without the gust and by the trivial estimate fhat = 0 (relative error 1)."""
     with_gust = simulate(r5, plant(), scenario(0.5), paths=4, seed=1, progress=False).metrics
     calm = simulate(r5, plant(), scenario(0.0), paths=4, seed=1, progress=False).metrics
-    e, e0 = with_gust["fault_rel_rms_error"][0], calm["fault_rel_rms_error"][0]
+    # after the estimator settles (each window minus its first 20 %): the gust's cost, not the start-up
+    e, e0 = with_gust["fault_rel_rms_error_settled"][0], calm["fault_rel_rms_error_settled"][0]
     assert e0 < 0.05  # measured 0.020
     assert e < 0.2  # measured 0.133: the gust (amplitude 0.5, as large as the fault) costs some accuracy
     assert with_gust["ftc_true_ratio"] < 0.1  # measured 0.039
@@ -178,7 +179,7 @@ def test_rule_dependent_bd_is_named_and_remark5_used():
     )
     assert d.remark5["decoupled_directions"] == 1  # H still decouples tau's mean direction
     m = simulate(d, bd_plant(), bd_scenario(0.5), paths=4, seed=1, progress=False).metrics
-    assert m["fault_rel_rms_error"][0] < 0.4  # measured 0.28
+    assert m["fault_rel_rms_error_settled"][0] < 0.4  # measured 0.28 (the whole window: 0.36)
 
 
 def _cli(*args):
