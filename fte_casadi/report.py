@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .design import DesignOptions
 from .design import design as run_design
 from .design.record import atomic_write_text
 from .errors import InfeasibleDesignError, SolverFailedError
@@ -299,9 +300,10 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         log(f"[{name}] design, variant {variant}")
         try:
             given = SECTION_6_PARAMS.get(name, {}) if variant == "paper" else {}
-            designs[variant] = run_design(
-                ts, variant=variant, plant_spec=name, sample_time=SCENARIOS[name]().dt, **given
+            options = DesignOptions(
+                variant=variant, plant_spec=name, sample_time=SCENARIOS[name]().dt, **given
             )
+            designs[variant] = run_design(ts, options)
         except (InfeasibleDesignError, SolverFailedError) as exc:
             designs[variant] = " ".join(str(exc).split())
             log(f"[{name}]   variant {variant} failed: {designs[variant][:160]}")
