@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from fte_casadi.design import Design, augment, check_assumptions, design, enforce, invariant_zeros, uio_gain
-from fte_casadi.design.certify import lmi45, lmi46, lmi55, lmi64
+from fte_casadi.design.core.lmis import lmi45, lmi46, lmi55, lmi64
 from fte_casadi.errors import AssumptionError, InfeasibleDesignError, ParameterError
 from fte_casadi.model import PlantBuilder
 from fte_casadi.plants import manipulator, three_tank
@@ -426,8 +426,8 @@ def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(m
 
 def test_a_numerical_failure_names_the_worst_scaled_block():
     """Issue #17: the report of a solver's numerical failure says which LMI block was badly scaled, and by how much."""
-    from fte_casadi.design.conditioned import _fail, worst_block
-    from fte_casadi.design.sdp import AffineLMI, SolveResult
+    from fte_casadi.design.core.conditioned import _fail, worst_block
+    from fte_casadi.design.core.sdp import AffineLMI, SolveResult
 
     F0 = np.diag([-1.0, -2.0, -1e-6, -3e3])
     F = np.zeros((2, 4, 4))

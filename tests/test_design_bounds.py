@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from fte_casadi.design import design
-from fte_casadi.design.bounds import bound_value
+from fte_casadi.design.core.bounds import bound_value
 from fte_casadi.design.record import Design
 from fte_casadi.plants.loader import load_plant, load_scenario
 from fte_casadi.sim import Sinusoid, UniformNoise, simulate

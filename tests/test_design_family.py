@@ -10,7 +10,7 @@ from threadpoolctl import threadpool_info
 
 from benchmarks.plant_chain import chain
 from fte_casadi.design import design
-from fte_casadi.design.certify import failures
+from fte_casadi.design.core.certify import failures
 from fte_casadi.ts import derive
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fte_casadi.design import DesignOptions, design
-from fte_casadi.design import conditioned as cond
+from fte_casadi.design.core import conditioned as cond
 from fte_casadi.design.options import resolve
 from fte_casadi.errors import ParameterError
 from fte_casadi.plants import SCENARIOS

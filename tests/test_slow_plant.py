@@ -20,7 +20,7 @@ import pytest
 from fte_casadi import PlantBuilder
 from fte_casadi.design import design
 from fte_casadi.design.augment import augment
-from fte_casadi.design.diagnose import sigma_max
+from fte_casadi.design.core.diagnose import sigma_max
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive
 

@@ -17,8 +17,9 @@ from threadpoolctl import threadpool_limits
 from ..errors import FteError, InfeasibleDesignError
 from ..rounding import nice_ceil
 from ..ts import TSModel
-from . import conditioned, pipeline
-from .diagnose import FrontierPoint, gamma_min, sigma_max
+from . import pipeline
+from .core import conditioned
+from .core.diagnose import FrontierPoint, gamma_min, sigma_max
 from .explain import explain_45, explain_46, outside_45
 from .options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, resolve
 from .record import Design

@@ -7,7 +7,7 @@ import math
 
 from ..errors import InfeasibleDesignError
 from ..rounding import nice_ceil, nice_floor
-from .diagnose import gamma_min, sigma_max
+from .core.diagnose import gamma_min, sigma_max
 from .limits import reachability
 from .options import DesignOptions, default_gamma1
 from .search import Attempt, refusals, try_design

@@ -18,9 +18,9 @@ import numpy as np
 from ..errors import AssumptionError, InfeasibleDesignError
 from ..model.fingerprint import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
-from . import conditioned, paper
 from .augment import Augmented, augment
-from .certify import certificate, discrete_certificate, failures
+from .core import conditioned, paper
+from .core.certify import certificate, discrete_certificate, failures
 from .options import DesignOptions, Resolved
 from .record import Design
 from .records import Dims, Observer, Params
@@ -275,7 +275,7 @@ def _fault_gains(ts: TSModel, status: list):
 
 
 def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known):
-    """The closed loop's data the bound needs (:mod:`fte_casadi.design.bounds`), or None where it is not posed
+    """The closed loop's data the bound needs (:mod:`fte_casadi.design.core.bounds`), or None where it is not posed
     (Remark 5's fallback, Theorem 5's diffusion). ``gains = (Kf, Kf_rules)`` and ``u_ref`` once the design has
     them (before step 5 they are computed here, their messages left to the design); ``known``: ``R`` once the
     observer is designed."""
@@ -290,13 +290,13 @@ def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known)
 
 def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, fallback=None) -> dict:
     """The certified bounds on the fault- and state-estimation errors at the returned design (
-    :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
+    :mod:`fte_casadi.design.core.bounds`), for a certified design; {} otherwise."""
     if not certified:
         return {}
     if r5doc and r5doc.get("used"):
         why = {"holds": False, "why": "not computed where Remark 5's fallback is used"}
         return {"fault_error": why, "state_error": dict(why)}
-    from .bounds import fault_error_bound, state_error_bound
+    from .core.bounds import fault_error_bound, state_error_bound
 
     view = _closed_loop_view(ts, T, K, None, (Kf, Kf_rules), u_ref, R=R)
     if view is None:  # Theorem 5's diffusion: the bounds say so

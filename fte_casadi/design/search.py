@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from ..errors import FteError
 from ..rounding import nice_ceil, nice_floor
-from .diagnose import gamma_min, sigma_max
+from .core.diagnose import gamma_min, sigma_max
 from .options import DesignOptions
 from .record import Design
 
