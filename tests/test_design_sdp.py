@@ -277,7 +277,7 @@ def test_phase1_on_a_subset_with_tied_caps_gives_the_full_answers(monkeypatch):
     """The Kron family with 12 members (one scalar rho_i each, capped by an LMI of its own) and I <= P <= 10 I:
     the decay term makes it infeasible for large parameters. Taken two members at a time, with the caps tied
     to their members, the growing subset decides every value as phase 1 on all members does."""
-    from fte_casadi.design import barrier
+    from fte_casadi.design.core import barrier
 
     monkeypatch.setattr(barrier, "ACTIVE_ADD", 2)
     lay, lmis, _ = _kron_family(r=12)
