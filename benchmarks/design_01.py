@@ -1,13 +1,13 @@
 """The 0.1 design: the design formulation of fte_casadi 0.1, kept only as the baseline of ``fte bench``.
 
-It was replaced by :mod:`fte_casadi.design.conditioned` (issue #9): the formulation below is not
+It was replaced by :mod:`fte_casadi.design.core.conditioned` (issue #9): the formulation below is not
 unique (N, Q_i, Y_j are free at its optimum, so different machines land on different points),
 needs about 30 solves (a grid over scales of Pbar x decay rates x a bisection on theta) and
 takes seconds. ``fte bench`` runs :func:`design_01` beside today's design in the same process
 so that the speed-up it reports is measured, not remembered (the numbers measured are also kept in
 ``benchmarks/RECORDED.md``). Nothing else uses this module; it is not part of the package.
 
-Corrections of the printed LMIs are listed in :mod:`fte_casadi.design.certify`.
+Corrections of the printed LMIs are listed in :mod:`fte_casadi.design.core.certify`.
 
 Two variants
 ------------
@@ -43,7 +43,7 @@ Two variants
       only ``-1e-4`` for the manipulator, so one uniform margin would fail).
 
     Every accept/retry decision (step 3, the search over c and alpha, each bisection step) uses
-    the numpy certificate of :mod:`fte_casadi.design.certify` at the returned point, never the
+    the numpy certificate of :mod:`fte_casadi.design.core.certify` at the returned point, never the
     solver status alone ("optimal_inaccurate" points are kept only when they certify). On
     failure step 5 is retried with alpha / 2, alpha / 4, 0 and then with SCS; SCS runs with capped
     iterations and a wall-clock budget (:data:`BUDGET_S`) so that it certifies or fails fast.
@@ -60,9 +60,10 @@ import cvxpy as cp
 import numpy as np
 
 from fte_casadi.design.augment import Augmented
-from fte_casadi.design.certify import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64, ts_max
-from fte_casadi.design.linalg import sym as _sym
-from fte_casadi.design.sdp import SOLVED
+from fte_casadi.design.core.certify import ts_max
+from fte_casadi.design.core.linalg import sym as _sym
+from fte_casadi.design.core.lmis import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64
+from fte_casadi.design.core.sdp import SOLVED
 from fte_casadi.errors import InfeasibleDesignError
 
 __all__ = ["design_01"]
@@ -491,7 +492,7 @@ def _default_alpha_step5(ts, aug, params, P, K, T, solver):
 def design_01(ts, solver: str = "CLARABEL") -> dict:
     """The 0.1 conditioned design of a T-S model with the plant's default parameters, and its certificate."""
     from fte_casadi.design.augment import augment
-    from fte_casadi.design.certify import certificate
+    from fte_casadi.design.core.certify import certificate
     from fte_casadi.design.uio import uio_gain
 
     defaults = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}

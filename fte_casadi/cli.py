@@ -276,26 +276,20 @@ def _make_design(
     plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
     vertices: str | None = None,
 ):  # fmt: skip
+    from .design import DesignOptions
     from .design import design as run_design
     from .plants.loader import load_plant
     from .ts import derive as derive_ts
 
+    options = DesignOptions(variant=variant, solver=solver, allow_uncertified=allow_uncertified,
+                            accept_assumptions=tuple(accept), plant_spec=_absolute_spec(plant_spec), **params)  # fmt: skip
     ts = derive_ts(load_plant(plant_spec), vertices=vertices)
-    params = dict(params)
     sc = _scenario(plant_spec)
-    if params.get("sample_time") is None and sc is not None:
-        params["sample_time"] = float(sc.dt)
-    if sc is not None and sc.x0 is not None:
-        params["initial_state"] = sc.x0  # the simulation's nominal start, for the C's init_from_y
-    return run_design(
-        ts,
-        variant=variant,
-        solver=solver,
-        allow_uncertified=allow_uncertified,
-        accept_assumptions=tuple(accept),
-        plant_spec=_absolute_spec(plant_spec),
-        **params,
-    )
+    if options.sample_time is None and sc is not None:
+        options = options.replace(sample_time=float(sc.dt))
+    if sc is not None and sc.x0 is not None:  # the simulation's nominal start, for the C's init_from_y
+        options = options.replace(initial_state=sc.x0)
+    return run_design(ts, options)
 
 
 def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:

@@ -19,13 +19,16 @@ __all__ = ["builtin_design", "regenerate_builtin"]
 
 def builtin_design(plant_name: str) -> Design:
     """The design used for ``generated/``: the conditioned LMI design of the built-in plant."""
+    from .design import DesignOptions
     from .design import design as lmi_design
     from .plants import BUILTIN, SCENARIOS
     from .ts import derive
 
     sc = SCENARIOS[plant_name]()
-    return lmi_design(derive(BUILTIN[plant_name]()), variant="conditioned", plant_spec=plant_name,
-                      sample_time=sc.dt, initial_state=sc.x0)  # fmt: skip
+    options = DesignOptions(
+        variant="conditioned", plant_spec=plant_name, sample_time=sc.dt, initial_state=sc.x0
+    )
+    return lmi_design(derive(BUILTIN[plant_name]()), options)
 
 
 def regenerate_builtin(root: str | os.PathLike, names=None) -> dict[str, list[Path]]:

@@ -16,7 +16,7 @@ import pytest
 
 from fte_casadi.codegen.generate import BUILTIN_DIRS, generate_c, output_files
 from fte_casadi.design import augment
-from fte_casadi.design.certify import certificate, failures
+from fte_casadi.design.core.certify import certificate, failures
 from fte_casadi.design.record import Design
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"

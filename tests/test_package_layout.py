@@ -159,16 +159,16 @@ def _modules_of(places: list[str]) -> set[str]:
 
 
 def test_the_symmetric_part_is_written_once():
-    assert _where(_is_sym) == ["design/linalg.py:12"]
+    assert _where(_is_sym) == ["design/core/linalg.py:12"]
     assert _is_sym(ast.parse("0.5 * (P.value + P.value.T)").body[0].value)  # the check sees an inline one
 
 
 def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once():
     inaccurate = _where(lambda n: isinstance(n, ast.Constant) and n.value == "optimal_inaccurate")
-    assert _modules_of(inaccurate) == {"design/sdp.py"} and len(inaccurate) == 1  # SOLVED
+    assert _modules_of(inaccurate) == {"design/core/sdp.py"} and len(inaccurate) == 1  # SOLVED
     assert _modules_of(_where(_calls("math.log10")) + _where(_calls("np.log10"))) <= {
         "rounding.py",
-        "design/conditioned.py",  # the span of the bracket in a message, not a rounding
+        "design/core/conditioned.py",  # the span of the bracket in a message, not a rounding
     }
     assert _modules_of(_where(_calls("shutil.which"))) == {"toolchain.py"}
 

@@ -14,7 +14,7 @@ import pytest
 from fte_casadi.codegen import build
 from fte_casadi.codegen.ctypes_step import CStep
 from fte_casadi.design import design
-from fte_casadi.design.certify import failures
+from fte_casadi.design.core.certify import failures
 from fte_casadi.design.record import Design
 from fte_casadi.plants import SCENARIOS, quadruple_tank
 from fte_casadi.ts import derive

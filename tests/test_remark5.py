@@ -19,7 +19,7 @@ from fte_casadi.codegen import build
 from fte_casadi.codegen.ctypes_step import CStep
 from fte_casadi.codegen.generate import generate_c
 from fte_casadi.design import augment, design
-from fte_casadi.design.certify import certificate
+from fte_casadi.design.core.certify import certificate
 from fte_casadi.design.record import Design
 from fte_casadi.errors import AssumptionError, DesignFileError
 from fte_casadi.sim import simulate

@@ -20,7 +20,7 @@ import pytest
 from fte_casadi import PlantBuilder
 from fte_casadi.design import design
 from fte_casadi.design.augment import augment
-from fte_casadi.design.diagnose import sigma_max
+from fte_casadi.design.core.diagnose import sigma_max
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive
 
@@ -112,7 +112,7 @@ def test_an_unstable_mode_barely_reachable_is_named(ts):
 def test_generic_values_follow_the_outputs_size(ts):
     """The generic gamma, gamma1, sigma in the outputs' own size (sy = 1024 here); gamma1 follows only a
     generic gamma, so it stays below a gamma that was given; given values are kept."""
-    from fte_casadi.design.api import _params
+    from fte_casadi.design.options import _params
 
     def params(**given):
         full = {k: given.get(k) for k in ("gamma", "gamma1", "sigma", "delta", "epsilon")}

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from fte_casadi.cli import main
 from fte_casadi.design import design
-from fte_casadi.design.certify import failures
+from fte_casadi.design.core.certify import failures
 from fte_casadi.design.limits import channel_zeros, explain_metrics
 from fte_casadi.design.record import Design
 from fte_casadi.errors import ParameterError

@@ -14,7 +14,8 @@ import dataclasses
 import numpy as np
 
 from .augment import augment
-from .certify import certificate, discrete_certificate, distinct, failures
+from .core.certify import certificate, discrete_certificate, failures
+from .core.lmis import LMIS, distinct
 
 __all__ = ["recertify"]
 
@@ -60,12 +61,12 @@ def recertify(d) -> list[str]:
     ts = d.observer.sample_time
     if ts is not None:
         checks["discrete"] = discrete_certificate(R, Pbar, float(ts))
-    names = {"45": "45", "46": "46", "55": "55", "64": "64"}
-    if checks.get("theorem") == 5:
-        names = {"45": "78", "46": "79", "55": "80", "64": "81"}
-    for k, v in checks["lmi_max_eig"].items():
-        if k in names and not v < 0:
-            out.append(f"LMI ({names[k]}) recomputes to {v:+.3g} at the loaded numbers (it must be negative)")
+    for k, lmi in LMIS.items():
+        v = checks["lmi_max_eig"][k]
+        if not v < 0:
+            out.append(
+                f"{lmi.name(checks.get('theorem'))} recomputes to {v:+.3g} at the loaded numbers (it must be negative)"
+            )
     for i, Ri in enumerate(R):
         top = float(np.max(np.linalg.eigvals(Ri).real))
         if not top < 0:

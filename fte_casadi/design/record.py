@@ -132,7 +132,7 @@ class Design:
     #: Remark 5's fallback (:mod:`fte_casadi.design.remark5`): {"used": True, "unknown_inputs": [...],
     #: "gain": [one per undecoupled direction], "d_bound", "Bdu", "M", ...}; empty when not used
     remark5: dict = field(default_factory=dict)
-    #: certified performance bounds at the design (:mod:`fte_casadi.design.bounds`): {"fault_error": {...}}
+    #: certified performance bounds at the design (:mod:`fte_casadi.design.core.bounds`): {"fault_error": {...}}
     bounds: dict = field(default_factory=dict)
     #: the scheduling map as data (:func:`fte_casadi.model.tape.write_tape`); None: a document older than it
     scheduling_ops: dict | None = None

@@ -11,7 +11,7 @@ For a transition the records also answer item access as the dicts did (``d.dims[
 code still written against the dicts keeps working; new code reads attributes.
 
 ``Design.checks`` stays a dict: its key set is open (the certificate adds keys with the theorem, the sample
-time and Remark 5's fallback, and :func:`~fte_casadi.design.certify.failures` reads whatever is there), and
+time and Remark 5's fallback, and :func:`~fte_casadi.design.core.certify.failures` reads whatever is there), and
 its values are nested reports (``checks["lmi_max_eig"]["46"]``), not scalars a record could type.
 """
 

@@ -4,13 +4,26 @@ from __future__ import annotations
 
 import numpy as np
 
+from .core.lmis import LMIS
+
 __all__ = ["design_summary"]
+
+
+def _lmi_keys(checks: dict) -> list[str]:
+    """The keys of the registered LMIs the certificate holds (:data:`~.core.lmis.LMIS`), then under Theorem 5
+    their Theorem 5 numbers (the same values)."""
+    lmi = checks["lmi_max_eig"]
+    keys = [k for k in LMIS if k in lmi]
+    if checks.get("theorem") == 5:
+        keys += [e.theorem5 for e in LMIS.values() if e.theorem5 and e.theorem5 in lmi]
+    return keys
 
 
 def design_summary(d) -> str:
     """The summary of the Design ``d`` that ``fte design`` prints (one string, lines joined)."""
     c = d.checks
     lmi = c["lmi_max_eig"]
+    shown = _lmi_keys(c)
     K = max(float(np.max(np.abs(k))) for k in d.K)
     obs = d.observer
     lines = [
@@ -18,10 +31,10 @@ def design_summary(d) -> str:
         f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
         "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.to_dict().items()),
         "  largest eigenvalue of each LMI at the returned point (negative = holds): "
-        + ", ".join(f"({k}) {v:.3g}" for k, v in lmi.items())
+        + ", ".join(f"({k}) {lmi[k]:.3g}" for k in shown)
         + (
             "; round-off of each, 8 dim eps ||M||: "
-            + ", ".join(f"{v:.1g}" for v in c["lmi_roundoff"].values())
+            + ", ".join(f"{c['lmi_roundoff'][k]:.1g}" for k in shown if k in c["lmi_roundoff"])
             if c.get("lmi_roundoff")
             else ""
         ),

@@ -69,7 +69,7 @@ def default_alpha(task: dict) -> float | None:
 
 def design_kwargs(knobs: dict) -> dict:
     """The arguments of :func:`fte_casadi.design.design` a candidate's knobs give (alpha aside)."""
-    from ..design.conditioned import KAPPA
+    from ..design.core.conditioned import KAPPA
 
     g = float(knobs["gamma"])
     kw = {"gamma": g, "gamma1": float(knobs["gamma1_ratio"]) * g, "sigma": float(knobs["sigma"]),
@@ -85,7 +85,7 @@ def design_kwargs(knobs: dict) -> dict:
 
 def bound_gain(bounds: dict | None) -> float | None:
     """The certified L2 gain from the stacked channels ``w = [d; f''; u_s; f; 1]`` to ``f - fhat`` of a
-    design's ``bounds.fault_error`` (:mod:`fte_casadi.design.bounds`): ``max_k gain_k``, since
+    design's ``bounds.fault_error`` (:mod:`fte_casadi.design.core.bounds`): ``max_k gain_k``, since
     ``E int |f - fhat|^2 <= sum_k gain_k^2 E int |w_k|^2 + v0 <= max_k gain_k^2 E int |w|^2 + v0``.
     None when the bound was not computed or does not hold."""
     fe = (bounds or {}).get("fault_error") or {}
@@ -127,7 +127,7 @@ def evaluate(task: dict) -> dict:
     import dataclasses
 
     from ..design import design as run_design
-    from ..design.conditioned import KAPPA
+    from ..design.core.conditioned import KAPPA
     from ..design.record import Design
     from ..sim import Scenario, simulate
 

@@ -579,7 +579,7 @@ def _base_knobs(base_design, base_task: dict, e_scale: float | None) -> tuple[fl
 def _sigma_sup(plant, base_design) -> float | None:
     """The largest sigma (45) allows for any gamma at the base gamma1 (None when none or on failure)."""
     from ..design.augment import augment
-    from ..design.diagnose import sigma_max
+    from ..design.core.diagnose import sigma_max
     from ..errors import FteError
     from ..ts import derive
 

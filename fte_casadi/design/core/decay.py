@@ -1,7 +1,7 @@
 """The observer's decay rate in step 5 (conditioned variant): the largest feasible one, and the one the
 sample time allows.
 
-``prob`` is step 5's problem (:class:`fte_casadi.design.conditioned._Step5`): ``prob.feasible(alpha)`` decides
+``prob`` is step 5's problem (:class:`fte_casadi.design.core.conditioned._Step5`): ``prob.feasible(alpha)`` decides
 whether (46) with the normalisation is feasible at ``alpha``, ``prob.design(alpha)`` returns the centred design
 there (or None)."""
 
@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InfeasibleDesignError
-from ..rounding import nice_floor
+from ...errors import InfeasibleDesignError
+from ...rounding import nice_floor
 
 __all__ = ["alpha_max", "cap_for_sample_time", "TS_FACTOR", "ALPHA_RTOL", "CAP_GRID"]
 
@@ -60,7 +60,7 @@ CAP_GRID = (0.875, 0.75, 0.625, 0.5, 0.375, 0.25, 0.125, 0.0)
 def cap_for_sample_time(prob, a: float, pt: dict, why: str, sample_time: float):
     """The largest alpha of ``CAP_GRID x a`` whose centred design runs at ``sample_time`` with margin.
 
-    The measure is ``ts_cert`` (:func:`~fte_casadi.design.certify.lyapunov_ts_max`): the largest Ts for
+    The measure is ``ts_cert`` (:func:`~fte_casadi.design.core.certify.lyapunov_ts_max`): the largest Ts for
     which Pbar proves the blended discrete step stable (not monotone in alpha: the centred point
     moves with it, hence a scan, not a bisection). The target is ``TS_FACTOR * sample_time``; when no
     alpha tried reaches it but some reach ``sample_time``, the largest such alpha is taken (stable at

@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import InfeasibleDesignError
-from .augment import Augmented
-from .certify import lmi45, lmi46, lmi55, lmi64
+from ...errors import InfeasibleDesignError
+from ..augment import Augmented
 from .conditioned import Step3, Step5
+from .lmis import lmi45, lmi46, lmi55, lmi64
 from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
 __all__ = ["step3", "step5", "STRICT"]

@@ -1,6 +1,6 @@
 """The closed loop's fault-error bound as a term of step 5's objective (issue #18 item 1).
 
-:mod:`fte_casadi.design.bounds` certifies, at a returned design, the gain from the channels
+:mod:`fte_casadi.design.core.bounds` certifies, at a returned design, the gain from the channels
 ``w = [d; f''; u_s; f; 1]`` to ``f - fhat`` with one common Lyapunov matrix ``P`` of the closed loop
 ``xi = [x; e]``. Here the same stochastic bounded-real LMI is posed *inside* step 5, where the observer
 is still an unknown, with a block-diagonal ``P = diag(P1, lam Pbar)``: with step 3's gain ``K`` fixed and
@@ -12,7 +12,7 @@ variables (``Pbar = Pt / s``, ``Q_i = rho_i Cbar^T / (2 s)``) the LMI times ``s 
      [.,                                                                                                   -diag(g')]]  < 0
 
 with ``P' = diag(P1', Pt)``, ``P1' = s P1 / lam > 0`` and ``g' = s g / lam`` (``g`` the squared gains);
-``Ax_ij`` is the closed loop without the error's own dynamics (:func:`~fte_casadi.design.bounds.vertex_parts`).
+``Ax_ij`` is the closed loop without the error's own dynamics (:func:`~fte_casadi.design.core.bounds.vertex_parts`).
 ``lam`` is twice the smallest scale at which the error's block alone holds at the design without the term
 (a generalised eigenvalue; with ``lam = 1`` the three-tank's has no point). The
 block-diagonal ``P`` is a restriction of the certified bound's common ``P``, so this term is an upper
@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import CentringError
+from ...errors import CentringError
 from .barrier import centre, phase1
 from .bounds import MAX_STATES, MAX_VERTICES, channel_names, gain_diag, vertex_parts
 from .sdp import AffineLMI, Layout, Var, affine_lmi, positive
@@ -62,7 +62,7 @@ def _block(L: AffineLMI, rows: np.ndarray) -> AffineLMI:
 
 class BoundTerm:
     """The bound LMIs on step 5's layout extended by ``P1'`` and ``g'``, and the centring with them
-    (``verts, Cz``: :func:`~fte_casadi.design.bounds.vertex_parts` of the closed loop)."""
+    (``verts, Cz``: :func:`~fte_casadi.design.core.bounds.vertex_parts` of the closed loop)."""
 
     def __init__(self, layout: Layout, aug, T, P, verts, Cz, weight: float):
         self.names, self.sizes = channel_names(verts)

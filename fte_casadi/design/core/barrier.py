@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import CentringError
+from ...errors import CentringError
 from .sdp import AffineLMI, ConicProblem, SolveResult
 
 __all__ = [

@@ -1,7 +1,7 @@
 """LMIs as affine maps of one variable vector and their cvxpy form.
 
 Every LMI of the design is written once, as a numpy function of plain matrices (the builders of
-:mod:`fte_casadi.design.certify`, which also compute the certificates). For a solve, the
+:mod:`fte_casadi.design.core.certify`, which also compute the certificates). For a solve, the
 unknowns are packed into one vector ``v`` (:class:`Layout`) and the builder is evaluated at
 ``v = 0`` and at the unit vectors, which gives the LMI exactly as ``F(v) = F0 + sum_l v_l F_l``
 (the builders are affine in the unknowns; :func:`affine_lmi` checks it at a random point).
@@ -10,7 +10,7 @@ milliseconds; a scalar parameter ``p`` (the observer decay rate) may enter as ``
 keeps the problem DPP so that re-solving for another ``p`` does not re-canonicalise it.
 
 The Newton methods that centre the solver's point and decide feasibility in numpy are in
-:mod:`fte_casadi.design.barrier`.
+:mod:`fte_casadi.design.core.barrier`.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import cvxpy as cp
 import numpy as np
 
-from ..errors import CentringError as CentringError
+from ...errors import CentringError as CentringError
 from .linalg import sym as _sym
 
 __all__ = [

@@ -1,7 +1,7 @@
 """The conditioned design (the default): the printed LMIs, posed to be well scaled, unique and cheap.
 
 The certificate is exactly the printed one ((45), (46), (55), (64), or (78)-(81) for Theorem 5,
-recomputed at the end by :func:`fte_casadi.design.certify.certificate`); what changes is how the
+recomputed at the end by :func:`fte_casadi.design.core.certify.certificate`); what changes is how the
 solver is asked for a point. Every choice below is an equivalent reformulation or an added
 constraint, never a changed certificate.
 
@@ -40,7 +40,7 @@ Step 5 — LMIs (46), (55), (64) for Pbar, Q_i, N, theta
 Margins are per diagonal block and relative to that block's own size (``MARGIN`` of sigma, of
 gamma1^2, of Pt >= I, ...; ``2 MARGIN`` in the conic solve, ``MARGIN`` in the centring, so that
 the solver's point starts the centring strictly inside). After each conic solve,
-:func:`fte_casadi.design.barrier.centre` moves to the unique central-path point with relative gap
+:func:`fte_casadi.design.core.barrier.centre` moves to the unique central-path point with relative gap
 ``ETA``: the design is a smooth function of the plant and does not depend on the solver or the
 machine beyond round-off.
 """
@@ -51,25 +51,24 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import CentringError, InfeasibleDesignError
-from ..errors import SolverFailedError as SolverFailedError
-from ..rounding import nice_floor
-from .augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
+from ...errors import CentringError, InfeasibleDesignError
+from ...errors import SolverFailedError as SolverFailedError
+from ...rounding import nice_floor
+from ..augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
 from .barrier import centre, numpy_first, phase1, phase1_active
 from .bound_objective import bound_term
-from .certify import (
+from .certify import lyapunov_ts_max, ts_max
+from .decay import ALPHA_RTOL as ALPHA_RTOL
+from .decay import TS_FACTOR, alpha_max, cap_for_sample_time
+from .lmis import (
     diffusion_coupling,
     lmi45,
     lmi45_kron,
     lmi46,
     lmi46_kron,
-    lyapunov_ts_max,
     sliding_kron,
     sliding_mismatch,
-    ts_max,
 )
-from .decay import ALPHA_RTOL as ALPHA_RTOL
-from .decay import TS_FACTOR, alpha_max, cap_for_sample_time
 from .sdp import (
     SOLVED,
     AffineLMI,
@@ -193,7 +192,7 @@ def _start(
     """A strictly feasible point of ``soft`` and ``hard`` from the solver's answer, or None.
 
     The solver's point is taken if it is strictly feasible; otherwise (an approximate point, e.g.
-    SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.barrier.phase1`
+    SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.core.barrier.phase1`
     decides, in numpy, from there. A status that is neither a point nor infeasibility is a failure.
     """
     if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
@@ -304,7 +303,7 @@ def _scalar_cap(layout: Layout, name: str, hi: float) -> list[AffineLMI]:
 
 
 def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list):
-    """A heavy step 3's start point by phase 1 in numpy (:func:`~fte_casadi.design.barrier.numpy_first`),
+    """A heavy step 3's start point by phase 1 in numpy (:func:`~fte_casadi.design.core.barrier.numpy_first`),
     or None (then the conic solvers).
 
     (45) is a cone in ``(X', Y', s)`` cut by ``I <= X' <= kappa I``; phase 1's barrier pushes along the
@@ -333,7 +332,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
 
     One feasibility solve gives a strictly feasible point (for a problem with many PSD cones, phase 1 in
     numpy, :func:`_step3_numpy`; the conic solvers when it finds none);
-    :func:`~fte_casadi.design.barrier.centre` then minimises ``t`` along the central path to the unique
+    :func:`~fte_casadi.design.core.barrier.centre` then minimises ``t`` along the central path to the unique
     centred point, which does not depend on where it started.
     """
     Su = input_scaling(aug)
@@ -451,8 +450,8 @@ class _Step5:
     """Step 5 built once per design: the LMIs, one conic solve, and deterministic decisions in alpha.
 
     The one conic solve is the feasibility of (46) with the normalisation at ``alpha = 0``. Every
-    further question "is (46) feasible at alpha?" is answered by :func:`~fte_casadi.design.barrier.phase1`
-    (a barrier method in numpy) on a growing subset of the rules (:func:`~fte_casadi.design.barrier.phase1_active`:
+    further question "is (46) feasible at alpha?" is answered by :func:`~fte_casadi.design.core.barrier.phase1`
+    (a barrier method in numpy) on a growing subset of the rules (:func:`~fte_casadi.design.core.barrier.phase1_active`:
     a few rules decide; the answer is the same fact as on all of them), started from the last point found
     feasible: its answer does
     not depend on the solver, so the default alpha (and hence the design) is the same with
@@ -633,7 +632,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
     """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate.
 
     With ``params["bound_weight"] > 0``, the closed loop's fault-error bound is a term of the objective
-    (:mod:`fte_casadi.design.bound_objective`; ``bound_view`` the closed loop's data without R).
+    (:mod:`fte_casadi.design.core.bound_objective`; ``bound_view`` the closed loop's data without R).
     ``alpha_is_default``: ``alpha`` is the plant's recorded default (``fte tune``'s), not the user's: like the
     rate found by default, it is lowered when the sample time needs it."""
     prob = _Step5(aug, params, X, K, T, solver)

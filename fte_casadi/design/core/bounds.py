@@ -226,9 +226,9 @@ def _analysis(verts, Cz, names, sizes):
 
 
 def _from_point(verts, Cz, names, sizes, P0, g0):
-    """``min sum g`` over a common P by the barrier method in numpy (:func:`~fte_casadi.design.barrier.centre`)
+    """``min sum g`` over a common P by the barrier method in numpy (:func:`~fte_casadi.design.core.barrier.centre`)
     from the strictly feasible ``(P0, g0)`` (step 5's block-diagonal certificate): ``(P, g)`` or ``(None, None)``."""
-    from ..errors import CentringError
+    from ...errors import CentringError
     from .barrier import centre
 
     layout, soft, hard, c = _analysis(verts, Cz, names, sizes)
@@ -274,7 +274,7 @@ def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = 
 
     The LMIs are posed with the diffusion term linear in P; when the solver gives no point that passes
     the numpy check there, the Schur form of the same set is solved too. When neither passes, ``fallback``
-    (``{"P", "g", "names"}``: step 5's block-diagonal certificate, :mod:`~fte_casadi.design.bound_objective`)
+    (``{"P", "g", "names"}``: step 5's block-diagonal certificate, :mod:`~fte_casadi.design.core.bound_objective`)
     is checked the same way and recorded (``"P_structure": "block-diagonal"``)."""
     verts, Cz, why = _posed(design)
     if why:
@@ -314,11 +314,11 @@ def _conic(verts, Cz, names, sizes, solver: str) -> tuple[tuple | None, str]:
 
 
 def _from_scratch(verts, Cz, names, sizes, start=None) -> tuple[tuple | None, str]:
-    """``min sum g`` in numpy without a feasible start point: phase 1 (:func:`~fte_casadi.design.barrier.phase1`,
+    """``min sum g`` in numpy without a feasible start point: phase 1 (:func:`~fte_casadi.design.core.barrier.phase1`,
     from ``start = (P, g)``, e.g. another output's certificate, or ``P = I``) finds a strictly feasible point
     or proves there is none, then the barrier method centres from it. ``((P, g, worst), how)`` at a point
     that passes the numpy check (the phase-1 point itself when the centring fails), or ``(None, why)``."""
-    from ..errors import CentringError
+    from ...errors import CentringError
     from .barrier import centre, phase1
 
     layout, soft, hard, c = _analysis(verts, Cz, names, sizes)

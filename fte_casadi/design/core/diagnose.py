@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .augment import Augmented, output_scale, time_scale, units_params, units_scaled
-from .certify import lmi45, lmi45_kron
+from ..augment import Augmented, output_scale, time_scale, units_params, units_scaled
 from .conditioned import MARGIN, input_scaling
+from .lmis import lmi45, lmi45_kron
 from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
 __all__ = ["gamma_min", "sigma_max", "FrontierPoint"]

@@ -1,0 +1,90 @@
+"""Tests of fte_casadi.design.core.lmis: every LMI registered once and read everywhere. A toy LMI, registered
+here with its builder and nothing else, appears in the certificate, its failures, the re-certification of a
+loaded document, ``fte design``'s summary and ``fte reproduce``'s table."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fte_casadi.design import design
+from fte_casadi.design.core.lmis import LMI, LMIS, block_sizes, register, unregister
+from fte_casadi.design.recertify import recertify
+from fte_casadi.design.record import Design
+from fte_casadi.design.summary import design_summary
+from fte_casadi.errors import InfeasibleDesignError
+from fte_casadi.report import _design_rows
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _toy(sign: float) -> LMI:
+    """``sign X < 0``: with sign -1 it holds iff X > 0, with +1 it fails at every design."""
+    return LMI("toy", None, "a toy: X > 0 as an LMI", lambda aug, d, params: [sign * np.asarray(d["X"])],
+               lambda aug: [aug.n])  # fmt: skip
+
+
+@pytest.fixture
+def toy(request):
+    lmi = register(_toy(request.param))
+    yield lmi
+    unregister("toy")
+
+
+def test_the_paper_lmis_are_registered_in_order():
+    assert list(LMIS) == ["45", "46", "55", "64"]
+    assert [e.theorem5 for e in LMIS.values()] == ["78", "79", "80", "81"]
+    assert LMIS["46"].name(3) == "LMI (46)" and LMIS["46"].name(5) == "LMI (79)"
+    with pytest.raises(ValueError, match="registered already"):
+        register(LMI("45", None, "again", LMIS["45"].matrices, LMIS["45"].blocks))
+
+
+@pytest.mark.parametrize("toy", [-1.0], indirect=True)
+def test_a_registered_lmi_is_certified_and_summarised(toy, ts_models):
+    d = design(ts_models["manipulator"], sample_time=1e-3)
+    assert list(LMIS)[-1] == "toy"
+    c = d.checks
+    # the certificate recomputed it, independently of the registry: its largest eigenvalue is -min eig(X)
+    expected = -float(np.linalg.eigvalsh(0.5 * (d.X + d.X.T))[0])
+    assert c["lmi_max_eig"]["toy"] == pytest.approx(expected, rel=1e-9) and expected < 0
+    assert c["lmi_block_max_eig"]["toy"] == [pytest.approx(expected, rel=1e-9)]
+    assert c["lmi_roundoff"]["toy"] > 0 and d.certified
+    assert block_sizes(_aug(d))["toy"] == [d.dims.n]
+    line = next(s for s in design_summary(d).splitlines() if "largest eigenvalue of each LMI" in s)
+    assert re.search(r"\(toy\) -[0-9.e+-]+", line), line
+    table = _design_rows({"conditioned": d}, None)
+    assert "(64) / (toy) |" in table[0] and f"{c['lmi_max_eig']['toy']:.2g} |" in table[2]
+
+
+@pytest.mark.parametrize("toy", [1.0], indirect=True)
+def test_a_registered_lmi_that_fails_refuses_the_design(toy, ts_models, tmp_path):
+    with pytest.raises(InfeasibleDesignError, match=r"LMI \(toy\) \(largest eigenvalue [0-9.e+]+\)"):
+        design(ts_models["manipulator"], sample_time=1e-3)
+    d = design(ts_models["manipulator"], sample_time=1e-3, allow_uncertified=True)
+    assert not d.certified and "NOT CERTIFIED" in design_summary(d).splitlines()[0]
+    # a loaded document is re-certified against every registered LMI too
+    loaded = Design.load(ROOT / "generated" / "manipulator" / "design.json")
+    reasons = recertify(loaded)
+    assert any(r.startswith("LMI (toy) recomputes to +") for r in reasons), reasons
+    assert not any(r.startswith("LMI (4") for r in reasons)
+
+
+def _aug(d):
+    from fte_casadi.design.augment import augment
+
+    return augment(d.local_models, d.C, d.Df)
+
+
+def test_the_documents_list_the_registered_lmis():
+    """docs/interface.md names the keys of ``checks.lmi_max_eig``; docs/design.md has a table of the registry."""
+    interface = (ROOT / "docs" / "interface.md").read_text()
+    row = next(line for line in interface.splitlines() if line.startswith("| `lmi_max_eig` |"))
+    assert re.findall(r'"(\d+)"', row.split(":")[0]) == list(LMIS)
+    table = (ROOT / "docs" / "design.md").read_text().split("<!-- lmis -->")[1]
+    rows = [line for line in table.splitlines() if line.startswith("| (")]
+    assert [re.match(r"\| \((\w+)\) \| \((\w+)\)", r).groups() for r in rows] == [
+        (k, e.theorem5) for k, e in LMIS.items()
+    ]
