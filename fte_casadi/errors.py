@@ -81,3 +81,8 @@ class ParameterError(FteError, ValueError):
 
 class MissingDependencyError(FteError, ImportError):
     """An optional dependency (python-control, dask.distributed) is needed and not installed."""
+
+
+class IntegrationStopped(Exception):
+    """Internal: ends an integration of the fidelity check from inside its right-hand side (budget spent, or
+    a value not finite); caught where it is raised, never reaches a user."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import LSODA, RK45
 
+from ..errors import IntegrationStopped
 from .model import Fidelity
 
 __all__ = ["blended", "fidelity", "sample_box"]
@@ -147,10 +148,6 @@ ESCAPE = 1000.0
 _STEP_SLACK = 256
 
 
-class _Stop(Exception):
-    """Ends an integration from inside the right-hand side (budget spent, or not finite)."""
-
-
 def _trajectory(fun, start, horizon, points, lo, hi, max_evaluations=MAX_EVALUATIONS):
     """The open-loop trajectory by RK45 (as ``solve_ivp`` would), and by LSODA, which switches to a
     stiff method, where RK45 spends a third of the budget (see :func:`_integrate`; the built-in plants
@@ -183,10 +180,12 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
         # right-hand side ends it at once (a step size it would otherwise shrink towards 0)
         spent[0] += 1
         if spent[0] > max_evaluations + _STEP_SLACK:
-            raise _Stop(f"stiff: {max_evaluations} evaluations spent by t = {t:.4g} ({method.__name__})")
+            raise IntegrationStopped(
+                f"stiff: {max_evaluations} evaluations spent by t = {t:.4g} ({method.__name__})"
+            )
         v = fun(t, xx)
         if not np.all(np.isfinite(v)):
-            raise _Stop(
+            raise IntegrationStopped(
                 f"the drift is not finite at t = {t:.4g} (x = {np.array2string(np.asarray(xx), precision=4)})"
             )
         return v
@@ -197,12 +196,12 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
     times, ys, i, stop = [], [], 0, ""
     try:
         solver = method(rhs, 0.0, x_start, horizon, rtol=1e-8, atol=1e-10)
-    except _Stop as exc:
+    except IntegrationStopped as exc:
         return x_start[:, None], np.zeros(1), str(exc)
     while solver.status == "running":
         try:
             solver.step()
-        except _Stop as exc:
+        except IntegrationStopped as exc:
             stop = str(exc)
             break
         if solver.status == "failed":
