@@ -402,6 +402,10 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     from .design.summary import design_summary
 
     click.echo(design_summary(d))
+    from .verdicts import design_warnings
+
+    for w in design_warnings(d.checks, d.observer.alpha, _scenario(plant)):
+        click.echo(textwrap.fill("fte: warning: " + w, width=100), err=True)
     if output:
         if Path(output).suffix.lower() == ".mat":
             d.save_mat(output)

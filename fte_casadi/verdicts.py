@@ -126,3 +126,30 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
             f"{100 * frac:.1f} % of the samples leave the plant's region, where the T-S model (and the design's "
             "certificate) is not exact")  # fmt: skip
     return out
+
+
+def design_warnings(checks: dict, alpha, scenario) -> list[str]:
+    """What makes a certified design unfit for its scenario, seen before any simulation: an observer whose
+    slowest time constant (``1 / |max Re eig R_i|``, from ``checks``) is too slow for the scenario's fault
+    windows, and a decay rate lowered to 0 (``alpha``). Empty without a scenario or faults."""
+    out = []
+    if scenario is None or not scenario.faults:
+        return out
+    re = checks.get("R_max_real_eig")
+    shortest = min(float(fp.stop) - float(fp.start) for fp in scenario.faults)
+    if re is not None and re < 0 and SLOW_OBSERVER / -re > shortest:
+        tau = 1.0 / -re
+        out.append(
+            f"the observer's slowest time constant is {tau:.3g}: {SLOW_OBSERVER:g} of them ({SLOW_OBSERVER * tau:.3g}) "
+            f"are longer than the scenario's shortest fault window ({shortest:.3g}), so its fault estimates cannot "
+            "settle inside the windows; a shorter sample time (which allows a faster decay rate), another kappa or a "
+            "larger --alpha may fix it (fte tune searches them); fte simulate measures what it costs"
+        )
+    elif re is not None and re >= 0:
+        out.append(f"the observer's slowest mode does not decay (max Re eig R_i = {re:.3g})")
+    if alpha is not None and float(alpha) == 0.0 and scenario.faults:
+        out.append(
+            "the observer's decay rate alpha was lowered to 0 to certify the discrete step at this sample time: "
+            "nothing certifies how fast the fault estimates converge; a shorter sample time allows a positive decay rate"
+        )
+    return out

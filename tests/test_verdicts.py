@@ -78,3 +78,17 @@ def test_each_verdict_on_its_figure():
     ok = {"paths": 5, "windows": [good], "false_alarm_peak": [0.1, 0.2], "outside_region": 0.0,
           "observer_time_constant": 0.1}  # fmt: skip
     assert verdicts.verdicts(ok, ["u"], ["fa", "fs"]) == []
+
+
+def test_design_warnings_against_the_scenario():
+    from fte_casadi.sim import Bias, Scenario
+
+    sc = Scenario(name="s", T=10.0, dt=0.01, faults=(Bias("fa", 1.0, 2.0, 3.0),))
+    slow = verdicts.design_warnings({"R_max_real_eig": -1.0}, 0.5, sc)  # 3 x 1 s > the 1 s window
+    assert (
+        len(slow) == 1 and "slowest time constant is 1" in slow[0] and "shortest fault window (1)" in slow[0]
+    )
+    assert verdicts.design_warnings({"R_max_real_eig": -10.0}, 0.5, sc) == []  # 3 x 0.1 s fits
+    zero = verdicts.design_warnings({"R_max_real_eig": -10.0}, 0.0, sc)
+    assert len(zero) == 1 and "lowered to 0" in zero[0]
+    assert verdicts.design_warnings({"R_max_real_eig": -1.0}, 0.0, None) == []
