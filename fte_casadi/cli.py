@@ -159,7 +159,7 @@ def derive(plant: str, as_json: bool) -> None:
     for pr in ts.premises:
         gap = f" (bounds widened by {pr.bound_gap:.2g})" if pr.bound_gap else ""
         click.echo(f"  {pr.name} = {pr.expr}: [{pr.min:.6g}, {pr.max:.6g}]{gap}")
-    for note in ts.notes:  # how the automatic method found them (issue #10)
+    for note in ts.notes:  # how the automatic method found them
         click.echo(f"  {note}")
     for i, lm in enumerate(ts.local_models):
         click.echo(f"rule {i + 1}:")

@@ -30,7 +30,7 @@ from .ts import derive
 __all__ = ["reproduce", "versions"]
 
 #: the parameters of the paper's Section 6, which the `paper` variant (the problem as printed) is solved at;
-#: the conditioned design uses the plant's design defaults (the three-tank's are `fte tune`'s, issue #18)
+#: the conditioned design uses the plant's design defaults (the three-tank's are `fte tune`'s)
 SECTION_6_PARAMS = {
     "manipulator": {"gamma": 2.0, "gamma1": 0.01, "sigma": 0.2, "delta": 1e-5, "epsilon": 1e-5},
     "three-tank": {"gamma": 1.0, "gamma1": 0.9, "sigma": 5.0, "delta": 1e-4, "epsilon": 1e-4},

@@ -130,9 +130,8 @@ def _one_blas_thread(fn):
     """Run ``fn`` with the BLAS limited to one thread (threadpoolctl).
 
     The design's algebra is many small dense products and factorisations (matrices of tens of rows);
-    a multi-threaded BLAS spends more on waking its threads than on the work, and on a loaded machine
-    the same design took 5.5-44 s with OpenBLAS's default threads against 0.3-6.9 s with one
-    (issue #17). The limit is undone on return, and nested calls keep it.
+    a multi-threaded BLAS spends more on waking its threads than on the work, most of all on a loaded
+    machine (docs/benchmarks.md). The limit is undone on return, and nested calls keep it.
     """
 
     @functools.wraps(fn)
@@ -212,7 +211,7 @@ def design(
         ts, {"gamma": gamma, "gamma1": gamma1, "sigma": sigma, "delta": delta, "epsilon": epsilon}, status
     )
     plant_defaults = getattr(ts.plant, "design_defaults", {}) or {}
-    # the knobs `fte tune` finds, recorded in the plant's defaults (issue #18 item 3)
+    # the knobs `fte tune` finds, recorded in the plant's defaults
     tuned = {k: plant_defaults[k] for k in TUNED_KNOBS if k in plant_defaults}
     alpha_from_plant = alpha is None and "alpha" in tuned
     alpha = tuned.get("alpha") if alpha is None else alpha
@@ -484,8 +483,8 @@ def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known)
 
 
 def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, fallback=None) -> dict:
-    """The certified bounds on the fault- and state-estimation errors at the returned design (issue #18 item 1;
-    :mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
+    """The certified bounds on the fault- and state-estimation errors at the returned design
+    (:mod:`fte_casadi.design.bounds`), for a certified design; {} otherwise."""
     if not certified:
         return {}
     if r5doc and r5doc.get("used"):
@@ -540,7 +539,7 @@ GAMMA_TRIALS = (1.25, 1.6, 2.5, 4.0, 10.0)
 
 def _choose(ts, aug, params: dict, solver: str, retry: dict, generic: set, lmi: str, exc,
             refused: list | None = None) -> Design | None:  # fmt: skip
-    """Parameters the tool finds itself (issue #17): when sigma and/or gamma came from the generic
+    """Parameters the tool finds itself: when sigma and/or gamma came from the generic
     defaults (neither the user nor the plant set them) and the design fails at them, the feasibility
     bounds say where to look: sigma below the largest sigma (45) allows, else gamma above the smallest
     one it allows. The first value tried that gives a certified design is taken, and the document's

@@ -1,4 +1,4 @@
-"""The closed loop's fault-error bound as a term of step 5's objective (issue #18 item 1).
+"""The closed loop's fault-error bound as a term of step 5's objective.
 
 :mod:`fte_casadi.design.bounds` certifies, at a returned design, the gain from the channels
 ``w = [d; f''; u_s; f; 1]`` to ``f - fhat`` with one common Lyapunov matrix ``P`` of the closed loop

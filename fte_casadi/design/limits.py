@@ -2,8 +2,7 @@
 
 When no certified design makes tolerant control better than none in a fault's window, or keeps
 a fault's estimate quiet outside its windows, the cause is often in the plant, not in the knobs.
-This module computes, from the local models and a design, the numbers that name such a cause
-(issue #18 item 4):
+This module computes, from the local models and a design, the numbers that name such a cause:
 
 - the invariant (transmission) zeros of the fault's channel to the outputs, per rule: the s where
   ``[[sI - A_i, Bf_ij], [C, Df_j]]`` loses rank, and the same with the unknown inputs beside the

@@ -1,6 +1,6 @@
 """Scenarios (faults, disturbances, noise) and the compiled Euler-Maruyama Monte Carlo engine.
 
-Two names for time steps, one meaning each (issue #20, "one name per concept"):
+Two names for time steps, one meaning each:
 
 - ``sample_time`` (Ts) is the observer/controller's sample time, everywhere in the package: what a
   design is made and certified for (``Design.observer.sample_time``, ``design(..., sample_time=)``),
