@@ -47,7 +47,7 @@ def _arr(name: str, a) -> str:
 def hand_written_c(design: Design, sample_time: float) -> str:
     """Plain C of the step (dense loops, expanded sum over rules), for the speed baseline."""
     d = design.dims
-    n, m, p, lf, r, nbar = (int(d[k]) for k in ("n", "m", "p", "lf", "r", "nbar"))
+    n, m, p, lf, r, nbar = (int(getattr(d, k)) for k in ("n", "m", "p", "lf", "r", "nbar"))
     T = np.asarray(design.T)
     Cbar = np.hstack([design.C, np.zeros((p, lf)), design.Df])
     gain = float(design.params.delta) + float(design.params.epsilon)

@@ -27,7 +27,7 @@ def ts():
 
 def test_designs_at_its_1_ms_step_with_the_discrete_step_proven(ts, tmp_path):
     d = design(ts, sample_time=1e-3, plant_spec=SPEC)
-    assert d.certified and d.observer["sample_time"] == 1e-3
+    assert d.certified and d.observer.sample_time == 1e-3
     disc = d.checks["discrete"]
     assert disc["holds"] and disc["sample_time"] == 1e-3 and disc["ts_max_lyapunov"] > 1e-3
     f = tmp_path / "cp.json"

@@ -57,8 +57,8 @@ def libs(designs, tmp_path_factory):
 
 def _samples(design, k: int, seed: int):
     rng = np.random.default_rng(seed)
-    nbar, p = int(design.dims["nbar"]), int(design.dims["p"])
-    y0 = np.asarray(design.C) @ (np.zeros(design.dims["n"]) if design.x_ref is None else design.x_ref)
+    nbar, p = int(design.dims.nbar), int(design.dims.p)
+    y0 = np.asarray(design.C) @ (np.zeros(design.dims.n) if design.x_ref is None else design.x_ref)
     for _ in range(k):
         yield rng.normal(scale=0.5, size=nbar), y0 + rng.normal(scale=0.5, size=p)
 
@@ -227,7 +227,7 @@ def test_readme_states_memory_and_sample_time(designs, libs):
     src = libs["three-tank", "double"][0]
     text = (src / "README.md").read_text()
     assert f"Ts = {default_sample_time(d)!r}" in text
-    nbar = int(d.dims["nbar"])
+    nbar = int(d.dims.nbar)
     assert f"{2 * nbar * 8} bytes" in text
     assert "numeric literals" in text
 
@@ -329,22 +329,24 @@ def test_default_sample_time(designs):
 
     for plant, d in designs.items():
         sample_time, ts_max = default_sample_time(d), d.checks["ts_max"]
-        assert sample_time == d.observer["sample_time"] == SCENARIOS[plant]().dt < ts_max
-        bare = dataclasses.replace(d, observer={k: v for k, v in d.observer.items() if k != "sample_time"})
+        assert sample_time == d.observer.sample_time == SCENARIOS[plant]().dt < ts_max
+        bare = dataclasses.replace(
+            d, observer={k: v for k, v in d.observer.to_dict().items() if k != "sample_time"}
+        )
         sample_time = default_sample_time(bare)
         assert sample_time <= 0.1 * ts_max and f"{sample_time:e}"[0] in "125"
         assert sample_time == min(BUILTIN_DT[plant], series_floor(0.1 * ts_max))
         assert BUILTIN_DT[plant] == SCENARIOS[plant]().dt  # kept in step with the simulator
     d = designs["three-tank"]
     user = dataclasses.replace(
-        d, plant="my-tank", observer={k: v for k, v in d.observer.items() if k != "sample_time"}
+        d, plant="my-tank", observer={k: v for k, v in d.observer.to_dict().items() if k != "sample_time"}
     )
     assert default_sample_time(user) == series_floor(0.1 * user.checks["ts_max"])
     assert 0.04 * user.checks["ts_max"] < default_sample_time(user) <= 0.1 * user.checks["ts_max"]
-    motor = dataclasses.replace(d, plant="motor", observer=dict(d.observer, sample_time=1e-3))
+    motor = dataclasses.replace(d, plant="motor", observer=dict(d.observer.to_dict(), sample_time=1e-3))
     assert default_sample_time(motor) == 1e-3  # the simulated rate, not a tenth of ts_max
     too_slow = dataclasses.replace(
-        d, plant="motor", observer=dict(d.observer, sample_time=2 * d.checks["ts_max"])
+        d, plant="motor", observer=dict(d.observer.to_dict(), sample_time=2 * d.checks["ts_max"])
     )
     assert default_sample_time(too_slow) == series_floor(
         0.1 * d.checks["ts_max"]
@@ -393,7 +395,7 @@ def test_init_from_y_starts_as_the_simulation(plant, designs, libs):
 
     d = designs[plant]
     sc = SCENARIOS[plant]()
-    np.testing.assert_array_equal(d.xbar0[: d.dims["n"]], np.asarray(sc.x0, float))
+    np.testing.assert_array_equal(d.xbar0[: d.dims.n], np.asarray(sc.x0, float))
     prep = Prepared(d, load_plant(plant), sc, sc.dt, 4, _scales(None, sc))
     lay = prep.lay
     start = prep.initial_states(np.arange(3), seed=7)

@@ -99,7 +99,7 @@ def _worst(got: np.ndarray, ref: np.ndarray, groups) -> float:
 
 
 def _groups(design: Design):
-    m, nbar, p = (int(design.dims[k]) for k in ("m", "nbar", "p"))
+    m, nbar, p = (int(getattr(design.dims, k)) for k in ("m", "nbar", "p"))
     return [slice(0, m), slice(m, m + nbar), slice(m + nbar, m + nbar + p)]
 
 
@@ -161,8 +161,8 @@ def test_fmpy_simulation_equals_the_python_step(plant, fmus):
     got = np.column_stack([res[n] for n in names[p:]])
     expected = np.vstack([ref[:1], ref])  # t_0: y_0's sample (read after the inputs), then held samples
     assert _worst(got, expected, _groups(d)) <= C_DOUBLE
-    n, lf = int(d.dims["n"]), int(d.dims["lf"])
-    m = int(d.dims["m"])
+    n, lf = int(d.dims.n), int(d.dims.lf)
+    m = int(d.dims.m)
     fa_hat = got[-1, m + n + lf]
     assert fa_hat < -0.05 * (1 if plant == "manipulator" else 100)  # the fault was estimated
 

@@ -55,7 +55,7 @@ def test_committed_design_is_certified_by_its_own_numbers(plant):
     aug = augment(d.local_models, d.C, d.Df)
     point = dict(X=d.X, K=list(d.K), P=d.P, T=d.T, Pbar=d.Pbar, Q=list(d.Q), N=d.N, theta=d.theta,
                  R=list(d.R), L1=list(d.L1))  # fmt: skip
-    checks = certificate(aug, point, d.params)
+    checks = certificate(aug, point, d.params.to_dict())
     assert not failures(checks)
     # Recomputed on another machine (other BLAS, other CPU) a largest eigenvalue may differ from the
     # recorded one by the round-off of its matrix, a few eps * dim * ||M||_2 (checks["lmi_roundoff"]).
@@ -83,7 +83,7 @@ def test_a_margin_inside_the_roundoff_is_not_a_certificate():
     aug = augment(d.local_models, d.C, d.Df)
     point = dict(X=d.X, K=list(d.K), P=d.P, T=d.T, Pbar=d.Pbar, Q=list(d.Q), N=d.N, theta=d.theta,
                  R=list(d.R), L1=list(d.L1))  # fmt: skip
-    checks = certificate(aug, point, d.params)
+    checks = certificate(aug, point, d.params.to_dict())
     eps, beps = checks["lmi_roundoff"]["46"], checks["lmi_balanced_roundoff"]["46"]
     checks["lmi_max_eig"]["46"] = -0.5 * eps
     checks["lmi_balanced_max_eig"]["46"] = -0.5 * beps

@@ -134,12 +134,12 @@ def test_conditioned_design_acceptance(designs, name):
     solves = [s for s in d.status if "solve (" in s]
     assert len(solves) == 2 and all("solve (optimal)" in s for s in solves), solves
     # alpha is the default's fraction of the largest feasible rate, or the plant's tuned default (issue #18)
-    assert 0 < d.observer["alpha"] and c["R_max_real_eig"] <= -d.observer["alpha"] / 2
+    assert 0 < d.observer.alpha and c["R_max_real_eig"] <= -d.observer.alpha / 2
     defaults = {"manipulator": manipulator, "three-tank": three_tank}[name]().design_defaults
     if "alpha" in defaults:
         assert d.observer.alpha == defaults["alpha"] and d.observer.alpha_max is None
     else:
-        assert d.observer["alpha"] < d.observer["alpha_max"]
+        assert d.observer.alpha < d.observer.alpha_max
     if name == "manipulator":
         assert c["max_abs_K"] <= 5
         assert np.allclose(d.Kf, [[-1.0, 0.0]])
@@ -340,7 +340,7 @@ def test_user_alpha_too_fast_names_the_largest(ts_models, designs):
     )
     assert alpha < largest
     d = design(ts, alpha=alpha)
-    assert d.certified and d.observer["alpha"] == alpha and "user" in d.observer["why"]
+    assert d.certified and d.observer.alpha == alpha and "user" in d.observer.why
 
 
 def _kf_plant(fault_gain):

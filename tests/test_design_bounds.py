@@ -22,11 +22,11 @@ SMALL = f"{Path(__file__).parent / 'plant_tune.py'}:plant"
 
 def _energies(d, scenario) -> dict:
     """Upper bounds of E int_0^T |w_k|^2 dt per channel for a fault-free scenario."""
-    T, ld, lf = scenario.T, int(d.dims["ld"]), int(d.dims["lf"])
+    T, ld, lf = scenario.T, int(d.dims.ld), int(d.dims.lf)
     ui = scenario.unknown_input
     amp = 0.0 if ui is None else float(ui.amplitude)
     assert ui is None or isinstance(ui, (UniformNoise, Sinusoid))
-    gain = float(d.params["delta"]) + float(d.params["epsilon"])
+    gain = float(d.params.delta) + float(d.params.epsilon)
     return {"d": amp**2 * ld * T, "fddot": 0.0, "u_s": gain**2 * lf * T, "f": 0.0, "const": T}
 
 
@@ -35,7 +35,7 @@ def _monte_carlo_and_bound(d, plant, scenario, key: str = "fault_error") -> tupl
     ("state_error"), 8 paths, seed 4, and the bound's right side."""
     fb = d.bounds[key]
     res = simulate(d, plant, scenario, paths=8, seed=4, progress=False, record_all=True, record_every=1)
-    n, lf, dt = int(d.dims["n"]), int(d.dims["lf"]), res.dt
+    n, lf, dt = int(d.dims.n), int(d.dims.lf), res.dt
     run = res.ftc
     err = run.f - run.xbarhat[:, :, n + lf :] if key == "fault_error" else run.x - run.xbarhat[:, :, :n]
     lhs = float(np.mean(np.sum(err[:, :-1, :] ** 2, axis=(1, 2)) * dt))
@@ -76,7 +76,7 @@ def test_the_bound_in_the_objective_lowers_it_and_monte_carlo_stays_below(spec):
     last = None
     for w in (1.0, 3.0):
         d = design(ts, sample_time=scenario.dt, initial_state=scenario.x0, bound_weight=w)
-        assert d.certified and d.params["bound_weight"] == w
+        assert d.certified and d.params.bound_weight == w
         ob = d.observer
         assert ob.bound_weight == w and ob.bound_objective < ob.bound_objective_before
         assert any("closed-loop fault-error bound" in s and f"weight {w:g}" in s for s in d.status)

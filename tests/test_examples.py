@@ -67,7 +67,7 @@ def test_example_generated_c_equals_python(pendulum_design, tmp_path):
 
     def fault(t, u):
         f = np.array([-0.3 * u[0] if t > 0.5 else 0.0, 0.05 if t > 1.0 else 0.0])
-        return f[: int(d.dims["lf"])]
+        return f[: int(d.dims.lf)]
 
     err, traj = closed_loop_compare(
         d, CStep(lib, d), sample_time, 1500, plant=load_plant(d.plant_spec), fault=fault

@@ -91,7 +91,7 @@ def test_no_import_circles():
 #: the steps of the path of the data, lowest first (docs/layout.md): a module imports its own step's
 #: modules and those of lower steps only
 LAYERS = (
-    {"errors", "rounding", "toolchain", "verdicts", "deprecation", "interop", "checkout", "resources"},
+    {"errors", "rounding", "toolchain", "verdicts", "interop", "checkout", "resources"},
     {"model"},
     {"ts"},
     {"design"},

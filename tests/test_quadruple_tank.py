@@ -45,17 +45,17 @@ def test_designs_at_its_own_parameters(ts):
     assert d.certified and not failures(d.checks)
     assert set(d.params_chosen) == {"sigma", "gamma"}
     for k, c in d.params_chosen.items():
-        assert d.params[k] == c["value"]
+        assert getattr(d.params, k) == c["value"]
         assert "first value tried that gives a certified design" in c["why"]
     # the generic default sigma = 1 is four orders of magnitude above what (45) allows for this plant
-    assert d.params["sigma"] < 1e-3 and d.params["gamma"] > 1.0
+    assert d.params.sigma < 1e-3 and d.params.gamma > 1.0
     assert d.checks["discrete"]["holds"]
 
 
 def test_certifies_with_scs_too(ts, committed):
     """The same parameters with the other solver: certified, and the same observer up to the solvers'
     tolerance (the centred point is unique; only where it is found from differs)."""
-    d = design(ts, solver="SCS", sigma=committed.params["sigma"], gamma=committed.params["gamma"],
+    d = design(ts, solver="SCS", sigma=committed.params.sigma, gamma=committed.params.gamma,
                sample_time=SCENARIOS["quadruple-tank"]().dt)  # fmt: skip
     assert d.certified
     assert np.allclose(d.Pbar, committed.Pbar, rtol=1e-5, atol=1e-8 * np.abs(committed.Pbar).max())

@@ -57,8 +57,8 @@ def test_a_slower_sample_time_lowers_alpha_and_keeps_the_proof(ts_models, real_d
     d = design(ts, sample_time=0.01)
     assert d.certified and d.checks["discrete"]["holds"]
     assert d.checks["discrete"]["ts_max_lyapunov"] >= 0.01
-    assert d.observer["alpha"] < real_designs["manipulator"].observer["alpha"]
-    assert "lowered to" in d.observer["why"]
+    assert d.observer.alpha < real_designs["manipulator"].observer.alpha
+    assert "lowered to" in d.observer.why
 
 
 def test_one_step_everywhere(ts_models, tmp_path):

@@ -68,7 +68,7 @@ def test_the_refusal_names_the_sample_time_and_that_one_certifies(ts):
     assert 0.05 < ts_ok < 1.0
     d = design(ts, sample_time=ts_ok)
     assert d.certified and d.checks["discrete"]["holds"]
-    assert d.params["sigma"] < 1e-9 and "sigma" in d.params_chosen
+    assert d.params.sigma < 1e-9 and "sigma" in d.params_chosen
     assert any("outputs' own size" in s for s in d.status)
 
 

@@ -205,7 +205,7 @@ def test_explain_names_the_limit_with_numbers(small):
 def test_kappa_bounds_the_conditioning(small):
     _, scenario, ts, base = small
     d = design(ts, sample_time=scenario.dt, kappa=1e2)
-    assert d.params["kappa"] == 1e2 and "kappa" not in base.params
+    assert d.params.kappa == 1e2 and base.params.kappa is None
     assert d.checks["cond_Pbar"] <= 1e2 * 1.01 < base.checks["cond_Pbar"]
     with pytest.raises(ParameterError, match="kappa"):
         design(ts, kappa=0.5)
@@ -218,7 +218,7 @@ def test_boundary_layer_of_the_design_is_the_step_s(small):
 
     _, _, _, base = small
     phi = 1e-3
-    d = dataclasses.replace(base, params=dict(base.params) | {"boundary_layer": phi})
+    d = dataclasses.replace(base, params=base.params.to_dict() | {"boundary_layer": phi})
     rng = np.random.default_rng(0)
     z, y = rng.normal(size=base.nbar) * 1e-4, rng.normal(size=base.C.shape[0]) * 1e-4
     own = [np.array(v) for v in step_function(d, 1e-3)(z, y)]
@@ -226,7 +226,7 @@ def test_boundary_layer_of_the_design_is_the_step_s(small):
     sgn = [np.array(v) for v in step_function(base, 1e-3)(z, y)]
     assert all(np.array_equal(a, b) for a, b in zip(own, asked))
     assert not all(np.array_equal(a, b) for a, b in zip(own, sgn))
-    assert Design.from_dict(json.loads(d.to_json())).params["boundary_layer"] == phi
+    assert Design.from_dict(json.loads(d.to_json())).params.boundary_layer == phi
 
 
 def test_cluster_gives_the_in_process_front(small, result):
@@ -253,7 +253,7 @@ def test_trial_zero_of_a_design_file_is_that_design(small, tmp_path):
     m0 = res.records[0].metrics
     assert m0["fault_rel_rms_error"] == direct["fault_rel_rms_error"]
     assert m0["windows"] == direct["windows"]
-    assert res.records[0].params["alpha"] == 0.5
+    assert res.records[0].params.alpha == 0.5
 
 
 def test_limits_named_when_no_candidate_helps(small):
@@ -340,13 +340,13 @@ def test_tune_from_tuned_defaults(small):
     d = design(derive(tuned), sample_time=scenario.dt, initial_state=scenario.x0, plant_spec=SPEC)
     res = tune(d, tuned, scenario, trials=6, seed=3, paths=2)
     r0 = res.records[0]
-    assert r0.params["alpha"] == a and r0.params["boundary_layer"] == 0.01 and r0.params["kappa"] == 3e3
+    assert r0.params.alpha == a and r0.params.boundary_layer == 0.01 and r0.params.kappa == 3e3
     assert 0 < r0.knobs["alpha_scale"] < 1 and r0.knobs["use_boundary_layer"] and r0.knobs["kappa"] == 3e3
     ok = [r for r in res.records[1:] if r.state == "ok"]
     assert ok
     for r in ok:
-        assert (r.params["boundary_layer"] is None) == (not r.knobs["use_boundary_layer"])
-        assert r.params["alpha"] != a and r.params["kappa"] == pytest.approx(r.knobs["kappa"])
+        assert (r.params.boundary_layer is None) == (not r.knobs["use_boundary_layer"])
+        assert r.params.alpha != a and r.params.kappa == pytest.approx(r.knobs["kappa"])
 
 
 def test_three_tank_default_is_the_tuned_design():

@@ -42,7 +42,6 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..deprecation import renamed_keyword
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
@@ -327,7 +326,6 @@ def _write_zip(target: Path, members: dict[str, bytes]) -> None:
         raise CodegenError(f"cannot write the FMU {str(target)!r}: {exc.strerror or exc}") from None
 
 
-@renamed_keyword("ts", "sample_time")
 def generate_fmu(
     design: Design | str | os.PathLike,
     out_dir: str | os.PathLike,

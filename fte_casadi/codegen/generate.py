@@ -34,7 +34,6 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..deprecation import renamed_keyword
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
 from ..rounding import series_floor
@@ -44,7 +43,6 @@ from . import template
 __all__ = [
     "generate_c",
     "default_sample_time",
-    "default_ts",
     "c_name",
     "output_files",
     "BUILTIN_DIRS",
@@ -120,14 +118,6 @@ def default_sample_time(design: Design) -> float:
         return float(st)
     sample_time = series_floor(0.1 * _ts_max(design))
     return min(sample_time, BUILTIN_DT.get(design.plant, sample_time))
-
-
-def default_ts(design: Design) -> float:
-    """Deprecated name of :func:`default_sample_time` (issue #20: ``ts`` names a T-S model)."""
-    import warnings
-
-    warnings.warn("default_ts() is deprecated; call default_sample_time()", DeprecationWarning, stacklevel=2)
-    return default_sample_time(design)
 
 
 def _check_sample_time(design: Design, sample_time) -> float:
@@ -586,7 +576,6 @@ def write_files(out_dir: Path, texts: dict[str, str]) -> list[Path]:
     return [out_dir / f for f in texts]
 
 
-@renamed_keyword("ts", "sample_time")
 def generate_c(
     design: Design | str | os.PathLike,
     out_dir: str | os.PathLike,

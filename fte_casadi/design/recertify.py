@@ -54,12 +54,12 @@ def recertify(d) -> list[str]:
     point = dict(X=np.asarray(d.X), K=[np.asarray(M) for M in d.K], P=np.asarray(d.P), T=T, Pbar=Pbar, Q=Q,
                  N=np.asarray(d.N), theta=float(d.theta), R=R, L1=L1)  # fmt: skip
     try:
-        checks = certificate(aug, point, d.params)
+        checks = certificate(aug, point, d.params.to_dict())
     except np.linalg.LinAlgError as exc:
         return out + [f"the certificate cannot be evaluated at the loaded numbers ({exc})"]
-    ts = d.observer.sample_time
-    if ts is not None:
-        checks["discrete"] = discrete_certificate(R, Pbar, float(ts))
+    sample_time = d.observer.sample_time
+    if sample_time is not None:
+        checks["discrete"] = discrete_certificate(R, Pbar, float(sample_time))
     names = {"45": "45", "46": "46", "55": "55", "64": "64"}
     if checks.get("theorem") == 5:
         names = {"45": "78", "46": "79", "55": "80", "64": "81"}

@@ -24,7 +24,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..deprecation import renamed_keyword
 from ..errors import DesignFileError
 from ..ts.model import LocalModel
 from .records import Dims, Observer, Params, _Record
@@ -97,9 +96,8 @@ class Design:
 
     ``params``, ``dims`` and ``observer`` are typed frozen records (:class:`~fte_casadi.design.records.Params`,
     :class:`~fte_casadi.design.records.Dims`, :class:`~fte_casadi.design.records.Observer`), read by attribute:
-    ``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``. Passing plain dicts for them (as older code does)
-    converts them; for a transition the records also answer item access (``d.dims["n"]``,
-    ``d.params.get("gamma2")``). ``checks`` stays a dict (its key set is open; see the records' module).
+    ``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``; a plain dict given for one (for example in
+    ``dataclasses.replace(d, params={...})``) becomes the record. ``checks`` stays a dict (its key set is open; see the records' module).
     """
 
     plant: str
@@ -251,7 +249,6 @@ class Design:
             )
         return read_tape(self.scheduling_ops, "scheduling")
 
-    @renamed_keyword("dt", "sample_time")
     def to_control(self, i: int = 0, j: int = 0, sample_time: float | None = None):
         """The closed loop of plant rule ``i``, observer rule ``i`` and gain ``K_j`` as a ``control.StateSpace``.
 
