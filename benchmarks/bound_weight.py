@@ -39,7 +39,7 @@ def run(name: str, weights, paths: int = 20, seed: int = 1, defaults: dict | Non
         rows.append({
             "weight": w, "design_s": round(seconds, 2), "alpha": d.observer.alpha,
             "bound": max(fb["gains"].values()) if fb.get("holds") else None, "P_structure": fb.get("P_structure"),
-            "bound_objective": [d.observer.bound_objective_before, d.observer.bound_objective],
+            "bound_objective": [d.observer.bound_objective_unweighted, d.observer.bound_objective],
             "fault_error": m["fault_rel_rms_error"], "false_alarm": m["false_alarm_rel_rms"],
             "ftc": [w_["ftc_deviation_ratio"] for w_ in m["windows"]],
         })  # fmt: skip

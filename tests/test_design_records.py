@@ -50,7 +50,7 @@ def test_records_are_typed_and_agree_with_the_document(committed):
     assert all(isinstance(getattr(d.dims, k), int) for k in ("n", "m", "p", "ld", "lf", "r", "nbar"))
     assert d.dims.nbar == d.nbar == d.dims.n + 2 * d.dims.lf and d.dims.r == len(d.K)
     assert d.params.gamma2 is None and "gamma2" not in d.params.to_dict()
-    assert d.observer.alpha > 0 and d.observer.sample_time > 0 and d.observer.ts_max > d.observer.sample_time
+    assert d.observer.alpha > 0 and d.observer.sample_time > 0 and d.checks["ts_max"] > d.observer.sample_time
 
 
 def test_records_are_frozen(committed):
@@ -196,3 +196,20 @@ def test_dicts_given_for_the_local_models_become_records(committed):
     e = dataclasses.replace(d, local_models=[lm.to_dict() for lm in d.local_models])
     assert isinstance(e.local_models, tuple) and all(isinstance(lm, LocalModel) for lm in e.local_models)
     assert e.to_json() == d.to_json()
+
+
+def test_a_document_before_0_2_0_is_read_with_each_value_once(committed):
+    """Before 0.2.0 the observer entry also held ``ts_max`` and ``bound_weight`` (copies of ``checks.ts_max``
+    and ``params.bound_weight``) and named ``bound_objective_unweighted`` ``bound_objective_before``."""
+    doc = json.loads(committed[1])
+    obs = doc["observer"]
+    old = {"sample_time": obs.get("sample_time"), "alpha": obs.get("alpha"), "why": obs.get("why"),
+           "ts_max": doc["checks"]["ts_max"], "bound_weight": 0.5, "bound_objective_before": 5.0,
+           "bound_objective": 2.0}  # fmt: skip
+    doc["observer"] = old
+    d = Design.from_dict(doc)
+    assert d.observer.bound_objective_unweighted == 5.0 and d.observer.bound_objective == 2.0
+    saved = json.loads(d.to_json())["observer"]
+    assert list(saved) == ["sample_time", "alpha", "why", "bound_objective_unweighted", "bound_objective"]
+    assert saved["bound_objective_unweighted"] == 5.0
+    assert not hasattr(d.observer, "ts_max") and d.checks["ts_max"] == old["ts_max"]

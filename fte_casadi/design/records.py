@@ -92,7 +92,7 @@ class _Record:
         """
         if isinstance(doc, cls):
             return doc
-        doc = dict(doc or {})
+        doc = cls._upgrade(dict(doc or {}))
         for k in cls.missing(doc):
             raise KeyError(k)
         known = {f.name for f in dataclasses.fields(cls)} - set(cls._META)
@@ -103,6 +103,11 @@ class _Record:
     @classmethod
     def _convert(cls, key: str, value):
         return value
+
+    @classmethod
+    def _upgrade(cls, doc: dict) -> dict:
+        """``doc`` with the keys of older documents read as today's (same order); the record's own rule."""
+        return doc
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,21 +167,33 @@ class Observer(_Record):
 
     ``sample_time`` the sample time the design was made for (``None`` when none was given),
     ``alpha`` the decay rate used, ``why`` the reason, ``alpha_max`` and ``alpha_max_upper`` the bisection's
-    bracket of the largest feasible rate (absent when the user set ``alpha``), ``ts_max`` the largest
-    sample time at which every R_i's explicit Euler step is stable; with the fault-error bound in step 5's
-    objective, ``bound_weight`` and the smallest block-diagonal bound (sum of squared channel gains) at the
-    observer without it (``bound_objective_before``) and with it (``bound_objective``). The paper variant holds only
-    ``alpha`` (0) and ``why``; documents older than the observer entry hold none.
+    bracket of the largest feasible rate (absent when the user set ``alpha``); with the fault-error bound
+    in step 5's objective (weight ``Design.params.bound_weight``), the smallest block-diagonal bound (sum of
+    squared channel gains) at the observer designed without the term, weight 0
+    (``bound_objective_unweighted``), and at the observer designed with it (``bound_objective``). The paper
+    variant holds only ``alpha`` (0) and ``why``; documents older than the observer entry hold none.
+
+    Each value is stored once: the largest stable sample time is ``checks.ts_max`` and the bound's weight
+    ``params.bound_weight``. Documents written before 0.2.0 also held them here (``observer.ts_max``,
+    ``observer.bound_weight``, the same numbers) and named ``bound_objective_unweighted``
+    ``bound_objective_before``: they are read as today's (:meth:`_upgrade`) and saved without the copies.
     """
+
+    #: keys of documents before 0.2.0 that held a value stored elsewhere (checks.ts_max, params.bound_weight)
+    _DUPLICATES: ClassVar[tuple[str, ...]] = ("ts_max", "bound_weight")
+    #: keys of documents before 0.2.0 that have a new name
+    _RENAMED: ClassVar[dict[str, str]] = {"bound_objective_before": "bound_objective_unweighted"}
 
     sample_time: float | None = None
     alpha_max: float | None = None
     alpha_max_upper: float | None = None
     alpha: float | None = None
     why: str | None = None
-    ts_max: float | None = None
-    bound_weight: float | None = None
-    bound_objective_before: float | None = None
+    bound_objective_unweighted: float | None = None
     bound_objective: float | None = None
     extra: dict = field(default_factory=dict, repr=False)
     order: tuple = field(default=(), repr=False)
+
+    @classmethod
+    def _upgrade(cls, doc: dict) -> dict:
+        return {cls._RENAMED.get(k, k): v for k, v in doc.items() if k not in cls._DUPLICATES}
