@@ -418,29 +418,39 @@ _allow_option = click.option(
     "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files."
 )
 @click.option(
-    "--ts", "sample_time", type=float,
+    "--sample-time", "sample_time", type=float,
     help="Sample time (default: the one the design was made for and fte simulate runs, its scenario's step; "
     "without one, a tenth of the design's ts_max, rounded down).",
 )  # fmt: skip
+@click.option("--ts", "sample_time_alias", type=float, hidden=True)  # the name before 0.2.0
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
 @click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
 @_plant_option
 @_allow_option
 @_guard
-def codegen(target, out_dir, sample_time, real, boundary_layer, fmu, plant_opt, allow_uncertified):
+def codegen(
+    target, out_dir, sample_time, sample_time_alias, real, boundary_layer, fmu, plant_opt, allow_uncertified
+):
     """Generate the embedded C of the observer/controller step."""
     from .codegen import default_sample_time, generate_c
     from .codegen.fmu import check_fmu_target, generate_fmu
+    from .plants import SCENARIOS
 
-    _positive("ts", sample_time)
+    if sample_time is not None and sample_time_alias is not None:
+        raise click.UsageError("give the sample time once: --sample-time (--ts is its former name)")
+    sample_time = sample_time if sample_time_alias is None else sample_time_alias
+    _positive("sample-time", sample_time)
     _positive("boundary-layer", boundary_layer)
     d, _ = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
-    files = generate_c(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
-    made_for = default_sample_time(d)
-    how = "--ts" if sample_time is not None else "the design's sample time, the step fte simulate runs"
+    made_for = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
+    files = generate_c(d, out_dir, sample_time=made_for if sample_time is None else sample_time, real=real,
+                       boundary_layer=boundary_layer)  # fmt: skip
+    how = (
+        "--sample-time" if sample_time is not None else "the design's sample time, the step fte simulate runs"
+    )
     if sample_time is not None and abs(sample_time - made_for) > 1e-12 * sample_time:
         how += f"; the design was made for {made_for:g}"
     if sample_time is None:
@@ -639,7 +649,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
         click.echo(
             f"note: simulated at dt = {change['to']:g}, not the design's sample time {change['from']:g} "
-            f"({change['why']}); the generated C runs {change['from']:g} unless --ts says otherwise",
+            f"({change['why']}); the generated C runs {change['from']:g} unless --sample-time says otherwise",
             err=True,
         )
     if as_json:

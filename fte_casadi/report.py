@@ -150,8 +150,9 @@ def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .codegen.ctypes_step import CStep, closed_loop_compare
     from .codegen.generate import default_sample_time, memory_report
     from .errors import MissingDependencyError
+    from .plants import SCENARIOS
 
-    sample_time = default_sample_time(d)
+    sample_time = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
     files = generate_c(d, folder, sample_time=sample_time)
     out = [f"Generated into `{folder.name}/` ({', '.join(f.name for f in files)}), Ts = {sample_time:g} s."]
     info: dict = {"ts": sample_time}  # the report document's key (kept: documents are not renamed)

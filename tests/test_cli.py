@@ -167,11 +167,28 @@ def test_codegen_cli(design_files, tmp_path):
         out / "fte_three_tank.h"
     ).read_text()
     assert (out / "mine.txt").read_text() == "user file"  # nothing else touched
-    r = run("codegen", str(design_files["three-tank"]), "--out", str(tmp_path / "d"), "--ts", "100")
+    r = run("codegen", str(design_files["three-tank"]), "--out", str(tmp_path / "d"), "--sample-time", "100")
     assert r.exit_code != 0 and "ts_max" in r.text
     (tmp_path / "afile").write_text("x")
     r = run("codegen", str(design_files["three-tank"]), "--out", str(tmp_path / "afile" / "sub"))
     assert r.exit_code != 0 and "--out" in r.text
+
+
+def test_codegen_sample_time_and_its_hidden_former_name(design_files, tmp_path):
+    """``--sample-time`` is the option (as on fte design); ``--ts`` still works and is not in the help."""
+    doc = str(design_files["three-tank"])
+    r = run("codegen", doc, "--out", str(tmp_path / "a"), "--sample-time", "0.005")
+    assert r.exit_code == 0, r.output
+    assert "Ts = 0.005 (--sample-time" in r.output
+    assert "#define FTE_THREE_TANK_TS (0.005)" in (tmp_path / "a" / "fte_three_tank.h").read_text()
+    r = run("codegen", doc, "--out", str(tmp_path / "b"), "--ts", "0.005")
+    assert r.exit_code == 0, r.output
+    for f in (tmp_path / "a").iterdir():
+        assert (tmp_path / "b" / f.name).read_bytes() == f.read_bytes()
+    r = run("codegen", doc, "--out", str(tmp_path / "c"), "--ts", "0.005", "--sample-time", "0.005")
+    assert r.exit_code != 0 and "once" in r.output
+    r = run("codegen", "--help")
+    assert "--sample-time" in r.output and "--ts" not in r.output
 
 
 PLANT_AUTO = Path(__file__).resolve().parent / "plant_auto.py"

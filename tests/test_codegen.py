@@ -321,10 +321,9 @@ def test_failed_write_leaves_nothing_half_written(designs, tmp_path, monkeypatch
 
 def test_default_sample_time(designs):
     """The sample time the design was made for (the scenario's step, which fte simulate runs); without
-    one, a tenth of ts_max rounded down to 1-2-5, capped by the built-in scenario's simulation step."""
+    one, a tenth of ts_max rounded down to 1-2-5, capped by the scenario's step when one is given."""
     import dataclasses
 
-    from fte_casadi.codegen.generate import BUILTIN_DT
     from fte_casadi.plants import SCENARIOS
 
     for plant, d in designs.items():
@@ -335,8 +334,10 @@ def test_default_sample_time(designs):
         )
         sample_time = default_sample_time(bare)
         assert sample_time <= 0.1 * ts_max and f"{sample_time:e}"[0] in "125"
-        assert sample_time == min(BUILTIN_DT[plant], series_floor(0.1 * ts_max))
-        assert BUILTIN_DT[plant] == SCENARIOS[plant]().dt  # kept in step with the simulator
+        assert sample_time == series_floor(0.1 * ts_max)
+        step = SCENARIOS[plant]().dt
+        assert default_sample_time(bare, step) == min(step, series_floor(0.1 * ts_max))
+        assert default_sample_time(bare, 1e-9) == 1e-9  # the cap is the scenario's step given
     d = designs["three-tank"]
     user = dataclasses.replace(
         d, plant="my-tank", observer={k: v for k, v in d.observer.to_dict().items() if k != "sample_time"}

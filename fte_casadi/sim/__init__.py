@@ -4,7 +4,7 @@ Two names for time steps, one meaning each:
 
 - ``sample_time`` (Ts) is the observer/controller's sample time, everywhere in the package: what a
   design is made and certified for (``Design.observer.sample_time``, ``design(..., sample_time=)``),
-  and the step of :func:`~fte_casadi.step.step_function` and of the generated C (``fte codegen --ts``).
+  and the step of :func:`~fte_casadi.step.step_function` and of the generated C (``fte codegen --sample-time``).
 - ``dt`` is the simulation's step, and is used only here in ``sim/`` and for the scenario
   (``Scenario.dt``, ``simulate(..., dt=)``, ``fte simulate --dt``, the metrics key ``"dt"``): the
   Euler-Maruyama step of the plant. The simulated controller takes one sample per step, so within a
