@@ -213,3 +213,65 @@ def test_a_document_before_0_2_0_is_read_with_each_value_once(committed):
     assert list(saved) == ["sample_time", "alpha", "why", "bound_objective_unweighted", "bound_objective"]
     assert saved["bound_objective_unweighted"] == 5.0
     assert not hasattr(d.observer, "ts_max") and d.checks["ts_max"] == old["ts_max"]
+
+
+# -- one policy for non-finite numbers: null with the reason, or a refusal; never a finite stand-in --------
+def _numbers(obj):
+    if isinstance(obj, dict):
+        return [x for v in obj.values() for x in _numbers(v)]
+    if isinstance(obj, list):
+        return [x for v in obj for x in _numbers(v)]
+    return [obj] if isinstance(obj, (int, float)) and not isinstance(obj, bool) else []
+
+
+def test_a_nan_check_is_written_as_null_with_its_reason_and_read_back_as_nan(committed, tmp_path):
+    from fte_casadi.design.certify import failures
+
+    d = committed[2]
+    checks = json.loads(json.dumps(d.checks))
+    checks["lmi_max_eig"]["45"] = float("nan")
+    if "lmi_balanced_max_eig" in checks:
+        checks["lmi_balanced_max_eig"]["45"] = float("nan")  # neither form evaluated
+    checks["lmi_max_eig"]["46"] = float("-inf")
+    checks["cond_Pbar"] = np.float64("inf")
+    bad = dataclasses.replace(d, checks=checks, certified=False)
+    bad.save(tmp_path / "nan.json")
+    text = (tmp_path / "nan.json").read_text()
+    doc = json.loads(text)
+    assert doc["checks"]["lmi_max_eig"]["45"] is None and doc["checks"]["lmi_max_eig"]["46"] is None
+    assert doc["checks"]["cond_Pbar"] is None
+    assert doc["nonfinite"]["checks.lmi_max_eig.45"].startswith("NaN: ")
+    assert doc["nonfinite"]["checks.lmi_max_eig.46"].startswith("-inf: ")
+    assert doc["nonfinite"]["checks.cond_Pbar"].startswith("+inf: ")
+    # no finite stand-in anywhere: the largest magnitude written is that of the design's own numbers
+    assert "e+308" not in text and "e308" not in text
+    assert max(abs(x) for x in _numbers(doc["checks"])) < 1e300
+    back = Design.load(tmp_path / "nan.json")
+    assert np.isnan(back.checks["lmi_max_eig"]["45"]) and back.checks["lmi_max_eig"]["46"] == -np.inf
+    assert back.checks["cond_Pbar"] == np.inf
+    assert any(s.startswith("LMI (45)") for s in failures(back.checks))  # a NaN is no certificate
+    back.save(tmp_path / "again.json")
+    assert (tmp_path / "again.json").read_text() == text  # a round trip keeps the nulls and their reasons
+
+
+def test_open_input_limits_are_null_with_their_reason(committed, tmp_path):
+    d = committed[2]
+    m = d.dims.m
+    lim = np.tile([-np.inf, 2.0], (m, 1))
+    lim[0, 1] = np.inf
+    e = dataclasses.replace(d, input_limits=lim)
+    doc = json.loads(e.to_json())
+    assert doc["input_limits"][0] == [None, None] and doc["input_limits"][-1][1] in (2.0, None)
+    assert doc["nonfinite"]["input_limits.0.0"] == "-inf: no limit on this side"
+    assert doc["nonfinite"]["input_limits.0.1"] == "+inf: no limit on this side"
+    e.save(tmp_path / "lim.json")
+    np.testing.assert_array_equal(Design.load(tmp_path / "lim.json").input_limits, lim)
+
+
+def test_a_non_finite_matrix_is_refused_by_name(committed, tmp_path):
+    d = committed[2]
+    Pbar = np.array(d.Pbar, dtype=float)
+    Pbar[0, 0] = np.nan
+    with pytest.raises(DesignFileError, match="'Pbar"):
+        dataclasses.replace(d, Pbar=Pbar).save(tmp_path / "bad.json")
+    assert not (tmp_path / "bad.json").exists()
