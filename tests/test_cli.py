@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from certified import assert_certified, verdict
 from click.testing import CliRunner
 from tolerances import PAPER_H
 
@@ -33,11 +34,21 @@ def test_design_writes_contract_document(tmp_path):
     f = tmp_path / "m.json"
     r = run("design", "manipulator", "-o", str(f))
     assert r.exit_code == 0, r.output
-    assert "CERTIFIED" in r.text
+    assert_certified(r.output, f)
     d = json.loads(f.read_text())
     assert d["variant"] == "conditioned" and d["dims"]["r"] == 2
     np.testing.assert_allclose(d["H"], PRINTED["manipulator"]["H"], atol=PAPER_H)
     assert all(v < 0 for v in d["checks"]["lmi_max_eig"].values())
+
+
+def test_the_certification_assertion_can_fail():
+    """The verdict is read from the summary line: "NOT CERTIFIED" is not a certificate."""
+    ok = "design of manipulator: variant conditioned, solver CLARABEL, CERTIFIED\n  params: ..."
+    assert verdict(ok) == "CERTIFIED"
+    assert verdict(ok.replace("CERTIFIED", "NOT CERTIFIED")) == "NOT CERTIFIED"
+    assert verdict("nothing certified here") is None
+    with pytest.raises(AssertionError):
+        assert_certified(ok.replace("CERTIFIED", "NOT CERTIFIED"))
 
 
 def test_infeasible_gamma_names_the_lmi_and_keeps_existing_file(design_files, tmp_path):

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from certified import assert_certified
 from tolerances import C_DOUBLE, ROUNDOFF
 
 from fte_casadi.codegen import build, generate_c
@@ -85,4 +86,4 @@ def test_example_runs_from_the_command_line(tmp_path):
         cwd=tmp_path,
     )
     assert p.returncode == 0, p.stderr
-    assert "CERTIFIED" in p.stdout
+    assert_certified(p.stdout, tmp_path / "p.json")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from certified import assert_certified
 from plant_bd_rules import plant as bd_plant
 from plant_bd_rules import scenario as bd_scenario
 from plant_remark5 import plant, scenario
@@ -194,5 +195,6 @@ def test_cli_no_remark5_gives_the_refusal(tmp_path):
     assert "assumption (1) fails" in off.stderr + off.stdout and "Remark 5" in off.stderr + off.stdout
     on = _cli("design", spec, "--sample-time", "0.001", "--d-bound", "0.5", "-o", str(tmp_path / "d.json"))
     assert on.returncode == 0, on.stderr
-    assert "CERTIFIED" in on.stdout and "Remark 5: H cannot decouple every unknown input" in on.stdout
+    assert_certified(on.stdout, tmp_path / "d.json")
+    assert "Remark 5: H cannot decouple every unknown input" in on.stdout
     assert Design.load(tmp_path / "d.json").remark5["d_bound"] == [0.5]
