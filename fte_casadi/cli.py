@@ -767,24 +767,31 @@ def reproduce(which, out_dir, seed, paths):
 
 
 # -- bench --------------------------------------------------------------------------------
+#: the parts of `fte bench` (fte_casadi.bench.PARTS; repeated here so that `fte --help` imports no benchmark)
+BENCH_PARTS = ("design", "growth", "monte-carlo", "c-step")
+
+
 @main.command()
 @click.option("--json", "as_json", is_flag=True, help="Print all figures as JSON on stdout.")
 @click.option(
     "--paths", type=int, default=1000, show_default=True, help="Monte Carlo paths of the engine run."
 )
+@click.option(
+    "--only", type=click.Choice(BENCH_PARTS), multiple=True,
+    help="Run only this part (repeatable; default: all of them).",
+)  # fmt: skip
 @_guard
-def bench(as_json, paths):
+def bench(as_json, paths, only):
     """Speed of design, Monte Carlo and the C step, against baselines run in the same process."""
     if paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    from .checkout import load_benchmarks
+    from .bench import run_all, summary_lines
 
-    benchmarks = load_benchmarks()
-    out = benchmarks.run_all(paths, log=lambda msg: click.echo(msg, err=True))
+    out = run_all(paths, log=lambda msg: click.echo(msg, err=True), only=only)
     if as_json:
         click.echo(json.dumps(out, indent=1, default=str))
         return
-    click.echo("\n".join(benchmarks.summary_lines(out)))
+    click.echo("\n".join(summary_lines(out)))
 
 
 # -- tune ---------------------------------------------------------------------------------

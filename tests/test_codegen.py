@@ -376,7 +376,7 @@ def test_no_compiler_is_reported(monkeypatch, tmp_path):
 @needs_cc
 def test_bench_measures_and_baseline_agrees(designs):
     """The benchmark runs; its hand-written baseline computes the same step; no mutable globals."""
-    from benchmarks.cstep import bench_c_step
+    from fte_casadi.bench.cstep import bench_c_step
 
     res = bench_c_step(designs["three-tank"], iters=2000, reps=1)
     assert res["c_ns"] > 0 and res["hand_ns"] > 0 and res["casadi_us"] > 0

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info
 
-from benchmarks.plant_chain import chain
+from fte_casadi.bench.plant_chain import chain
 from fte_casadi.design import design
 from fte_casadi.design.certify import failures
 from fte_casadi.ts import derive

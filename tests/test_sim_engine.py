@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from benchmarks.perpath import monte_carlo
+from fte_casadi.bench.perpath import monte_carlo
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.plants import SCENARIOS
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate

@@ -1,7 +1,7 @@
 """What the fault-error bound's weight in step 5's objective does (docs/design.md): a built-in plant designed
 at each weight, its certified bound, and the metrics of ``simulate(..., paths, seed=1)`` on its scenario.
 
-    PYTHONPATH=. python benchmarks/bound_weight.py manipulator 0,0.3,1,3,10 20 \
+    python -m fte_casadi.bench.bound_weight manipulator 0,0.3,1,3,10 20 \
         '{"gamma": 2, "gamma1": 0.01, "sigma": 0.2, "delta": 1e-5, "epsilon": 1e-5}'
 
 The optional last argument replaces the plant's design defaults (above: Section 6.1's parameters, without

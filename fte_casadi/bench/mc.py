@@ -97,8 +97,10 @@ def bench(
     C loop over the same arithmetic (:func:`.handloop.bench_fast`, ``fast_repeats`` repetitions).
     """
     scen = scenario
-    if horizon is not None:
-        scen = dataclasses.replace(scen, T=float(horizon))
+    if horizon is not None:  # the fault windows shrink with the horizon, so that they stay inside it
+        k = float(horizon) / float(scen.T)
+        faults = tuple(dataclasses.replace(f, start=k * f.start, stop=k * f.stop) for f in scen.faults)
+        scen = dataclasses.replace(scen, T=float(horizon), faults=faults)
     dt, nsteps, _ = resolve_dt(design, scen, None)
     kw = dict(paths=paths, seed=seed, progress=False, threads=threads)
 
