@@ -214,3 +214,39 @@ def test_the_method_text_is_shown_not_parsed():
         )
 
     assert _where(reads_method) == []
+
+
+def test_a_module_declares_public_only_what_its_package_exports_or_the_docs_name():
+    """The public surface (docs/api.md): each subpackage's ``__init__`` re-exports its public names
+    (``from ._x import Y as Y``); another module's ``__all__`` lists only those, or names the docs
+    document. Everything else is internal, even without a leading underscore."""
+    import importlib
+    import re
+
+    docs = " ".join(p.read_text() for p in (ROOT.parent / "docs").glob("*.md"))
+    docs += (ROOT.parent / "README.md").read_text()
+    bad = []
+    for init in sorted(ROOT.glob("*/__init__.py")):
+        pkg = importlib.import_module(f"fte_casadi.{init.parent.name}")
+        exported = {n for n in vars(pkg) if not n.startswith("_")}
+        for mod in sorted(init.parent.glob("*.py")):
+            rel = f"{init.parent.name}/{mod.name}"
+            if (
+                mod.name == "__init__.py"
+                or rel in NOT_TRIMMED_YET
+                or init.parent.name in NOT_TRIMMED_YET_PACKAGES
+            ):
+                continue
+            m = importlib.import_module(f"fte_casadi.{init.parent.name}.{mod.stem}")
+            for n in getattr(m, "__all__", []):
+                if n not in exported and not re.search(r"`[^`]*\b" + re.escape(n) + r"\b[^`]*`", docs):
+                    bad.append(f"{init.parent.name}/{mod.name}: {n}")
+    assert bad == [], bad
+
+
+#: modules whose ``__all__`` is not trimmed yet: work in progress on other branches rewrites them
+#: (the design options and LMI registry, the fault shapes, the C templates, the T-S groups)
+NOT_TRIMMED_YET = {"design/api.py", "design/certify.py", "design/conditioned.py", "design/paper.py",
+                   "design/sdp.py", "design/barrier.py", "sim/scenario.py", "codegen/template.py",
+                   "codegen/fmu_template.py"}  # fmt: skip
+NOT_TRIMMED_YET_PACKAGES = {"ts"}

@@ -32,7 +32,7 @@ from fte_casadi.codegen.generate import _void_unused, c_name, default_sample_tim
 from fte_casadi.design.record import Design
 from fte_casadi.step import step_function
 
-__all__ = ["bench_c_step", "hand_written_c"]
+__all__ = ["bench_c_step"]  # public: docs/api.md
 
 
 def _arr(name: str, a) -> str:

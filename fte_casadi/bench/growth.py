@@ -10,7 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-__all__ = ["bench_growth", "MEMBERS", "BASELINE_S"]
+__all__ = ["bench_growth"]  # public: docs/api.md
 
 #: (n, q): n states, q sin couplings (2^q rules); what ``fte bench`` runs by default
 MEMBERS = ((2, 1), (4, 2), (8, 2), (4, 4), (6, 4))

@@ -49,15 +49,7 @@ from . import build
 from .fmu_template import FMI2_HEADER, FMI2_HEADER_NAME, WRAPPER
 from .generate import _check_sample_time, _version, c_name, file_mode, generate_c, output_files, prepare_dir
 
-__all__ = [
-    "FmuVariable",
-    "fmu_variables",
-    "model_identifier",
-    "fmu_path",
-    "check_fmu_target",
-    "is_fte_fmu",
-    "generate_fmu",
-]
+__all__ = ["generate_fmu"]  # public: docs/api.md
 
 _TOOL = "fte_casadi"
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed timestamps: the same design gives the same archive

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import DesignFileError
 
-__all__ = ["check_document"]
+__all__ = []  # public: docs/api.md
 
 _REMAKE = "make it again with `fte design PLANT -o FILE`"
 

@@ -28,7 +28,7 @@ from ..errors import DesignFileError
 from ..ts.model import LocalModel
 from .records import Dims, Observer, Params, _Record
 
-__all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "SCHEMA", "atomic_write_text"]
+__all__ = ["Design", "Dims", "Params", "Observer"]  # public: docs/api.md
 
 #: the version of the design document this fte writes (documents without ``schema`` predate it: 1)
 SCHEMA = 2

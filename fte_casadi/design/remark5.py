@@ -42,14 +42,7 @@ from .uio import (
     remark5_split,
 )
 
-__all__ = [
-    "fallback",
-    "rule_dependent_directions",
-    "explain_rule_dependence",
-    "resolve_d_bound",
-    "record",
-    "with_remark5",
-]
+__all__ = ["fallback", "record"]  # public: docs/api.md
 
 
 def rule_dependent_directions(

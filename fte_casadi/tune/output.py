@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..design.record import Design, atomic_write_text
 
-__all__ = ["MARKER", "is_tune_record", "write_outputs", "front_documents", "front_table", "comparison"]
+__all__ = ["comparison"]  # public: docs/api.md
 
 #: the key that marks a tune.json as written by fte tune
 MARKER = "fte_tune"

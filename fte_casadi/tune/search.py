@@ -54,7 +54,7 @@ from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 from .evaluate import evaluate
 from .space import Space, space_for
 
-__all__ = ["tune", "TuneResult", "Record", "choose", "pareto_front", "RULES", "BATCH", "objectives_for"]
+__all__ = ["tune", "TuneResult", "Record", "choose", "pareto_front", "RULES"]  # public: docs/api.md
 
 #: trials asked from the sampler before any of them is told (also the tasks sent to a cluster at once)
 BATCH = 4
