@@ -195,7 +195,7 @@ def test_certificate_recomputed_from_saved_json(designs, name, tmp_path):
     e = Design.load(path)
     assert e.to_dict() == d.to_dict()
     aug = augment(e.local_models, e.C, e.Df)
-    pr = e.params
+    pr = e.params.to_dict()
     worst = {"45": -np.inf, "46": -np.inf, "55": -np.inf, "64": -np.inf}
     for i in range(e.r):
         for j in range(e.r):
@@ -300,7 +300,7 @@ def test_theorem5_with_diffusion_in_u_and_f():
     assert all(c["lmi_max_eig"][k] < 0 for k in ("78", "79", "80", "81"))
     assert c["lmi_max_eig"]["79"] == c["lmi_max_eig"]["46"]
     aug = augment(d.local_models, d.C, d.Df)
-    pr = d.params
+    pr = d.params.to_dict()
     for i in range(d.r):
         for j in range(d.r):  # (79) with its G terms, recomputed; differs from (46) without them
             L = lmi46(aug, i, d.K[j], d.P, d.T, d.Pbar, d.Q[i], pr["sigma"], pr["gamma1"])

@@ -253,7 +253,7 @@ def test_trial_zero_of_a_design_file_is_that_design(small, tmp_path):
     m0 = res.records[0].metrics
     assert m0["fault_rel_rms_error"] == direct["fault_rel_rms_error"]
     assert m0["windows"] == direct["windows"]
-    assert res.records[0].params.alpha == 0.5
+    assert res.records[0].params["alpha"] == 0.5
 
 
 def test_limits_named_when_no_candidate_helps(small):
@@ -340,13 +340,13 @@ def test_tune_from_tuned_defaults(small):
     d = design(derive(tuned), sample_time=scenario.dt, initial_state=scenario.x0, plant_spec=SPEC)
     res = tune(d, tuned, scenario, trials=6, seed=3, paths=2)
     r0 = res.records[0]
-    assert r0.params.alpha == a and r0.params.boundary_layer == 0.01 and r0.params.kappa == 3e3
+    assert r0.params["alpha"] == a and r0.params["boundary_layer"] == 0.01 and r0.params["kappa"] == 3e3
     assert 0 < r0.knobs["alpha_scale"] < 1 and r0.knobs["use_boundary_layer"] and r0.knobs["kappa"] == 3e3
     ok = [r for r in res.records[1:] if r.state == "ok"]
     assert ok
     for r in ok:
-        assert (r.params.boundary_layer is None) == (not r.knobs["use_boundary_layer"])
-        assert r.params.alpha != a and r.params.kappa == pytest.approx(r.knobs["kappa"])
+        assert (r.params["boundary_layer"] is None) == (not r.knobs["use_boundary_layer"])
+        assert r.params["alpha"] != a and r.params["kappa"] == pytest.approx(r.knobs["kappa"])
 
 
 def test_three_tank_default_is_the_tuned_design():
