@@ -1,6 +1,7 @@
 """The benchmarks run end to end (speed itself is reported by `fte bench`, not asserted here)."""
 
 import numpy as np
+import pytest
 
 from fte_casadi.bench.mc import bench
 from fte_casadi.plants import manipulator
@@ -109,6 +110,7 @@ def test_summary_of_one_part_only():
     assert lines[0].startswith("generated C step") and "manipulator" in lines[1] and len(lines) == 2
 
 
+@pytest.mark.slow
 def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeypatch, tmp_path):
     """`fte reproduce` where the C step's timings cannot be measured: the C table keeps the sizes and says why."""
     import pytest

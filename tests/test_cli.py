@@ -30,6 +30,7 @@ def design_files(real_designs, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_design_writes_contract_document(tmp_path):
     f = tmp_path / "m.json"
     r = run("design", "manipulator", "-o", str(f))
@@ -51,6 +52,7 @@ def test_the_certification_assertion_can_fail():
         assert_certified(ok.replace("CERTIFIED", "NOT CERTIFIED"))
 
 
+@pytest.mark.slow
 def test_infeasible_gamma_names_the_lmi_and_keeps_existing_file(design_files, tmp_path):
     f = tmp_path / "keep.json"
     old = design_files["manipulator"].read_text()  # an earlier design, which a failed run must not replace
@@ -73,6 +75,7 @@ def test_design_never_overwrites_a_file_it_did_not_write(tmp_path, content):
     assert [p.name for p in tmp_path.iterdir()] == ["plant.py"]
 
 
+@pytest.mark.slow
 def test_design_replaces_its_own_earlier_document(design_files, tmp_path):
     f = tmp_path / "m.json"
     doc = json.loads(design_files["manipulator"].read_text())
@@ -90,6 +93,7 @@ def test_design_out_without_explore_is_refused(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.slow
 def test_simulate_save_never_overwrites_a_foreign_file(design_files, tmp_path):
     f = tmp_path / "data.npz"
     f.write_bytes(b"user data")
@@ -114,6 +118,7 @@ def test_simulate_save_never_overwrites_a_foreign_file(design_files, tmp_path):
         (["--solver", "NOPE"], "NOPE"),
     ],
 )
+@pytest.mark.slow
 def test_design_parameter_errors(args, needle):
     r = run("design", "manipulator", *args)
     assert r.exit_code != 0
@@ -205,6 +210,7 @@ def test_codegen_sample_time_and_its_hidden_former_name(design_files, tmp_path):
 PLANT_AUTO = Path(__file__).resolve().parent / "plant_auto.py"
 
 
+@pytest.mark.slow
 def test_failed_assumptions_are_named_with_the_cli_option_to_accept_them():
     """Two outputs for a fault, a sensor fault and an unknown input: (2) fails with the count that
     explains why, (4)'s repeated eigenvalue is printed once with its count, and the advice is a CLI option
@@ -222,6 +228,7 @@ def test_failed_assumptions_are_named_with_the_cli_option_to_accept_them():
     assert "assumption (" not in r.output and "Traceback" not in r.output, r.output
 
 
+@pytest.mark.slow
 def test_design_bound_weight_option(tmp_path):
     """--bound-weight puts the fault-error bound into the observer's objective and is recorded; a negative
     weight is refused by name."""

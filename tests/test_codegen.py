@@ -106,6 +106,7 @@ def _fault(plant):
     return lambda t, u: np.array([-10.0 if t >= 5.0 else 0.0])  # pump 2 delivers 10 cm^3/s less
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("plant", PLANTS)
 def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
@@ -122,6 +123,7 @@ def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
     assert np.max(np.abs(traj["fhat"][-1])) > 0  # the fault estimate moved: the loop was exercised
 
 
+@pytest.mark.slow
 @needs_cc
 def test_saturating_closed_loop_matches_casadi(designs, libs):
     """Issue #12: the C step clips u into the pumps' limits exactly as the Python step does, over a
@@ -194,6 +196,7 @@ def test_no_heap_io_or_mutable_globals(libs):
     assert checked >= 16
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("plant", PLANTS)
 @pytest.mark.parametrize("real", ["double", "float"])
@@ -373,6 +376,7 @@ def test_no_compiler_is_reported(monkeypatch, tmp_path):
         build.compile_shared(tmp_path, tmp_path / "x.so")
 
 
+@pytest.mark.slow
 @needs_cc
 def test_bench_measures_and_baseline_agrees(designs):
     """The benchmark runs; its hand-written baseline computes the same step; no mutable globals."""
@@ -415,6 +419,7 @@ def test_init_from_y_starts_as_the_simulation(plant, designs, libs):
     np.testing.assert_array_equal(c.z, before)  # refused: the state is unchanged
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("plant", PLANTS)
 def test_closed_loop_from_first_measurement_matches_casadi(plant, designs, libs):

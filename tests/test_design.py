@@ -154,6 +154,7 @@ def _gains(d) -> dict:
     return {"K": d.K, "L1": d.L1, "N": [d.N], "H": [d.H], "Kf": [d.Kf]}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_design_is_a_smooth_function_of_the_plant(ts_models, designs, name):
     """A 1e-12 relative perturbation of the T-S matrices moves K_j, L_i1, N, H, Kf by at most 1e-6 relative."""
@@ -175,6 +176,7 @@ def test_design_is_a_smooth_function_of_the_plant(ts_models, designs, name):
     assert g1.keys() == g2.keys() and all(abs(g2[k] / g1[k] - 1) <= 1e-6 for k in g1), (g1, g2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_clarabel_and_scs_give_the_same_design(ts_models, designs, name):
     """Both solvers: every solve optimal, certified, and the same design to 1e-8 relative (the solver
@@ -229,6 +231,7 @@ def test_three_tank_reference_input(designs):
     assert np.max(np.abs(np.array(f(d.x_ref, u, 0, 0)))) < 1e-9
 
 
+@pytest.mark.slow
 def test_infeasible_gamma_names_a_feasible_bound_that_works(ts_models):
     ts = ts_models["manipulator"]
     with pytest.raises(InfeasibleDesignError, match=r"LMI \(45\) is infeasible") as exc:
@@ -248,6 +251,7 @@ def test_bad_parameters(ts_models, kw):
         design(ts_models["manipulator"], **kw)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_paper_variant_never_claims_false_certificate(ts_models, name):
     try:
@@ -290,6 +294,7 @@ def _diffusion_manipulator(beta_s=0.003, beta_sf=0.003):
     return b.build()
 
 
+@pytest.mark.slow
 def test_theorem5_with_diffusion_in_u_and_f():
     ts = derive(_diffusion_manipulator(), fidelity_samples=200)
     assert ts.local_models[0].has_diffusion_extension
@@ -321,6 +326,7 @@ def test_three_tank_observer_decays_within_the_fault_window(designs):
     assert c["cond_Pbar"] <= 1e5 and c["max_abs_L1"] <= 1e4
 
 
+@pytest.mark.slow
 def test_no_solver_warning_leaks_and_status_records_it(ts_models):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -330,6 +336,7 @@ def test_no_solver_warning_leaks_and_status_records_it(ts_models):
     assert any("warned" in s for s in d.status) == any("inaccurate" in s for s in d.status)
 
 
+@pytest.mark.slow
 def test_user_alpha_too_fast_names_the_largest(ts_models, designs):
     ts = ts_models["manipulator"]
     with pytest.raises(InfeasibleDesignError, match=r"lower alpha to <= ([0-9.]+)") as exc:
@@ -362,6 +369,7 @@ def _kf_plant(fault_gain):
     return b.build()
 
 
+@pytest.mark.slow
 def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
     from fte_casadi import derive
 
@@ -379,6 +387,7 @@ def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
     np.testing.assert_array_equal(d2.Kf, d2.Kf_rules[0])
 
 
+@pytest.mark.slow
 def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeypatch):
     """Issue #17: a solver's numerical failure is retried with the other solver before it is reported."""
     from fte_casadi.design import conditioned
@@ -401,6 +410,7 @@ def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeyp
         run_design(ts_models["manipulator"], solver="CLARABEL")
 
 
+@pytest.mark.slow
 def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(monkeypatch):
     """Issue #20: SolverFailedError is no InfeasibleDesignError; `fte design` still fails with exit 1
     and the one-paragraph message (no traceback, not 'internal error')."""

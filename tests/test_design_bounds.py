@@ -46,6 +46,7 @@ def _monte_carlo_and_bound(d, plant, scenario, key: str = "fault_error") -> tupl
     return lhs, bound_value(fb, _energies(d, scenario), v0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spec, horizon", [(SMALL, None), ("manipulator", None), ("three-tank", 100.0)])
 def test_monte_carlo_stays_below_the_bound(spec, horizon):
     plant, scenario = load_plant(spec), load_scenario(spec)
@@ -63,6 +64,7 @@ def test_monte_carlo_stays_below_the_bound(spec, horizon):
     assert 0 < lhs <= rhs, (lhs, rhs)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spec", [SMALL, "manipulator"])
 def test_the_bound_in_the_objective_lowers_it_and_monte_carlo_stays_below(spec):
     """bound_weight puts the closed loop's bound (block-diagonal P) into step 5's objective: the bound at the
@@ -89,6 +91,7 @@ def test_the_bound_in_the_objective_lowers_it_and_monte_carlo_stays_below(spec):
     assert 0 < lhs <= rhs, (lhs, rhs)
 
 
+@pytest.mark.slow
 def test_the_analysis_from_step_5s_point_agrees_with_the_conic_solver():
     """With the bound in the objective, the certified bound (common P) is computed by the barrier method in
     numpy from step 5's block-diagonal point; Clarabel's optimum of the same problem agrees with it to the
@@ -106,6 +109,7 @@ def test_the_analysis_from_step_5s_point_agrees_with_the_conic_solver():
     assert numpy_sum == pytest.approx(float(np.sum(ok[0])), rel=2e-3)
 
 
+@pytest.mark.slow
 def test_a_bad_bound_weight_is_refused_with_its_name():
     from fte_casadi.errors import ParameterError
 
@@ -128,6 +132,7 @@ def test_one_vertex_per_rule_with_a_common_gain_and_a_size_limit_said(monkeypatc
     assert out["holds"] is False and "not computed" in out["why"] and "12 states" in out["why"]
 
 
+@pytest.mark.slow
 def test_the_linear_and_the_schur_form_give_the_same_bound():
     """The diffusion term W^T P W is linear in P: posed so, the analysis LMI is half the size of its Schur
     form with a -P block (the same set for P > 0) and several times cheaper. Both forms' points pass the

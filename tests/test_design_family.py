@@ -14,6 +14,7 @@ from fte_casadi.design.certify import failures
 from fte_casadi.ts import derive
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("n", "q"), [(2, 1), (4, 2), (8, 2), (16, 2), (24, 2), (6, 4), (6, 6)])
 def test_a_member_designs_at_its_defaults(n, q):
     ts = derive(chain(n, q), fidelity_samples=500)
@@ -26,6 +27,7 @@ def test_a_member_designs_at_its_defaults(n, q):
         assert getattr(d.params, k) == c["value"] and "certified design" in c["why"]
 
 
+@pytest.mark.slow
 def test_the_design_limits_the_blas_to_one_thread(monkeypatch):
     """design() runs under threadpoolctl's limit of one BLAS thread (small dense algebra thrashes in many)."""
     seen = []
@@ -42,6 +44,7 @@ def test_the_design_limits_the_blas_to_one_thread(monkeypatch):
     assert seen and all(t == 1 for t in seen)
 
 
+@pytest.mark.slow
 def test_the_numpy_starts_and_the_rule_subsets_do_not_change_the_design(monkeypatch):
     """A heavy problem's step 3 starts from phase 1 in numpy instead of a conic solve, and step 5's
     decisions in alpha take the rules a few at a time (barrier.phase1_active); both only change the path

@@ -44,6 +44,7 @@ def test_example_design_is_certified(pendulum_design):
     assert d.checks["R_max_real_eig"] < 0 and d.checks["closed_loop_max_real_eig"] < 0
 
 
+@pytest.mark.slow
 def test_example_simulates_and_estimates_its_faults(pendulum_design):
     spec = pendulum_design.plant_spec
     sc = load_scenario(spec)
@@ -59,6 +60,7 @@ def test_example_simulates_and_estimates_its_faults(pendulum_design):
     ] == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_example_generated_c_equals_python(pendulum_design, tmp_path):
     d = pendulum_design
@@ -77,6 +79,7 @@ def test_example_generated_c_equals_python(pendulum_design, tmp_path):
     assert np.max(np.abs(traj["fhat"][-1])) > 0.01  # the observer saw the faults
 
 
+@pytest.mark.slow
 def test_example_runs_from_the_command_line(tmp_path):
     p = subprocess.run(
         [sys.executable, "-m", "fte_casadi", "design", SPEC, "-o", str(tmp_path / "p.json")],

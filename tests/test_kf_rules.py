@@ -80,6 +80,7 @@ def test_c_and_simulation_run_the_scheduled_term(kf_design, tmp_path):
     assert m["fault_rel_rms_error"][0] < 0.3 and m["ftc_deviation_ratio"] < 0.5
 
 
+@pytest.mark.slow
 def test_parameters_the_user_did_not_set_are_found_by_the_tool(tmp_path):
     """Issue #17 item 2: the generic sigma fails on this plant; the tool picks one below the largest
     sigma (45) allows, certifies, and records what it chose and why. A sigma the user gave is kept."""

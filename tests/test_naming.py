@@ -45,6 +45,7 @@ def _names(tree) -> list[tuple[str, int]]:
     return out
 
 
+@pytest.mark.slow
 def test_the_scan_sees_the_package():
     trees = dict(_trees())
     assert len(trees) > 50 and "sim/engine.py" in trees and "step.py" in trees
@@ -52,6 +53,7 @@ def test_the_scan_sees_the_package():
     assert any(n == "dt" for n, _ in _names(trees["sim/engine.py"]))
 
 
+@pytest.mark.slow
 def test_dt_is_a_name_only_in_the_simulator():
     bad = [
         f"{rel}:{line}"
@@ -63,6 +65,7 @@ def test_dt_is_a_name_only_in_the_simulator():
     assert bad == [], f"'dt' outside sim/ (the sample time is 'sample_time'): {bad}"
 
 
+@pytest.mark.slow
 def test_ts_is_never_a_number():
     """``ts`` is a T-S model: never annotated as a number, never in arithmetic, never converted to float,
     never a keyword of a call."""
@@ -86,11 +89,13 @@ def test_ts_is_never_a_number():
     assert bad == [], bad
 
 
+@pytest.mark.slow
 def test_former_names_of_the_sample_time_are_gone():
     bad = [f"{rel}:{line} {name}" for rel, tree in _trees() for name, line in _names(tree) if name in FORMER]
     assert bad == [], bad
 
 
+@pytest.mark.slow
 def test_the_former_default_ts_is_gone():
     uses = [(rel, name) for rel, tree in _trees() for name, _ in _names(tree) if name == "default_ts"]
     assert uses == [] and not hasattr(fte_casadi.codegen, "default_ts")
@@ -126,6 +131,7 @@ def test_generate_c_refuses_the_former_keyword(design, tmp_path):
         generate_c(design, tmp_path / "old", ts=0.005)
 
 
+@pytest.mark.slow
 def test_to_control_refuses_the_former_keyword(design):
     pytest.importorskip("control")
     assert design.to_control(1, 1, sample_time=0.01).dt == 0.01

@@ -7,6 +7,8 @@ from __future__ import annotations
 import ast
 import pathlib
 
+import pytest
+
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "fte_casadi"
 
 
@@ -77,6 +79,7 @@ def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_the_graph_sees_imports_inside_functions():
     g = import_graph()
     assert "fte_casadi.sim.cluster" in g["fte_casadi.sim.engine"]  # imported at the top
@@ -109,6 +112,7 @@ def _layer(module: str) -> int:
     return next(k for k, names in enumerate(LAYERS) if part in names)
 
 
+@pytest.mark.slow
 def test_no_module_imports_a_layer_above_it():
     g = import_graph()
     assert {m.split(".")[1] for m in g if "." in m} <= set().union(*LAYERS)  # every top-level part placed
@@ -157,11 +161,13 @@ def _modules_of(places: list[str]) -> set[str]:
     return {p.split(":")[0] for p in places}
 
 
+@pytest.mark.slow
 def test_the_symmetric_part_is_written_once():
     assert _where(_is_sym) == ["design/linalg.py:12"]
     assert _is_sym(ast.parse("0.5 * (P.value + P.value.T)").body[0].value)  # the check sees an inline one
 
 
+@pytest.mark.slow
 def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once():
     inaccurate = _where(lambda n: isinstance(n, ast.Constant) and n.value == "optimal_inaccurate")
     assert _modules_of(inaccurate) == {"design/sdp.py"} and len(inaccurate) == 1  # SOLVED
@@ -172,6 +178,7 @@ def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once(
     assert _modules_of(_where(_calls("shutil.which"))) == {"toolchain.py"}
 
 
+@pytest.mark.slow
 def test_one_class_per_name():
     """Two unrelated classes were both called ``Layout`` (the conic layer's and the engine's path layout)."""
     seen: dict[str, list[str]] = {}
@@ -198,6 +205,7 @@ def test_every_exception_class_lives_in_errors_py():
     )  # a failure, not infeasibility
 
 
+@pytest.mark.slow
 def test_the_method_text_is_shown_not_parsed():
     """``TSModel.method`` is display text; code decides on ``TSModel.kind``."""
 

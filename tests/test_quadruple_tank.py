@@ -38,6 +38,7 @@ def test_premises_found_automatically_and_exact(ts):
     assert ts.fidelity.drift_max_abs_error < 1e-12
 
 
+@pytest.mark.slow
 def test_designs_at_its_own_parameters(ts):
     """No design defaults: the generic ones fail, and the tool finds sigma and gamma itself (and says so)."""
     assert not quadruple_tank().design_defaults
@@ -52,6 +53,7 @@ def test_designs_at_its_own_parameters(ts):
     assert d.checks["discrete"]["holds"]
 
 
+@pytest.mark.slow
 def test_certifies_with_scs_too(ts, committed):
     """The same parameters with the other solver: certified, and the same observer up to the solvers'
     tolerance (the centred point is unique; only where it is found from differs)."""
@@ -61,6 +63,7 @@ def test_certifies_with_scs_too(ts, committed):
     assert np.allclose(d.Pbar, committed.Pbar, rtol=1e-5, atol=1e-8 * np.abs(committed.Pbar).max())
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler")
 def test_c_started_from_the_first_measurement_has_no_false_fault_estimate(committed, tmp_path):
     """The committed C on the nonlinear plant. (1) With noise and the unknown inflow, the plant starting at
@@ -107,6 +110,7 @@ def test_c_started_from_the_first_measurement_has_no_false_fault_estimate(commit
     assert np.all(cold > 20 * steady), (cold, steady)
 
 
+@pytest.mark.slow
 def test_a_design_with_chosen_parameters_keeps_the_plant_and_start(ts):
     """The parameter search redesigns; the document it returns still names the plant (so that
     `fte simulate DESIGN.json` finds it) and the nominal start it was asked for."""

@@ -159,6 +159,7 @@ def test_monte_carlo_estimates_the_fault_with_the_gust_acting(r5):
     assert with_gust["ftc_deviation_ratio"] < 0.1  # measured 0.039
 
 
+@pytest.mark.slow
 def test_rule_dependent_bd_is_named_and_remark5_used():
     """Issue #19 item 4: Bd_i differs between rules; decoupling both directions leaves (4) failing with
     s = 0. The message names the input, rules and entry, offers no --accept-assumption 4 (it cannot
@@ -188,6 +189,7 @@ def _cli(*args):
     )
 
 
+@pytest.mark.slow
 def test_cli_no_remark5_gives_the_refusal(tmp_path):
     spec = f"{HERE / 'plant_remark5.py'}:plant"
     off = _cli("design", spec, "--no-remark5", "--sample-time", "0.001")

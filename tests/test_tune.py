@@ -25,6 +25,9 @@ from fte_casadi.tune import choose, pareto_front, tune  # noqa: E402
 from fte_casadi.tune.search import Record  # noqa: E402
 
 SPEC = f"{Path(__file__).parent / 'plant_tune.py'}:plant"
+#: every test here searches and simulates many candidates: the module took over 20 minutes on the shared
+#: 2-core machine (python3 -m pytest --durations=0 tests/test_tune.py), so all of it is left out of the fast subset
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
