@@ -214,7 +214,7 @@ def derive(plant: str, as_json: bool, vertices: str | None) -> None:
     for pr in ts.premises:
         gap = f" (bounds widened by {pr.bound_gap:.2g})" if pr.bound_gap else ""
         click.echo(f"  {pr.name} = {pr.expr}: [{pr.min:.6g}, {pr.max:.6g}]{gap}")
-    for note in ts.notes:  # how the automatic method found them (issue #10)
+    for note in ts.notes:  # how the automatic method found them
         click.echo(f"  {note}")
     for i, lm in enumerate(ts.local_models):
         click.echo(f"rule {i + 1}:")
@@ -475,30 +475,40 @@ _allow_option = click.option(
     "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files."
 )
 @click.option(
-    "--ts", "sample_time", type=float,
+    "--sample-time", "sample_time", type=float,
     help="Sample time (default: the one the design was made for and fte simulate runs, its scenario's step; "
     "without one, a tenth of the design's ts_max, rounded down).",
 )  # fmt: skip
+@click.option("--ts", "sample_time_alias", type=float, hidden=True)  # the name before 0.2.0
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
 @click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
 @_plant_option
 @_allow_option
 @_guard
-def codegen(target, out_dir, sample_time, real, boundary_layer, fmu, plant_opt, allow_uncertified):
+def codegen(
+    target, out_dir, sample_time, sample_time_alias, real, boundary_layer, fmu, plant_opt, allow_uncertified
+):
     """Generate the embedded C of the observer/controller step."""
     from .codegen import default_sample_time, generate_c
     from .codegen.fmu import check_fmu_target, generate_fmu
+    from .plants import SCENARIOS
 
-    _positive("ts", sample_time)
+    if sample_time is not None and sample_time_alias is not None:
+        raise click.UsageError("give the sample time once: --sample-time (--ts is its former name)")
+    sample_time = sample_time if sample_time_alias is None else sample_time_alias
+    _positive("sample-time", sample_time)
     _positive("boundary-layer", boundary_layer)
     _outputs(out_dir)
     d, _ = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
-    files = generate_c(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
-    made_for = default_sample_time(d)
-    how = "--ts" if sample_time is not None else "the design's sample time, the step fte simulate runs"
+    made_for = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
+    files = generate_c(d, out_dir, sample_time=made_for if sample_time is None else sample_time, real=real,
+                       boundary_layer=boundary_layer)  # fmt: skip
+    how = (
+        "--sample-time" if sample_time is not None else "the design's sample time, the step fte simulate runs"
+    )
     if sample_time is not None and abs(sample_time - made_for) > 1e-12 * sample_time:
         how += f"; the design was made for {made_for:g}"
     if sample_time is None:
@@ -698,7 +708,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
         click.echo(
             f"note: simulated at dt = {change['to']:g}, not the design's sample time {change['from']:g} "
-            f"({change['why']}); the generated C runs {change['from']:g} unless --ts says otherwise",
+            f"({change['why']}); the generated C runs {change['from']:g} unless --sample-time says otherwise",
             err=True,
         )
     if as_json:
@@ -818,24 +828,31 @@ def reproduce(which, out_dir, seed, paths):
 
 
 # -- bench --------------------------------------------------------------------------------
+#: the parts of `fte bench` (fte_casadi.bench.PARTS; repeated here so that `fte --help` imports no benchmark)
+BENCH_PARTS = ("design", "growth", "monte-carlo", "c-step")
+
+
 @main.command()
 @click.option("--json", "as_json", is_flag=True, help="Print all figures as JSON on stdout.")
 @click.option(
     "--paths", type=int, default=1000, show_default=True, help="Monte Carlo paths of the engine run."
 )
+@click.option(
+    "--only", type=click.Choice(BENCH_PARTS), multiple=True,
+    help="Run only this part (repeatable; default: all of them).",
+)  # fmt: skip
 @_guard
-def bench(as_json, paths):
+def bench(as_json, paths, only):
     """Speed of design, Monte Carlo and the C step, against baselines run in the same process."""
     if paths < 1:
         raise ParameterError(f"--paths must be a positive integer; got {paths}")
-    from .checkout import load_benchmarks
+    from .bench import run_all, summary_lines
 
-    benchmarks = load_benchmarks()
-    out = benchmarks.run_all(paths, log=lambda msg: click.echo(msg, err=True))
+    out = run_all(paths, log=lambda msg: click.echo(msg, err=True), only=only)
     if as_json:
         click.echo(json.dumps(out, indent=1, default=str))
         return
-    click.echo("\n".join(benchmarks.summary_lines(out)))
+    click.echo("\n".join(summary_lines(out)))
 
 
 # -- tune ---------------------------------------------------------------------------------

@@ -26,7 +26,6 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .deprecation import renamed_keyword
 from .design.record import Design
 from .errors import ParameterError
 
@@ -76,7 +75,6 @@ def accommodation_gate(fhat: ca.SX, acc: dict) -> ca.SX:
     return ca.vertcat(*gates)
 
 
-@renamed_keyword("ts", "sample_time")
 def step_function(
     design: Design,
     sample_time: float,

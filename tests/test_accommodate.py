@@ -74,6 +74,7 @@ def test_the_document_keeps_the_accommodation_and_refuses_a_bad_one(real_designs
             Design.load(tmp_path / "b.json")
 
 
+@pytest.mark.slow
 @needs_cc
 def test_the_c_step_accommodates_as_the_simulation(real_designs, tmp_path):
     """The generated C of an accommodated design, fed the Monte Carlo's measurements, gives its inputs."""

@@ -1,8 +1,9 @@
 """The benchmarks run end to end (speed itself is reported by `fte bench`, not asserted here)."""
 
 import numpy as np
+import pytest
 
-from benchmarks.mc import bench
+from fte_casadi.bench.mc import bench
 from fte_casadi.plants import manipulator
 from fte_casadi.plants.manipulator import scenario
 
@@ -45,7 +46,7 @@ def test_monte_carlo_bench_smoke(lqr_designs):
     # the hand loop built with -ffast-math did not switch this process to flush-to-zero (crtfastmath.o)
     tiny = np.array([2.0e-308])
     assert (tiny / 4.0)[0] > 0.0
-    from benchmarks import fast_lines
+    from fte_casadi.bench import fast_lines
 
     text = "\n".join(fast_lines(fm, out["engine"]))
     assert "hand-vectorised C loop" in text
@@ -53,7 +54,7 @@ def test_monte_carlo_bench_smoke(lqr_designs):
 
 
 def test_layers_do_not_import_the_plants():
-    """sim/ and codegen/ sit below the plants: only benchmarks/, report.py and cli.py may import them."""
+    """sim/ and codegen/ sit below the plants: only bench/, report.py and cli.py may import them."""
     import pathlib
     import re
 
@@ -64,7 +65,7 @@ def test_layers_do_not_import_the_plants():
 
 
 def test_leaving_out_the_libm_calls_changes_only_those_lines():
-    from benchmarks.anatomy import _no_libm
+    from fte_casadi.bench.anatomy import _no_libm
 
     src = "  for (l = 0; l < V; ++l) w3[l] = sin(w1[l]);\n  w4 = w3 * w2;\n  dw[l] = fte_ndtri_tail(p[l]);"
     assert (
@@ -73,56 +74,48 @@ def test_leaving_out_the_libm_calls_changes_only_those_lines():
     )
 
 
-def test_bench_finds_the_checkouts_benchmarks(monkeypatch):
-    """`fte bench` loads benchmarks/ from the checkout beside fte_casadi/ when it is not imported yet."""
-    import pathlib
-    import sys
-
-    from fte_casadi.checkout import load_benchmarks
-
-    monkeypatch.delitem(sys.modules, "benchmarks", raising=False)
-    mod = load_benchmarks()
-    root = pathlib.Path(__file__).resolve().parents[1]
-    assert pathlib.Path(mod.__file__).resolve() == root / "benchmarks" / "__init__.py"
-    assert callable(mod.run_all) and callable(mod.summary_lines)
-
-
-def test_bench_without_the_benchmarks_says_where_they_are(monkeypatch, tmp_path):
-    """An installed wheel holds fte_casadi only: `fte bench` says so, exit status 2, no traceback."""
-    import sys
-
-    from click.testing import CliRunner
-
-    from fte_casadi import checkout
-    from fte_casadi.cli import main
-
-    (tmp_path / "fte_casadi").mkdir()
-    monkeypatch.delitem(sys.modules, "benchmarks", raising=False)
-    monkeypatch.setattr(checkout, "__file__", str(tmp_path / "fte_casadi" / "checkout.py"))
-    r = CliRunner().invoke(main, ["bench"])
-    assert r.exit_code == 2, r.output
-    assert "source repository" in r.output and "checkout" in r.output and "Traceback" not in r.output
-
-
-def test_the_wheel_holds_no_benchmarks_nor_history():
-    """pyproject's package list: fte_casadi only; the baselines (0.1 design, per-path engine) live in benchmarks/."""
+def test_the_benchmarks_ship_with_the_package():
+    """`fte bench` needs no source checkout: the benchmarks are the package's fte_casadi.bench, and
+    pyproject's package list takes it into the wheel."""
     import pathlib
 
     from setuptools import find_packages
 
+    import fte_casadi.bench as bench
+
     root = pathlib.Path(__file__).resolve().parents[1]
     pkgs = find_packages(str(root), include=["fte_casadi*"])
-    assert "fte_casadi" in pkgs and not any(p.startswith("benchmarks") for p in pkgs)
-    files = {p.name for p in (root / "fte_casadi").rglob("*.py")}
-    assert not files & {"legacy.py", "perpath.py", "mc.py", "cstep.py"}
-    assert not any("legacy" in p.read_text() for p in (root / "fte_casadi").rglob("*.py"))
+    assert "fte_casadi.bench" in pkgs and not (root / "benchmarks").exists()
+    assert pathlib.Path(bench.__file__).resolve() == root / "fte_casadi" / "bench" / "__init__.py"
+    assert callable(bench.run_all) and callable(bench.summary_lines)
+    from fte_casadi.cli import BENCH_PARTS
+
+    assert BENCH_PARTS == bench.PARTS
 
 
+def test_bench_refuses_an_unknown_part():
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+
+    r = CliRunner().invoke(main, ["bench", "--only", "nope"])
+    assert r.exit_code == 2 and "nope" in r.output and "Traceback" not in r.output
+
+
+def test_summary_of_one_part_only():
+    from fte_casadi.bench import summary_lines
+
+    row = {"casadi_us": 1.0, "state_bytes": 8, "const_bytes": 16, "c_ns": 2.0, "hand_ns": 4.0, "ratio": 0.5}
+    lines = summary_lines({"c_step": {"manipulator": row}})
+    assert lines[0].startswith("generated C step") and "manipulator" in lines[1] and len(lines) == 2
+
+
+@pytest.mark.slow
 def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeypatch, tmp_path):
-    """`fte reproduce` from a wheel: the C table keeps the sizes and says where the timings come from."""
+    """`fte reproduce` where the C step's timings cannot be measured: the C table keeps the sizes and says why."""
     import pytest
 
-    from fte_casadi import checkout
+    import fte_casadi.bench
     from fte_casadi.codegen import find_compiler
     from fte_casadi.codegen.generate import memory_report
     from fte_casadi.errors import MissingDependencyError
@@ -132,13 +125,13 @@ def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeyp
         pytest.skip("no C compiler")
 
     def missing():
-        raise MissingDependencyError("no benchmarks (test)")
+        raise MissingDependencyError("no hand-written loop (test)")
 
-    monkeypatch.setattr(checkout, "load_benchmarks", missing)
+    monkeypatch.setattr(fte_casadi.bench, "bench_c_step", lambda *a, **k: missing())
     d = real_designs["three-tank"]
     lines, info = _c_section(d, tmp_path / "c")
     row = next(ln for ln in lines if ln.startswith("| n/a ns | n/a ns | n/a |"))
     mem = memory_report(d, sample_time=info["ts"])
     assert f"{mem['state_bytes']} B" in row and f"{mem['const_bytes']} B" in row
-    assert "(timings: run from a source checkout.)" in lines
+    assert "(timings: not measured (no hand-written loop (test)).)" in lines
     assert info["max_diff"] < 1e-9 and info["bench"]["casadi_us"] is None

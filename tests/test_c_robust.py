@@ -163,6 +163,7 @@ def _generate(plant, real, folder):
     return sorted(str(p) for p in folder.glob("fte_*.c"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("real", ["double", "float"])
 @pytest.mark.parametrize("plant", sorted(BUILTIN_DIRS))
 def test_c_recovers_under_traps_and_sanitizers(plant, real, tmp_path):
@@ -187,6 +188,7 @@ def test_c_recovers_under_traps_and_sanitizers(plant, real, tmp_path):
     assert r.returncode == 0 and r.stdout.strip().endswith("OK"), (r.returncode, r.stdout, r.stderr[-2000:])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("real", ["double", "float"])
 def test_fast_math_keeps_the_nan_check(real, tmp_path):
     """-ffast-math lets the compiler assume there is no NaN: the check reads the bits, so it stays."""

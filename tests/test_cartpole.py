@@ -25,9 +25,10 @@ def ts():
     return derive(cartpole(), fidelity_samples=2000)
 
 
+@pytest.mark.slow
 def test_designs_at_its_1_ms_step_with_the_discrete_step_proven(ts, tmp_path):
     d = design(ts, sample_time=1e-3, plant_spec=SPEC)
-    assert d.certified and d.observer["sample_time"] == 1e-3
+    assert d.certified and d.observer.sample_time == 1e-3
     disc = d.checks["discrete"]
     assert disc["holds"] and disc["sample_time"] == 1e-3 and disc["ts_max_lyapunov"] > 1e-3
     f = tmp_path / "cp.json"
@@ -46,6 +47,7 @@ def test_designs_at_its_1_ms_step_with_the_discrete_step_proven(ts, tmp_path):
     assert "#define FTE_CARTPOLE_TS (0.001)" in (tmp_path / "c" / "fte_cartpole.h").read_text()
 
 
+@pytest.mark.slow
 def test_a_rate_too_slow_is_refused_naming_one_that_works(ts):
     """At 50 ms no certified design of this plant runs: the refusal names the fastest sample time found,
     and a design at that sample time is certified."""

@@ -50,6 +50,7 @@ def test_derive_document_manipulator(manip_doc):
     assert d["fidelity"]["max_abs_error"] <= ROUNDOFF and d["fidelity"]["samples"] > 0
 
 
+@pytest.mark.slow
 def test_derive_document_three_tank():
     p = fte("derive", "three-tank", "--json")
     assert p.returncode == 0, p.stderr
@@ -59,6 +60,7 @@ def test_derive_document_three_tank():
     assert d["fidelity"]["max_abs_error"] > 0
 
 
+@pytest.mark.slow
 def test_derive_table_and_example_file_plant():
     p = fte("derive", str(EXAMPLES / "pendulum_plant.py") + ":pendulum")
     assert p.returncode == 0, p.stderr
@@ -73,6 +75,7 @@ def _bad(tmp_path, args, needle):
     return p
 
 
+@pytest.mark.slow
 def test_errors_are_clear(tmp_path):
     """Each bad plant gives a non-zero exit and its message, never a traceback (asserted in _bad)."""
     assert _bad(tmp_path, ["derive", "manipulatr"], "unknown plant").returncode == 2
@@ -121,6 +124,7 @@ def test_errors_are_clear(tmp_path):
     _bad(tmp_path, ["derive", "unb.py:f"], "no bounds")
 
 
+@pytest.mark.slow
 def test_click_runner_in_process(tmp_path):
     from click.testing import CliRunner
 
@@ -131,6 +135,7 @@ def test_click_runner_in_process(tmp_path):
 PLANT_AUTO = __import__("pathlib").Path(__file__).resolve().parent / "plant_auto.py"
 
 
+@pytest.mark.slow
 def test_derive_finds_the_premises_of_the_plain_manipulator(manip_doc):
     """`fte derive` on (82) as printed: the premise it chose, its bounds, the rules, and that it was automatic."""
     p = fte("derive", f"{PLANT_AUTO}:manipulator_plain", "--json")
@@ -150,6 +155,7 @@ def test_derive_finds_the_premises_of_the_plain_manipulator(manip_doc):
     assert "1 premise, 2 rules" in t.stdout and "z1 schedules A[w_l, theta_l], W[w_l, theta_l]" in t.stdout
 
 
+@pytest.mark.slow
 def test_derive_linear_plant_is_one_rule():
     p = fte("derive", f"{PLANT_AUTO}:linear")
     assert p.returncode == 0, p.stderr
@@ -157,6 +163,7 @@ def test_derive_linear_plant_is_one_rule():
     assert "rule 2:" not in p.stdout
 
 
+@pytest.mark.slow
 def test_derive_refuses_an_unbounded_term_by_name(tmp_path):
     (tmp_path / "pole.py").write_text(
         textwrap.dedent(

@@ -57,8 +57,8 @@ def libs(designs, tmp_path_factory):
 
 def _samples(design, k: int, seed: int):
     rng = np.random.default_rng(seed)
-    nbar, p = int(design.dims["nbar"]), int(design.dims["p"])
-    y0 = np.asarray(design.C) @ (np.zeros(design.dims["n"]) if design.x_ref is None else design.x_ref)
+    nbar, p = int(design.dims.nbar), int(design.dims.p)
+    y0 = np.asarray(design.C) @ (np.zeros(design.dims.n) if design.x_ref is None else design.x_ref)
     for _ in range(k):
         yield rng.normal(scale=0.5, size=nbar), y0 + rng.normal(scale=0.5, size=p)
 
@@ -106,6 +106,7 @@ def _fault(plant):
     return lambda t, u: np.array([-10.0 if t >= 5.0 else 0.0])  # pump 2 delivers 10 cm^3/s less
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("plant", PLANTS)
 def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
@@ -122,6 +123,7 @@ def test_closed_loop_trajectory_matches_casadi(plant, designs, libs):
     assert np.max(np.abs(traj["fhat"][-1])) > 0  # the fault estimate moved: the loop was exercised
 
 
+@pytest.mark.slow
 @needs_cc
 def test_saturating_closed_loop_matches_casadi(designs, libs):
     """Issue #12: the C step clips u into the pumps' limits exactly as the Python step does, over a
@@ -194,6 +196,7 @@ def test_no_heap_io_or_mutable_globals(libs):
     assert checked >= 16
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("plant", PLANTS)
 @pytest.mark.parametrize("real", ["double", "float"])
@@ -227,7 +230,7 @@ def test_readme_states_memory_and_sample_time(designs, libs):
     src = libs["three-tank", "double"][0]
     text = (src / "README.md").read_text()
     assert f"Ts = {default_sample_time(d)!r}" in text
-    nbar = int(d.dims["nbar"])
+    nbar = int(d.dims.nbar)
     assert f"{2 * nbar * 8} bytes" in text
     assert "numeric literals" in text
 
@@ -321,30 +324,33 @@ def test_failed_write_leaves_nothing_half_written(designs, tmp_path, monkeypatch
 
 def test_default_sample_time(designs):
     """The sample time the design was made for (the scenario's step, which fte simulate runs); without
-    one, a tenth of ts_max rounded down to 1-2-5, capped by the built-in scenario's simulation step."""
+    one, a tenth of ts_max rounded down to 1-2-5, capped by the scenario's step when one is given."""
     import dataclasses
 
-    from fte_casadi.codegen.generate import BUILTIN_DT
     from fte_casadi.plants import SCENARIOS
 
     for plant, d in designs.items():
         sample_time, ts_max = default_sample_time(d), d.checks["ts_max"]
-        assert sample_time == d.observer["sample_time"] == SCENARIOS[plant]().dt < ts_max
-        bare = dataclasses.replace(d, observer={k: v for k, v in d.observer.items() if k != "sample_time"})
+        assert sample_time == d.observer.sample_time == SCENARIOS[plant]().dt < ts_max
+        bare = dataclasses.replace(
+            d, observer={k: v for k, v in d.observer.to_dict().items() if k != "sample_time"}
+        )
         sample_time = default_sample_time(bare)
         assert sample_time <= 0.1 * ts_max and f"{sample_time:e}"[0] in "125"
-        assert sample_time == min(BUILTIN_DT[plant], series_floor(0.1 * ts_max))
-        assert BUILTIN_DT[plant] == SCENARIOS[plant]().dt  # kept in step with the simulator
+        assert sample_time == series_floor(0.1 * ts_max)
+        step = SCENARIOS[plant]().dt
+        assert default_sample_time(bare, step) == min(step, series_floor(0.1 * ts_max))
+        assert default_sample_time(bare, 1e-9) == 1e-9  # the cap is the scenario's step given
     d = designs["three-tank"]
     user = dataclasses.replace(
-        d, plant="my-tank", observer={k: v for k, v in d.observer.items() if k != "sample_time"}
+        d, plant="my-tank", observer={k: v for k, v in d.observer.to_dict().items() if k != "sample_time"}
     )
     assert default_sample_time(user) == series_floor(0.1 * user.checks["ts_max"])
     assert 0.04 * user.checks["ts_max"] < default_sample_time(user) <= 0.1 * user.checks["ts_max"]
-    motor = dataclasses.replace(d, plant="motor", observer=dict(d.observer, sample_time=1e-3))
+    motor = dataclasses.replace(d, plant="motor", observer=dict(d.observer.to_dict(), sample_time=1e-3))
     assert default_sample_time(motor) == 1e-3  # the simulated rate, not a tenth of ts_max
     too_slow = dataclasses.replace(
-        d, plant="motor", observer=dict(d.observer, sample_time=2 * d.checks["ts_max"])
+        d, plant="motor", observer=dict(d.observer.to_dict(), sample_time=2 * d.checks["ts_max"])
     )
     assert default_sample_time(too_slow) == series_floor(
         0.1 * d.checks["ts_max"]
@@ -370,10 +376,11 @@ def test_no_compiler_is_reported(monkeypatch, tmp_path):
         build.compile_shared(tmp_path, tmp_path / "x.so")
 
 
+@pytest.mark.slow
 @needs_cc
 def test_bench_measures_and_baseline_agrees(designs):
     """The benchmark runs; its hand-written baseline computes the same step; no mutable globals."""
-    from benchmarks.cstep import bench_c_step
+    from fte_casadi.bench.cstep import bench_c_step
 
     res = bench_c_step(designs["three-tank"], iters=2000, reps=1)
     assert res["c_ns"] > 0 and res["hand_ns"] > 0 and res["casadi_us"] > 0
@@ -393,7 +400,7 @@ def test_init_from_y_starts_as_the_simulation(plant, designs, libs):
 
     d = designs[plant]
     sc = SCENARIOS[plant]()
-    np.testing.assert_array_equal(d.xbar0[: d.dims["n"]], np.asarray(sc.x0, float))
+    np.testing.assert_array_equal(d.xbar0[: d.dims.n], np.asarray(sc.x0, float))
     prep = Prepared(d, load_plant(plant), sc, sc.dt, 4, _scales(None, sc))
     lay = prep.lay
     start = prep.initial_states(np.arange(3), seed=7)
@@ -412,6 +419,7 @@ def test_init_from_y_starts_as_the_simulation(plant, designs, libs):
     np.testing.assert_array_equal(c.z, before)  # refused: the state is unchanged
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("plant", PLANTS)
 def test_closed_loop_from_first_measurement_matches_casadi(plant, designs, libs):

@@ -28,6 +28,7 @@ def _measurements() -> np.ndarray:
     return np.array(rows, dtype=float)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_example_runs_and_matches_casadi(tmp_path):
     exe = build.compile_program(GEN, EXAMPLE / "main.c", tmp_path / "fte_example")

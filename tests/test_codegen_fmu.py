@@ -99,7 +99,7 @@ def _worst(got: np.ndarray, ref: np.ndarray, groups) -> float:
 
 
 def _groups(design: Design):
-    m, nbar, p = (int(design.dims[k]) for k in ("m", "nbar", "p"))
+    m, nbar, p = (int(getattr(design.dims, k)) for k in ("m", "nbar", "p"))
     return [slice(0, m), slice(m, m + nbar), slice(m + nbar, m + nbar + p)]
 
 
@@ -133,6 +133,7 @@ def test_fmpy_validates_the_fmu(plant, fmus):
     assert is_fte_fmu(path)
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("plant", list(DESIGNS))
 def test_fmpy_simulation_equals_the_python_step(plant, fmus):
@@ -161,8 +162,8 @@ def test_fmpy_simulation_equals_the_python_step(plant, fmus):
     got = np.column_stack([res[n] for n in names[p:]])
     expected = np.vstack([ref[:1], ref])  # t_0: y_0's sample (read after the inputs), then held samples
     assert _worst(got, expected, _groups(d)) <= C_DOUBLE
-    n, lf = int(d.dims["n"]), int(d.dims["lf"])
-    m = int(d.dims["m"])
+    n, lf = int(d.dims.n), int(d.dims.lf)
+    m = int(d.dims.m)
     fa_hat = got[-1, m + n + lf]
     assert fa_hat < -0.05 * (1 if plant == "manipulator" else 100)  # the fault was estimated
 
@@ -266,6 +267,7 @@ def test_non_finite_measurement_and_output_write_are_refused(fmus, tmp_path):
     s.freeInstance()
 
 
+@pytest.mark.slow
 @needs_cc
 def test_cli_writes_the_fmu_and_keeps_a_foreign_file(tmp_path):
     out = tmp_path / "gen"
@@ -290,6 +292,7 @@ def test_cli_writes_the_fmu_and_keeps_a_foreign_file(tmp_path):
     assert not list(tmp_path.rglob(".*.tmp"))
 
 
+@pytest.mark.slow
 def test_without_a_compiler_fmu_says_so(tmp_path, monkeypatch):
     monkeypatch.setattr(build, "find_compiler", lambda: None)
     out = tmp_path / "gen"
@@ -319,6 +322,7 @@ def test_variable_names_are_unique_identifiers():
     assert [x.name for x in bare[:4]] == ["y0", "y1", "y2", "u0"]
 
 
+@pytest.mark.slow
 @needs_cc
 def test_sources_build_a_source_code_fmu(fmus, tmp_path):
     """The <SourceFiles> compile on their own, also with FMI2_FUNCTION_PREFIX (static linking)."""
@@ -356,6 +360,7 @@ int main(void) {
 """
 
 
+@pytest.mark.slow
 @needs_cc
 def test_fmi_declarations_match_the_standard_headers(fmus, tmp_path):
     """fte_fmi2.h against the FMI 2.0 standard headers FMPy ships: the wrapper compiles against the
@@ -389,6 +394,7 @@ def test_fmi_declarations_match_the_standard_headers(fmus, tmp_path):
     assert out[0] == out[1], out
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.skipif(shutil.which("cmake") is None, reason="FMPy builds a source-code FMU with CMake")
 def test_fmpy_rebuilds_the_binary_from_the_sources(fmus, tmp_path):

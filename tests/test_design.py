@@ -134,12 +134,12 @@ def test_conditioned_design_acceptance(designs, name):
     solves = [s for s in d.status if "solve (" in s]
     assert len(solves) == 2 and all("solve (optimal)" in s for s in solves), solves
     # alpha is the default's fraction of the largest feasible rate, or the plant's tuned default (issue #18)
-    assert 0 < d.observer["alpha"] and c["R_max_real_eig"] <= -d.observer["alpha"] / 2
+    assert 0 < d.observer.alpha and c["R_max_real_eig"] <= -d.observer.alpha / 2
     defaults = {"manipulator": manipulator, "three-tank": three_tank}[name]().design_defaults
     if "alpha" in defaults:
         assert d.observer.alpha == defaults["alpha"] and d.observer.alpha_max is None
     else:
-        assert d.observer["alpha"] < d.observer["alpha_max"]
+        assert d.observer.alpha < d.observer.alpha_max
     if name == "manipulator":
         assert c["max_abs_K"] <= 5
         assert np.allclose(d.Kf, [[-1.0, 0.0]])
@@ -154,6 +154,7 @@ def _gains(d) -> dict:
     return {"K": d.K, "L1": d.L1, "N": [d.N], "H": [d.H], "Kf": [d.Kf]}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_design_is_a_smooth_function_of_the_plant(ts_models, designs, name):
     """A 1e-12 relative perturbation of the T-S matrices moves K_j, L_i1, N, H, Kf by at most 1e-6 relative."""
@@ -175,6 +176,7 @@ def test_design_is_a_smooth_function_of_the_plant(ts_models, designs, name):
     assert g1.keys() == g2.keys() and all(abs(g2[k] / g1[k] - 1) <= 1e-6 for k in g1), (g1, g2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_clarabel_and_scs_give_the_same_design(ts_models, designs, name):
     """Both solvers: every solve optimal, certified, and the same design to 1e-8 relative (the solver
@@ -195,7 +197,7 @@ def test_certificate_recomputed_from_saved_json(designs, name, tmp_path):
     e = Design.load(path)
     assert e.to_dict() == d.to_dict()
     aug = augment(e.local_models, e.C, e.Df)
-    pr = e.params
+    pr = e.params.to_dict()
     worst = {"45": -np.inf, "46": -np.inf, "55": -np.inf, "64": -np.inf}
     for i in range(e.r):
         for j in range(e.r):
@@ -229,6 +231,7 @@ def test_three_tank_reference_input(designs):
     assert np.max(np.abs(np.array(f(d.x_ref, u, 0, 0)))) < 1e-9
 
 
+@pytest.mark.slow
 def test_infeasible_gamma_names_a_feasible_bound_that_works(ts_models):
     ts = ts_models["manipulator"]
     with pytest.raises(InfeasibleDesignError, match=r"LMI \(45\) is infeasible") as exc:
@@ -248,6 +251,7 @@ def test_bad_parameters(ts_models, kw):
         design(ts_models["manipulator"], **kw)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_paper_variant_never_claims_false_certificate(ts_models, name):
     try:
@@ -290,6 +294,7 @@ def _diffusion_manipulator(beta_s=0.003, beta_sf=0.003):
     return b.build()
 
 
+@pytest.mark.slow
 def test_theorem5_with_diffusion_in_u_and_f():
     ts = derive(_diffusion_manipulator(), fidelity_samples=200)
     assert ts.local_models[0].has_diffusion_extension
@@ -300,7 +305,7 @@ def test_theorem5_with_diffusion_in_u_and_f():
     assert all(c["lmi_max_eig"][k] < 0 for k in ("78", "79", "80", "81"))
     assert c["lmi_max_eig"]["79"] == c["lmi_max_eig"]["46"]
     aug = augment(d.local_models, d.C, d.Df)
-    pr = d.params
+    pr = d.params.to_dict()
     for i in range(d.r):
         for j in range(d.r):  # (79) with its G terms, recomputed; differs from (46) without them
             L = lmi46(aug, i, d.K[j], d.P, d.T, d.Pbar, d.Q[i], pr["sigma"], pr["gamma1"])
@@ -321,6 +326,7 @@ def test_three_tank_observer_decays_within_the_fault_window(designs):
     assert c["cond_Pbar"] <= 1e5 and c["max_abs_L1"] <= 1e4
 
 
+@pytest.mark.slow
 def test_no_solver_warning_leaks_and_status_records_it(ts_models):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -330,6 +336,7 @@ def test_no_solver_warning_leaks_and_status_records_it(ts_models):
     assert any("warned" in s for s in d.status) == any("inaccurate" in s for s in d.status)
 
 
+@pytest.mark.slow
 def test_user_alpha_too_fast_names_the_largest(ts_models, designs):
     ts = ts_models["manipulator"]
     with pytest.raises(InfeasibleDesignError, match=r"lower alpha to <= ([0-9.]+)") as exc:
@@ -340,7 +347,7 @@ def test_user_alpha_too_fast_names_the_largest(ts_models, designs):
     )
     assert alpha < largest
     d = design(ts, alpha=alpha)
-    assert d.certified and d.observer["alpha"] == alpha and "user" in d.observer["why"]
+    assert d.certified and d.observer.alpha == alpha and "user" in d.observer.why
 
 
 def _kf_plant(fault_gain):
@@ -362,6 +369,7 @@ def _kf_plant(fault_gain):
     return b.build()
 
 
+@pytest.mark.slow
 def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
     from fte_casadi import derive
 
@@ -379,6 +387,7 @@ def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
     np.testing.assert_array_equal(d2.Kf, d2.Kf_rules[0])
 
 
+@pytest.mark.slow
 def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeypatch):
     """Issue #17: a solver's numerical failure is retried with the other solver before it is reported."""
     from fte_casadi.design.api import design as run_design
@@ -401,6 +410,7 @@ def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeyp
         run_design(ts_models["manipulator"], solver="CLARABEL")
 
 
+@pytest.mark.slow
 def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(monkeypatch):
     """Issue #20: SolverFailedError is no InfeasibleDesignError; `fte design` still fails with exit 1
     and the one-paragraph message (no traceback, not 'internal error')."""

@@ -40,6 +40,7 @@ def test_bounds_of_lmi_45(ts):
     assert g is not None and g >= 0.1
 
 
+@pytest.mark.slow
 def test_infeasible_defaults_name_a_bound_that_gives_a_certified_design(ts):
     with pytest.raises(InfeasibleDesignError) as exc:
         design(ts)
@@ -51,12 +52,14 @@ def test_infeasible_defaults_name_a_bound_that_gives_a_certified_design(ts):
     assert d.certified and all(v < 0 for v in d.checks["lmi_max_eig"].values())
 
 
+@pytest.mark.slow
 def test_cli_prints_the_bounds_as_one_paragraph():
     r = CliRunner().invoke(main, ["design", f"{HERE / 'plant_tight.py'}:tight"])
     assert r.exit_code == 1
     assert "Traceback" not in r.output and "lower sigma to <=" in r.output.lower()
 
 
+@pytest.mark.slow
 def test_explore_frontier_and_figure(ts, tmp_path):
     points, info = explore(ts, count=4)
     assert len(points) == 4 and info["sigma_sup"] > 0

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info
 
-from benchmarks.plant_chain import chain
+from fte_casadi.bench.plant_chain import chain
 from fte_casadi.design import design
 from fte_casadi.design.core.certify import failures
 from fte_casadi.ts import derive
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("n", "q"), [(2, 1), (4, 2), (8, 2), (16, 2), (24, 2), (6, 4), (6, 6)])
 def test_a_member_designs_at_its_defaults(n, q):
     ts = derive(chain(n, q), fidelity_samples=500)
@@ -23,9 +24,10 @@ def test_a_member_designs_at_its_defaults(n, q):
     assert d.checks["discrete"]["holds"]
     # the parameters are the generic ones or ones the tool chose and recorded with why
     for k, c in (d.params_chosen or {}).items():
-        assert d.params[k] == c["value"] and "certified design" in c["why"]
+        assert getattr(d.params, k) == c["value"] and "certified design" in c["why"]
 
 
+@pytest.mark.slow
 def test_the_design_limits_the_blas_to_one_thread(monkeypatch):
     """design() runs under threadpoolctl's limit of one BLAS thread (small dense algebra thrashes in many)."""
     seen = []
@@ -42,6 +44,7 @@ def test_the_design_limits_the_blas_to_one_thread(monkeypatch):
     assert seen and all(t == 1 for t in seen)
 
 
+@pytest.mark.slow
 def test_the_numpy_starts_and_the_rule_subsets_do_not_change_the_design(monkeypatch):
     """A heavy problem's step 3 starts from phase 1 in numpy instead of a conic solve, and step 5's
     decisions in alpha take the rules a few at a time (barrier.phase1_active); both only change the path

@@ -43,6 +43,7 @@ def test_mat_holds_every_contract_matrix_of_the_json(plant, real_designs, tmp_pa
     assert float(v["params"]["gamma"][0, 0][0, 0]) == doc["params"]["gamma"]
 
 
+@pytest.mark.slow
 def test_cli_writes_mat_and_keeps_a_foreign_one(tmp_path):
     f = tmp_path / "design.mat"
     r = CliRunner().invoke(main, ["design", "manipulator", "-o", str(f)])

@@ -38,6 +38,7 @@ def test_leak_and_level_bias_are_named_with_the_sensor_that_separates_them(quadt
     assert 'a measurement of "dh1" free of fault "fs" would separate them' in msg
 
 
+@pytest.mark.slow
 def test_the_named_measurement_does_separate_them():
     ts = derive(measured_twice(), fidelity_samples=200)
     aug = _aug(ts)

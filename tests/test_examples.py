@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from certified import assert_certified
 from tolerances import C_DOUBLE, ROUNDOFF
 
 from fte_casadi.codegen import build, generate_c
@@ -42,6 +43,7 @@ def test_example_design_is_certified(pendulum_design):
     assert d.checks["R_max_real_eig"] < 0 and d.checks["closed_loop_max_real_eig"] < 0
 
 
+@pytest.mark.slow
 def test_example_simulates_and_estimates_its_faults(pendulum_design):
     spec = pendulum_design.plant_spec
     sc = load_scenario(spec)
@@ -57,6 +59,7 @@ def test_example_simulates_and_estimates_its_faults(pendulum_design):
     ] == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 def test_example_generated_c_equals_python(pendulum_design, tmp_path):
     d = pendulum_design
@@ -66,7 +69,7 @@ def test_example_generated_c_equals_python(pendulum_design, tmp_path):
 
     def fault(t, u):
         f = np.array([-0.3 * u[0] if t > 0.5 else 0.0, 0.05 if t > 1.0 else 0.0])
-        return f[: int(d.dims["lf"])]
+        return f[: int(d.dims.lf)]
 
     err, traj = closed_loop_compare(
         d, CStep(lib, d), sample_time, 1500, plant=load_plant(d.plant_spec), fault=fault
@@ -75,6 +78,7 @@ def test_example_generated_c_equals_python(pendulum_design, tmp_path):
     assert np.max(np.abs(traj["fhat"][-1])) > 0.01  # the observer saw the faults
 
 
+@pytest.mark.slow
 def test_example_runs_from_the_command_line(tmp_path):
     p = subprocess.run(
         [sys.executable, "-m", "fte_casadi", "design", SPEC, "-o", str(tmp_path / "p.json")],
@@ -84,4 +88,4 @@ def test_example_runs_from_the_command_line(tmp_path):
         cwd=tmp_path,
     )
     assert p.returncode == 0, p.stderr
-    assert "CERTIFIED" in p.stdout
+    assert_certified(p.stdout, tmp_path / "p.json")

@@ -44,9 +44,9 @@ def test_step_blends_kf_with_the_memberships(kf_design):
     fn = step_function(d, scenario().dt)
     sched = d.scheduling_function()
     rng = np.random.default_rng(3)
-    n, lf = d.dims["n"], d.dims["lf"]
+    n, lf = d.dims.n, d.dims.lf
     for _ in range(20):
-        z, y = rng.normal(scale=0.5, size=d.nbar), rng.uniform(-0.9, 0.9, size=d.dims["p"])
+        z, y = rng.normal(scale=0.5, size=d.nbar), rng.uniform(-0.9, 0.9, size=d.dims.p)
         _, u, xb, *_ = (np.asarray(v).ravel() for v in fn(z, y))
         xhat, fhat = xb[:n], xb[n + lf :]
         h = np.asarray(sched(y, xhat)).ravel()
@@ -67,10 +67,10 @@ def test_c_and_simulation_run_the_scheduled_term(kf_design, tmp_path):
     c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), d, "double")
     fn = step_function(d, sample_time)
     rng = np.random.default_rng(5)
-    z = d.observer_start(np.zeros(d.dims["p"]))
+    z = d.observer_start(np.zeros(d.dims.p))
     c.init(z)
     for _ in range(50):
-        y = rng.normal(scale=0.3, size=d.dims["p"])
+        y = rng.normal(scale=0.3, size=d.dims.p)
         zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
         rc, uc, xbc, ycc = c.step(y)
         assert rc == 0
@@ -80,6 +80,7 @@ def test_c_and_simulation_run_the_scheduled_term(kf_design, tmp_path):
     assert m["fault_rel_rms_error"][0] < 0.3 and m["ftc_true_ratio"] < 0.5
 
 
+@pytest.mark.slow
 def test_parameters_the_user_did_not_set_are_found_by_the_tool(tmp_path):
     """Issue #17 item 2: the generic sigma fails on this plant; the tool picks one below the largest
     sigma (45) allows, certifies, and records what it chose and why. A sigma the user gave is kept."""
@@ -87,7 +88,7 @@ def test_parameters_the_user_did_not_set_are_found_by_the_tool(tmp_path):
     d = design(ts, sample_time=scenario().dt)
     assert d.certified and set(d.params_chosen) == {"sigma"}
     c = d.params_chosen["sigma"]
-    assert c["value"] == d.params["sigma"] < 1.0 and "largest sigma for which (45) is feasible" in c["why"]
+    assert c["value"] == d.params.sigma < 1.0 and "largest sigma for which (45) is feasible" in c["why"]
     d.save(tmp_path / "d.json")
     assert Design.load(tmp_path / "d.json").params_chosen == d.params_chosen
     with pytest.raises(Exception, match=r"LMI \(45\) is infeasible.*[Ll]ower sigma to <="):

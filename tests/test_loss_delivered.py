@@ -38,6 +38,7 @@ def test_the_loss_is_seen_and_compensated(deviation_design):
     assert m["ftc_true_ratio"] < 0.5  # tolerant control removes most of its effect
 
 
+@pytest.mark.slow
 def test_a_loss_that_would_do_nothing_is_refused():
     p = plain()
     d = design(derive(p), sigma=0.5, sample_time=scenario().dt)

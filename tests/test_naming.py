@@ -1,23 +1,23 @@
-"""Issue #20, "one name per concept": the observer/controller's sample time is ``sample_time`` in the code,
-``ts`` is only ever a T-S model, ``dt`` is the simulation's step and lives in ``sim/`` (see
-:mod:`fte_casadi.sim`); the public keywords that changed keep working with a DeprecationWarning."""
+"""One name per concept: the observer/controller's sample time is ``sample_time`` in the code, ``ts`` is
+only ever a T-S model, ``dt`` is the simulation's step and lives in ``sim/`` (see :mod:`fte_casadi.sim`).
+The former keywords (``ts=``, ``dt=``, ``default_ts``) were removed in 0.2.0: giving one is a TypeError."""
 
 from __future__ import annotations
 
 import ast
 import pathlib
-import warnings
 
 import numpy as np
 import pytest
 
-from fte_casadi.codegen import default_sample_time, default_ts, generate_c
-from fte_casadi.deprecation import renamed_keyword
+import fte_casadi.codegen
+from fte_casadi.codegen import generate_c
 from fte_casadi.step import step_function
 
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "fte_casadi"
-#: where ``dt`` (the simulation's step) may be a name: the simulator, and the CLI's ``fte simulate --dt``
-DT_HOMES = ("sim/", "cli.py")
+#: where ``dt`` (the simulation's step) may be a name: the simulator, the CLI's ``fte simulate --dt``, and
+#: the memory a simulation run will take (resources.py), and the benchmarks of the simulator (bench/)
+DT_HOMES = ("sim/", "cli.py", "resources.py", "bench/")
 #: calls whose keyword ``dt`` is the simulation's step (a plant's scenario, a simulation run)
 DT_CALLEES = ("Scenario", "simulate", "sweep")
 #: names the sample time had besides ``sample_time`` (``ts_max`` stays: the design document's key)
@@ -45,6 +45,7 @@ def _names(tree) -> list[tuple[str, int]]:
     return out
 
 
+@pytest.mark.slow
 def test_the_scan_sees_the_package():
     trees = dict(_trees())
     assert len(trees) > 50 and "sim/engine.py" in trees and "step.py" in trees
@@ -52,6 +53,7 @@ def test_the_scan_sees_the_package():
     assert any(n == "dt" for n, _ in _names(trees["sim/engine.py"]))
 
 
+@pytest.mark.slow
 def test_dt_is_a_name_only_in_the_simulator():
     bad = [
         f"{rel}:{line}"
@@ -63,6 +65,7 @@ def test_dt_is_a_name_only_in_the_simulator():
     assert bad == [], f"'dt' outside sim/ (the sample time is 'sample_time'): {bad}"
 
 
+@pytest.mark.slow
 def test_ts_is_never_a_number():
     """``ts`` is a T-S model: never annotated as a number, never in arithmetic, never converted to float,
     never a keyword of a call."""
@@ -86,14 +89,16 @@ def test_ts_is_never_a_number():
     assert bad == [], bad
 
 
+@pytest.mark.slow
 def test_former_names_of_the_sample_time_are_gone():
     bad = [f"{rel}:{line} {name}" for rel, tree in _trees() for name, line in _names(tree) if name in FORMER]
     assert bad == [], bad
 
 
-def test_the_deprecated_default_ts_is_not_called_inside_the_package():
+@pytest.mark.slow
+def test_the_former_default_ts_is_gone():
     uses = [(rel, name) for rel, tree in _trees() for name, _ in _names(tree) if name == "default_ts"]
-    assert uses == [("codegen/generate.py", "default_ts")]  # its definition, nothing else
+    assert uses == [] and not hasattr(fte_casadi.codegen, "default_ts")
 
 
 def test_the_scan_would_catch_a_sample_time_called_ts_or_dt():
@@ -108,46 +113,27 @@ def design(real_designs):
     return real_designs["three-tank"]
 
 
-def test_renamed_keyword_warns_and_passes_the_value():
-    @renamed_keyword("ts", "sample_time")
-    def f(a, *, sample_time=None):
-        return a, sample_time
-
-    with pytest.warns(DeprecationWarning, match="'ts' is deprecated; call it 'sample_time'"):
-        assert f(1, ts=0.25) == (1, 0.25)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        assert f(1, sample_time=0.5) == (1, 0.5)  # the new name: no warning
-    with pytest.raises(TypeError, match="both 'sample_time' and its former name 'ts'"):
-        f(1, ts=0.1, sample_time=0.1)
-
-
-def test_step_function_former_keyword_builds_the_same_step(design):
+def test_step_function_refuses_the_former_keyword(design):
     z, y = np.linspace(-1, 1, design.nbar), np.asarray(design.C) @ np.full(int(design.dims.n), 0.3)
     new = [np.array(v) for v in step_function(design, sample_time=0.01)(z, y)]
-    with pytest.warns(DeprecationWarning, match="step_function"):
-        old = [np.array(v) for v in step_function(design, ts=0.01)(z, y)]
     other = [np.array(v) for v in step_function(design, sample_time=0.02)(z, y)]
-    assert all(np.array_equal(a, b) for a, b in zip(new, old))
     assert not np.array_equal(new[0], other[0])  # the keyword does reach the step
+    with pytest.raises(TypeError, match="ts"):
+        step_function(design, ts=0.01)
 
 
-def test_generate_c_former_keyword_and_default_ts(design, tmp_path):
-    with pytest.warns(DeprecationWarning, match="generate_c"):
-        generate_c(design, tmp_path / "old", ts=0.005)
+def test_generate_c_refuses_the_former_keyword(design, tmp_path):
     generate_c(design, tmp_path / "new", sample_time=0.005)
-    for f in (tmp_path / "new").iterdir():
-        assert (tmp_path / "old" / f.name).read_bytes() == f.read_bytes()
     assert (
         "#define FTE_THREE_TANK_TS (0.005)" in (tmp_path / "new" / "fte_three_tank.h").read_text()
     )  # as asked
-    with pytest.warns(DeprecationWarning, match="default_sample_time"):
-        assert default_ts(design) == default_sample_time(design)
+    with pytest.raises(TypeError, match="ts"):
+        generate_c(design, tmp_path / "old", ts=0.005)
 
 
-def test_to_control_former_keyword(design):
+@pytest.mark.slow
+def test_to_control_refuses_the_former_keyword(design):
     pytest.importorskip("control")
-    with pytest.warns(DeprecationWarning, match="to_control"):
-        old = design.to_control(1, 1, dt=0.01)
-    new = design.to_control(1, 1, sample_time=0.01)
-    assert old.dt == new.dt == 0.01 and np.array_equal(old.A, new.A)
+    assert design.to_control(1, 1, sample_time=0.01).dt == 0.01
+    with pytest.raises(TypeError, match="dt"):
+        design.to_control(1, 1, dt=0.01)

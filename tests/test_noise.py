@@ -70,6 +70,7 @@ def test_sweep_over_measurement_noise(real_designs):
     assert sum(loud["state_rms_error"]) > sum(quiet["state_rms_error"])
 
 
+@pytest.mark.slow
 @needs_cc
 @pytest.mark.parametrize("name", ["manipulator", "three-tank"])
 def test_the_c_step_on_the_noisy_readings_gives_the_simulation(name, real_designs, tmp_path):

@@ -7,6 +7,8 @@ from __future__ import annotations
 import ast
 import pathlib
 
+import pytest
+
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "fte_casadi"
 
 
@@ -77,10 +79,11 @@ def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
+@pytest.mark.slow
 def test_the_graph_sees_imports_inside_functions():
     g = import_graph()
     assert "fte_casadi.sim.cluster" in g["fte_casadi.sim.engine"]  # imported at the top
-    assert "fte_casadi.checkout" in g["fte_casadi.cli"]  # imported inside `fte bench`
+    assert "fte_casadi.bench" in g["fte_casadi.cli"]  # imported inside `fte bench`
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
@@ -91,17 +94,7 @@ def test_no_import_circles():
 #: the steps of the path of the data, lowest first (docs/layout.md): a module imports its own step's
 #: modules and those of lower steps only
 LAYERS = (
-    {
-        "errors",
-        "rounding",
-        "toolchain",
-        "verdicts",
-        "deprecation",
-        "interop",
-        "checkout",
-        "resources",
-        "atomic",
-    },
+    {"errors", "rounding", "toolchain", "verdicts", "interop", "resources", "atomic"},
     {"model"},
     {"ts"},
     {"design"},
@@ -109,7 +102,7 @@ LAYERS = (
     {"sim", "codegen"},
     {"plants", "plot"},
     {"tune"},
-    {"report", "generated", "trust"},
+    {"bench", "report", "generated", "trust"},
     {"cli", "__init__", "__main__"},
 )
 
@@ -119,6 +112,7 @@ def _layer(module: str) -> int:
     return next(k for k, names in enumerate(LAYERS) if part in names)
 
 
+@pytest.mark.slow
 def test_no_module_imports_a_layer_above_it():
     g = import_graph()
     assert {m.split(".")[1] for m in g if "." in m} <= set().union(*LAYERS)  # every top-level part placed
@@ -128,10 +122,19 @@ def test_no_module_imports_a_layer_above_it():
 
 
 # -- written once (issue #20, "one name per concept") ---------------------------------------------------
+#: the benchmarks (fte_casadi/bench/) hold baselines written as they were or written by hand on purpose
+#: (the 0.1 design, the per-path engine, a hand-written C loop): the rules of "written once" below are
+#: about the package's own code, which the benchmarks measure
+BASELINES = "bench/"
+
+
 def _where(pred) -> list[str]:
-    """``module:line`` of every AST node of the package for which ``pred(node)`` holds."""
+    """``module:line`` of every AST node of the package (not the benchmarks' baselines) for which
+    ``pred(node)`` holds."""
     out = []
     for path in sorted(ROOT.rglob("*.py")):
+        if path.relative_to(ROOT).as_posix().startswith(BASELINES):
+            continue
         for node in ast.walk(ast.parse(path.read_text())):
             if pred(node):
                 out.append(f"{path.relative_to(ROOT).as_posix()}:{node.lineno}")
@@ -158,11 +161,13 @@ def _modules_of(places: list[str]) -> set[str]:
     return {p.split(":")[0] for p in places}
 
 
+@pytest.mark.slow
 def test_the_symmetric_part_is_written_once():
     assert _where(_is_sym) == ["design/core/linalg.py:12"]
     assert _is_sym(ast.parse("0.5 * (P.value + P.value.T)").body[0].value)  # the check sees an inline one
 
 
+@pytest.mark.slow
 def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once():
     inaccurate = _where(lambda n: isinstance(n, ast.Constant) and n.value == "optimal_inaccurate")
     assert _modules_of(inaccurate) == {"design/core/sdp.py"} and len(inaccurate) == 1  # SOLVED
@@ -173,6 +178,7 @@ def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once(
     assert _modules_of(_where(_calls("shutil.which"))) == {"toolchain.py"}
 
 
+@pytest.mark.slow
 def test_one_class_per_name():
     """Two unrelated classes were both called ``Layout`` (the conic layer's and the engine's path layout)."""
     seen: dict[str, list[str]] = {}
@@ -199,6 +205,7 @@ def test_every_exception_class_lives_in_errors_py():
     )  # a failure, not infeasibility
 
 
+@pytest.mark.slow
 def test_the_method_text_is_shown_not_parsed():
     """``TSModel.method`` is display text; code decides on ``TSModel.kind``."""
 
@@ -215,3 +222,39 @@ def test_the_method_text_is_shown_not_parsed():
         )
 
     assert _where(reads_method) == []
+
+
+def test_a_module_declares_public_only_what_its_package_exports_or_the_docs_name():
+    """The public surface (docs/api.md): each subpackage's ``__init__`` re-exports its public names
+    (``from ._x import Y as Y``); another module's ``__all__`` lists only those, or names the docs
+    document. Everything else is internal, even without a leading underscore."""
+    import importlib
+    import re
+
+    docs = " ".join(p.read_text() for p in (ROOT.parent / "docs").glob("*.md"))
+    docs += (ROOT.parent / "README.md").read_text()
+    bad = []
+    for init in sorted(ROOT.glob("*/__init__.py")):
+        pkg = importlib.import_module(f"fte_casadi.{init.parent.name}")
+        exported = {n for n in vars(pkg) if not n.startswith("_")}
+        for mod in sorted(init.parent.glob("*.py")):
+            rel = f"{init.parent.name}/{mod.name}"
+            if (
+                mod.name == "__init__.py"
+                or rel in NOT_TRIMMED_YET
+                or init.parent.name in NOT_TRIMMED_YET_PACKAGES
+            ):
+                continue
+            m = importlib.import_module(f"fte_casadi.{init.parent.name}.{mod.stem}")
+            for n in getattr(m, "__all__", []):
+                if n not in exported and not re.search(r"`[^`]*\b" + re.escape(n) + r"\b[^`]*`", docs):
+                    bad.append(f"{init.parent.name}/{mod.name}: {n}")
+    assert bad == [], bad
+
+
+#: modules whose ``__all__`` is not trimmed yet: work in progress on other branches rewrites them
+#: (the design options and LMI registry, the fault shapes, the C templates, the T-S groups)
+NOT_TRIMMED_YET = {"design/api.py", "design/certify.py", "design/conditioned.py", "design/paper.py",
+                   "design/sdp.py", "design/barrier.py", "sim/scenario.py", "codegen/template.py",
+                   "codegen/fmu_template.py"}  # fmt: skip
+NOT_TRIMMED_YET_PACKAGES = {"ts"}

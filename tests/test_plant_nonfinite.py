@@ -79,6 +79,7 @@ def test_region_points_are_centre_and_corners():
     assert X.shape == (12, 3 + 24)
 
 
+@pytest.mark.slow
 def test_nan_plant_cli_exits_2_without_hanging():
     t0 = time.perf_counter()
     r = subprocess.run(

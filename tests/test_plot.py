@@ -36,6 +36,7 @@ def results(plants, lqr_designs):
     }
 
 
+@pytest.mark.slow
 def test_manipulator_figures(results, tmp_path):
     paths = write_figures(results["manipulator"], tmp_path)
     names = [p.name for p in paths]
@@ -55,6 +56,7 @@ def test_manipulator_figures(results, tmp_path):
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_three_tank_figures(results, tmp_path):
     names = [p.name for p in write_figures(results["three-tank"], tmp_path)]
     assert names == [

@@ -38,6 +38,7 @@ def test_premises_found_automatically_and_exact(ts):
     assert ts.fidelity.drift_max_abs_error < 1e-12
 
 
+@pytest.mark.slow
 def test_designs_at_its_own_parameters(ts):
     """No design defaults: the generic ones fail, and the tool finds sigma and gamma itself (and says so)."""
     assert not quadruple_tank().design_defaults
@@ -45,22 +46,24 @@ def test_designs_at_its_own_parameters(ts):
     assert d.certified and not failures(d.checks)
     assert set(d.params_chosen) == {"sigma", "gamma"}
     for k, c in d.params_chosen.items():
-        assert d.params[k] == c["value"]
+        assert getattr(d.params, k) == c["value"]
         assert "first value tried that gives a certified design" in c["why"]
     # the generic default sigma = 1 is four orders of magnitude above what (45) allows for this plant
-    assert d.params["sigma"] < 1e-3 and d.params["gamma"] > 1.0
+    assert d.params.sigma < 1e-3 and d.params.gamma > 1.0
     assert d.checks["discrete"]["holds"]
 
 
+@pytest.mark.slow
 def test_certifies_with_scs_too(ts, committed):
     """The same parameters with the other solver: certified, and the same observer up to the solvers'
     tolerance (the centred point is unique; only where it is found from differs)."""
-    d = design(ts, solver="SCS", sigma=committed.params["sigma"], gamma=committed.params["gamma"],
+    d = design(ts, solver="SCS", sigma=committed.params.sigma, gamma=committed.params.gamma,
                sample_time=SCENARIOS["quadruple-tank"]().dt)  # fmt: skip
     assert d.certified
     assert np.allclose(d.Pbar, committed.Pbar, rtol=1e-5, atol=1e-8 * np.abs(committed.Pbar).max())
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler")
 def test_c_started_from_the_first_measurement_has_no_false_fault_estimate(committed, tmp_path):
     """The committed C on the nonlinear plant. (1) With noise and the unknown inflow, the plant starting at
@@ -107,6 +110,7 @@ def test_c_started_from_the_first_measurement_has_no_false_fault_estimate(commit
     assert np.all(cold > 20 * steady), (cold, steady)
 
 
+@pytest.mark.slow
 def test_a_design_with_chosen_parameters_keeps_the_plant_and_start(ts):
     """The parameter search redesigns; the document it returns still names the plant (so that
     `fte simulate DESIGN.json` finds it) and the nominal start it was asked for."""

@@ -7,6 +7,8 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import pytest
+
 from fte_casadi.design import design
 from fte_casadi.plants.loader import load_plant, load_scenario
 from fte_casadi.sim import simulate
@@ -20,6 +22,7 @@ def _blocks(path: Path) -> list[str]:
     return re.findall(r"```python\n(.*?)```", path.read_text(), re.S)
 
 
+@pytest.mark.slow
 def test_readme_plant_and_scenario_run(tmp_path):
     blocks = _blocks(README)
     plant = [b for b in blocks if "def pendulum" in b]

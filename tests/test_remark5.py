@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from certified import assert_certified
 from plant_bd_rules import plant as bd_plant
 from plant_bd_rules import scenario as bd_scenario
 from plant_remark5 import plant, scenario
@@ -65,7 +66,7 @@ def test_fallback_designs_and_certifies_with_the_widened_sliding_term(r5):
     rk = d.remark5
     assert rk["used"] and rk["unknown_inputs"] == ["gust"] and rk["attenuated_directions"] == 1
     assert rk["decoupled_directions"] == 0 and np.max(np.abs(d.H)) == 0  # nothing H can decouple
-    lf, nbar, p = d.dims["lf"], d.nbar, d.dims["p"]
+    lf, nbar, p = d.dims.lf, d.nbar, d.dims.p
     Bdu = np.array(rk["Bdu"])
     assert d.Ls.shape == (nbar, lf + 1) and d.N.shape == (lf + 1, p)
     Cbar = np.hstack([d.C, np.zeros((p, lf)), d.Df])
@@ -73,7 +74,7 @@ def test_fallback_designs_and_certifies_with_the_widened_sliding_term(r5):
     for i, lm in enumerate(d.local_models):  # T Bdbar_i = Bdu M_i: all of d that reaches the error
         Bdbar = np.vstack([lm.Bd, np.zeros((2 * lf, 1))])
         np.testing.assert_allclose(d.T @ Bdbar, Bdu @ np.array(rk["M"][i]), atol=1e-14)
-    J1 = np.vstack([np.zeros((d.dims["n"], lf)), np.eye(lf), np.zeros((lf, lf))])
+    J1 = np.vstack([np.zeros((d.dims.n, lf)), np.eye(lf), np.zeros((lf, lf))])
     np.testing.assert_allclose(d.Ls, d.T @ np.hstack([Bdu, J1]), atol=1e-14)
     # the recorded certificate is the widened one: (55) rebuilt by hand with [Bdu J1] in place of J1
     E = np.hstack([Bdu, J1]).T @ d.T.T @ d.Pbar - d.N @ Cbar
@@ -84,7 +85,7 @@ def test_fallback_designs_and_certifies_with_the_widened_sliding_term(r5):
     # ... and it differs from the unwidened one, so the widening is not a no-op
     aug = augment(d.local_models, d.C, d.Df)
     plain = certificate(aug, dict(X=d.X, K=d.K, P=d.P, T=d.T, Pbar=d.Pbar, Q=d.Q, N=d.N[1:], theta=d.theta,
-                                  R=d.R, L1=d.L1), d.params)  # fmt: skip
+                                  R=d.R, L1=d.L1), d.params.to_dict())  # fmt: skip
     assert plain["lmi_max_eig"]["55"] != pytest.approx(d.checks["lmi_max_eig"]["55"], rel=1e-6)
     assert any(s.startswith("Remark 5:") and '"gust"' in s for s in d.status)
 
@@ -100,7 +101,7 @@ def test_document_round_trip_and_old_documents(r5_bound, tmp_path):
     with pytest.raises(DesignFileError, match="remark5"):
         Design.from_dict(doc)
     old = Design.load(HERE.parent / "generated" / "three_tank" / "design.json")  # written before remark5
-    assert old.remark5 == {} and old.sliding_gain().shape == (old.dims["lf"],)
+    assert old.remark5 == {} and old.sliding_gain().shape == (old.dims.lf,)
 
 
 def test_step_applies_each_sliding_gain(r5_bound):
@@ -108,12 +109,12 @@ def test_step_applies_each_sliding_gain(r5_bound):
     d = r5_bound
     fn = step_function(d, SAMPLE_TIME)
     sched = d.scheduling_function()
-    n, lf, m = d.dims["n"], d.dims["lf"], d.dims["m"]
+    n, lf, m = d.dims.n, d.dims.lf, d.dims.m
     g = d.sliding_gain()
     assert g[0] > 100 * g[1]  # the gust's gain is the bound, the fault's delta + eps
     rng = np.random.default_rng(7)
     for _ in range(20):
-        z, y = rng.normal(scale=0.5, size=d.nbar), rng.uniform(-1, 1, size=d.dims["p"])
+        z, y = rng.normal(scale=0.5, size=d.nbar), rng.uniform(-1, 1, size=d.dims.p)
         zn, u, xb, _, s = (np.asarray(v).ravel() for v in fn(z, y))
         assert s.shape == (lf + 1,)
         h = np.asarray(sched(y, xb[:n])).ravel()
@@ -133,11 +134,11 @@ def test_c_equals_the_step_with_the_widened_sliding_term(r5_bound, tmp_path):
     c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), d, "double")
     fn = step_function(d, SAMPLE_TIME)
     rng = np.random.default_rng(11)
-    z = d.observer_start(np.zeros(d.dims["p"]))
+    z = d.observer_start(np.zeros(d.dims.p))
     c.init(z)
     flips = 0
     for _ in range(50):
-        y = rng.normal(scale=0.3, size=d.dims["p"])
+        y = rng.normal(scale=0.3, size=d.dims.p)
         zn, u, xb, yc, s = (np.asarray(v).ravel() for v in fn(z, y))
         rc, uc, xbc, ycc = c.step(y)
         assert rc == 0
@@ -159,6 +160,7 @@ def test_monte_carlo_estimates_the_fault_with_the_gust_acting(r5):
     assert with_gust["ftc_true_ratio"] < 0.1  # measured 0.039
 
 
+@pytest.mark.slow
 def test_rule_dependent_bd_is_named_and_remark5_used():
     """Issue #19 item 4: Bd_i differs between rules; decoupling both directions leaves (4) failing with
     s = 0. The message names the input, rules and entry, offers no --accept-assumption 4 (it cannot
@@ -188,6 +190,7 @@ def _cli(*args):
     )
 
 
+@pytest.mark.slow
 def test_cli_no_remark5_gives_the_refusal(tmp_path):
     spec = f"{HERE / 'plant_remark5.py'}:plant"
     off = _cli("design", spec, "--no-remark5", "--sample-time", "0.001")
@@ -195,5 +198,6 @@ def test_cli_no_remark5_gives_the_refusal(tmp_path):
     assert "assumption (1) fails" in off.stderr + off.stdout and "Remark 5" in off.stderr + off.stdout
     on = _cli("design", spec, "--sample-time", "0.001", "--d-bound", "0.5", "-o", str(tmp_path / "d.json"))
     assert on.returncode == 0, on.stderr
-    assert "CERTIFIED" in on.stdout and "Remark 5: H cannot decouple every unknown input" in on.stdout
+    assert_certified(on.stdout, tmp_path / "d.json")
+    assert "Remark 5: H cannot decouple every unknown input" in on.stdout
     assert Design.load(tmp_path / "d.json").remark5["d_bound"] == [0.5]

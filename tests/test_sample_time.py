@@ -36,6 +36,7 @@ def test_design_certifies_the_discrete_step_it_runs(plant, real_designs):
     assert not any("kept" in s for s in d.status)
 
 
+@pytest.mark.slow
 def test_too_slow_a_sample_time_names_the_fastest_that_works(ts_models):
     ts = ts_models["manipulator"]
     with pytest.raises(InfeasibleDesignError) as err:
@@ -52,15 +53,17 @@ def test_too_slow_a_sample_time_names_the_fastest_that_works(ts_models):
     assert _blended_decrease(d, fastest, np.random.default_rng(2)) < 0
 
 
+@pytest.mark.slow
 def test_a_slower_sample_time_lowers_alpha_and_keeps_the_proof(ts_models, real_designs):
     ts = ts_models["manipulator"]
     d = design(ts, sample_time=0.01)
     assert d.certified and d.checks["discrete"]["holds"]
     assert d.checks["discrete"]["ts_max_lyapunov"] >= 0.01
-    assert d.observer["alpha"] < real_designs["manipulator"].observer["alpha"]
-    assert "lowered to" in d.observer["why"]
+    assert d.observer.alpha < real_designs["manipulator"].observer.alpha
+    assert "lowered to" in d.observer.why
 
 
+@pytest.mark.slow
 def test_one_step_everywhere(ts_models, tmp_path):
     """The design records its sample time; simulate runs it, codegen uses it, a change is a metrics key."""
     import json
@@ -91,6 +94,7 @@ def test_one_step_everywhere(ts_models, tmp_path):
     assert "#define FTE_MANIPULATOR_TS (0.002)" in (tmp_path / "c" / "fte_manipulator.h").read_text()
 
 
+@pytest.mark.slow
 def test_the_plants_tuned_alpha_gives_way_where_it_is_infeasible(ts_models):
     """A decay rate recorded in the plant's defaults (fte tune's) is a default, not the user's: at parameters
     where it is infeasible the design takes the rate it would find by default, and says why; a rate the user

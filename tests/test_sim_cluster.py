@@ -28,6 +28,7 @@ def _doc(res):
     return m
 
 
+@pytest.mark.slow
 def test_cluster_run_equals_in_process(cluster, plants, real_designs):
     from fte_casadi.plants import SCENARIOS
 
@@ -73,6 +74,7 @@ def test_a_lost_worker_is_retried_without_changing_the_result(cluster, plants, r
         assert (got[a][0] == ref[a][0]).all() and (got[a][1] == ref[a][1]).all()
 
 
+@pytest.mark.slow
 def test_cli_scheduler_equals_in_process(cluster):
     from click.testing import CliRunner
 
@@ -87,6 +89,7 @@ def test_cli_scheduler_equals_in_process(cluster):
     assert ma == mb
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_a_clear_error(plants, real_designs):
     from fte_casadi.errors import SimulationError
     from fte_casadi.plants import SCENARIOS

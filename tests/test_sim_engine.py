@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from benchmarks.perpath import monte_carlo
+from fte_casadi.bench.perpath import monte_carlo
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.plants import SCENARIOS
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate
@@ -36,6 +36,7 @@ def _filler(dW: np.ndarray):
     return fill
 
 
+@pytest.mark.slow
 def test_em_reproduces_gbm_mean_and_variance():
     rng = np.random.default_rng(12345)
     paths, T, dt = 20000, 1.0, 1e-2
@@ -56,6 +57,7 @@ def test_em_reproduces_gbm_mean_and_variance():
     np.testing.assert_allclose(xT, np.prod(1 + GBM_A * dt + GBM_B * dW, axis=1), rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_em_strong_order_half():
     rng = np.random.default_rng(7)
     paths, T, kmax = 4000, 1.0, 10

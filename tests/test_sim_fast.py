@@ -64,6 +64,7 @@ def _close_metrics(a: dict, b: dict, rel: float) -> float:
     return worst
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,paths", [("manipulator", 16), ("three-tank", 8)])
 def test_fast_equals_exact_within_the_tolerance(plants, real_designs, name, paths):
     """The paper's scenario in full (both fault windows): trajectories and metrics within FAST_REL,
@@ -95,6 +96,7 @@ def _short(T=1.0):
                                                       for f in sc.faults))  # fmt: skip
 
 
+@pytest.mark.slow
 def test_fast_mode_does_not_depend_on_chunks_or_threads(plants, real_designs):
     """Every path runs the same instruction sequence whatever lane and chunk it lands in: metrics and
     recorded trajectories bit for bit equal for any chunk size (partial lanes included) and threads."""
@@ -119,6 +121,7 @@ def test_fast_mode_does_not_depend_on_chunks_or_threads(plants, real_designs):
     np.testing.assert_array_equal(ex.ftc.xbarhat, runs[0].ftc.xbarhat[:5])
 
 
+@pytest.mark.slow
 def test_fast_mode_on_a_cluster_equals_in_process(plants, real_designs):
     distributed = pytest.importorskip("distributed")
     plant, design, sc = plants["manipulator"], real_designs["manipulator"], _short()
@@ -208,6 +211,7 @@ def test_bad_mode_is_refused(plants, lqr_designs):
         simulate(design, plant, sc, paths=2, seed=0, progress=False, exact=False, prepared=prep)
 
 
+@pytest.mark.slow
 def test_cli_fast_math_on_simulate_and_sweep():
     base = ["simulate", "manipulator", "--paths", "16", "--seed", "1", "--json", "--quiet"]
     a = CliRunner().invoke(main, base)

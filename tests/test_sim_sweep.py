@@ -50,6 +50,7 @@ def test_sweep_over_two_factors(plants, real_designs, tmp_path):
     assert len(rows) == 5 and rows[0].startswith("fault_scale,noise_scale,fault_rel_rms_error_0")
 
 
+@pytest.mark.slow
 def test_cli_sweep_prints_points_and_writes_figure(tmp_path):
     r = CliRunner().invoke(main, ["sweep", "manipulator", "--vary", "fault_scale=0.5,1,2", "--paths", "16", "--seed", "1",
                                   "--json", "--quiet", "--out", str(tmp_path)])  # fmt: skip
@@ -77,6 +78,7 @@ def test_a_fault_scale_beyond_a_full_loss_is_refused_before_any_point_runs(plant
               {"fault_scale": [1.0, 3.0]}, paths=4, seed=0, progress=False)  # fmt: skip
 
 
+@pytest.mark.slow
 def test_cli_sweep_warns_by_point_where_tolerant_control_is_worse_than_none(monkeypatch):
     """The per-window verdict of fte simulate, for every point of a sweep, on stderr (also with --json)."""
     import fte_casadi.sim.sweep as sweep_module

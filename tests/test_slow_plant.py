@@ -59,6 +59,7 @@ def test_the_bounds_find_a_sigma_four_orders_below_the_defaults(ts):
     assert sup is not None and 1e-13 < sup < 1e-9, (sup, status)
 
 
+@pytest.mark.slow
 def test_the_refusal_names_the_sample_time_and_that_one_certifies(ts):
     with pytest.raises(InfeasibleDesignError) as exc:
         design(ts, sample_time=1.0)
@@ -68,10 +69,11 @@ def test_the_refusal_names_the_sample_time_and_that_one_certifies(ts):
     assert 0.05 < ts_ok < 1.0
     d = design(ts, sample_time=ts_ok)
     assert d.certified and d.checks["discrete"]["holds"]
-    assert d.params["sigma"] < 1e-9 and "sigma" in d.params_chosen
+    assert d.params.sigma < 1e-9 and "sigma" in d.params_chosen
     assert any("outputs' own size" in s for s in d.status)
 
 
+@pytest.mark.slow
 def test_the_design_does_not_depend_on_the_outputs_unit():
     """The plant with every output (and its sensor bias) in units 1024 times smaller. At its defaults both
     certify at a sample time of 1 s with the same largest sample time up to the rounding of the sigma the
@@ -96,6 +98,7 @@ def test_the_design_does_not_depend_on_the_outputs_unit():
                                atol=1e-8 * np.abs(a.L1[0]).max())  # fmt: skip
 
 
+@pytest.mark.slow
 def test_an_unstable_mode_barely_reachable_is_named(ts):
     """Coupled more strongly than it decays, the chain is open-loop unstable and its one input, at the chain's
     head, reaches the unstable modes only weakly: the reason (45) may leave no margin sigma at all."""

@@ -59,6 +59,7 @@ def test_negated_L1_is_refused_naming_the_observer(tmp_path):
     assert "the observer matrix R_1" in out and "eigenvalue with real" in out and "R_1 is not" in out
 
 
+@pytest.mark.slow
 def test_certified_false_and_missing(tmp_path):
     code, out = run("codegen", tampered(tmp_path, certified=False), "--out", tmp_path / "c")
     assert code == 2 and '"certified": false' in out, out
@@ -120,6 +121,7 @@ def test_corrupt_scheduling_tape_is_refused(tmp_path, tape):
     assert "'scheduling_ops'" in out and "internal error" not in out
 
 
+@pytest.mark.slow
 def test_edited_plant_file_is_refused(tmp_path):
     src = (ROOT / "examples" / "pendulum_plain.py").read_text()
     plant = tmp_path / "pend.py"
@@ -195,6 +197,7 @@ def test_deep_json_and_user_mistakes_exit_2(tmp_path):
     assert code == 2 and "memory" in out and "GB" in out, out
 
 
+@pytest.mark.slow
 def test_unicode_plant_name_works(tmp_path):
     src = (ROOT / "examples" / "pendulum_plain.py").read_text()
     plant = tmp_path / "pend.py"

@@ -143,6 +143,7 @@ def test_triangular_memberships_of_three_tank(tank):
         np.testing.assert_allclose(tank.memberships(np.array([x1, 10, 15])), expect, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_two_premise_plant_derives_four_rules_exactly():
     b = PlantBuilder("two")
     x1, x2 = b.states("x1", "x2")

@@ -52,6 +52,7 @@ def test_plain_manipulator_gives_the_paper_model(plain_and_builtin):
     assert "z1 schedules A[w_l, theta_l], W[w_l, theta_l]" in doc["notes"]
 
 
+@pytest.mark.slow
 def test_plain_manipulator_designs_simulates_and_generates_like_the_builtin(
     plain_and_builtin, real_designs, tmp_path
 ):
@@ -73,6 +74,7 @@ def test_plain_manipulator_designs_simulates_and_generates_like_the_builtin(
         assert max(err.values()) <= C_DOUBLE * 10
 
 
+@pytest.mark.slow
 def test_plain_pendulum_equals_the_premise_form():
     """examples/pendulum_plain.py (plain sin) and examples/pendulum_plant.py (premise by hand)."""
     plain = derive(load_plant(f"{EXAMPLES / 'pendulum_plain.py'}:pendulum"))
@@ -85,6 +87,7 @@ def test_plain_pendulum_equals_the_premise_form():
     assert hand.to_dict()["premises_found_automatically"] is False
 
 
+@pytest.mark.slow
 def test_bilinear_and_saturation_derive_with_four_rules():
     """One box per premise (vertices="box") gives four rules; both premises depend on x1 alone, so the
     default covers their image (a curve) with a simplex of three (tests/test_ts_groups.py)."""
@@ -103,6 +106,7 @@ def test_bilinear_and_saturation_derive_with_four_rules():
     assert ts.local_models[3].A[1].tolist() == pytest.approx([-np.tanh(2.0), 1.5], abs=1e-9)
 
 
+@pytest.mark.slow
 def test_kinked_terms_are_exact():
     """fabs, fmin/fmax saturation and a leaky if_else: exact quotient, filled at 0 only."""
     ts = derive(two_state(lambda x1, x2, u, fa: [x2 - ca.fabs(x1), -ca.fmin(ca.fmax(x1, -1), 1) + u + fa
@@ -135,6 +139,7 @@ def test_kinked_terms_are_exact():
     ],
     ids=["1/x1", "1/(x1-1)", "tan", "u/(x1-1)", "sqrt", "sqrt<0", "log", "sign"],
 )  # fmt: skip
+@pytest.mark.slow
 def test_terms_that_cannot_be_bounded_are_refused_by_name(rows, region, message):
     with pytest.raises(DerivationError, match=message) as exc:
         derive(two_state(rows, region=(region, (-2.0, 2.0))), fidelity_samples=2000)
@@ -160,6 +165,7 @@ def test_uncovered_term_with_declared_premises_keeps_todays_error():
         b.build()
 
 
+@pytest.mark.slow
 def test_state_dependent_input_gain_becomes_a_premise():
     ts = derive(two_state(lambda x1, x2, u, fa: [x2, -x1 + (1 + 0.5 * ca.cos(x1)) * (u + fa)]))
     assert len(ts.premises) == 1 and ts.premises[0].expr == "1+(0.5*cos(x1))"  # the coefficient of u and fa
@@ -169,6 +175,7 @@ def test_state_dependent_input_gain_becomes_a_premise():
     assert ts.fidelity.max_abs_error <= ROUNDOFF
 
 
+@pytest.mark.slow
 def test_orientation_rule_one_weighs_most_at_the_origin():
     """The sign of a premise does not depend on how the user wrote it; rule 1 holds at the origin."""
     a = derive(two_state(lambda x1, x2, u, fa: [x2, -3 * ca.sin(x1) + u + fa]))
@@ -184,6 +191,7 @@ def test_orientation_rule_one_weighs_most_at_the_origin():
     assert cube.local_models[0].A[1, 0] == 0.0 and cube.local_models[1].A[1, 0] == -4.0
 
 
+@pytest.mark.slow
 def test_singular_fill_is_exact_near_zero():
     """The quotient's removable singularity: coefficient values against 50-digit references near 0."""
     mp.mp.dps = 50
@@ -203,6 +211,7 @@ def test_singular_fill_is_exact_near_zero():
             assert abs(got - float(ref)) <= 1e-11 * max(1.0, abs(float(ref))), (name, v)
 
 
+@pytest.mark.slow
 def test_linear_plant_is_one_rule_with_a_certified_design_simulation_and_working_c(tmp_path):
     ts = derive(linear())
     assert ts.r == 1 and ts.premises == () and ts.method == "linear (one rule)" and ts.kind == "linear"
@@ -234,6 +243,7 @@ def _many(k):
     )
 
 
+@pytest.mark.slow
 def test_many_premises_warn_then_refuse():
     with pytest.warns(RuntimeWarning, match="found 7 premises"):
         ts = derive(_many(7), fidelity_samples=200, vertices="box")
@@ -270,6 +280,7 @@ _TERM = st.tuples(st.integers(0, len(_TERMS) - 1), _COEF)
 _DIFF_TERM = st.tuples(st.sampled_from([k for k in range(len(_TERMS)) if k != 7]), _COEF)
 
 
+@pytest.mark.slow
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(_TERM, min_size=1, max_size=3), st.lists(_DIFF_TERM, max_size=1), st.integers(0, 10_000))
 def test_ts_model_equals_the_nonlinear_equations(drift_terms, diff_terms, seed):
@@ -318,6 +329,7 @@ def test_fidelity_trajectory_of_an_escaping_open_loop_stops_and_says_so():
     assert 2 <= f.trajectory_points < 400 and f.trajectory_max_abs_error <= ROUNDOFF * 10
 
 
+@pytest.mark.slow
 def test_fidelity_trajectory_of_a_stiff_plant_is_integrated_by_a_stiff_method():
     """Poles near -1e4 and -1e-3: the horizon is 1000 s and RK45 would need some 1e7 steps (it ran for
     minutes). RK45 spends its share of the budget, LSODA integrates the whole horizon, and the sector

@@ -15,6 +15,7 @@ from fte_casadi.design import limits
 from fte_casadi.tune import search
 
 
+@pytest.mark.slow
 def test_every_consumer_reads_the_one_definition():
     metrics = importlib.import_module("fte_casadi.sim.metrics")  # (fte_casadi.sim.metrics is the function)
     for mod in (metrics, limits, search):

@@ -5,14 +5,12 @@ from .build import compile_shared as compile_shared
 from .build import find_compiler as find_compiler
 from .fmu import generate_fmu as generate_fmu
 from .generate import default_sample_time as default_sample_time
-from .generate import default_ts as default_ts
 from .generate import generate_c as generate_c
 from .generate import output_files as output_files
 
 __all__ = [
     "generate_c",
     "default_sample_time",
-    "default_ts",
     "output_files",
     "generate_fmu",
     "find_compiler",

@@ -10,7 +10,7 @@ from pathlib import Path
 from ..errors import CodegenError
 from ..toolchain import find_compiler as find_compiler
 
-__all__ = ["STRICT_FLAGS", "find_compiler", "compile_shared", "compile_program", "run_program"]
+__all__ = ["find_compiler", "compile_shared", "compile_program"]  # public: docs/api.md
 
 #: the flags every generated file must compile under, with no warning
 STRICT_FLAGS = ("-std=c99", "-O2", "-Wall", "-Wextra", "-Werror", "-pedantic")

@@ -42,22 +42,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..deprecation import renamed_keyword
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import build, template
 from .generate import _check_sample_time, _version, c_name, file_mode, generate_c, output_files, prepare_dir
 
-__all__ = [
-    "FmuVariable",
-    "fmu_variables",
-    "model_identifier",
-    "fmu_path",
-    "check_fmu_target",
-    "is_fte_fmu",
-    "generate_fmu",
-]
+__all__ = ["generate_fmu"]  # public: docs/api.md
 
 _TOOL = "fte_casadi"
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)  # fixed timestamps: the same design gives the same archive
@@ -328,7 +319,6 @@ def _write_zip(target: Path, members: dict[str, bytes]) -> None:
         raise CodegenError(f"cannot write the FMU {str(target)!r}: {exc.strerror or exc}") from None
 
 
-@renamed_keyword("ts", "sample_time")
 def generate_fmu(
     design: Design | str | os.PathLike,
     out_dir: str | os.PathLike,

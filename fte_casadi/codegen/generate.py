@@ -34,27 +34,13 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..deprecation import renamed_keyword
 from ..design.record import Design
 from ..errors import CodegenError, ParameterError
 from ..rounding import series_floor
 from ..step import step_function
 from . import template
 
-__all__ = [
-    "generate_c",
-    "default_sample_time",
-    "default_ts",
-    "c_name",
-    "output_files",
-    "BUILTIN_DIRS",
-    "write_files",
-    "file_mode",
-    "output_range",
-    "single_precision",
-    "Y_MARGIN",
-    "Y_FAULT_MARGIN",
-]
+__all__ = ["generate_c", "default_sample_time", "output_files"]  # public: docs/api.md
 
 #: directory name under ``generated/`` of each built-in plant
 BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank", "quadruple-tank": "quadruple_tank"}
@@ -106,32 +92,21 @@ def _ts_max(design: Design) -> float:
     return ts_max
 
 
-#: simulation time step of the built-in plants' paper scenarios (``fte_casadi.plants.SCENARIOS``)
-BUILTIN_DT = {"manipulator": 1e-3, "three-tank": 1e-2, "quadruple-tank": 0.1}
-
-
-def default_sample_time(design: Design) -> float:
+def default_sample_time(design: Design, scenario_step: float | None = None) -> float:
     """Default sample time: the sample time the design was made for (``observer.sample_time``, the
     scenario's step, which ``fte simulate`` runs and the default alpha respects) when it is below
     ``ts_max``; otherwise ``0.1 * ts_max`` rounded down to 1, 2 or 5 times a power of ten, and no
-    more than the simulation step of a built-in plant (:data:`BUILTIN_DT`)."""
+    more than ``scenario_step`` when the caller knows the plant's scenario (``Scenario.dt``; the CLI
+    passes the built-in plants' :data:`fte_casadi.plants.SCENARIOS` step)."""
     st = design.observer.sample_time
     if st is not None and math.isfinite(float(st)) and 0 < float(st) < _ts_max(design):
         return float(st)
     sample_time = series_floor(0.1 * _ts_max(design))
-    return min(sample_time, BUILTIN_DT.get(design.plant, sample_time))
-
-
-def default_ts(design: Design) -> float:
-    """Deprecated name of :func:`default_sample_time` (issue #20: ``ts`` names a T-S model)."""
-    import warnings
-
-    warnings.warn("default_ts() is deprecated; call default_sample_time()", DeprecationWarning, stacklevel=2)
-    return default_sample_time(design)
+    return sample_time if scenario_step is None else min(sample_time, float(scenario_step))
 
 
 def _check_sample_time(design: Design, sample_time) -> float:
-    """``sample_time`` as a float below ``ts_max`` (the CLI's ``--ts``); None: :func:`default_sample_time`."""
+    """``sample_time`` as a float below ``ts_max`` (the CLI's ``--sample-time``); None: :func:`default_sample_time`."""
     ts_max = _ts_max(design)
     if sample_time is None:
         return default_sample_time(design)
@@ -139,15 +114,15 @@ def _check_sample_time(design: Design, sample_time) -> float:
     try:
         sample_time = float(given)
     except (TypeError, ValueError):
-        raise ParameterError(f"sample time --ts must be a number; got {given!r}") from None
+        raise ParameterError(f"sample time --sample-time must be a number; got {given!r}") from None
     if not (math.isfinite(sample_time) and sample_time > 0):
         raise ParameterError(
-            f"sample time --ts must be positive and finite; got {given!r} (the design allows Ts < {ts_max:.6g})"
+            f"sample time --sample-time must be positive and finite; got {given!r} (the design allows Ts < {ts_max:.6g})"
         )
     if sample_time >= ts_max:
         raise ParameterError(
             f"sample time Ts = {sample_time:.6g} is not below the design's ts_max = {ts_max:.6g}: the discrete "
-            f"observer would be unstable; choose --ts below {ts_max:.6g} (default {default_sample_time(design):.6g})"
+            f"observer would be unstable; choose --sample-time below {ts_max:.6g} (default {default_sample_time(design):.6g})"
         )
     return sample_time
 
@@ -586,7 +561,6 @@ def write_files(out_dir: Path, texts: dict[str, str]) -> list[Path]:
     return [out_dir / f for f in texts]
 
 
-@renamed_keyword("ts", "sample_time")
 def generate_c(
     design: Design | str | os.PathLike,
     out_dir: str | os.PathLike,
@@ -605,9 +579,8 @@ def generate_c(
         Created if needed. Only the files of :func:`output_files` are written (atomically:
         temporary files, then renames); nothing else in the directory is touched.
     sample_time : float, optional
-        The step's sample time Ts (the CLI's ``--ts``); positive and below ``design.checks["ts_max"]``.
-        Default :func:`default_sample_time`. The former keyword ``ts`` still works, with a
-        ``DeprecationWarning``.
+        The step's sample time Ts (the CLI's ``--sample-time``); positive and below
+        ``design.checks["ts_max"]``. Default :func:`default_sample_time`.
     real : {"double", "float"}
         The C type of ``fte_real``.
     boundary_layer : float, optional

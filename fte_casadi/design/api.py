@@ -32,9 +32,8 @@ def _one_blas_thread(fn):
     """Run ``fn`` with the BLAS limited to one thread (threadpoolctl).
 
     The design's algebra is many small dense products and factorisations (matrices of tens of rows);
-    a multi-threaded BLAS spends more on waking its threads than on the work (on a loaded machine the same
-    design took 5.5-44 s with OpenBLAS's default threads against 0.3-6.9 s with one). The limit is undone
-    on return, and nested calls keep it.
+    a multi-threaded BLAS spends more on waking its threads than on the work, most of all on a loaded
+    machine (docs/benchmarks.md). The limit is undone on return, and nested calls keep it.
     """
 
     @functools.wraps(fn)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..ts.model import LocalModel
 
-__all__ = ["Augmented", "augment", "pad_rows", "time_scale", "time_scaled"]
+__all__ = ["Augmented", "augment", "time_scaled"]  # public: docs/api.md
 
 
 def pad_rows(M: np.ndarray, lf: int) -> np.ndarray:

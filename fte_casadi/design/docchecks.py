@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import DesignFileError
 
-__all__ = ["check_document"]
+__all__ = []  # public: docs/api.md
 
 _REMAKE = "make it again with `fte design PLANT -o FILE`"
 
@@ -86,6 +86,7 @@ _OPTIONAL_PARAMS = {
 }
 _OBSERVER = {"sample_time": (0, True), "alpha": (0, False), "alpha_max": (0, False), "alpha_max_upper": (0, False),
              "ts_max": (0, False), "bound_weight": (0, False), "bound_objective_before": (None, False),
+             "bound_objective_unweighted": (None, False),
              "bound_objective": (None, False)}  # fmt: skip
 
 

@@ -2,8 +2,7 @@
 
 When no certified design makes tolerant control better than none in a fault's window, or keeps
 a fault's estimate quiet outside its windows, the cause is often in the plant, not in the knobs.
-This module computes, from the local models and a design, the numbers that name such a cause
-(issue #18 item 4):
+This module computes, from the local models and a design, the numbers that name such a cause:
 
 - the invariant (transmission) zeros of the fault's channel to the outputs, per rule: the s where
   ``[[sI - A_i, Bf_ij], [C, Df_j]]`` loses rank, and the same with the unknown inputs beside the
@@ -26,8 +25,7 @@ import scipy.linalg as sla
 
 from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 
-__all__ = ["FaultLimits", "channel_zeros", "fault_limits", "separation", "explain_metrics", "reachability",
-           "vertex_reach"]  # fmt: skip
+__all__ = ["separation", "explain_metrics"]  # public: docs/api.md
 
 #: a normalised separation below this is "weak" (the outputs tell the columns apart only slowly)
 WEAK_SEPARATION = 5e-2

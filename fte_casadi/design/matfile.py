@@ -19,7 +19,7 @@ import numpy as np
 from ..atomic import atomic_write
 from ..errors import DesignFileError
 
-__all__ = ["save_mat", "is_fte_mat", "MARKER"]
+__all__ = []  # public: docs/api.md
 
 #: the variable that marks a MAT file as an fte design document
 MARKER = "fte_document"

@@ -17,7 +17,7 @@ from .augment import augment
 from .core.certify import certificate, discrete_certificate, failures
 from .core.lmis import LMIS, distinct
 
-__all__ = ["recertify"]
+__all__ = []  # public: docs/api.md
 
 #: how far (relative) a stored matrix may be from what it is made of: the design writes them with
 #: 17 significant digits, so anything above round-off is an edit
@@ -55,12 +55,12 @@ def recertify(d) -> list[str]:
     point = dict(X=np.asarray(d.X), K=[np.asarray(M) for M in d.K], P=np.asarray(d.P), T=T, Pbar=Pbar, Q=Q,
                  N=np.asarray(d.N), theta=float(d.theta), R=R, L1=L1)  # fmt: skip
     try:
-        checks = certificate(aug, point, d.params)
+        checks = certificate(aug, point, d.params.to_dict())
     except np.linalg.LinAlgError as exc:
         return out + [f"the certificate cannot be evaluated at the loaded numbers ({exc})"]
-    ts = d.observer.sample_time
-    if ts is not None:
-        checks["discrete"] = discrete_certificate(R, Pbar, float(ts))
+    sample_time = d.observer.sample_time
+    if sample_time is not None:
+        checks["discrete"] = discrete_certificate(R, Pbar, float(sample_time))
     for k, lmi in LMIS.items():
         v = checks["lmi_max_eig"][k]
         if not v < 0:

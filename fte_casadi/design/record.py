@@ -24,12 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from ..atomic import atomic_write_text
-from ..deprecation import renamed_keyword
 from ..errors import DesignFileError
 from ..ts.model import LocalModel
 from .records import Dims, Observer, Params, _Record
 
-__all__ = ["Design", "Dims", "Params", "Observer", "REQUIRED_KEYS", "SCHEMA"]
+__all__ = ["Design", "Dims", "Params", "Observer"]  # public: docs/api.md
 
 #: the version of the design document this fte writes (documents without ``schema`` predate it: 1)
 SCHEMA = 2
@@ -75,9 +74,8 @@ class Design:
 
     ``params``, ``dims`` and ``observer`` are typed frozen records (:class:`~fte_casadi.design.records.Params`,
     :class:`~fte_casadi.design.records.Dims`, :class:`~fte_casadi.design.records.Observer`), read by attribute:
-    ``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``. Passing plain dicts for them (as older code does)
-    converts them; for a transition the records also answer item access (``d.dims["n"]``,
-    ``d.params.get("gamma2")``). ``checks`` stays a dict (its key set is open; see the records' module).
+    ``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``; a plain dict given for one (for example in
+    ``dataclasses.replace(d, params={...})``) becomes the record. ``checks`` stays a dict (its key set is open; see the records' module).
     """
 
     plant: str
@@ -229,7 +227,6 @@ class Design:
             )
         return read_tape(self.scheduling_ops, "scheduling")
 
-    @renamed_keyword("dt", "sample_time")
     def to_control(self, i: int = 0, j: int = 0, sample_time: float | None = None):
         """The closed loop of plant rule ``i``, observer rule ``i`` and gain ``K_j`` as a ``control.StateSpace``.
 
@@ -266,21 +263,22 @@ class Design:
         for k in _LISTS:
             out[k] = [_arr(M).tolist() for M in getattr(self, k)]
         out["theta"] = float(self.theta)
-        out["checks"] = _jsonable(self.checks)
-        out["timings"] = {k: float(v) for k, v in self.timings.items()}
+        nonfinite: dict[str, str] = {}
+        out["checks"] = _jsonable(self.checks, "checks", nonfinite)
+        out["timings"] = _jsonable({k: float(v) for k, v in self.timings.items()}, "timings", nonfinite)
         out["plant_spec"] = self.plant_spec
         out["u_ref"] = _arr(self.u_ref).tolist()
         out["x_ref"] = None if self.x_ref is None else _arr(self.x_ref).tolist()
         if self.x0 is not None:
             out["x0"] = _arr(self.x0).tolist()
         if self.params_chosen:
-            out["params_chosen"] = _jsonable(self.params_chosen)
+            out["params_chosen"] = _jsonable(self.params_chosen, "params_chosen", nonfinite)
         if self.bounds:
-            out["bounds"] = _jsonable(self.bounds)
+            out["bounds"] = _jsonable(self.bounds, "bounds", nonfinite)
         if self.Kf_rules is not None:
             out["Kf_rules"] = [_arr(M).tolist() for M in self.Kf_rules]
         if self.remark5.get("used"):
-            out["remark5"] = _jsonable(self.remark5)
+            out["remark5"] = _jsonable(self.remark5, "remark5", nonfinite)
         out["scheduling"] = self.scheduling if isinstance(self.scheduling, str) else ""
         if self.scheduling_ops is not None:
             out["scheduling_ops"] = self.scheduling_ops
@@ -288,27 +286,45 @@ class Design:
         if self.plant_hash:
             out["plant_hash"] = dict(self.plant_hash)
         if self.accommodation is not None:
-            out["accommodation"] = _jsonable(self.accommodation)
+            out["accommodation"] = _jsonable(self.accommodation, "accommodation", nonfinite)
         out["names"] = self.names
         out["certified"] = bool(self.certified)
         out["status"] = list(self.status)
         out["solves"] = {k: int(v) for k, v in self.solves.items()}
-        out["observer"] = _jsonable(self.observer.to_dict())
-        out["input_limits"] = None if self.input_limits is None else [
-            [None if not np.isfinite(v) else float(v) for v in row] for row in np.asarray(self.input_limits, float)
-        ]  # fmt: skip
+        out["observer"] = _jsonable(self.observer.to_dict(), "observer", nonfinite)
+        out["input_limits"] = (
+            None
+            if self.input_limits is None
+            else _jsonable(np.asarray(self.input_limits, float), "input_limits", nonfinite)
+        )
+        if nonfinite:
+            out["nonfinite"] = nonfinite
         return out
 
     def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1, allow_nan=False)
+        """The design document as JSON text.
+
+        One policy for non-finite numbers: in the reports (``checks``, ``bounds``, ``timings``, ``observer``,
+        ``input_limits``, ...) a NaN or an infinity is written as ``null`` and the document's ``nonfinite``
+        entry names it with what it was and why (``{"checks.lmi_max_eig.45": "NaN: ..."}``); reading gives
+        the NaN or infinity back. A matrix, a parameter or a size that is not finite makes the design
+        unusable: writing it is refused (``ValueError`` naming the key). Never a finite stand-in.
+        """
+        doc = self.to_dict()
+        bad = _first_nonfinite(doc)
+        if bad is not None:
+            raise ValueError(f"{bad!r} holds a NaN or infinite entry")
+        return json.dumps(doc, indent=1, allow_nan=False)
 
     def save(self, path: str | os.PathLike) -> None:
-        """Write the design document atomically (an existing file survives a failed run)."""
+        """Write the design document atomically (an existing file survives a failed run); refuse, naming
+        the key, a design whose matrices or parameters are not finite (see :meth:`to_json`)."""
         try:
             text = self.to_json()
         except ValueError as exc:
             raise DesignFileError(
-                f"the design holds a non-finite number and cannot be written as JSON ({exc})"
+                f"the design holds a non-finite number and cannot be written as JSON ({exc}); its matrices "
+                "are unusable: make the design again"
             ) from None
         try:
             atomic_write_text(path, text)
@@ -345,6 +361,7 @@ class Design:
         from .docchecks import check_document
 
         check_document(doc, source)
+        doc = _restore_nonfinite(doc)
         if isinstance(doc.get("schema"), int) and doc["schema"] > SCHEMA:
             raise DesignFileError(
                 f"{source} is a design document of schema {doc['schema']}, written by a newer fte than this one "
@@ -510,6 +527,23 @@ def _local_model(source: str, i: int, entry) -> LocalModel:
         ) from None
 
 
+def _first_nonfinite(obj, path: str = "") -> str | None:
+    """The path of the first NaN or infinity left in a document (where nothing writes it as null)."""
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            bad = _first_nonfinite(v, f"{path}.{k}" if path else str(k))
+            if bad is not None:
+                return bad
+    elif isinstance(obj, (list, tuple)):
+        for k, v in enumerate(obj):
+            bad = _first_nonfinite(v, f"{path}[{k}]")
+            if bad is not None:
+                return bad
+    elif isinstance(obj, float) and not math.isfinite(obj):
+        return path
+    return None
+
+
 def _reject_constant(name: str):
     raise DesignFileError(f"the design document holds {name}; every number must be finite")
 
@@ -521,18 +555,72 @@ def _finite(source: str, key: str, value) -> np.ndarray:
     return a
 
 
-def _jsonable(obj):
+#: why a number of a document's section is not finite, by the longest matching path prefix
+_NONFINITE_WHY = {
+    "checks.lmi_max_eig": "the LMI's largest eigenvalue was not evaluated at a finite point; it is no certificate",
+    "checks": "the check was not evaluated at a finite point",
+    "bounds": "the bound was not computed at a finite point",
+    "input_limits": "no limit on this side",
+}
+
+
+def _why_nonfinite(path: str, v: float) -> str:
+    kind = "NaN" if math.isnan(v) else ("+inf" if v > 0 else "-inf")
+    prefix = max((p for p in _NONFINITE_WHY if path == p or path.startswith(p + ".")), key=len, default=None)
+    return f"{kind}: {_NONFINITE_WHY[prefix] if prefix else 'not a finite number'}"
+
+
+def _jsonable(obj, path: str, nonfinite: dict):
+    """``obj`` as JSON values: a non-finite number becomes ``null`` and ``nonfinite[path]`` says what it was
+    and why (:func:`_restore_nonfinite` reads it back); a finite stand-in is never written."""
     if isinstance(obj, _Record):
         obj = obj.to_dict()
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
+        return {str(k): _jsonable(v, f"{path}.{k}", nonfinite) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return [_jsonable(v, f"{path}.{k}", nonfinite) for k, v in enumerate(obj)]
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
     if isinstance(obj, (np.floating, float)):
         v = float(obj)
-        return v if math.isfinite(v) else (1e308 if v > 0 else -1e308)
+        if math.isfinite(v):
+            return v
+        nonfinite[path] = _why_nonfinite(path, v)
+        return None
     if isinstance(obj, (np.integer,)):
         return int(obj)
     return obj
+
+
+def _restore_nonfinite(doc: dict) -> dict:
+    """``doc`` with each null that its ``nonfinite`` entry explains read back as NaN, +inf or -inf (the
+    sections are copied; the rest is shared). A path that does not lead to a null is ignored."""
+    notes = doc.get("nonfinite")
+    if not isinstance(notes, dict) or not notes:
+        return doc
+    doc = dict(doc)
+    copied: set[str] = set()
+    for path, why in notes.items():
+        parts = str(path).split(".")
+        if not parts or parts[0] not in doc or not isinstance(why, str):
+            continue
+        kind = why.split(":", 1)[0].strip()
+        value = {"NaN": math.nan, "+inf": math.inf, "-inf": -math.inf}.get(kind)
+        if value is None:
+            continue
+        if parts[0] not in copied:
+            doc[parts[0]] = json.loads(json.dumps(doc[parts[0]]))  # a deep copy of JSON data
+            copied.add(parts[0])
+        node = doc
+        for p in parts[:-1]:
+            node = node.get(p) if isinstance(node, dict) else (
+                node[int(p)] if isinstance(node, list) and p.isdigit() and int(p) < len(node) else None
+            )  # fmt: skip
+            if node is None:
+                break
+        last = parts[-1]
+        if isinstance(node, dict) and last in node and node[last] is None:
+            node[last] = value
+        elif isinstance(node, list) and last.isdigit() and int(last) < len(node) and node[int(last)] is None:
+            node[int(last)] = value
+    return doc

@@ -4,11 +4,8 @@
 (``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``) as diffrax and equinox records are. The design
 document (docs/interface.md) does not change: each record writes back exactly the keys it was read from,
 in the same order (:meth:`to_dict`), and keeps any key it does not know in ``extra`` (a document written by
-a newer version survives a load/save). An optional entry that is absent is ``None``.
-
-For a transition the records also answer item access as the dicts did (``d.dims["n"]``,
-``d.params.get("gamma2")``, ``"alpha" in d.observer``, ``dict(d.params)``, ``d.observer.items()``), so that
-code still written against the dicts keeps working; new code reads attributes.
+a newer version survives a load/save). An optional entry that is absent is ``None``. The records are not
+mappings: read attributes, and :meth:`to_dict` for the document's dict.
 
 ``Design.checks`` stays a dict: its key set is open (the certificate adds keys with the theorem, the sample
 time and Remark 5's fallback, and :func:`~fte_casadi.design.core.certify.failures` reads whatever is there), and
@@ -18,7 +15,7 @@ its values are nested reports (``checks["lmi_max_eig"]["46"]``), not scalars a r
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import MISSING, dataclass, field
 from typing import Any, ClassVar
 
@@ -26,7 +23,7 @@ __all__ = ["Dims", "Params", "Observer"]
 
 
 class _Record:
-    """Shared behaviour: the document's key order, unknown keys kept, and the transitional mapping view."""
+    """Shared behaviour: the document's key order and unknown keys kept."""
 
     #: fields that are not document keys
     _META: ClassVar[tuple[str, ...]] = ("extra", "order")
@@ -48,48 +45,20 @@ class _Record:
         held += [k for k in self.extra if k not in held]
         return tuple(held)
 
+    def _value(self, key: str):
+        return self.extra[key] if key in self.extra else getattr(self, key)
+
     def to_dict(self) -> dict:
         """The record as the design document writes it (same keys, same order as read)."""
         cast = self._CAST
-        return {k: (self[k] if cast is None else cast(self[k])) for k in self.keys()}
-
-    # -- transitional mapping view (item access as the dicts had) ------------------------------
-    def __getitem__(self, key: str):
-        if key in self.extra:
-            return self.extra[key]
-        if key in self._fields() and (key in self.order or getattr(self, key) is not None):
-            return getattr(self, key)
-        raise KeyError(key)
-
-    def get(self, key: str, default=None):
-        """``self[key]`` or ``default`` (transitional: new code reads the attribute)."""
-        try:
-            return self[key]
-        except KeyError:
-            return default
-
-    def __contains__(self, key: object) -> bool:
-        return key in self.keys()
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self.keys())
-
-    def __len__(self) -> int:
-        return len(self.keys())
-
-    def items(self):
-        """``(key, value)`` pairs in the document's order (transitional)."""
-        return [(k, self[k]) for k in self.keys()]
-
-    def values(self):
-        """The values in the document's order (transitional)."""
-        return [self[k] for k in self.keys()]
+        return {
+            k: (v if cast is None or v is None else cast(v))
+            for k, v in ((k, self._value(k)) for k in self.keys())
+        }
 
     def __eq__(self, other: object) -> bool:
         if isinstance(other, _Record):
             return type(self) is type(other) and self.to_dict() == other.to_dict()
-        if isinstance(other, Mapping):
-            return self.to_dict() == dict(other)
         return NotImplemented
 
     __hash__ = None  # type: ignore[assignment]  # extra is a dict
@@ -123,7 +92,7 @@ class _Record:
         """
         if isinstance(doc, cls):
             return doc
-        doc = dict(doc or {})
+        doc = cls._upgrade(dict(doc or {}))
         for k in cls.missing(doc):
             raise KeyError(k)
         known = {f.name for f in dataclasses.fields(cls)} - set(cls._META)
@@ -135,13 +104,16 @@ class _Record:
     def _convert(cls, key: str, value):
         return value
 
+    @classmethod
+    def _upgrade(cls, doc: dict) -> dict:
+        """``doc`` with the keys of older documents read as today's (same order); the record's own rule."""
+        return doc
+
 
 @dataclass(frozen=True, eq=False)
 class Dims(_Record):
     """The design's sizes (``Design.dims``): states, inputs, outputs, unknown inputs, faults, rules, and
     the augmented state ``[x; f'; f'']``.
-
-    Read ``d.dims.n``; ``d.dims["n"]`` still works for a transition (see the module docstring).
     """
 
     n: int
@@ -168,8 +140,6 @@ class Params(_Record):
     ``None`` when not used: ``gamma2`` (Theorem 5's d2 attenuation), ``kappa`` (the bound on cond(Pbar)
     when asked for one), ``boundary_layer`` (the sliding term's ``sat(s/phi)`` width, set by the tuner),
     ``bound_weight`` (the fault-error bound's weight in step 5's objective, when positive).
-
-    Read ``d.params.sigma``; ``d.params["sigma"]`` still works for a transition (see the module docstring).
     """
 
     gamma: float
@@ -197,24 +167,33 @@ class Observer(_Record):
 
     ``sample_time`` the sample time the design was made for (``None`` when none was given),
     ``alpha`` the decay rate used, ``why`` the reason, ``alpha_max`` and ``alpha_max_upper`` the bisection's
-    bracket of the largest feasible rate (absent when the user set ``alpha``), ``ts_max`` the largest
-    sample time at which every R_i's explicit Euler step is stable; with the fault-error bound in step 5's
-    objective, ``bound_weight`` and the smallest block-diagonal bound (sum of squared channel gains) at the
-    observer without it (``bound_objective_before``) and with it (``bound_objective``). The paper variant holds only
-    ``alpha`` (0) and ``why``; documents older than the observer entry hold none.
+    bracket of the largest feasible rate (absent when the user set ``alpha``); with the fault-error bound
+    in step 5's objective (weight ``Design.params.bound_weight``), the smallest block-diagonal bound (sum of
+    squared channel gains) at the observer designed without the term, weight 0
+    (``bound_objective_unweighted``), and at the observer designed with it (``bound_objective``). The paper
+    variant holds only ``alpha`` (0) and ``why``; documents older than the observer entry hold none.
 
-    Read ``d.observer.alpha``; ``d.observer["alpha"]`` still works for a transition (see the module
-    docstring).
+    Each value is stored once: the largest stable sample time is ``checks.ts_max`` and the bound's weight
+    ``params.bound_weight``. Documents written before 0.2.0 also held them here (``observer.ts_max``,
+    ``observer.bound_weight``, the same numbers) and named ``bound_objective_unweighted``
+    ``bound_objective_before``: they are read as today's (:meth:`_upgrade`) and saved without the copies.
     """
+
+    #: keys of documents before 0.2.0 that held a value stored elsewhere (checks.ts_max, params.bound_weight)
+    _DUPLICATES: ClassVar[tuple[str, ...]] = ("ts_max", "bound_weight")
+    #: keys of documents before 0.2.0 that have a new name
+    _RENAMED: ClassVar[dict[str, str]] = {"bound_objective_before": "bound_objective_unweighted"}
 
     sample_time: float | None = None
     alpha_max: float | None = None
     alpha_max_upper: float | None = None
     alpha: float | None = None
     why: str | None = None
-    ts_max: float | None = None
-    bound_weight: float | None = None
-    bound_objective_before: float | None = None
+    bound_objective_unweighted: float | None = None
     bound_objective: float | None = None
     extra: dict = field(default_factory=dict, repr=False)
     order: tuple = field(default=(), repr=False)
+
+    @classmethod
+    def _upgrade(cls, doc: dict) -> dict:
+        return {cls._RENAMED.get(k, k): v for k, v in doc.items() if k not in cls._DUPLICATES}

@@ -6,8 +6,8 @@ When it applies (:func:`fallback`)
       rest (the paper's Remark 5);
     - assumption (4) fails although ``(Abar_i, Cbar)`` is observable: decoupling every direction of
       ``[Bdbar_1 ... Bdbar_r]`` made the pair unobservable. This is what a rule-dependent ``Bd_i``
-      does: one unknown input enters along r directions and H decouples all of them (issue #19:
-      the cart-pole with a torque through ``1/den(theta)``). Then H decouples less — the mean
+      does: one unknown input enters along r directions and H decouples all of them (for
+      example the cart-pole with a torque through ``1/den(theta)``). Then H decouples less — the mean
       direction of each unknown input over the rules, else nothing — and the sliding term
       attenuates the rest, if that makes (4) hold.
 
@@ -42,14 +42,7 @@ from .uio import (
     remark5_split,
 )
 
-__all__ = [
-    "fallback",
-    "rule_dependent_directions",
-    "explain_rule_dependence",
-    "resolve_d_bound",
-    "record",
-    "with_remark5",
-]
+__all__ = ["fallback", "record"]  # public: docs/api.md
 
 
 def rule_dependent_directions(

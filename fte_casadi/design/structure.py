@@ -16,7 +16,7 @@ import numpy as np
 from .augment import Augmented
 from .uio import rank
 
-__all__ = ["Confounded", "confounded_sets", "undecoupled_inputs", "describe"]
+__all__ = []  # public: docs/api.md
 
 #: the largest set size searched (sets of faults and unknown inputs)
 MAX_SET = 3

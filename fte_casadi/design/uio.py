@@ -42,20 +42,11 @@ from .augment import Augmented
 
 __all__ = [
     "AssumptionCheck",
-    "RANK_RTOL",
     "uio_gain",
-    "check_decoupling",
-    "check_full_column_rank",
-    "check_invariant_zeros",
-    "check_observability",
-    "check_fault_matching",
     "check_assumptions",
     "enforce",
     "invariant_zeros",
-    "Remark5",
-    "remark5_split",
-    "decoupling_gain",
-]
+]  # public: docs/api.md
 
 #: relative tolerance of every numerical rank decision (singular values below it times the largest are zero)
 RANK_RTOL = 1e-9

@@ -15,7 +15,7 @@ import casadi as ca
 
 from ..errors import DesignFileError
 
-__all__ = ["TAPE_FORMAT", "write_tape", "read_tape"]
+__all__ = []  # public: docs/api.md
 
 TAPE_FORMAT = "casadi-sx-tape/1"
 #: the largest tape a document may hold (the built-in plants' maps have tens of instructions)

@@ -14,7 +14,7 @@ from .record import Plant, _column, _units
 if TYPE_CHECKING:
     from .plant import PlantBuilder
 
-__all__ = ["validate", "triangular_memberships"]
+__all__ = ["triangular_memberships"]  # public: docs/api.md
 
 
 def _vec(syms: list) -> ca.SX:

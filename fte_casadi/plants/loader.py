@@ -13,7 +13,7 @@ from pathlib import Path
 from ..errors import FteError, PlantError, PlantLoadError
 from ..model import Plant
 
-__all__ = ["load_plant", "load_scenario", "builtin_names"]
+__all__ = []  # public: docs/api.md
 
 
 def builtin_names() -> list[str]:

@@ -1,10 +1,10 @@
 """Scenarios (faults, disturbances, noise) and the compiled Euler-Maruyama Monte Carlo engine.
 
-Two names for time steps, one meaning each (issue #20, "one name per concept"):
+Two names for time steps, one meaning each:
 
 - ``sample_time`` (Ts) is the observer/controller's sample time, everywhere in the package: what a
   design is made and certified for (``Design.observer.sample_time``, ``design(..., sample_time=)``),
-  and the step of :func:`~fte_casadi.step.step_function` and of the generated C (``fte codegen --ts``).
+  and the step of :func:`~fte_casadi.step.step_function` and of the generated C (``fte codegen --sample-time``).
 - ``dt`` is the simulation's step, and is used only here in ``sim/`` and for the scenario
   (``Scenario.dt``, ``simulate(..., dt=)``, ``fte simulate --dt``, the metrics key ``"dt"``): the
   Euler-Maruyama step of the plant. The simulated controller takes one sample per step, so within a

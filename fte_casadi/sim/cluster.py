@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from ..errors import MissingDependencyError, SimulationError
 from .vector import auto_chunk
 
-__all__ = ["run_on_cluster", "client_for", "plant_bytes", "plant_from_bytes"]
+__all__ = []  # public: docs/api.md
 
 
 def _require():

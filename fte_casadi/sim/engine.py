@@ -52,8 +52,7 @@ from .vector import auto_chunk as auto_chunk
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
 
-__all__ = ["simulate", "closed_loop_sample", "PathLayout", "Prepared", "run_paths", "resolve_dt", "step_change", "design_sample_time", "SCALES",
-           "auto_chunk"]  # fmt: skip
+__all__ = ["simulate"]  # public: docs/api.md
 
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001

@@ -11,12 +11,13 @@ import math
 
 import numpy as np
 
-from ..verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+from ..verdicts import FALSE_ALARM as FALSE_ALARM
+from ..verdicts import SATURATED as SATURATED
+from ..verdicts import WORSE_THAN_NONE as WORSE_THAN_NONE
 from .reduce import HYSTERESIS, SETTLE_FRACTION, _mask, allowances, outside_mask, settling_time
 from .result import SimulationResult
 
-__all__ = ["metrics", "metrics_from_arrays", "fault_windows", "input_saturation", "alarms",
-           "WORSE_THAN_NONE", "FALSE_ALARM", "SATURATED"]  # fmt: skip
+__all__ = ["metrics", "metrics_from_arrays", "input_saturation", "alarms"]  # public: docs/api.md
 
 
 def fault_windows(result: SimulationResult) -> list[list[tuple[float, float]]]:

@@ -16,7 +16,7 @@ from ..design.record import Design
 from ..errors import SimulationError
 from .scenario import Scenario
 
-__all__ = ["RunData", "SimulationResult", "save_result", "load_result", "RUNS"]
+__all__ = ["RunData", "SimulationResult", "save_result", "load_result"]  # public: docs/api.md
 
 #: the three runs per path, in order
 RUNS = ("free", "no_ftc", "ftc")

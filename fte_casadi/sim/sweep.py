@@ -24,7 +24,7 @@ from .engine import SCALES, Prepared, _check_settings, _scales, resolve_dt, simu
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
 
-__all__ = ["sweep", "parse_vary", "to_csv"]
+__all__ = ["sweep"]  # public: docs/api.md
 
 
 def parse_vary(items) -> dict[str, list[float]]:

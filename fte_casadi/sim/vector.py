@@ -49,8 +49,7 @@ from ..errors import UnsupportedOperation
 from ..toolchain import cache_dir, find_compiler
 from . import rng
 
-__all__ = ["emit", "VectorEngine", "UnsupportedOperation", "unsupported", "LANES", "FLAGS", "FAST_FLAGS", "CHUNK",
-           "auto_chunk"]  # fmt: skip
+__all__ = []  # public: docs/api.md
 
 #: paths per lane vector (8 doubles: one AVX-512 register, two AVX2 ones)
 LANES = 8

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import FteError
 
-__all__ = ["evaluate", "design_kwargs", "default_alpha", "bound_gain", "KNOBS", "TUNED_DEFAULTS"]
+__all__ = ["evaluate"]  # public: docs/api.md
 
 #: the input peak (and the output-error scale of the boundary layer) is read from the first paths, recorded
 PEAK_PATHS = 5

@@ -13,7 +13,7 @@ from ..atomic import atomic_write_text, replace_dir
 from ..design.record import Design
 from ..errors import ParameterError
 
-__all__ = ["MARKER", "is_tune_record", "write_outputs", "front_documents", "front_table", "comparison"]
+__all__ = ["comparison"]  # public: docs/api.md
 
 #: the key that marks a tune.json as written by fte tune
 MARKER = "fte_tune"

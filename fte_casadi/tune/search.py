@@ -55,7 +55,7 @@ from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 from .evaluate import evaluate
 from .space import Space, space_for
 
-__all__ = ["tune", "TuneResult", "Record", "choose", "pareto_front", "RULES", "BATCH", "objectives_for"]
+__all__ = ["tune", "TuneResult", "Record", "choose", "pareto_front", "RULES"]  # public: docs/api.md
 
 #: trials asked from the sampler before any of them is told (also the tasks sent to a cluster at once)
 BATCH = 4
@@ -300,7 +300,7 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
     sigma_sup : float, optional
         The largest sigma (45) allows for any gamma (caps the sigma range).
     base_is_given : bool
-        Kept for callers of earlier versions; trial 0 is always ``base_design`` as it is (its alpha,
+        Has no effect on the search: trial 0 is always ``base_design`` as it is (its alpha,
         kappa and boundary layer may come from the plant's defaults, which a design from its
         parameters alone would not reproduce).
     progress : callable, optional
@@ -592,7 +592,7 @@ def _sigma_sup(plant, base_design) -> float | None:
 
 
 def _limits(done, plant) -> list[str]:
-    """Item 4 of issue #18: the windows where no certified candidate makes tolerant control better
+    """The windows where no certified candidate makes tolerant control better
     than none, and the faults whose false alarms none keeps below 1, with their structural causes
     (:func:`fte_casadi.design.limits.explain_metrics`, at the candidate closest to succeeding)."""
     from ..design.limits import explain_metrics

@@ -3,7 +3,7 @@
 :func:`centre` turns a solver's answer into a point that depends on the data only. The conic
 optimum of an LMI problem is in general neither unique nor well conditioned: solvers stop at
 different points of a flat optimal face, and two machines' floating point lands on different
-points (issue #9). The centred point is the minimiser of the strictly convex function
+points. The centred point is the minimiser of the strictly convex function
 ``c^T v / mu + sum_k -log det(-F_k(v))`` (a point of the central path) with ``mu`` fixed by
 ``mu * nu = eta * (c^T v + floor)``, i.e. the point whose duality gap is the fraction ``eta`` of
 its own objective (``nu`` = the barrier's degree, the sum of the LMI sizes). It is unique when

@@ -1,4 +1,4 @@
-"""The closed loop's fault-error bound as a term of step 5's objective (issue #18 item 1).
+"""The closed loop's fault-error bound as a term of step 5's objective.
 
 :mod:`fte_casadi.design.core.bounds` certifies, at a returned design, the gain from the channels
 ``w = [d; f''; u_s; f; 1]`` to ``f - fhat`` with one common Lyapunov matrix ``P`` of the closed loop
@@ -38,7 +38,7 @@ from .barrier import centre, phase1
 from .bounds import MAX_STATES, MAX_VERTICES, channel_names, gain_diag, vertex_parts
 from .sdp import AffineLMI, Layout, Var, affine_lmi, positive
 
-__all__ = ["BoundTerm", "bound_term"]
+__all__ = []  # public: docs/api.md
 
 
 def _padded(L: AffineLMI, extra: int) -> AffineLMI:

@@ -1,4 +1,4 @@
-"""A certified bound on the fault-estimation error of a returned design (issue #18 item 1).
+"""A certified bound on the fault-estimation error of a returned design.
 
 At the design's gains, the closed loop of the T-S model with the observer is, for ``xi = [x; e]``
 (``e = xbar - xbarhat`` the augmented estimation error, ``f - fhat = J2 e``)::
@@ -17,9 +17,9 @@ bounded-real lemma gives, for ``P > 0`` and ``g_k`` with, for every rule pair (i
      [B_ij^T P,                                 -diag(g)]]  < 0,      C = [0, J2]
 
 (affine in P and in the vertex matrices, so the vertices cover every blend of the rules; the diffusion's
-``W_i^T P W_i`` is linear in P as it stands: the Schur form with a ``-P`` block, which this module used
-before, is the same set for ``P > 0`` but twice the size, and a conic solver's cost per iteration grows
-like the cube of each PSD cone's k(k+1)/2 rows: a chain of n = 8 states, 4 rules, about 7 s -> 1.8 s), the bound
+``W_i^T P W_i`` is linear in P as it stands and is posed so: the Schur form with a ``-P`` block is the
+same set for ``P > 0`` but twice the size, and a conic solver's cost per iteration grows like the cube of
+each PSD cone's k(k+1)/2 rows; docs/benchmarks.md has the measurement), the bound
 
     E int_0^t |f - fhat|^2 ds  <=  sum_k g_k E int_0^t |w_k|^2 ds + E xi(0)^T P xi(0)
 
@@ -36,17 +36,7 @@ import warnings
 
 import numpy as np
 
-__all__ = [
-    "fault_error_bound",
-    "state_error_bound",
-    "bound_value",
-    "vertex_parts",
-    "channel_names",
-    "gain_diag",
-    "CHANNELS",
-    "MAX_VERTICES",
-    "MAX_STATES",
-]
+__all__ = ["fault_error_bound"]  # public: docs/api.md
 
 #: the input channels, in order
 CHANNELS = ("d", "fddot", "u_s", "f", "const")

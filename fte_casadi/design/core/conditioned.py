@@ -691,12 +691,10 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         and pt["ts_cert"] < TS_FACTOR * sample_time
     ):
         a, pt, why = cap_for_sample_time(prob, a, pt, why, sample_time)
-    observer.update(alpha=a, why=why, ts_max=pt["ts_max"])
+    observer.update(alpha=a, why=why)  # ts_max is the certificate's (checks.ts_max)
     if pt["bound"] is not None:
-        b = pt["bound"]
-        observer.update(
-            bound_weight=b["weight"], bound_objective_before=b["before"], bound_objective=b["after"]
-        )
+        b = pt["bound"]  # its weight is params.bound_weight
+        observer.update(bound_objective_unweighted=b["before"], bound_objective=b["after"])
         prob.notes.append(
             f"step 5: the closed-loop fault-error bound (block-diagonal P = diag(P1, Pbar), the smallest sum of the "
             f"squared channel gains at the observer) is in the objective with weight {b['weight']:g}: "

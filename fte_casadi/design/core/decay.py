@@ -12,7 +12,7 @@ import numpy as np
 from ...errors import InfeasibleDesignError
 from ...rounding import nice_floor
 
-__all__ = ["alpha_max", "cap_for_sample_time", "TS_FACTOR", "ALPHA_RTOL", "CAP_GRID"]
+__all__ = ["alpha_max"]  # public: docs/api.md
 
 #: the default decay rate keeps ts_max >= TS_FACTOR * sample_time
 TS_FACTOR = 2.0

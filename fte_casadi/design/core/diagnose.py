@@ -25,7 +25,7 @@ from .conditioned import MARGIN, input_scaling
 from .lmis import lmi45, lmi45_kron
 from .sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
-__all__ = ["gamma_min", "sigma_max", "FrontierPoint"]
+__all__ = ["sigma_max"]  # public: docs/api.md
 
 
 def _blocks(aug: Augmented) -> tuple[int, int, int, int]:

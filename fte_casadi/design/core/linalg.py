@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sym"]
+__all__ = []  # public: docs/api.md
 
 
 def sym(M: np.ndarray) -> np.ndarray:

@@ -47,9 +47,9 @@ __all__ = [
 #: has to lie strictly inside LMIs with half the margins they were posed with (checked with numpy
 #: afterwards), so the first-order SCS is asked for 1e-6, not for an interior-point accuracy.
 #: Clarabel factors its KKT system with faer's supernodal LDL: a PSD cone of size k is a dense block
-#: of k(k+1)/2 rows there, which the default QDLDL factors as if sparse (measured on the chain
-#: family, one step-3 solve: n = 12 4.95 s -> 0.85 s, n = 16 57 s -> 3.3 s); one thread, so that
-#: a run repeats itself exactly.
+#: of k(k+1)/2 rows there, which the default QDLDL factors as if sparse (several times slower on
+#: the larger members of the chain family: docs/benchmarks.md); one thread, so that a run repeats
+#: itself exactly.
 SOLVER_SETTINGS = {
     "CLARABEL": {
         "max_iter": 200,

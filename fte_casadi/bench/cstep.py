@@ -32,7 +32,7 @@ from fte_casadi.codegen.generate import _void_unused, c_name, default_sample_tim
 from fte_casadi.design.record import Design
 from fte_casadi.step import step_function
 
-__all__ = ["bench_c_step", "hand_written_c"]
+__all__ = ["bench_c_step"]  # public: docs/api.md
 
 
 def _arr(name: str, a) -> str:
@@ -47,7 +47,7 @@ def _arr(name: str, a) -> str:
 def hand_written_c(design: Design, sample_time: float) -> str:
     """Plain C of the step (dense loops, expanded sum over rules), for the speed baseline."""
     d = design.dims
-    n, m, p, lf, r, nbar = (int(d[k]) for k in ("n", "m", "p", "lf", "r", "nbar"))
+    n, m, p, lf, r, nbar = (int(getattr(d, k)) for k in ("n", "m", "p", "lf", "r", "nbar"))
     T = np.asarray(design.T)
     Cbar = np.hstack([design.C, np.zeros((p, lf)), design.Df])
     gain = float(design.params.delta) + float(design.params.epsilon)

@@ -24,7 +24,7 @@ from .anatomy import libm_share, op_counts, peak_flops
 from .handloop import bench_fast
 from .perpath import monte_carlo, simulate_per_path
 
-__all__ = ["bench", "baseline_functions"]
+__all__ = ["bench"]  # public: docs/api.md
 
 
 def baseline_functions(design: Design, plant, scenario, dt: float):

@@ -1,4 +1,4 @@
-"""The fast Monte Carlo mode against a hand-vectorised C loop over the same arithmetic (issue #20).
+"""The fast Monte Carlo mode against a hand-vectorised C loop over the same arithmetic.
 
 :func:`hand_loop_c` writes the loop a C programmer writes for a Monte Carlo of one closed-loop sample
 when speed is all that counts: the state of a block of paths in arrays with the paths innermost
@@ -29,7 +29,7 @@ from fte_casadi.sim import rng
 from fte_casadi.sim.vector import _BINARY, _CALL, _VMATH, VectorEngine
 from fte_casadi.toolchain import find_compiler
 
-__all__ = ["hand_loop_c", "bench_fast", "HAND_FLAGS"]
+__all__ = []  # public: docs/api.md
 
 #: the hand loop's flags: everything allowed (reassociation, contraction, vector math library)
 HAND_FLAGS = ("-O3", "-march=native", "-fno-math-errno", "-fno-trapping-math", "-ffp-contract=fast", "-fopenmp-simd",
@@ -96,7 +96,7 @@ def hand_loop_c(F: ca.Function, x_slots: list[int], block: int) -> str:
         f"#pragma omp declare simd notinbranch\ndouble {f}(double{', double' if f in ('pow', 'atan2', 'hypot') else ''});"
         for f in fns
     )
-    return f"""/* a hand-vectorised Monte Carlo loop (benchmarks/handloop.py): paths innermost */
+    return f"""/* a hand-vectorised Monte Carlo loop (fte_casadi/bench/handloop.py): paths innermost */
 #include <math.h>
 #include <stdint.h>
 #include <string.h>

@@ -1,11 +1,11 @@
 """The 0.1 design: the design formulation of fte_casadi 0.1, kept only as the baseline of ``fte bench``.
 
-It was replaced by :mod:`fte_casadi.design.core.conditioned` (issue #9): the formulation below is not
+Today's design is :mod:`fte_casadi.design.core.conditioned`; the formulation below is not
 unique (N, Q_i, Y_j are free at its optimum, so different machines land on different points),
 needs about 30 solves (a grid over scales of Pbar x decay rates x a bisection on theta) and
 takes seconds. ``fte bench`` runs :func:`design_01` beside today's design in the same process
 so that the speed-up it reports is measured, not remembered (the numbers measured are also kept in
-``benchmarks/RECORDED.md``). Nothing else uses this module; it is not part of the package.
+docs/benchmarks.md). Nothing else uses this module.
 
 Corrections of the printed LMIs are listed in :mod:`fte_casadi.design.core.certify`.
 

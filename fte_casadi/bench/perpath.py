@@ -41,7 +41,7 @@ from fte_casadi.sim.result import RUNS, SimulationResult
 from fte_casadi.sim.scenario import Scenario, Sinusoid, UniformNoise
 from fte_casadi.toolchain import cache_dir, find_compiler
 
-__all__ = ["simulate_per_path", "monte_carlo"]
+__all__ = []  # public: docs/api.md
 
 #: recorded path-samples kept in memory by default (per run); more paths -> coarser recording
 _RECORD_BUDGET = 500_000

@@ -1,11 +1,11 @@
-"""A scalable family (issue #17): a chain of n first-order stages with rates 1 + k/10, q of the couplings
+"""A scalable family: a chain of n first-order stages with rates 1 + k/10, q of the couplings
 through ``sin`` (each a premise found automatically, so 2^q rules), one input, one unknown input at both
 ends, an actuator fault on the input and a sensor fault on the first of n + 1 outputs; no design
 defaults. The couplings run x_n -> x_1 -> x_2 -> ...: the first q of them are nonlinear."""
 
 import casadi as ca
 
-from fte_casadi import PlantBuilder
+from fte_casadi.model import PlantBuilder
 
 
 def chain(n: int = 4, q: int = 1):

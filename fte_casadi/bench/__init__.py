@@ -1,11 +1,11 @@
 """``fte bench``: speed of the design, the Monte Carlo engine and the generated C step, each against
 baselines run in the same process.
 
-This package is part of the source repository, not of the ``fte_casadi`` wheel: it holds the
-baselines that are history or test machinery (the 0.1 design, :mod:`.design_01`; the per-path
-Monte Carlo engine, :mod:`.perpath`, also the tests' reference) and the measurements around them.
-``fte bench`` finds it through :func:`fte_casadi.checkout.load_benchmarks`. The 0.1 design's numbers
-as measured are kept in ``benchmarks/RECORDED.md``.
+It ships with the package, so that ``fte bench`` runs from an installed wheel: the baselines (the
+design formulation of 0.1, :mod:`.design_01`; the per-path Monte Carlo engine, :mod:`.perpath`, also
+the tests' reference; a hand-written C loop) and the measurements around them. The Monte Carlo
+comparison with sdeint needs the ``bench`` extra (``pip install 'fte_casadi[bench]'``). The numbers
+measured are kept in docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -18,34 +18,52 @@ from .growth import bench_growth as bench_growth
 from .growth import growth_lines
 from .mc import bench as bench_monte_carlo
 
-__all__ = ["bench_c_step", "bench_design", "bench_growth", "bench_monte_carlo", "run_all", "summary_lines",
-           "fast_lines"]  # fmt: skip
+__all__ = ["PARTS", "bench_c_step", "bench_design", "bench_growth", "bench_monte_carlo", "run_all",
+           "summary_lines", "fast_lines"]  # fmt: skip
+
+#: the parts of ``fte bench``, in the order they run (``fte bench --only PART``)
+PARTS = ("design", "growth", "monte-carlo", "c-step")
 
 
-def run_all(paths: int = 1000, log: Callable[[str], None] = lambda s: None) -> dict:
-    """Everything ``fte bench`` reports, for the built-in plants."""
+def run_all(paths: int = 1000, log: Callable[[str], None] = lambda s: None, only=None) -> dict:
+    """Everything ``fte bench`` reports, for the built-in plants; ``only``: the :data:`PARTS` to run (all)."""
     from fte_casadi.design import design as run_design
+    from fte_casadi.errors import ParameterError
     from fte_casadi.plants import BUILTIN, SCENARIOS
     from fte_casadi.ts import derive
 
-    out: dict = {"design": {}, "c_step": {}}
+    parts = set(only or PARTS)
+    if parts - set(PARTS):
+        raise ParameterError(
+            f"unknown benchmark part(s) {sorted(parts - set(PARTS))}; choose from {list(PARTS)}"
+        )
+    out: dict = {}
     designs = {}
+    need = {"manipulator"} if parts & {"monte-carlo"} else set()
+    need |= set(BUILTIN) if parts & {"c-step"} else set()
     for name in BUILTIN:
+        if "design" not in parts and name not in need:
+            continue
         ts = derive(BUILTIN[name]())
         dt = SCENARIOS[name]().dt
-        if name in ("manipulator", "three-tank"):  # the 0.1 design was made for the paper's plants
+        if "design" in parts and name in ("manipulator", "three-tank"):  # the 0.1 design's plants
             log(f"bench: design {name} (Clarabel, SCS, and the 0.1 design as baseline)")
-            out["design"][name] = bench_design(ts, sample_time=dt)
-        designs[name] = run_design(ts, variant="conditioned", plant_spec=name, sample_time=dt)
-    out["growth"] = bench_growth(log=log)
-    log(
-        f"bench: Monte Carlo, manipulator, {paths} paths x 3 runs: vectorised engine against the per-path engine"
-    )
-    out["monte_carlo"] = bench_monte_carlo(designs["manipulator"], BUILTIN["manipulator"](),
-                                           SCENARIOS["manipulator"](), paths=paths)  # fmt: skip
-    for name, d in designs.items():
-        log(f"bench: generated C step of {name}")
-        out["c_step"][name] = bench_c_step(d)
+            out.setdefault("design", {})[name] = bench_design(ts, sample_time=dt)
+        if name in need:
+            designs[name] = run_design(ts, variant="conditioned", plant_spec=name, sample_time=dt)
+    if "growth" in parts:
+        out["growth"] = bench_growth(log=log)
+    if "monte-carlo" in parts:
+        log(
+            f"bench: Monte Carlo, manipulator, {paths} paths x 3 runs: vectorised engine against the per-path engine"
+        )
+        out["monte_carlo"] = bench_monte_carlo(designs["manipulator"], BUILTIN["manipulator"](),
+                                               SCENARIOS["manipulator"](), paths=paths)  # fmt: skip
+    if "c-step" in parts:
+        out["c_step"] = {}
+        for name, d in designs.items():
+            log(f"bench: generated C step of {name}")
+            out["c_step"][name] = bench_c_step(d)
     return out
 
 
@@ -77,8 +95,12 @@ def fast_lines(fm: dict, e: dict) -> list[str]:
 
 def summary_lines(out: dict) -> list[str]:
     """The text ``fte bench`` prints for the figures of :func:`run_all`."""
-    lines = ["design (conditioned, wall time incl. certificates; baseline: the 0.1 design, same process):"]
-    for name, row in out["design"].items():
+    lines = []
+    if "design" in out:
+        lines.append(
+            "design (conditioned, wall time incl. certificates; baseline: the 0.1 design, same process):"
+        )
+    for name, row in out.get("design", {}).items():
         cells = []
         for key in ("CLARABEL", "SCS", "design_0.1"):
             v = row.get(key, {})
@@ -87,9 +109,24 @@ def summary_lines(out: dict) -> list[str]:
         if "max_rel_diff_clarabel_scs" in row:
             extra += f", Clarabel and SCS designs equal to {row['max_rel_diff_clarabel_scs']:.1e}"
         lines.append(f"  {name:12s} " + ", ".join(cells) + extra)
-    lines += growth_lines(out.get("growth", []))
-    mc = out["monte_carlo"]
+    if "growth" in out:
+        lines += growth_lines(out["growth"])
+    if "monte_carlo" in out:
+        lines += _monte_carlo_lines(out["monte_carlo"])
+    if "c_step" in out:
+        lines.append("generated C step (double, -O2):")
+    for name, b in out.get("c_step", {}).items():
+        lines.append(
+            f"  {name:12s} {b.get('c_ns') or float('nan'):.1f} ns/step vs hand-written {b.get('hand_ns') or float('nan'):.1f} ns "
+            f"(ratio {b.get('ratio') or float('nan'):.2f}); through CasADi from Python {b['casadi_us']:.1f} us; "
+            f"state {b['state_bytes']} B, constants {b['const_bytes']} B"
+        )
+    return lines
+
+
+def _monte_carlo_lines(mc: dict) -> list[str]:
     e, pp = mc["engine"], mc["per_path_engine"]
+    lines = []
     lines.append(
         f"Monte Carlo ({mc['scenario']}): {e['paths']} paths in {e['wall_s']:.2f} s "
         f"({e['path_steps_per_s'] / 1e6:.2f} M path-steps/s; first call incl. compile {e['first_call_wall_s']:.2f} s)\n"
@@ -108,11 +145,4 @@ def summary_lines(out: dict) -> list[str]:
     )
     if "fast_mode" in mc:
         lines += fast_lines(mc["fast_mode"], e)
-    lines.append("generated C step (double, -O2):")
-    for name, b in out["c_step"].items():
-        lines.append(
-            f"  {name:12s} {b.get('c_ns') or float('nan'):.1f} ns/step vs hand-written {b.get('hand_ns') or float('nan'):.1f} ns "
-            f"(ratio {b.get('ratio') or float('nan'):.2f}); through CasADi from Python {b['casadi_us']:.1f} us; "
-            f"state {b['state_bytes']} B, constants {b['const_bytes']} B"
-        )
     return lines

@@ -24,7 +24,7 @@ import numpy as np
 from fte_casadi.sim.rng import TAIL
 from fte_casadi.sim.vector import _CALL, VectorEngine
 
-__all__ = ["op_counts", "peak_flops", "libm_share"]
+__all__ = ["peak_flops", "libm_share"]  # public: docs/api.md
 
 _FLOP = {"OP_ADD", "OP_SUB", "OP_MUL", "OP_DIV", "OP_SQ", "OP_TWICE", "OP_INV", "OP_SQRT"}
 #: lane loops that the compiler turns into vector instructions (``vsqrtpd``): not library calls
