@@ -133,10 +133,12 @@ def test_replace_dir_puts_the_new_set_in_place(tmp_path, monkeypatch, exchange):
 def test_a_kill_during_simulate_save_leaves_the_earlier_result(small, tmp_path):
     """``fte simulate --save`` killed while the .npz is being written: the earlier result is intact."""
     target = tmp_path / "r.npz"
-    r = CliRunner().invoke(main, ["simulate", str(small), "--paths", "2", "--save", str(target), "--quiet"])
+    r = CliRunner().invoke(
+        main, ["simulate", str(small), "--plant", SPEC, "--paths", "2", "--save", str(target), "--quiet"]
+    )
     assert r.exit_code == 0, r.output
     before = target.read_bytes()
-    p = _fte("simulate", str(small), "--paths", "40", "--save", str(target), "--quiet")
+    p = _fte("simulate", str(small), "--plant", SPEC, "--paths", "40", "--save", str(target), "--quiet")
     try:
         deadline = time.monotonic() + 300
         while not any(f.name.endswith(".tmp") for f in tmp_path.iterdir()):
@@ -154,7 +156,9 @@ def test_a_kill_during_simulate_save_leaves_the_earlier_result(small, tmp_path):
 
 def test_load_result_names_a_truncated_file(small, tmp_path):
     target = tmp_path / "r.npz"
-    r = CliRunner().invoke(main, ["simulate", str(small), "--paths", "2", "--save", str(target), "--quiet"])
+    r = CliRunner().invoke(
+        main, ["simulate", str(small), "--plant", SPEC, "--paths", "2", "--save", str(target), "--quiet"]
+    )
     assert r.exit_code == 0, r.output
     data = target.read_bytes()
     for cut in (len(data) // 2, len(data) - 100, 30):
@@ -195,7 +199,7 @@ def test_ctrl_c_names_what_was_written(small, tmp_path, monkeypatch):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(plot, "write_figures", interrupted)
-    r = CliRunner().invoke(main, ["simulate", str(small), "--paths", "2", "--save", str(target), "--plots",
+    r = CliRunner().invoke(main, ["simulate", str(small), "--plant", SPEC, "--paths", "2", "--save", str(target), "--plots",
                                   str(figs), "--quiet"])  # fmt: skip
     assert r.exit_code == 130, r.output
     assert f"written before the interrupt, each file complete: {target}; nothing else was written" in _said(r)
@@ -209,7 +213,7 @@ def test_sigint_stops_simulate_within_seconds(small, tmp_path):
     figs = tmp_path / "figs"
     figs.mkdir()
     (figs / "fig01_old.png").write_bytes(b"an earlier figure")
-    p = _fte("simulate", str(small), "--paths", "200000", "--plots", str(figs))
+    p = _fte("simulate", str(small), "--plant", SPEC, "--paths", "200000", "--plots", str(figs))
     err = bytearray()  # the progress bar rewrites its line (\r): read what comes, not lines
     reader = threading.Thread(target=lambda: [err.extend(b) for b in iter(lambda: p.stderr.read1(4096), b"")],
                               daemon=True)  # fmt: skip

@@ -36,7 +36,7 @@ def test_readme_plant_and_scenario_run(tmp_path):
     assert {f.fault for f in sc.faults} == {"fa", "fs"}
     d = design(ts, sample_time=sc.dt)
     assert d.certified
-    assert sc.measurement_noise == (0.002, 0.01, 0.003)
+    assert tuple(sc.measurement_noise.std) == (0.002, 0.01, 0.003)
     m = simulate(d, ts.plant, sc, paths=2, seed=0, progress=False).metrics
     assert len(m["windows"]) == 2 and all(e is not None and e < 1.0 for e in m["fault_rel_rms_error"])
     assert m["ftc_true_ratio"] < 1.0  # over both windows, on the true outputs

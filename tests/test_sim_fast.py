@@ -92,8 +92,8 @@ def test_fast_equals_exact_within_the_tolerance(plants, real_designs, name, path
 
 def _short(T=1.0):
     sc = SCENARIOS["manipulator"]()
-    return dataclasses.replace(sc, T=T, faults=tuple(dataclasses.replace(f, start=f.start / 10, stop=f.stop / 10)
-                                                      for f in sc.faults))  # fmt: skip
+    return dataclasses.replace(sc, T=1.0, faults=tuple(dataclasses.replace(f, start=f.start / 10, stop=f.stop / 10)
+                                                        for f in sc.faults)).until(T)  # fmt: skip
 
 
 @pytest.mark.slow

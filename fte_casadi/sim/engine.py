@@ -451,7 +451,10 @@ def check_scenario(plant: Plant, scenario: Scenario) -> None:
         scenario.measurement_noise.check(scenario.name, plant.output_names)
     x0 = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
     lo, hi = np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float)
-    bad = [k for k in range(plant.n) if not (lo[k] <= x0[k] <= hi[k])] if x0.shape == lo.shape else []
+    # a bound that is not a finite number (a region the plant leaves open) does not confine x0
+    bad = [
+        k for k in range(plant.n) if (np.isfinite(lo[k]) and x0[k] < lo[k]) or (np.isfinite(hi[k]) and x0[k] > hi[k])
+    ] if x0.shape == lo.shape else []  # fmt: skip
     if bad:
         txt = ", ".join(f"{plant.state_names[k]} = {x0[k]:g} outside [{lo[k]:g}, {hi[k]:g}]" for k in bad)
         raise ParameterError(
