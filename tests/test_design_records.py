@@ -225,7 +225,7 @@ def _numbers(obj):
 
 
 def test_a_nan_check_is_written_as_null_with_its_reason_and_read_back_as_nan(committed, tmp_path):
-    from fte_casadi.design.certify import failures
+    from fte_casadi.design.core.certify import failures
 
     d = committed[2]
     checks = json.loads(json.dumps(d.checks))

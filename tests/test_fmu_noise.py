@@ -17,6 +17,8 @@ from fte_casadi.plants.loader import load_plant
 from fte_casadi.sim import simulate
 from fte_casadi.step import step_function
 
+pytestmark = pytest.mark.slow
+
 try:
     import fmpy
 except ImportError:  # the optional extra `fmi`

@@ -59,6 +59,7 @@ def test_noise_of_the_wrong_size_and_a_scale_without_noise_are_refused(real_desi
                  scales={"measurement_noise_scale": 2.0})  # fmt: skip
 
 
+@pytest.mark.slow
 def test_sweep_over_measurement_noise(real_designs):
     d, plant = real_designs["manipulator"], load_plant("manipulator")
     sc = dataclasses.replace(SCENARIOS["manipulator"](), measurement_noise=(0.002, 0.002, 0.002))

@@ -129,6 +129,7 @@ def test_replace_dir_puts_the_new_set_in_place(tmp_path, monkeypatch, exchange):
     assert sorted(f.name for f in tmp_path.iterdir()) == ["out"]
 
 
+@pytest.mark.slow
 # -- simulate --save, load_result, design -o ---------------------------------------------------
 def test_a_kill_during_simulate_save_leaves_the_earlier_result(small, tmp_path):
     """``fte simulate --save`` killed while the .npz is being written: the earlier result is intact."""
@@ -154,6 +155,7 @@ def test_a_kill_during_simulate_save_leaves_the_earlier_result(small, tmp_path):
     assert load_result(target).paths == 2
 
 
+@pytest.mark.slow
 def test_load_result_names_a_truncated_file(small, tmp_path):
     target = tmp_path / "r.npz"
     r = CliRunner().invoke(
@@ -167,6 +169,7 @@ def test_load_result_names_a_truncated_file(small, tmp_path):
             load_result(target)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["d.json", "d.mat"])
 def test_ctrl_c_while_design_writes_leaves_the_earlier_document(small, tmp_path, monkeypatch, name):
     target = tmp_path / name
@@ -189,6 +192,7 @@ def test_ctrl_c_while_design_writes_leaves_the_earlier_document(small, tmp_path,
     assert sorted(os.listdir(tmp_path)) == [name]
 
 
+@pytest.mark.slow
 def test_ctrl_c_names_what_was_written(small, tmp_path, monkeypatch):
     """The result was saved before the Ctrl-C came, the figures were not: the message says so."""
     import fte_casadi.plot as plot
@@ -207,6 +211,7 @@ def test_ctrl_c_names_what_was_written(small, tmp_path, monkeypatch):
     assert not figs.exists()
 
 
+@pytest.mark.slow
 def test_sigint_stops_simulate_within_seconds(small, tmp_path):
     """SIGINT to ``python -m fte_casadi simulate`` in the middle of a long Monte Carlo: exit 130 within
     a few seconds (docs/interface.md: about a second), the earlier figures untouched."""
@@ -254,6 +259,7 @@ def _trials(out: Path) -> list[tuple]:
             for t in json.loads((out / "tune.json").read_text())["trials"]]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_tune_interrupted_keeps_its_trials_and_resumes(tmp_path, monkeypatch):
     """An earlier set in DIR survives a Ctrl-C; the finished trials are kept in DIR.partial; --resume
     finishes the run, and its trials are those of an uninterrupted run."""
@@ -298,6 +304,7 @@ def test_tune_interrupted_keeps_its_trials_and_resumes(tmp_path, monkeypatch):
     assert resumed == _trials(tmp_path / "u")
 
 
+@pytest.mark.slow
 def test_tune_failed_write_leaves_the_earlier_set(tmp_path, monkeypatch):
     """Disk full while the new set is written: DIR is the earlier set, whole; --resume writes it later
     without running a trial again."""
@@ -326,6 +333,7 @@ def test_tune_failed_write_leaves_the_earlier_set(tmp_path, monkeypatch):
     assert len(_trials(out)) == 3 and (out / "pareto.png").stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_tune_refuses_a_directory_with_other_files(tmp_path):
     out = tmp_path / "t"
     out.mkdir()

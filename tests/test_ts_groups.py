@@ -19,6 +19,8 @@ from fte_casadi.errors import ParameterError
 from fte_casadi.step import step_function
 from fte_casadi.ts import derive
 
+pytestmark = pytest.mark.slow
+
 EXACT = 1e-9  # relative to the drift's size, as the automatic method's own check (auto_checks.EXACT_TOL)
 
 
@@ -120,8 +122,8 @@ def test_grouped_memberships_in_c_equal_python(tmp_path):
     rng = np.random.default_rng(3)
     worst = 0.0
     for _ in range(100):
-        z = rng.normal(scale=0.5, size=int(d.dims["nbar"]))
-        y = rng.normal(scale=0.5, size=int(d.dims["p"]))
+        z = rng.normal(scale=0.5, size=int(d.dims.nbar))
+        y = rng.normal(scale=0.5, size=int(d.dims.p))
         zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
         c.init(z)
         rc, uc, xbc, ycc = c.step(y)

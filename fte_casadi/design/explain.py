@@ -12,7 +12,7 @@ from .limits import reachability
 from .options import DesignOptions, default_gamma1
 from .search import Attempt, refusals, try_design
 
-__all__ = ["explain_45", "explain_46", "outside_45"]
+__all__ = []
 
 
 def outside_45(aug, params: dict, solver: str) -> str | None:

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import ParameterError
 from ..ts import TSModel
 
-__all__ = ["DesignOptions", "Resolved", "resolve", "GENERIC_DEFAULTS", "TUNED_KNOBS", "VARIANTS", "SOLVERS"]
+__all__ = ["DesignOptions", "resolve"]
 
 GENERIC_DEFAULTS = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}
 VARIANTS = ("paper", "conditioned")

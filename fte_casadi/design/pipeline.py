@@ -29,7 +29,7 @@ from .remark5 import fallback as remark5_fallback
 from .remark5 import record as remark5_record
 from .uio import check_assumptions, enforce, uio_gain
 
-__all__ = ["Structure", "structure", "step3", "step5", "paper_steps", "finish"]
+__all__ = ["structure", "step3", "step5"]
 
 PAPER_NOTE = "paper variant: problem as printed (with the corrections of docs/method.md); expect an ill-conditioned Pbar"
 

@@ -18,7 +18,7 @@ from .core.diagnose import gamma_min, sigma_max
 from .options import DesignOptions
 from .record import Design
 
-__all__ = ["SIGMA_TRIALS", "GAMMA_TRIALS", "choose", "try_design", "refusals"]
+__all__ = ["choose"]
 
 #: one attempt of the design: ``attempt(ts, options) -> Design``
 Attempt = Callable[..., Design]

@@ -36,16 +36,7 @@ import numpy as np
 
 from ..errors import ParameterError
 
-__all__ = [
-    "FaultShape",
-    "FaultSite",
-    "FaultRows",
-    "FAULT_SHAPES",
-    "LossOfEffectiveness",
-    "Bias",
-    "Drift",
-    "Stuck",
-]
+__all__ = ["FaultShape", "FaultSite", "FaultRows", "LossOfEffectiveness", "Bias", "Drift", "Stuck"]
 
 #: the fault shapes by ``kind``: filled by subclassing :class:`FaultShape`
 FAULT_SHAPES: dict[str, type[FaultShape]] = {}

@@ -25,11 +25,9 @@ from ..errors import ParameterError
 __all__ = [
     "UnknownInput",
     "UnknownInputTerms",
-    "UNKNOWN_INPUTS",
     "UniformNoise",
     "Sinusoid",
     "MeasurementNoise",
-    "MEASUREMENT_NOISES",
     "GaussianNoise",
 ]
 
