@@ -54,7 +54,7 @@ def test_monte_carlo_bench_smoke(lqr_designs):
 
 
 def test_layers_do_not_import_the_plants():
-    """sim/ and codegen/ sit below the plants: only bench/, report.py and cli.py may import them."""
+    """sim/ and codegen/ sit below the plants: only bench/, report.py and cli/ may import them."""
     import pathlib
     import re
 
@@ -88,7 +88,7 @@ def test_the_benchmarks_ship_with_the_package():
     assert "fte_casadi.bench" in pkgs and not (root / "benchmarks").exists()
     assert pathlib.Path(bench.__file__).resolve() == root / "fte_casadi" / "bench" / "__init__.py"
     assert callable(bench.run_all) and callable(bench.summary_lines)
-    from fte_casadi.cli import BENCH_PARTS
+    from fte_casadi.cli.bench import BENCH_PARTS
 
     assert BENCH_PARTS == bench.PARTS
 

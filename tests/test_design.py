@@ -416,7 +416,8 @@ def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(m
     and the one-paragraph message (no traceback, not 'internal error')."""
     from click.testing import CliRunner
 
-    from fte_casadi.cli import EXIT_FAILED, main
+    from fte_casadi.cli import main
+    from fte_casadi.cli.common import EXIT_FAILED
     from fte_casadi.design.core import conditioned
     from fte_casadi.errors import FteError, SolverFailedError
 

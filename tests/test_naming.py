@@ -17,7 +17,7 @@ from fte_casadi.step import step_function
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "fte_casadi"
 #: where ``dt`` (the simulation's step) may be a name: the simulator, the CLI's ``fte simulate --dt``, and
 #: the memory a simulation run will take (resources.py), and the benchmarks of the simulator (bench/)
-DT_HOMES = ("sim/", "cli.py", "resources.py", "bench/")
+DT_HOMES = ("sim/", "cli/", "resources.py", "bench/")
 #: calls whose keyword ``dt`` is the simulation's step (a plant's scenario, a simulation run)
 DT_CALLEES = ("Scenario", "simulate", "sweep")
 #: names the sample time had besides ``sample_time`` (``ts_max`` stays: the design document's key)

@@ -10,7 +10,7 @@ import pathlib
 import pytest
 
 from fte_casadi import verdicts
-from fte_casadi.cli import _warnings
+from fte_casadi.cli.simulate import _warnings
 from fte_casadi.design import limits
 from fte_casadi.tune import search
 

@@ -1,0 +1,36 @@
+"""The ``fte`` command: the only place that prints or exits.
+
+Every command turns the library's errors into a one-paragraph message and exit status 2
+(bad input) or 1 (a failed design/run); ``--debug`` shows the Python traceback instead.
+
+One module per command (``simulate.py`` holds ``fte sweep`` too); what several of them share is in
+``common.py`` (the error guard, the Ctrl-C report, argument checks) and ``targets.py`` (the design or
+plant a command works on). A new command is a module with a ``click.command`` and one
+``add_command`` line below.
+"""
+
+from __future__ import annotations
+
+import click
+
+from . import bench, codegen, derive, design, reproduce, simulate, tune
+from .common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
+from .common import EXIT_FAILED as EXIT_FAILED
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--debug", is_flag=True, help="Show Python tracebacks on errors.")
+@click.version_option(package_name="fte_casadi")
+def main(debug: bool) -> None:
+    """fte: certified fault estimation and fault-tolerant control, from CasADi equations to embedded C.
+
+    PLANT is a built-in name (manipulator, three-tank, quadruple-tank), path/to/file.py:function or
+    package.module:function returning a Plant.
+    """
+
+
+for command in (
+    derive.derive, design.design, codegen.codegen, simulate.simulate, simulate.sweep, reproduce.reproduce,
+    bench.bench, tune.tune,
+):  # fmt: skip
+    main.add_command(command)
