@@ -17,7 +17,11 @@ import time
 __all__ = ["run"]
 
 
-def run(name: str, weights, paths: int = 20, seed: int = 1, defaults: dict | None = None) -> list[dict]:
+def run(
+    name: str, weights, paths: int = 20, seed: int = 1, defaults: dict | None = None, on_row=None
+) -> list[dict]:
+    """One row per weight; ``on_row(row)``, when given, is called with each row as soon as it is measured
+    (a design and a simulation per weight take a while)."""
     import dataclasses
 
     from fte_casadi.design import design
@@ -41,12 +45,14 @@ def run(name: str, weights, paths: int = 20, seed: int = 1, defaults: dict | Non
             "bound": max(fb["gains"].values()) if fb.get("holds") else None, "P_structure": fb.get("P_structure"),
             "bound_objective": [d.observer.bound_objective_unweighted, d.observer.bound_objective],
             "fault_error": m["fault_rel_rms_error"], "false_alarm": m["false_alarm_rel_rms"],
-            "ftc": [w_["ftc_deviation_ratio"] for w_ in m["windows"]],
+            "ftc": [w_.get("ftc_true_ratio") for w_ in m["windows"]],
         })  # fmt: skip
-        print(json.dumps(rows[-1]), flush=True)
+        if on_row is not None:
+            on_row(rows[-1])
     return rows
 
 
 if __name__ == "__main__":
     run(sys.argv[1], [float(w) for w in sys.argv[2].split(",")], int(sys.argv[3]) if len(sys.argv) > 3 else 20,
-        defaults=json.loads(sys.argv[4]) if len(sys.argv) > 4 else None)  # fmt: skip
+        defaults=json.loads(sys.argv[4]) if len(sys.argv) > 4 else None,
+        on_row=lambda row: print(json.dumps(row), flush=True))  # fmt: skip

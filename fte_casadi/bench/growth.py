@@ -1,6 +1,6 @@
 """How the design's time and memory grow with states and rules: the chain family of
 :mod:`.plant_chain` designed at its defaults (no design defaults: the tool finds its parameters), each
-member in a fresh process so that its peak memory is its own."""
+member in a fresh process (:mod:`.growth_member`) so that its peak memory is its own."""
 
 from __future__ import annotations
 
@@ -19,30 +19,6 @@ MEMBERS = ((2, 1), (4, 2), (8, 2), (4, 4), (6, 4))
 #: found by hand; the defaults were refused, n = 16 and n = 24 failed numerically with Clarabel)
 BASELINE_S = {(4, 2): 0.33, (4, 4): 1.6, (6, 6): 24.0, (8, 2): 1.1, (12, 2): 4.5}
 
-_CHILD = r"""
-import json, resource, sys, time
-from fte_casadi.bench.plant_chain import chain
-from fte_casadi.design import design
-from fte_casadi.errors import FteError
-from fte_casadi.ts import derive
-n, q = int(sys.argv[1]), int(sys.argv[2])
-ts = derive(chain(n, q), fidelity_samples=500)
-out = {"n": n, "q": q, "rules": ts.r}
-t0 = time.perf_counter()
-try:
-    d = design(ts, sample_time=1e-3)
-    out.update(certified=d.certified, sigma=d.params.sigma, gamma=d.params.gamma,
-               chosen=sorted(d.params_chosen or {}), solver_s=d.timings["solver_s"])
-    t1 = time.perf_counter()
-    design(ts, sample_time=1e-3, sigma=d.params.sigma, gamma=d.params.gamma)
-    out["one_design_s"] = time.perf_counter() - t1
-except FteError as exc:
-    out["error"] = " ".join(str(exc).split())[:300]
-out["wall_s"] = time.perf_counter() - t0 - out.get("one_design_s", 0.0)
-out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-print(json.dumps(out))
-"""
-
 
 def bench_growth(members=MEMBERS, log=lambda s: None) -> list[dict]:
     """One row per member: rules, wall time at the defaults (with the parameter search), the time of one
@@ -52,8 +28,8 @@ def bench_growth(members=MEMBERS, log=lambda s: None) -> list[dict]:
     rows = []
     for n, q in members:
         log(f"bench: design growth, chain n = {n}, {2**q} rules")
-        p = subprocess.run([sys.executable, "-c", _CHILD, str(n), str(q)], capture_output=True, text=True,
-                           env=env, cwd=root)  # fmt: skip
+        p = subprocess.run([sys.executable, "-m", "fte_casadi.bench.growth_member", str(n), str(q)],
+                           capture_output=True, text=True, env=env, cwd=root)  # fmt: skip
         try:
             row = json.loads(p.stdout.strip().splitlines()[-1])
         except (ValueError, IndexError):
