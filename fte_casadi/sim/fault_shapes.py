@@ -226,43 +226,54 @@ class LossOfEffectiveness(FaultShape, kind="loss", label="loss of effectiveness"
         return FaultRows(a=a, lu=lu, input_index=i)
 
 
+class _Additive(FaultShape):
+    """An additive fault ``a(t)`` for ``start <= t < stop`` (actuator or sensor), set by one finite
+    parameter, the field named by ``_param``: a subclass gives the profile over the window."""
+
+    _param: ClassVar[str]
+
+    def validate(self) -> None:
+        v = getattr(self, self._param)
+        if not math.isfinite(float(v)):
+            raise ParameterError(f"{self.label} {self._param} must be finite; got {v!r}")
+
+    def profile(self, t: np.ndarray):
+        """The fault at the window's sample times ``t`` (an array, or one number for all of them)."""
+        raise NotImplementedError(f"{type(self).__name__} does not define profile()")
+
+    def rows(self, site: FaultSite) -> FaultRows:
+        on = site.active(self.start, self.stop)
+        a = site.zeros()
+        a[on] = self.profile(site.t[on])
+        return FaultRows(a=a)
+
+
 @dataclass(frozen=True)
-class Bias(FaultShape, kind="bias"):
+class Bias(_Additive, kind="bias"):
     """Additive fault of constant ``value`` for ``start <= t < stop`` (actuator or sensor)."""
 
+    _param = "value"
     fault: str
     value: float
     start: float
     stop: float
 
-    def validate(self) -> None:
-        if not math.isfinite(float(self.value)):
-            raise ParameterError(f"bias value must be finite; got {self.value!r}")
-
-    def rows(self, site: FaultSite) -> FaultRows:
-        a = site.zeros()
-        a[site.active(self.start, self.stop)] = self.value
-        return FaultRows(a=a)
+    def profile(self, t: np.ndarray) -> float:
+        return self.value
 
 
 @dataclass(frozen=True)
-class Drift(FaultShape, kind="drift"):
+class Drift(_Additive, kind="drift"):
     """Slowly drifting fault ``f = rate * (t - start)`` for ``start <= t < stop``."""
 
+    _param = "rate"
     fault: str
     rate: float
     start: float
     stop: float
 
-    def validate(self) -> None:
-        if not math.isfinite(float(self.rate)):
-            raise ParameterError(f"drift rate must be finite; got {self.rate!r}")
-
-    def rows(self, site: FaultSite) -> FaultRows:
-        on = site.active(self.start, self.stop)
-        a = site.zeros()
-        a[on] = self.rate * (site.t[on] - self.start)
-        return FaultRows(a=a)
+    def profile(self, t: np.ndarray) -> np.ndarray:
+        return self.rate * (t - self.start)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,8 @@ neighbouring cell, not missed.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
@@ -82,6 +84,52 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MA
     return sign * best, gap
 
 
+def _states_used(expr: ca.SX, x: ca.SX) -> tuple[int, ...]:
+    """The indices of the states ``expr`` depends on."""
+    return tuple(j for j in range(x.numel()) if ca.depends_on(expr, x[j]))
+
+
+class _Sampled(NamedTuple):
+    """``expr`` as a function of the states it uses (``idx``), and its values on a grid of about
+    ``samples`` points over their box: what :func:`_extremum` searches."""
+
+    F: ca.Function
+    G: ca.Function  # its gradient
+    points: np.ndarray  # (k, N): the grid, one column a point
+    vals: np.ndarray  # (N,)
+    lo: np.ndarray
+    hi: np.ndarray
+    per: int  # grid points per axis
+
+    @classmethod
+    def of(cls, expr: ca.SX, x: ca.SX, idx: tuple[int, ...], lo: np.ndarray, hi: np.ndarray, samples: int):
+        xs = ca.vertcat(*[x[j] for j in idx])
+        others = [j for j in range(x.numel()) if j not in idx]
+        e = (
+            ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others)))
+            if others
+            else expr
+        )
+        F = ca.Function("F", [xs], [e])
+        G = ca.Function("G", [xs], [ca.gradient(e, xs)])
+        k = len(idx)
+        per = max(3, int(round(samples ** (1.0 / k))))
+        lo_s, hi_s = lo[list(idx)], hi[list(idx)]
+        axes = [np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)]
+        points = np.array(np.meshgrid(*axes, indexing="ij")).reshape(k, -1)
+        vals = np.array(F.map(points.shape[1])(points)).ravel()
+        return cls(F, G, points, vals, lo_s, hi_s, per)
+
+    def extrema(self, signs: tuple[float, ...], max_searches: int) -> list[tuple[float, float]]:
+        """``(value, gap)`` of :func:`_extremum` for each sign (1: the minimum, -1: the maximum)."""
+        k, N = self.points.shape
+        grads = np.array(self.G.map(N)(self.points)).reshape(k, N)
+        grads[~np.isfinite(grads)] = 0.0
+        hw = (self.hi - self.lo) / (self.per - 1) / 2
+        return [_extremum(self.F, self.G, self.points, self.vals, grads, self.lo, self.hi, hw, sign, (self.per,) * k,
+                          max_searches) for sign in signs]  # fmt: skip
+
+
 def premise_bounds(
     name: str,
     expr: ca.SX,
@@ -99,25 +147,14 @@ def premise_bounds(
     when the expression is not finite somewhere on the grid, unbounded, or (unless
     ``allow_constant``) constant over the box.
     """
-    idx = tuple(j for j in range(x.numel()) if ca.depends_on(expr, x[j]))
+    idx = _states_used(expr, x)
     if not idx:
         val = float(ca.Function("c", [x], [expr])(np.zeros(x.numel())))
         return val, val, idx, 0.0
-    xs = ca.vertcat(*[x[j] for j in idx])
-    others = [j for j in range(x.numel()) if j not in idx]
-    e = ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others))) if others else expr
-    F = ca.Function("F", [xs], [e])
-    G = ca.Function("G", [xs], [ca.gradient(e, xs)])
-    k = len(idx)
-    per = max(3, int(round(_SAMPLES ** (1.0 / k))))
-    lo_s, hi_s = lo[list(idx)], hi[list(idx)]
-    axes = [np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)]
-    grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(k, -1)
-    N = grid.shape[1]
-    vals = np.array(F.map(N)(grid)).ravel()
-    bad = ~np.isfinite(vals)
+    grid = _Sampled.of(expr, x, idx, lo, hi, _SAMPLES)
+    bad = ~np.isfinite(grid.vals)
     if np.any(bad):
-        pt = grid[:, np.flatnonzero(bad)[0]]
+        pt = grid.points[:, np.flatnonzero(bad)[0]]
         where = ", ".join(f"{state_names[j]} = {v:g}" for j, v in zip(idx, pt))
         raise BoundsError(
             f"premise {name!r} is not finite at {where}: define it there (e.g. with casadi.if_else for a "
@@ -125,11 +162,7 @@ def premise_bounds(
             "not finite",
             where,
         )
-    grads = np.array(G.map(N)(grid)).reshape(k, N)
-    grads[~np.isfinite(grads)] = 0.0
-    hw = (hi_s - lo_s) / (per - 1) / 2
-    mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k, max_searches)
-    mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
+    (mn, gap1), (mx, gap2) = grid.extrema((1.0, -1.0), max_searches)
     if not (np.isfinite(mn) and np.isfinite(mx)):
         raise BoundsError(f"premise {name!r} is unbounded over the region; shrink the region", "unbounded")
     if mx - mn < 1e-12 and not allow_constant:
@@ -148,24 +181,8 @@ def certified_max(
     (a grid of ``samples`` points, every cell whose Lipschitz bound could beat the best value searched
     locally, the bound widened by whatever was not searched). Used to grow a polytope's facets until they
     provably contain the premises' image."""
-    idx = tuple(j for j in range(x.numel()) if ca.depends_on(expr, x[j]))
+    idx = _states_used(expr, x)
     if not idx:
         return float(ca.Function("c", [x], [expr])(np.zeros(x.numel())))
-    xs = ca.vertcat(*[x[j] for j in idx])
-    others = [j for j in range(x.numel()) if j not in idx]
-    e = ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others))) if others else expr
-    F = ca.Function("F", [xs], [e])
-    G = ca.Function("G", [xs], [ca.gradient(e, xs)])
-    k = len(idx)
-    per = max(3, int(round(samples ** (1.0 / k))))
-    lo_s, hi_s = lo[list(idx)], hi[list(idx)]
-    grid = np.array(
-        np.meshgrid(*[np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)], indexing="ij")
-    ).reshape(k, -1)
-    N = grid.shape[1]
-    vals = np.array(F.map(N)(grid)).ravel()
-    grads = np.array(G.map(N)(grid)).reshape(k, N)
-    grads[~np.isfinite(grads)] = 0.0
-    hw = (hi_s - lo_s) / (per - 1) / 2
-    mx, _ = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
+    ((mx, _),) = _Sampled.of(expr, x, idx, lo, hi, samples).extrema((-1.0,), max_searches)
     return float(mx)
