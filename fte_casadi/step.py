@@ -9,7 +9,9 @@ measurement ``y`` and observer state ``z``::
     s       = N (y - Cbar xbarhat),  us = g .* sgn(s)   (or a boundary layer); g = delta + eps,
                                                          with Remark 5 first the gains of the undecoupled d
     u       = sat(u_ref + sum_j h_j (K_j xhat + Kf_j G fhat)) (no Kf term without tolerant control;
-                                                         G = I, or diag(accommodation_gate) of the design;
+                                                         G = I, or diag(accommodation_gate) of the design,
+                                                         whose latches, with a release ratio < 1, follow
+                                                         z in the state: z+ then ends with G's diagonal;
                                                          Kf_j = Kf unless the rules' Kf_i differ;
                                                          sat: the actuator limits, if any)
     yc      = y - Df fhat                               (y itself without tolerant control)
@@ -59,19 +61,37 @@ def saturate(u: ca.SX, limits) -> ca.SX:
     return ca.vertcat(*out)
 
 
-def accommodation_gate(fhat: ca.SX, acc: dict) -> ca.SX:
-    """Per fault, 1 while its estimate is detected and isolated, else 0: ``|fhat_j| >= threshold_j`` and
-    ``|fhat_j| / threshold_j >= |fhat_q| / threshold_q`` for every other fault q (the largest normalised
-    residual wins; a tie keeps both). Memoryless, so the C and the FMU compute it from the same sample."""
+def accommodation_gate(fhat: ca.SX, acc: dict, latch: ca.SX | None = None) -> ca.SX:
+    """Per fault, 1 while its estimate is compensated in ``u``, else 0 (``r_j = |fhat_j| / threshold_j``).
+
+    Fault j switches on when it is detected and isolated: ``r_j >= 1`` and ``r_j >= r_q`` for every other
+    fault q (the largest normalised residual wins; a tie keeps both). Without ``latch`` (no ``"release"``
+    in ``acc``, or 1) that is the gate, memoryless. With ``latch`` (the previous sample's gates, 0 or 1) and
+    the release ratio ``rho = acc["release"]`` < 1, a fault that was on stays on while ``r_j >= rho``,
+    unless another fault q switches on with ``r_q > r_j`` (isolation while latched: at most one fault is
+    compensated, ties aside). With ``rho = 1`` this is the memoryless gate exactly: a latched fault with
+    ``r_j >= 1`` and no larger ratio switches on anyway, and a larger ratio >= 1 means the largest one
+    switches on."""
     thr = [float(v) for v in acc["thresholds"]]
-    rr = [ca.fabs(fhat[j]) / thr[j] for j in range(len(thr))]
-    gates = []
-    for j in range(len(thr)):
+    lf = len(thr)
+    rr = [ca.fabs(fhat[j]) / thr[j] for j in range(lf)]
+    on = []
+    for j in range(lf):
         g = rr[j] >= 1.0
-        for q in range(len(thr)):
+        for q in range(lf):
             if q != j:
                 g = g * (rr[j] >= rr[q])
-        gates.append(g)
+        on.append(g)
+    if latch is None:
+        return ca.vertcat(*on)
+    rho = float(acc["release"])
+    gates = []
+    for j in range(lf):
+        hold = (latch[j] > 0.5) * (rr[j] >= rho)
+        for q in range(lf):
+            if q != j:
+                hold = hold * (1 - on[q] * (rr[q] > rr[j]))
+        gates.append(ca.fmax(on[j], hold))
     return ca.vertcat(*gates)
 
 
@@ -84,6 +104,10 @@ def step_function(
     name: str = "fte_step",
 ) -> ca.Function:
     """Build the step ``(z, y) -> (z_next, u, xbarhat, yc, s)`` of a design at ``sample_time``.
+
+    ``z`` has ``design.nz`` values: the observer state (nbar), then, for an accommodation gate with a
+    release ratio below 1 (``design.latched``), the gate's latches, one per fault (0 or 1; ``z_next`` ends
+    with the gates this sample applied).
 
     Parameters
     ----------
@@ -108,7 +132,9 @@ def step_function(
         raise ParameterError(f"boundary layer must be a positive number; got {boundary_layer!r}")
     dims = design.dims
     n, m, p, lf, r, nbar = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.r, dims.nbar))
-    z = ca.SX.sym("z", nbar)
+    latched = design.latched  # the gate's latches follow z in the step's state
+    zz = ca.SX.sym("z", design.nz)
+    z, latch = (zz[:nbar], zz[nbar:]) if latched else (zz, None)
     y = ca.SX.sym("y", p)
 
     xbh = z + ca.mtimes(_dm(design.H), y)
@@ -129,7 +155,8 @@ def step_function(
     for j in range(r):
         uj = ca.mtimes(_dm(design.K[j]), xhat)
         u = u + h[j] * uj
-    fcomp = fhat if design.accommodation is None else fhat * accommodation_gate(fhat, design.accommodation)
+    gate = None if design.accommodation is None else accommodation_gate(fhat, design.accommodation, latch)
+    fcomp = fhat if gate is None else fhat * gate
     if tolerant and design.Kf_rules is not None:  # Kf(h) = sum_i h_i Kf_i where the rules' Kf_i differ
         for i in range(r):
             u = u + h[i] * ca.mtimes(_dm(design.Kf_rules[i]), fcomp)
@@ -155,4 +182,6 @@ def step_function(
             term = term + _dm(Ta)
         rhs = rhs + h[i] * term
     z_next = z + float(sample_time) * rhs
-    return ca.Function(name, [z, y], [z_next, u, xbh, yc, s], list(STEP_INPUTS), list(STEP_OUTPUTS))
+    if latched:  # the gates of this sample are the next sample's latches
+        z_next = ca.vertcat(z_next, gate)
+    return ca.Function(name, [zz, y], [z_next, u, xbh, yc, s], list(STEP_INPUTS), list(STEP_OUTPUTS))

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 from tolerances import C_DOUBLE
@@ -21,6 +22,7 @@ from fte_casadi.plants import SCENARIOS
 from fte_casadi.plants.loader import load_plant, load_scenario
 from fte_casadi.sim import simulate
 from fte_casadi.sim.accommodate import accommodated
+from fte_casadi.step import accommodation_gate, step_function
 
 ROOT = Path(__file__).resolve().parents[1]
 PENDULUM = f"{ROOT / 'examples' / 'pendulum_plant.py'}:pendulum"
@@ -67,37 +69,109 @@ def test_the_document_keeps_the_accommodation_and_refuses_a_bad_one(real_designs
     back = Design.load(tmp_path / "a.json")
     assert back.accommodation["thresholds"] == [0.02, 0.01]
     doc = json.loads((tmp_path / "a.json").read_text())
+    assert "release" not in back.accommodation and not back.latched and back.nz == back.nbar  # memoryless
     for bad in ([0.02], [0.02, -1.0], [0.02, "inf"], [True, 0.1]):
         doc["accommodation"]["thresholds"] = bad
         (tmp_path / "b.json").write_text(json.dumps(doc))
         with pytest.raises(DesignFileError, match="accommodation"):
             Design.load(tmp_path / "b.json")
+    doc["accommodation"]["thresholds"] = [0.02, 0.01]
+    for good, latched in ((0.5, True), (1, False)):
+        doc["accommodation"]["release"] = good
+        (tmp_path / "b.json").write_text(json.dumps(doc))
+        back = Design.load(tmp_path / "b.json")
+        assert back.accommodation["release"] == good and back.latched is latched
+        assert back.nz == back.nbar + (2 if latched else 0)
+    for bad in (0, -0.5, 1.5, "0.5", None, True):
+        doc["accommodation"]["release"] = bad
+        (tmp_path / "b.json").write_text(json.dumps(doc))
+        with pytest.raises(DesignFileError, match="release"):
+            Design.load(tmp_path / "b.json")
+
+
+def _gate_fn(acc: dict, lf: int, latched: bool):
+    fhat, latch = ca.SX.sym("f", lf), ca.SX.sym("g", lf)
+    return ca.Function("g", [fhat, latch], [accommodation_gate(fhat, acc, latch if latched else None)])
+
+
+def test_a_release_of_one_is_the_memoryless_gate():
+    """With the release ratio 1 the latches change nothing: whatever they hold, the gate is the memoryless one
+    (a latched fault with ratio >= 1 and no larger ratio switches on anyway; a larger ratio >= 1 means the
+    largest fault switches on, and releases it)."""
+    thr = [0.02, 0.01, 0.05]
+    memoryless = _gate_fn({"thresholds": thr}, 3, False)
+    one = _gate_fn({"thresholds": thr, "release": 1.0}, 3, True)
+    rng = np.random.default_rng(0)
+    f = rng.uniform(-2, 2, size=(3, 4000)) * np.array(thr)[:, None]
+    f[:, :200] = np.array(thr)[:, None] * rng.choice([0.5, 1.0, 1.5], size=(3, 200))  # ties and edges
+    latches = rng.integers(0, 2, size=(3, 4000)).astype(float)
+    a, b = np.array(memoryless(f, latches)), np.array(one(f, latches))
+    assert np.array_equal(a, b)
+    assert 0 < a.sum() < a.size
+
+
+def test_the_latch_switches_on_holds_and_releases():
+    """Fault 0 switches on at ratio 1, holds down to the release ratio, releases below it; a larger ratio of
+    another fault releases it only once that fault itself switches on."""
+    thr = [1.0, 1.0]
+    g = _gate_fn({"thresholds": thr, "release": 0.5}, 2, True)
+
+    def run(seq):
+        latch, out = np.zeros(2), []
+        for f in seq:
+            latch = np.array(g(f, latch)).ravel()
+            out.append(latch.tolist())
+        return out
+
+    assert run([[0.9, 0], [1.0, 0], [0.7, 0], [0.5, 0], [0.49, 0], [0.7, 0]]) == [
+        [0, 0], [1, 0], [1, 0], [1, 0], [0, 0], [0, 0]]  # fmt: skip
+    # fault 1 above fault 0 but below its threshold: 0 holds; once 1 switches on (and is larger), 0 releases
+    assert run([[1.2, 0], [0.8, 0.9], [0.8, 1.1], [0.8, 0.7], [0.2, 0.6]]) == [
+        [1, 0], [1, 0], [0, 1], [0, 1], [0, 1]]  # fmt: skip
+    # sign does not matter; a tie switching on keeps both
+    assert run([[-1.5, 0], [1.5, -1.5]]) == [[1, 0], [1, 1]]
 
 
 @pytest.mark.slow
 @needs_cc
-def test_the_c_step_accommodates_as_the_simulation(real_designs, tmp_path):
-    """The generated C of an accommodated design, fed the Monte Carlo's measurements, gives its inputs."""
+@pytest.mark.parametrize("release", [None, 0.5])
+def test_the_c_step_accommodates_as_the_simulation(release, real_designs, tmp_path):
+    """The generated C of an accommodated design, fed the Monte Carlo's measurements, gives its inputs; with
+    hysteresis (release 0.5) its latches are the Python step's gates, sample by sample, on a path where a
+    latch holds a fault below its threshold."""
     d, plant = real_designs["manipulator"], load_plant("manipulator")
     sc = dataclasses.replace(SCENARIOS["manipulator"](), measurement_noise=(0.002, 0.002, 0.002))
-    acc = dataclasses.replace(d, accommodation={"rule": "isolate", "thresholds": [0.02, 0.008]})
+    rule = {"rule": "isolate", "thresholds": [0.02, 0.008]}
+    acc = dataclasses.replace(d, accommodation=rule if release is None else {**rule, "release": release})
     res = simulate(
         acc, plant, sc, paths=1, seed=2, record_all=True, record_every=1, progress=False, detect=False
     )
     generate_c(acc, tmp_path, sample_time=res.dt)
     c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), acc, "double")
     ftc = res.ftc
-    c.init(ftc.xbarhat[0, 0] - np.asarray(acc.H) @ ftc.y[0, 0])
+    z = np.concatenate([ftc.xbarhat[0, 0] - np.asarray(acc.H) @ ftc.y[0, 0], np.zeros(acc.nz - acc.nbar)])
+    c.init(z)
+    fn = step_function(acc, res.dt)
     scale = max(1.0, float(np.max(np.abs(ftc.y))), float(np.max(np.abs(ftc.u))))
-    worst, gated = 0.0, 0
+    worst, gated, held, gates = 0.0, 0, 0, []
     Kf = np.asarray(acc.Kf)
     for k in range(ftc.y.shape[1]):
         rc, u, xb, yc = c.step(ftc.y[0, k])
         assert rc == 0
+        z, u_py, *_ = (np.asarray(v).ravel() for v in fn(z, ftc.y[0, k]))
         worst = max(
-            worst, float(np.max(np.abs(u - ftc.u[0, k]))), float(np.max(np.abs(xb - ftc.xbarhat[0, k])))
-        )
+            worst, float(np.max(np.abs(u - ftc.u[0, k]))), float(np.max(np.abs(xb - ftc.xbarhat[0, k]))),
+            float(np.max(np.abs(u_py - ftc.u[0, k]))),
+        )  # fmt: skip
         fhat = ftc.fhat[0, k]
-        gated += int(np.any(np.abs(fhat) < [0.02, 0.008]) and np.any(Kf @ fhat))
+        ratio = np.abs(fhat) / [0.02, 0.008]
+        gated += int(np.any(ratio < 1) and np.any(Kf @ fhat))
+        if acc.latched:
+            assert np.array_equal(c.gate, z[acc.nbar :]), k  # the C's latches are the Python step's gates
+            held += int(np.any((c.gate == 1) & (ratio < 1) & (ratio >= 0.5)))
+            gates.append(c.gate)
     assert worst <= C_DOUBLE * scale, worst
     assert gated > 0  # the gate was closed on some samples: the comparison exercised it
+    if acc.latched:
+        assert held > 0  # a latch held a fault between the release ratio and its threshold
+        assert set(np.unique(gates)) == {0.0, 1.0}

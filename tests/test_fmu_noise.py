@@ -31,9 +31,12 @@ needs = pytest.mark.skipif(
 
 
 @needs
-def test_fmu_with_accommodation_on_noisy_measurements(tmp_path):
+@pytest.mark.parametrize("release", [None, 0.5])
+def test_fmu_with_accommodation_on_noisy_measurements(release, tmp_path):
+    """u, xbarhat, yc and, with hysteresis (release 0.5), the gates equal the Python step's."""
     d = Design.load(ROOT / "generated/manipulator/design.json")
-    d = dataclasses.replace(d, accommodation={"rule": "isolate", "thresholds": [0.02, 0.008]})
+    rule = {"rule": "isolate", "thresholds": [0.02, 0.008]}
+    d = dataclasses.replace(d, accommodation=rule if release is None else {**rule, "release": release})
     sc = dataclasses.replace(SCENARIOS["manipulator"]().until(6.0), measurement_noise=(0.002, 0.002, 0.002))
     res = simulate(d, load_plant("manipulator"), sc, paths=1, seed=4, record_all=True, record_every=1,
                    progress=False, detect=False)  # fmt: skip
@@ -43,7 +46,7 @@ def test_fmu_with_accommodation_on_noisy_measurements(tmp_path):
     ref = []
     for y in ys:
         z, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
-        ref.append(np.concatenate([u, xb, yc]))
+        ref.append(np.concatenate([u, xb, yc, z[d.nbar :]]))  # z ends with a latched gate's gates
     ref = np.array(ref)
     path = generate_fmu(d, tmp_path, sample_time=res.dt)
     names = [v.name for v in fmu_variables(d)]
@@ -64,3 +67,9 @@ def test_fmu_with_accommodation_on_noisy_measurements(tmp_path):
     closed = np.any(np.abs(fhat) < [0.02, 0.008], axis=1)
     assert closed.any() and (~closed).any()  # the gate was both open and closed along the path
     assert np.all(np.isfinite(u_all))
+    if d.latched:
+        assert all(n.endswith("_gate") for n in names[-2:])
+        gate = got[1:, -2:]
+        assert np.array_equal(gate, ref[:, -2:])  # the FMU's gates are exactly the Python step's
+        ratio = np.abs(fhat) / [0.02, 0.008]
+        assert np.any((gate == 1) & (ratio < 1))  # a latch held a fault below its threshold

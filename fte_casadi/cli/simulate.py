@@ -133,6 +133,9 @@ def _why(d, m: dict) -> list[str]:
 @click.option("--accommodate", is_flag=True,
               help="Compensate a fault in the control only while it is detected and isolated (thresholds calibrated "
                    "on fault-free paths at --false-alarm-rate); the C and FMU of --save-design's document do the same.")  # fmt: skip
+@click.option("--release", "release", type=float, default=0.5, show_default=True,
+              help="With --accommodate: a compensated fault stays compensated until |fhat| / threshold falls below "
+                   "this ratio (hysteresis); 1: the memoryless gate.")  # fmt: skip
 @click.option(
     "--save-design",
     "save_design",
@@ -150,7 +153,7 @@ def _why(d, m: dict) -> list[str]:
 @_plant_option
 @_allow_option
 @_guard
-def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, accommodate, save_design,
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, accommodate, release, save_design,
              no_detect, as_json, quiet, plant_opt, allow_uncertified):  # fmt: skip
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
@@ -173,6 +176,8 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     plant = load_plant(spec)
     scenario = _with_noise(load_scenario(spec), noise)
     check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
+    if not (0 < release <= 1):
+        raise ParameterError(f"--release must be in (0, 1] (1: no hysteresis); got {release}")
     if save_design and not accommodate:
         raise ParameterError(
             "--save-design writes the design with its accommodation thresholds: give --accommodate"
@@ -183,7 +188,14 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
         from ..sim.accommodate import accommodated
 
         d = accommodated(
-            d, plant, scenario, paths=paths or scenario.paths, seed=seed, false_alarm_rate=fa_rate, dt=dt
+            d,
+            plant,
+            scenario,
+            paths=paths or scenario.paths,
+            seed=seed,
+            false_alarm_rate=fa_rate,
+            dt=dt,
+            release=release,
         )
         click.echo(f"note: {d.status[-1]}", err=True)
         if save_design:

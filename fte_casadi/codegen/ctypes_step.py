@@ -30,6 +30,7 @@ class CStep:
         self.real = real
         self.dtype = _NP[real]
         self.nbar, self.p, self.m = int(design.dims.nbar), int(design.dims.p), int(design.dims.m)
+        self.nz = design.nz  # z, then a latched accommodation gate's latches
         name = c_name(design.plant)
         self._init = getattr(self.lib, f"fte_{name}_init")
         self._step = getattr(self.lib, f"fte_{name}_step")
@@ -42,7 +43,7 @@ class CStep:
         self._step.argtypes = [ctypes.c_void_p, ptr, ptr, ptr, ptr]
         self._step.restype = ctypes.c_int
         self._ptr = ptr
-        # the struct starts with z[nbar], z_next[nbar]; work arrays follow (generously sized buffer)
+        # the struct starts with z[nz], z_next[nz]; work arrays follow (generously sized buffer)
         self.state = (ctypes.c_char * 65536)()
 
     def _p(self, a: np.ndarray):
@@ -63,7 +64,13 @@ class CStep:
 
     @property
     def z(self) -> np.ndarray:
-        return np.frombuffer(bytes(self.state), dtype=self.dtype, count=self.nbar).astype(float)
+        """The state ``z`` (nz values: with a latched accommodation gate, the latches follow the observer's)."""
+        return np.frombuffer(bytes(self.state), dtype=self.dtype, count=self.nz).astype(float)
+
+    @property
+    def gate(self) -> np.ndarray:
+        """A latched accommodation gate's latches: the gates the last step applied (empty without latches)."""
+        return self.z[self.nbar :]
 
     def step(self, y) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         yy = np.ascontiguousarray(y, dtype=self.dtype)
@@ -107,13 +114,13 @@ def closed_loop_compare(
         # both steps continue from the C's z0 (equal to xbar0 - H y0 up to round-off): at this start the
         # residual y - Cbar xbarhat is zero up to round-off, and sgn of a round-off would differ otherwise
         z = cstep.z
-        if np.max(np.abs(z - (design.xbar0 - np.asarray(design.H) @ y0))) > 1e-12 * max(
+        if np.max(np.abs(z[: design.nbar] - (design.xbar0 - np.asarray(design.H) @ y0))) > 1e-12 * max(
             1.0, np.max(np.abs(z))
         ):
             raise CodegenError("the C init_from_y does not give z0 = xbar0 - H y0")
     else:
         x = np.asarray(plant.x0, float).copy()
-        z = np.zeros(int(design.dims.nbar))
+        z = np.zeros(design.nz)
         cstep.init(z)
     err = {"z": 0.0, "u": 0.0, "xbarhat": 0.0, "yc": 0.0}
     traj = {"y": [], "u": [], "fhat": []}

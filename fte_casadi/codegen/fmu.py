@@ -19,6 +19,8 @@ Variables (in this order, value references 0, 1, ...), named after the plant's o
     outputs  u:        one per plant input, named as the plant names its inputs
              xbarhat:  <state>_hat, then <fault>_dot_hat (fdothat), then <fault>_hat (fhat)
              yc:       <output>_c, the reliable (fault-compensated) outputs y - Df fhat
+             gate:     <fault>_gate, only for a latched accommodation gate (a release ratio below 1):
+                       1 while that fault is compensated in u (the sample's gate, also its latch)
 
 A name already taken gets ``_2``, ``_3``, ... appended. The sampling semantics (where the first
 measurement is taken, what an output read returns) are described in the wrapper's header
@@ -63,7 +65,7 @@ class FmuVariable:
     name: str
     value_reference: int
     causality: str  # "input" or "output"
-    group: str  # "y", "u", "xbarhat" or "yc"
+    group: str  # "y", "u", "xbarhat", "yc" or "gate"
     index: int  # position inside its group's vector
     description: str
     unit: str | None = None
@@ -128,6 +130,9 @@ def fmu_variables(design: Design) -> list[FmuVariable]:
              for k in range(lf)]  # fmt: skip
     rows += [("output", "yc", k, f"{ys[k]}_c", f"reliable output {ys[k]}: y - Df fhat", y_units[k], None)
              for k in range(p)]  # fmt: skip
+    if design.latched:  # the accommodation gate's latches: 1 while fault k is compensated in u
+        rows += [("output", "gate", k, f"{fs[k]}_gate", f"accommodation gate of fault {fs[k]}: 1 while it is "
+                  "compensated in u (this sample), else 0", None, None) for k in range(lf)]  # fmt: skip
     taken: set[str] = set()
     out = []
     for vr, (causality, group, idx, name, desc, unit, start) in enumerate(rows):
@@ -141,16 +146,22 @@ def fmu_variables(design: Design) -> list[FmuVariable]:
 
 
 def _dependencies(design: Design, sample_time: float, boundary_layer) -> list[list[int]]:
-    """Per output (u, xbarhat, yc in order): the inputs it depends on structurally (0-based), from the
-    CasADi step, in the running observer and at the first sample (z0 = xbar0 - H y0), united."""
+    """Per output (u, xbarhat, yc in order, then a latched gate's): the inputs it depends on structurally
+    (0-based), from the CasADi step, in the running observer and at the first sample (z0 = xbar0 - H y0),
+    united. A gate, piecewise constant in y, takes the dependencies of the fault estimates it compares."""
     fn = step_function(design, sample_time, boundary_layer=boundary_layer)
-    nbar, p = int(design.dims.nbar), int(design.dims.p)
-    z, y = ca.SX.sym("z", nbar), ca.SX.sym("y", p)
-    z0 = ca.DM(design.xbar0) - ca.mtimes(ca.DM(np.asarray(design.H, float)), y)
+    nbar, p, lf = int(design.dims.nbar), int(design.dims.p), int(design.dims.lf)
+    latches = design.nz - nbar
+    z, y = ca.SX.sym("z", design.nz), ca.SX.sym("y", p)
+    z0 = ca.vertcat(
+        ca.DM(design.xbar0) - ca.mtimes(ca.DM(np.asarray(design.H, float)), y), ca.DM.zeros(latches)
+    )
     deps = None
     for zz in (z, z0):
         outs = fn(zz, y)
-        expr = ca.vertcat(outs[1], outs[2], outs[3])
+        fhat = outs[2][nbar - lf :]
+        gates = [ca.sum1(fhat)] * latches  # each gate compares every estimate
+        expr = ca.vertcat(outs[1], outs[2], outs[3], *gates)
         sp = np.array(ca.DM(ca.jacobian(expr, y).sparsity(), 1)) != 0
         deps = sp if deps is None else (deps | sp)
     return [list(np.flatnonzero(row)) for row in deps]
@@ -398,6 +409,11 @@ def generate_fmu(
                 ny_last=p - 1,
                 nvar_last=len(variables) - 1,
                 sample_time_text=repr(sample_time),
+                ngate=design.nz - int(design.dims.nbar),
+                gate_names=", gate" if design.latched else "",
+                gate_out="  for (i = 0; i < NGATE; ++i) out[NU + NXBAR + NY + i] = (fmi2Real)st->z[NXBAR + i];\n"
+                if design.latched
+                else "",
                 y_start=_c_reals(v.start for v in variables[:p]),
                 var_names=_c_strings(v.name for v in variables),
             ),

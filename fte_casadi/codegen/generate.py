@@ -29,6 +29,7 @@ import math
 import os
 import re
 import tempfile
+import textwrap
 from pathlib import Path
 
 import casadi as ca
@@ -229,7 +230,7 @@ def _sizes(h_src: str, fname: str) -> dict:
     return out
 
 
-def _memory(c_src: str, real: str, nxbar: int, sizes: dict) -> dict:
+def _memory(c_src: str, real: str, nxbar: int, sizes: dict, latches: int = 0) -> dict:
     rb = _REAL_BYTES[real]
     literals = len(re.findall(r"^\s*a\d+=[-+]?[0-9][0-9.eE+-]*;$", c_src, re.M))
     sparsity = sum(int(k) for k in re.findall(r"static const casadi_int \w+\[(\d+)\]", c_src))
@@ -237,6 +238,8 @@ def _memory(c_src: str, real: str, nxbar: int, sizes: dict) -> dict:
     local_count = sum(len(d.split(",")) for d in decl)
     state = 2 * nxbar * rb + sizes["SZ_W"] * rb + sizes["SZ_IW"] * 4
     detail = f"z and z_next, {nxbar} `{real}` each"
+    if latches:
+        detail += f" (z ends with the {latches} latches of the accommodation gate)"
     if sizes["SZ_W"]:
         detail += f"; w, {sizes['SZ_W']} `{real}`"
     if sizes["SZ_IW"]:
@@ -291,7 +294,8 @@ def _wrapper(
 
     NAME = name.upper()
     work_fields = ""
-    work_init = ""
+    gate = _gate_texts(design, NAME)
+    work_init = gate.pop("gate_init")
     if sizes["SZ_W"]:
         work_fields += f"  fte_real w[{sizes['SZ_W']}];     /* CasADi real work array */\n"
         work_init += f"  for (i = 0; i < {sizes['SZ_W']}; ++i) s->w[i] = (fte_real)0;\n"
@@ -308,7 +312,7 @@ def _wrapper(
         "res[4] = 0; /* s: not exported */",
     ]
     setup += [f"res[{k}] = 0;" for k in range(5, sizes["SZ_RES"])]
-    mem = _memory(c_src, real, nbar, sizes)
+    mem = _memory(c_src, real, design.nz, sizes, lf if design.latched else 0)
     certified = "certified" if design.certified else "NOT CERTIFIED (no guarantee: see the design's status)"
     affine = any(np.any(lm.a) for lm in design.local_models)
     sub = {
@@ -340,6 +344,7 @@ def _wrapper(
         "x_names": joined("states", n, "x"),
         "f_names": joined("faults", lf, "f"),
         "work_fields": work_fields,
+        **gate,
         "work_init": work_init,
         "sz_arg": sizes["SZ_ARG"],
         "sz_res": sizes["SZ_RES"],
@@ -371,6 +376,40 @@ def _wrapper(
         files[1]: template.fill(template.TEMPLATES["source"], sub),
         files[4]: template.fill(template.TEMPLATES["readme"], sub),
     }, mem
+
+
+def _gate_texts(design: Design, NAME: str) -> dict:
+    """The template's texts for the accommodation gate: nothing without one (the C is then byte for byte
+    what it was); for a latched gate (a release ratio below 1) its latches, stored after z in the state."""
+    acc = design.accommodation
+    out = {"z_len": f"FTE_{NAME}_NXBAR", "z_gate_text": "", "gate_doc": "", "gate_init": "",
+           "accommodation_text": ""}  # fmt: skip
+    if acc is None:
+        return out
+    thr = ", ".join(f"{v:.6g}" for v in acc["thresholds"])
+    rule = (f"fault j is compensated in u (the Kf fhat term) when |fhat_j| >= threshold_j and |fhat_j| / "
+            f"threshold_j is the largest (thresholds {thr})")  # fmt: skip
+    if not design.latched:
+        out["accommodation_text"] = (
+            f"\nAccommodation after detection: {rule}, in each sample anew (no memory)."
+        )
+        return out
+    rho = float(acc["release"])
+    held = (f"and stays compensated while |fhat_j| / threshold_j >= {rho:g}, unless another fault switches on "
+            "with a larger ratio")  # fmt: skip
+    out["accommodation_text"] = (
+        f"\nAccommodation after detection: {rule}, {held}. The latches (1: compensated in the last sample) follow "
+        f"the observer state in `z`, from `z[FTE_{NAME}_NXBAR]` on; `init` and `init_from_y` set them to 0."
+    )
+    out["z_len"] = f"FTE_{NAME}_NXBAR + FTE_{NAME}_NF"
+    out["z_gate_text"] = ", then the gate's latches"
+    doc = (f"Accommodation after detection: {rule}, {held}. z[FTE_{NAME}_NXBAR + j] is fault j's latch (1: "
+           "compensated in the last sample's u, 0: not); init and init_from_y set the latches to 0.")  # fmt: skip
+    out["gate_doc"] = "\n/* " + "\n * ".join(textwrap.wrap(doc, 100)) + " */\n"
+    out["gate_init"] = (
+        f"  for (i = FTE_{NAME}_NXBAR; i < FTE_{NAME}_NXBAR + FTE_{NAME}_NF; ++i) s->z[i] = s->z_next[i] = (fte_real)0;\n"
+    )
+    return out
 
 
 def _sliding_text(design: Design) -> dict:
@@ -464,6 +503,8 @@ def output_range(design: Design, fn: ca.Function | None = None, real: str = "dou
         def finite(ys: np.ndarray) -> bool:
             N = ys.shape[1]
             zs = xbar0[:, None] - H @ ys
+            if fn.size1_in(0) > zs.shape[0]:  # a latched accommodation gate's latches, off as init sets them
+                zs = np.vstack([zs, np.zeros((fn.size1_in(0) - zs.shape[0], N))])
             return bool(np.all(np.isfinite(np.array(every.map(N)(zs, ys)))))
 
         mid = np.where(known, 0.5 * (lo + hi), 0.0)
@@ -647,4 +688,5 @@ def memory_report(design: Design, *, sample_time: float | None = None, real: str
     name = c_name(design.plant)
     fn = step_function(design, sample_time, tolerant=True, name=f"fte_{name}_casadi_step")
     c_src, h_src = _casadi_sources(fn, name, real)
-    return _memory(c_src, real, int(design.dims.nbar), _sizes(h_src, f"fte_{name}_casadi_step"))
+    lf = int(design.dims.lf) if design.latched else 0
+    return _memory(c_src, real, design.nz, _sizes(h_src, f"fte_{name}_casadi_step"), lf)

@@ -138,8 +138,10 @@ class Design:
     #: empty for documents older than it
     plant_hash: dict = field(default_factory=dict)
     #: accommodation after detection (:mod:`fte_casadi.sim.accommodate`): {"rule": "isolate", "thresholds":
-    #: [one per fault], ...}: fault j is compensated in u only while |fhat_j| >= threshold_j and its normalised
-    #: residual |fhat_j| / threshold_j is the largest; None: every estimate is compensated always (the paper)
+    #: [one per fault], "release": ratio, ...}: fault j switches on in u when |fhat_j| >= threshold_j and its
+    #: normalised residual |fhat_j| / threshold_j is the largest, and with a release ratio below 1 stays on
+    #: until that ratio falls below it (:func:`fte_casadi.step.accommodation_gate`; no "release": 1, the
+    #: memoryless gate); None: every estimate is compensated always (the paper)
     accommodation: dict | None = None
     #: how a loaded document read (not a document key): {"source", "schema", "certified"}, the last as the
     #: document wrote it (None: absent); empty for a design made in this process
@@ -176,6 +178,16 @@ class Design:
     def nbar(self) -> int:
         return int(self.dims.nbar)
 
+    @property
+    def latched(self) -> bool:
+        """True when the accommodation gate has hysteresis (a release ratio below 1): its latches are state."""
+        return self.accommodation is not None and float(self.accommodation.get("release", 1.0)) < 1.0
+
+    @property
+    def nz(self) -> int:
+        """Length of the step's state: ``z`` (nbar), then with a latched gate one latch (0 or 1) per fault."""
+        return self.nbar + (int(self.dims.lf) if self.latched else 0)
+
     def sliding_gain(self) -> np.ndarray:
         """The gain of each sliding variable: Remark 5's per-direction gains for the undecoupled part of d
         (first), then ``delta + eps`` for each fault's ``f''`` (docs/method.md, sliding surface (19)-(21))."""
@@ -200,11 +212,13 @@ class Design:
     def observer_start(self, y0, xbar0=None) -> np.ndarray:
         """``z0 = xbar0 - H y0`` (xbar0 None: :attr:`xbar0`), summed in the order of the generated C's
         ``init_from_y`` so that both give the same bits (at that start the residual ``y - Cbar xbarhat``
-        is zero up to round-off, and ``sgn`` of a round-off decides the first sliding term)."""
+        is zero up to round-off, and ``sgn`` of a round-off decides the first sliding term). With a latched
+        accommodation gate (:attr:`latched`) the step's state goes on with the latches, all off (0), as the C's
+        ``init`` sets them: the result has :attr:`nz` values."""
         H = _arr(self.H)
         y = [float(v) for v in np.ravel(y0)]
         xb = self.xbar0 if xbar0 is None else _arr(xbar0).ravel()
-        out = np.empty(H.shape[0])
+        out = np.zeros(self.nz)
         for i in range(H.shape[0]):
             hy = 0.0
             for j, yj in enumerate(y):
@@ -472,7 +486,18 @@ def _accommodation(source: str, value, lf: int) -> dict | None:
         raise DesignFileError(
             f"{source}: 'accommodation.thresholds' must be {lf} finite positive numbers (one per fault); got {thr!r}"
         )
-    return {**value, "thresholds": [float(v) for v in thr]}
+    out = {**value, "thresholds": [float(v) for v in thr]}
+    if "release" in value:  # absent (documents older than it): 1, the memoryless gate
+        rel = value["release"]
+        if not (
+            isinstance(rel, (int, float)) and not isinstance(rel, bool) and np.isfinite(rel) and 0 < rel <= 1
+        ):
+            raise DesignFileError(
+                f"{source}: 'accommodation.release' must be a number in (0, 1] (the ratio |fhat_j| / threshold_j "
+                f"below which a compensated fault is released; 1: no hysteresis); got {rel!r}"
+            )
+        out["release"] = float(rel)
+    return out
 
 
 def _limits(source: str, value, m: int) -> np.ndarray | None:

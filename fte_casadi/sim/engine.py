@@ -63,9 +63,13 @@ SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0, "measurement_n
 class PathLayout:
     """Sizes and offsets of the closed-loop state and record of one path."""
 
-    def __init__(self, n: int, nbar: int, lf: int, m: int, p: int, ld: int, nv: int = 0):
+    def __init__(
+        self, n: int, nbar: int, lf: int, m: int, p: int, ld: int, nv: int = 0, nz: int | None = None
+    ):
         self.n, self.nbar, self.lf, self.m, self.p, self.ld, self.nv = n, nbar, lf, m, p, ld, nv
-        self.run_state = n + nbar + lf  # x, z, sensor memory
+        #: the step's state: z (nbar), then a latched accommodation gate's latches (Design.nz)
+        self.nz = nbar if nz is None else int(nz)
+        self.run_state = n + self.nz + lf  # x, z (and latches), sensor memory
         self.ns = 3 * self.run_state
         self.sizes = {"x": n, "xbarhat": nbar, "f": lf, "u": m, "y": p, "yc": p}
         self.run_rec = sum(self.sizes.values())
@@ -96,7 +100,8 @@ def closed_loop_sample(
     """
     n, m, p, lf, ld = plant.n, plant.m, plant.p, plant.lf, plant.ld
     nbar = int(design.dims.nbar)
-    lay = PathLayout(n, nbar, lf, m, p, ld, nv=p if noise else 0)
+    nz = design.nz
+    lay = PathLayout(n, nbar, lf, m, p, ld, nv=p if noise else 0, nz=nz)
     drift = plant.drift_function()
     diff = plant.diffusion_function()
     steps = {
@@ -114,7 +119,7 @@ def closed_loop_sample(
     nexts, recs = [], []
     for r, run in enumerate(RUNS):
         o = r * lay.run_state
-        x, z, mem = S[o : o + n], S[o + n : o + n + nbar], S[o + n + nbar : o + lay.run_state]
+        x, z, mem = S[o : o + n], S[o + n : o + n + nz], S[o + n + nz : o + lay.run_state]
         Cx = ca.mtimes(ca.DM(C), x) + v  # the reading before sensor faults
         faulty = run != "free"
         fs, mem_next = [], []
