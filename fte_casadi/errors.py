@@ -49,7 +49,14 @@ class InfeasibleDesignError(FteError, ValueError):
 class SolverFailedError(FteError, RuntimeError):
     """The SDP solver failed numerically (as posed and on rescaled data, with both solvers when the
     design retries); not a proof of infeasibility, so not an :class:`InfeasibleDesignError`. The
-    CLI reports it with the same exit status as an infeasible design."""
+    CLI reports it with the same exit status as an infeasible design.
+
+    ``solver_independent``: the failure is in the numpy stages (centring, phase 1), which the other solver would
+    repeat exactly, so the design does not retry with it."""
+
+    def __init__(self, *args, solver_independent: bool = False):
+        super().__init__(*args)
+        self.solver_independent = solver_independent
 
 
 class CentringError(ArithmeticError):

@@ -142,8 +142,8 @@ def design_warnings(checks: dict, alpha, scenario) -> list[str]:
         out.append(
             f"the observer's slowest time constant is {tau:.3g}: {SLOW_OBSERVER:g} of them ({SLOW_OBSERVER * tau:.3g}) "
             f"are longer than the scenario's shortest fault window ({shortest:.3g}), so its fault estimates cannot "
-            "settle inside the windows; a shorter sample time (which allows a faster decay rate), another kappa or a "
-            "larger --alpha may fix it (fte tune searches them); fte simulate measures what it costs"
+            "settle inside the windows (fte design tries a larger kappa and, where the sample time lowered the decay "
+            "rate, a shorter one, and prints what each gives; fte simulate measures what it costs)"
         )
     elif re is not None and re >= 0:
         out.append(f"the observer's slowest mode does not decay (max Re eig R_i = {re:.3g})")

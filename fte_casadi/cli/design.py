@@ -87,6 +87,10 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
     help="sample time the observer must run at (default: the plant's scenario step); caps the default alpha.",
 )  # fmt: skip
 @click.option(
+    "--kappa", type=float,
+    help="Bound on cond(X') and cond(Pbar) (default 1e4); a larger one allows a faster observer decay rate.",
+)  # fmt: skip
+@click.option(
     "--bound-weight", "bound_weight", type=float,
     help="Weight of the closed loop's fault-error bound in the observer's objective (default 0: off; 1 counts it "
     "as much as the rest; docs/design.md).",
@@ -118,11 +122,11 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
-def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, bound_weight,
+def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, kappa, bound_weight,
            allow_uncertified, accept, no_remark5, d_bound, output, explore, out_dir, vertices):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
-                           sample_time=sample_time, d_bound=d_bound, bound_weight=bound_weight)  # fmt: skip
+                           sample_time=sample_time, d_bound=d_bound, bound_weight=bound_weight, kappa=kappa)  # fmt: skip
     if no_remark5:
         params["remark5"] = False
     if explore:
@@ -136,14 +140,22 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     if output is not None:
         _writable_target(output, "-o", "design.json")
     _outputs(output)
-    d = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices)
+    d, ts, options = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices,
+                                  full=True)  # fmt: skip
     from ..design.summary import design_summary
 
     click.echo(design_summary(d))
     from ..verdicts import design_warnings
 
-    for w in design_warnings(d.checks, d.observer.alpha, _scenario(plant)):
+    scenario = _scenario(plant)
+    warnings = design_warnings(d.checks, d.observer.alpha, scenario)
+    for w in warnings:
         click.echo(textwrap.fill("fte: warning: " + w, width=100), err=True)
+    if warnings and d.certified:
+        from ..design.remedy import remedies
+
+        for line in remedies(ts, options, d, scenario):
+            click.echo(textwrap.fill("fte: tried " + line, width=100), err=True)
     if output:
         if Path(output).suffix.lower() == ".mat":
             d.save_mat(output)

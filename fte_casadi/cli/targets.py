@@ -40,8 +40,10 @@ def _absolute_spec(plant_spec: str) -> str:
 
 def _make_design(
     plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
-    vertices: str | None = None,
+    vertices: str | None = None, full: bool = False,
 ):  # fmt: skip
+    """The design of ``plant_spec`` (the plant's scenario step as its sample time, unless given); with ``full``,
+    ``(design, T-S model, options)``."""
     from ..design import DesignOptions
     from ..design import design as run_design
     from ..plants.loader import load_plant
@@ -55,7 +57,8 @@ def _make_design(
         options = options.replace(sample_time=float(sc.dt))
     if sc is not None and sc.x0 is not None:  # the simulation's nominal start, for the C's init_from_y
         options = options.replace(initial_state=sc.x0)
-    return run_design(ts, options)
+    d = run_design(ts, options)
+    return (d, ts, options) if full else d
 
 
 def _design_or_plant(

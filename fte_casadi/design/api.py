@@ -17,13 +17,13 @@ from threadpoolctl import threadpool_limits
 from ..errors import FteError, InfeasibleDesignError
 from ..rounding import nice_ceil
 from ..ts import TSModel
-from . import pipeline
+from . import diffusion, pipeline
 from .core import conditioned
 from .core.diagnose import FrontierPoint, gamma_min, sigma_max
 from .explain import explain_45, explain_46, outside_45
 from .options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, resolve
 from .record import Design
-from .search import choose
+from .search import choose, try_design
 
 __all__ = ["design", "explore", "DesignOptions", "GENERIC_DEFAULTS"]
 
@@ -108,7 +108,8 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
         chosen = choose(_attempt, ts, options, st.aug, params, generic, "45", exc, refused)
         if chosen is not None:
             return chosen
-        raise explain_45(_attempt, ts, options, st.aug, params, refused) from None
+        raise _naming_diffusion(explain_45(_attempt, ts, options, st.aug, params, refused), ts, options, st,
+                                params, refused) from None  # fmt: skip
     K = [s3.K] * st.aug.r
     try:
         s5 = pipeline.step5(ts, st, options, res, s3)
@@ -120,9 +121,38 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
             chosen = choose(_attempt, ts, options, st.aug, params, generic, "46", exc, refused)
             if chosen is not None:
                 return chosen
-            raise explain_46(_attempt, ts, options, st.aug, params, exc, refused) from None
+            raise _naming_diffusion(explain_46(_attempt, ts, options, st.aug, params, exc, refused), ts, options,
+                                    st, params, refused) from None  # fmt: skip
         raise
     return pipeline.finish(ts, options, res, st, s3, K, s5, t0)
+
+
+def _naming_diffusion(err: InfeasibleDesignError, ts: TSModel, options: DesignOptions, st, params: dict,
+                      refused: list) -> InfeasibleDesignError:  # fmt: skip
+    """``err`` with the diffusion named as its cause, when it is (:func:`~.diffusion.tolerance`): the fraction
+    of it the design tolerates, at the parameters tried where (45) held (else the given ones), and whether the
+    whole design certifies with the diffusion scaled to that fraction (run, not guessed)."""
+    at = next((change for change, why in refused if "(46)" in why), {})
+    p = dict(params, **at)
+    tol = diffusion.tolerance(st.aug, st.T, p, options.solver)
+    if tol is None or not tol.blocks:
+        return err
+    where = ", ".join(f"{k} = {p[k]:g}" for k in ("sigma", "gamma", "gamma1"))
+    text = f"{tol.text()} at {where}"
+    fix = ""
+    if tol.feasible > 0:
+        why: list = []
+        d = try_design(_attempt, diffusion.scaled_model(ts, tol.feasible), options, why, **at)
+        fix = (
+            f" With the diffusion scaled by {tol.feasible:.3g} the whole design is certified (checked): if the "
+            "plant's noise is smaller than written, write it as it is; otherwise this method cannot certify an "
+            "observer for it at the parameters tried."
+            if d is not None
+            else f" Even with the diffusion scaled by {tol.feasible:.3g} the whole design is not certified: "
+            f"{why[0][1][:300] if why else 'not certified'}."
+        )
+    msg = str(err).split(" No value tried")[0].split(" No larger sigma tried")[0].rstrip(".")
+    return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.{fix}")
 
 
 def _refuse_beyond_sigma_max(aug, params: dict, solver: str) -> None:
@@ -148,6 +178,8 @@ def _other_solver(ts, options: DesignOptions, exc: Exception, where: str, retrie
     before it is reported; the design's status says so, and a failure of both names both."""
     solver = options.solver
     other = SOLVERS[1 - SOLVERS.index(solver)]
+    if getattr(exc, "solver_independent", False):  # numpy's stages would fail the same with the other solver
+        raise exc
     if retried:
         raise conditioned.SolverFailedError(
             f"both solvers failed numerically: first {retried.rstrip('.')}; then {solver} in {where}: "

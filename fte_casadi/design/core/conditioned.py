@@ -302,7 +302,7 @@ def _scalar_cap(layout: Layout, name: str, hi: float) -> list[AffineLMI]:
     return [AffineLMI(f"{name} <= cap", np.array([[-hi]]), F), AffineLMI(f"{name} > 0", np.zeros((1, 1)), -F)]
 
 
-def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list):
+def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list, keep_infeasible: bool = False):
     """A heavy step 3's start point by phase 1 in numpy (:func:`~fte_casadi.design.core.barrier.numpy_first`),
     or None (then the conic solvers).
 
@@ -311,7 +311,8 @@ def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list):
     from ``X' = sqrt(kappa) I`` the damped Newton steps creep up the ray 0.25 % at a time). Phase 1 needs
     a bounded set: ``||Y'|| <= RHO_CAP kappa max(max ||A_i||, sigma)`` (a gain ``||K~||`` of RHO_CAP times
     the plant's fastest rate) and ``0 < s <= `` that cap times ``max(1, 1/sigma, ||C||^2)``. The caps only
-    serve phase 1: an answer "infeasible" under them goes to the conic solver, which has none.
+    serve phase 1: an answer "infeasible" under them goes to the conic solver, which has none (returned,
+    with ``keep_infeasible``, where the conic solver has already failed numerically).
     """
     n, m, r = aug.n, aug.m, aug.r
     kappa, sg = _kappa(params), float(params["sigma"])
@@ -324,7 +325,9 @@ def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list):
     prob = ConicProblem(layout, feas)
     v0 = layout.pack(X=0.5 * kappa * np.eye(n), Y=np.zeros((m, n)), s=1.0, t=0.0)
     res = numpy_first(prob, r, v0, [ycap_lmi] + _scalar_cap(layout, "s", scap))
-    return None if res is None or res.v is None else (prob, res)
+    if res is None or (res.v is None and not keep_infeasible):
+        return None
+    return prob, res
 
 
 def step3(aug: Augmented, params: dict, solver: str) -> Step3:
@@ -344,6 +347,13 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
         prob, res = first
     else:
         prob, res = _step3_conic(aug, params, solver, tau, layout, Su)
+        if res.failed:  # a numerical failure of the solver: phase 1 in numpy decides instead
+            fallback = _step3_numpy(aug, params, layout, feas, keep_infeasible=True)
+            if fallback is not None:
+                fallback[0].notes.insert(
+                    0, f"{solver} failed numerically ({res.status}); phase 1 in numpy decided"
+                )
+                prob, res = fallback
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
     lmis = [L.at(MARGIN) for L in family]
     repaired: list[str] = []
@@ -464,7 +474,7 @@ class _Step5:
         self.params, self.X, self.K, self.tau = params, X, K, time_scale(aug)
         self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T)
         r = aug.r
-        self.feas = ConicProblem(self.layout, [L.at(2 * MARGIN) for L in feas])
+        self.feas = self.feas0 = ConicProblem(self.layout, [L.at(2 * MARGIN) for L in feas])
         self.soft = [L.at(MARGIN) for L in feas[:r]]  # (46) per rule: depends on alpha
         self.fixed = [L.at(MARGIN) for L in feas[r:]]  # the normalisation of Pt
         self.centring = [L.at(MARGIN) for L in feas + rest]
@@ -498,11 +508,7 @@ class _Step5:
         Q_i) and mapped back exactly to the unknowns of the unscaled problem. Only the starting point
         comes from here; the centring runs on the unscaled LMIs."""
         if self.feas.heavy and self.feas.layout is self.layout:
-            # (46) per rule soft, the normalisation and the gain caps hard, from Pt = sqrt(kappa) I, s = rho_i = 1
-            v0 = self.layout.pack(
-                Pt=np.sqrt(self.kappa) * np.eye(self.aug.nbar), s=1.0, rho=np.ones(self.aug.r)
-            )
-            res = numpy_first(self.feas, self.aug.r, v0, self.caps)
+            res = self._numpy()
             if res is not None:
                 return res
         if self.tau == 1.0:
@@ -521,14 +527,32 @@ class _Step5:
         v = self.layout.pack(Pt=u["Pt"], s=u["s"] / tau, rho=u["rho"] / tau, tau=0.0)
         return replace(res, v=v)
 
+    def _numpy(self) -> SolveResult | None:
+        """The feasibility of (46) at alpha = 0 by phase 1 in numpy (:func:`~.barrier.numpy_first`): (46) per rule
+        soft, the normalisation and the gain caps hard, from ``Pt = sqrt(kappa) I``, ``s = rho_i = 1``."""
+        v0 = self.layout.pack(Pt=np.sqrt(self.kappa) * np.eye(self.aug.nbar), s=1.0, rho=np.ones(self.aug.r))
+        res = numpy_first(self.feas0, self.aug.r, v0, self.caps)
+        if res is not None and self.feas0 is not self.feas:  # the time-scaled problem keeps the account
+            self.feas.seconds += res.seconds
+            self.feas.notes.append(self.feas0.notes[-1])
+        return res
+
     def first(self) -> SolveResult:
         """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else.
 
-        A numerical failure of the solver is retried here with the other solver: only this point comes
-        from a solver (the decisions and the centring run in numpy), so the design does not change, and
-        steps 1-3 are not run again."""
+        Where the solver fails numerically, or its point cannot be repaired into a strictly feasible one,
+        phase 1 in numpy decides instead (a point, or a proof that none exists under the gain caps); failing
+        that, the other solver is tried here: only this point comes from a solver (the decisions and the
+        centring run in numpy), so the design does not change, and steps 1-3 are not run again."""
         res = self._conic()
-        if res.failed:
+        if not self._take(res):
+            numpy_res = self._numpy()
+            if numpy_res is not None:
+                self.notes.append(f"step 5: {self.solver}'s feasibility solve gave no usable point ({res.status[:120]}); "
+                                  f"phase 1 in numpy decided")  # fmt: skip
+                res = replace(numpy_res, seconds=res.seconds + numpy_res.seconds, warned=res.warned)
+                self._take(res)
+        if not self.points and res.failed:
             other = "SCS" if self.solver == "CLARABEL" else "CLARABEL"
             first, self.solver = res, other
             res = self._conic()
@@ -537,17 +561,23 @@ class _Step5:
                 f"step 5: {'SCS' if other == 'CLARABEL' else 'CLARABEL'} failed numerically on the feasibility solve "
                 f"({first.status[:120]}, also on rescaled data); {other}'s point ({res.status}) starts the centring"
             )
-        if res.v is not None and np.all(np.isfinite(res.v)):
-            v = res.v.copy()
-            ir = self.layout.index("rho")
-            v[ir] = np.minimum(v[ir], 0.5 * self.rho_cap)
-            res_c = replace(res, v=v)
-            start = _start(
-                res_c, self.layout, "Pt", self.soft, self.fixed + self.caps, self.notes, self.kappa
-            )
-            if start is not None:
-                self.points[self.reach(start)] = start
+            self._take(res)
         return res
+
+    def _take(self, res: SolveResult) -> bool:
+        """Record a strictly feasible start from ``res`` (its gains clipped to the cap); False when there is none."""
+        if res.v is None or not np.all(np.isfinite(res.v)):
+            return False
+        v = res.v.copy()
+        ir = self.layout.index("rho")
+        v[ir] = np.minimum(v[ir], 0.5 * self.rho_cap)
+        start = _start(
+            replace(res, v=v), self.layout, "Pt", self.soft, self.fixed + self.caps, self.notes, self.kappa
+        )
+        if start is None:
+            return False
+        self.points[self.reach(start)] = start
+        return True
 
     def reach(self, v: np.ndarray) -> float:
         """The largest alpha at which the point ``v`` itself satisfies every (46): with
@@ -681,9 +711,19 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
             f"feasible with cond(Pbar) <= {prob.kappa:g} is about {lo:.4g}; lower alpha to <= "
             f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
         )
+    if pt is None and (
+        alpha is None or alpha_is_default
+    ):  # the rate is the tool's choice: a slower one is inside
+        for f in (0.5, 0.25):
+            pt = prob.design(f * a)
+            if pt is not None:
+                why = (f"{f:g} x the rate first chosen ({a:.4g}), at which the centring failed ({prob.notes[-1]}); "
+                       + why)  # fmt: skip
+                a *= f
+                break
     if pt is None:
         raise SolverFailedError(
-            f"step 5: no centred design found ({'; '.join(prob.notes[-2:])}); try the other solver"
+            f"step 5: no centred design found ({'; '.join(prob.notes[-2:])})", solver_independent=True
         )
     if (
         (alpha is None or alpha_is_default)
