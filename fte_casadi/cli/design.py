@@ -30,7 +30,7 @@ def _scenario_sample_time(plant_spec: str) -> float | None:
     return None if sc is None else float(sc.dt)
 
 
-def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
+def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | None = None) -> None:
     from ..design import explore
     from ..plants.loader import load_plant
     from ..plot import frontier_figure
@@ -58,6 +58,19 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
         )
     fig = frontier_figure(points, info, ts.plant.name, out_dir)
     click.echo(f"figure written to {fig}")
+    if info["skipped"]:
+        click.echo(f"{info['skipped']} of the sigmas were not tried: the time budget (60 s) ran out")
+    best = info["best"]
+    if best is None:
+        click.echo("no certified design found" + (f": {info['cause']}" if info["cause"] else ""))
+        return
+    click.echo(
+        f"best certified design found (the fastest observer): sigma = {best.params.sigma:.4g}, gamma = "
+        f"{best.params.gamma:g}, decay rate {best.observer.alpha:.4g}"
+    )
+    if output:
+        best.save(output)
+        click.echo(f"design document written to {output}")
 
 
 @click.command()
@@ -116,7 +129,10 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str) -> None:
     "-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here."
 )
 @click.option(
-    "--explore", is_flag=True, help="Print and plot the feasible frontier (smallest gamma over sigma)."
+    "--explore",
+    is_flag=True,
+    help="Print and plot the feasible frontier (smallest gamma over sigma) within 60 s; with -o, write the best "
+    "certified design found.",
 )
 @_VERTICES
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
@@ -130,8 +146,10 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     if no_remark5:
         params["remark5"] = False
     if explore:
-        _outputs(out_dir or "fte-explore")
-        _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore")
+        if output is not None:
+            _writable_target(output, "-o", "design.json")
+        _outputs(out_dir or "fte-explore", output)
+        _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore", output)
         return
     if out_dir is not None:
         raise ParameterError(

@@ -197,16 +197,23 @@ LADDER = (1.05, 1.25, 1.6, 2.5, 4.0, 6.3, 10.0)
 
 
 def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas=None, count: int = 12,
-            sample_time: float | None = None, progress=None) -> tuple[list[FrontierPoint], dict]:  # fmt: skip
+            sample_time: float | None = None, progress=None, budget: float | None = 60.0,
+            ) -> tuple[list[FrontierPoint], dict]:  # fmt: skip
     """The feasible frontier: for each sigma, the smallest gamma for which (45) is feasible, and the
     smallest gamma of :data:`LADDER` x that value for which the whole design (both steps and the
     certificate) is certified: step 5 needs some room above the frontier of (45).
 
     ``sigmas`` default: ``count`` values spaced in log scale from ``min(sigma / 30, 1e-3 sigma_sup)``
-    (``sigma`` the plant's default) to just below ``sigma_sup``, the largest sigma any gamma allows. Returns the points and a dict with the plant's default parameters and that sigma bound.
+    (``sigma`` the plant's default) to just below ``sigma_sup``, the largest sigma any gamma allows. Returns the
+    points and a dict with the plant's default parameters, that sigma bound, ``best`` (the certified design
+    with the fastest observer, None without one) and ``cause`` (why none is certified, when the diffusion is
+    why: :func:`~fte_casadi.design.diffusion.tolerance`). ``budget`` (seconds, None: none): sigmas not reached
+    within it are listed as not tried, and said so in ``info["skipped"]``.
     """
     from .augment import augment
+    from .uio import uio_gain
 
+    t0 = time.perf_counter()
     status: list[str] = []
     params = _params(
         ts, {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": None, "epsilon": None}, status
@@ -222,8 +229,20 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
             )
         sigmas = np.geomspace(min(params["sigma"] / 30, sup * 1e-3), sup * 0.98, count)
     base = DesignOptions(diagnose=False, solver=solver, gamma1=g1, sample_time=sample_time)
-    points = []
-    for k, sg in enumerate(sigmas):
+    points, best, skipped, refused_46 = [], None, 0, None
+    # the largest sigma first ((46) asks for a large one, (45) for a small one), within 70 % of the budget: the
+    # rest is left for the diagnosis of a frontier without a certified design
+    for k, sg in enumerate(sorted(sigmas, reverse=True)):
+        if budget is not None and time.perf_counter() - t0 > 0.7 * budget:
+            points.append(
+                FrontierPoint(
+                    float(sg), None, None, False, None, None, f"not tried: the {budget:g} s budget ran out"
+                )
+            )
+            skipped += 1
+            if progress is not None:
+                progress(k + 1, len(sigmas))
+            continue
         gmin, _ = gamma_min(aug, float(sg), g1, solver)
         if gmin is None:
             points.append(
@@ -237,6 +256,8 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                     d = design(ts, base.replace(gamma=gt, sigma=float(sg)))
                 except FteError as exc:
                     why = " ".join(str(exc).split())[:100]
+                    if "(46)" in why and refused_46 is None:
+                        refused_46 = dict(params, gamma=gt, sigma=float(sg), gamma1=g1)
                     continue
                 if d.certified:
                     point = FrontierPoint(
@@ -248,9 +269,21 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                         d.checks["max_abs_L1"],
                         ts_max=d.checks["ts_max"],
                     )
+                    if best is None or d.observer.alpha > best.observer.alpha:
+                        best = d
                     break
             points.append(point or FrontierPoint(float(sg), gmin, None, False, None, None, f"no gamma up to "
                                                  f"{LADDER[-1]:g} x {gmin:.3g} certifies: {why}"))  # fmt: skip
         if progress is not None:
             progress(k + 1, len(sigmas))
-    return points, {"gamma": params["gamma"], "gamma1": g1, "sigma": params["sigma"], "sigma_sup": sup}
+    points.sort(key=lambda pt: pt.sigma)
+    cause = None
+    if best is None and refused_46 is not None:
+        from . import diffusion
+
+        _, T = uio_gain(aug)
+        tol = diffusion.tolerance(aug, T, refused_46, solver)
+        if tol is not None and tol.blocks:
+            cause = f"{tol.text()} at sigma = {refused_46['sigma']:.3g}, gamma = {refused_46['gamma']:g}"
+    return points, {"gamma": params["gamma"], "gamma1": g1, "sigma": params["sigma"], "sigma_sup": sup,
+                    "best": best, "cause": cause, "skipped": skipped}  # fmt: skip

@@ -676,7 +676,8 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         l2 = aug.Mbar[0].shape[1]
         names = {aug.n + aug.nbar + l2: [("x", aug.n), ("e", aug.nbar)] + ([("d2", l2)] if l2 else [])}
         raise _fail(f"LMI (46) with cond(Pbar) <= {prob.kappa:g}", res0, solver,
-                    "raise sigma within what (45) allows", worst_block(prob.feas.lmis, names))  # fmt: skip
+                    "its -sigma P^2 block must dominate the observer's coupling with the loop and the diffusion",
+                    worst_block(prob.feas.lmis, names))  # fmt: skip
     n = aug.n
     decays = [
         -float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ K).real))
