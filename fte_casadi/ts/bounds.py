@@ -38,8 +38,8 @@ def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return (2.0 * out.reshape(k, -1) + 1e-12).T
 
 
-def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_SEARCHES):
-    """Minimum of sign*f over the box; returns (value, gap)."""
+def _extremum(FG, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_SEARCHES):
+    """Minimum of sign*f over the box (``FG``: ``x -> (f, grad f)``); returns (value, gap)."""
     v = sign * vals
     cell_lb = v - _local_lipschitz(grads, shape) @ hw
     order = np.argsort(v)
@@ -50,17 +50,9 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MA
     starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]  # noqa: C401
     searched = set()
 
-    FG = (
-        ca.Function("FG", F.sx_in(), [F.call(F.sx_in())[0], G.call(F.sx_in())[0]])
-        if F.is_a("SXFunction")
-        else None
-    )
-
     def fun(xx):
-        if FG is not None:
-            f, g = FG(xx)
-            return sign * float(f), sign * np.array(g).ravel()
-        return sign * float(F(xx)), sign * np.array(G(xx)).ravel()
+        f, g = FG(xx)
+        return sign * float(f), sign * np.array(g).ravel()
 
     top = set(order[:10])
     for k in starts:
@@ -80,6 +72,19 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MA
             gap = best - lb
             best = lb
     return sign * best, gap
+
+
+def _value_and_gradient(xs: ca.SX, e: ca.SX) -> ca.Function:
+    """``x -> (f, grad f)`` in one Function: the gradient's reverse sweep reuses the value's forward one, so a
+    grid costs one evaluation of both instead of two."""
+    return ca.Function("FG", [xs], [e, ca.gradient(e, xs)])
+
+
+def _on_grid(FG: ca.Function, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values (N,) and gradients (k, N) of ``FG`` at the columns of ``grid`` (k, N), one mapped call."""
+    k, N = grid.shape
+    f, g = FG.map(N)(grid)
+    return np.array(f).ravel(), np.array(g).reshape(k, N)
 
 
 def premise_bounds(
@@ -106,15 +111,13 @@ def premise_bounds(
     xs = ca.vertcat(*[x[j] for j in idx])
     others = [j for j in range(x.numel()) if j not in idx]
     e = ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others))) if others else expr
-    F = ca.Function("F", [xs], [e])
-    G = ca.Function("G", [xs], [ca.gradient(e, xs)])
+    FG = _value_and_gradient(xs, e)
     k = len(idx)
     per = max(3, int(round(_SAMPLES ** (1.0 / k))))
     lo_s, hi_s = lo[list(idx)], hi[list(idx)]
     axes = [np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)]
     grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(k, -1)
-    N = grid.shape[1]
-    vals = np.array(F.map(N)(grid)).ravel()
+    vals, grads = _on_grid(FG, grid)
     bad = ~np.isfinite(vals)
     if np.any(bad):
         pt = grid[:, np.flatnonzero(bad)[0]]
@@ -125,11 +128,10 @@ def premise_bounds(
             "not finite",
             where,
         )
-    grads = np.array(G.map(N)(grid)).reshape(k, N)
     grads[~np.isfinite(grads)] = 0.0
     hw = (hi_s - lo_s) / (per - 1) / 2
-    mn, gap1 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k, max_searches)
-    mx, gap2 = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
+    mn, gap1 = _extremum(FG, grid, vals, grads, lo_s, hi_s, hw, 1.0, (per,) * k, max_searches)
+    mx, gap2 = _extremum(FG, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
     if not (np.isfinite(mn) and np.isfinite(mx)):
         raise BoundsError(f"premise {name!r} is unbounded over the region; shrink the region", "unbounded")
     if mx - mn < 1e-12 and not allow_constant:
@@ -154,18 +156,15 @@ def certified_max(
     xs = ca.vertcat(*[x[j] for j in idx])
     others = [j for j in range(x.numel()) if j not in idx]
     e = ca.substitute(expr, ca.vertcat(*[x[j] for j in others]), ca.DM.zeros(len(others))) if others else expr
-    F = ca.Function("F", [xs], [e])
-    G = ca.Function("G", [xs], [ca.gradient(e, xs)])
+    FG = _value_and_gradient(xs, e)
     k = len(idx)
     per = max(3, int(round(samples ** (1.0 / k))))
     lo_s, hi_s = lo[list(idx)], hi[list(idx)]
     grid = np.array(
         np.meshgrid(*[np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)], indexing="ij")
     ).reshape(k, -1)
-    N = grid.shape[1]
-    vals = np.array(F.map(N)(grid)).ravel()
-    grads = np.array(G.map(N)(grid)).reshape(k, N)
+    vals, grads = _on_grid(FG, grid)
     grads[~np.isfinite(grads)] = 0.0
     hw = (hi_s - lo_s) / (per - 1) / 2
-    mx, _ = _extremum(F, G, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
+    mx, _ = _extremum(FG, grid, vals, grads, lo_s, hi_s, hw, -1.0, (per,) * k, max_searches)
     return float(mx)
