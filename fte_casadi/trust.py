@@ -87,7 +87,7 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
                 f"was made for, in {', '.join(PARTS[k] for k in changed)}. Design it again for this plant "
                 "(`fte design PLANT -o FILE`), or name the plant it was made for with --plant"
             )
-    ts = structure(plant)
+    ts = structure(plant, vertices=d.vertices)  # the cover it was designed with (None: the default)
     why = _models_differ(d, ts)
     if why:
         raise DesignFileError(

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from ..errors import DesignFileError
+from ..ts.cover import VERTEX_CHOICES
 
 __all__ = []  # public: docs/api.md
 
@@ -184,3 +185,7 @@ def check_document(doc: dict, source: str) -> None:
     for k in ("plant", "plant_spec", "variant", "solver"):
         if k in doc and not isinstance(doc[k], str):
             raise _fail(source, k, f"must be a string; got {doc[k]!r}")
+    if doc.get("vertices") is not None and doc["vertices"] not in VERTEX_CHOICES:
+        raise _fail(
+            source, "vertices", f"must be one of {', '.join(VERTEX_CHOICES)} or null; got {doc['vertices']!r}"
+        )

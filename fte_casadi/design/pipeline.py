@@ -185,6 +185,7 @@ def finish(
         x_ref=x_ref,
         scheduling=sched,  # the record keeps it as data (scheduling_ops) and, for older readers, serialised
         plant_hash=plant_fingerprint(plant),
+        vertices=ts.vertices,
         names={
             "states": list(plant.state_names),
             "inputs": list(plant.input_names),

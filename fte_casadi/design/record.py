@@ -143,6 +143,10 @@ class Design:
     #: until that ratio falls below it (:func:`fte_casadi.step.accommodation_gate`; no "release": 1, the
     #: memoryless gate); None: every estimate is compensated always (the paper)
     accommodation: dict | None = None
+    #: how the T-S model's premises were covered (``derive(vertices=...)``: grouped, box or fewest); loading
+    #: re-derives the plant's model with it. None: the derivation's default (a document older than the key, or a
+    #: model of operating points)
+    vertices: str | None = None
     #: how a loaded document read (not a document key): {"source", "schema", "certified"}, the last as the
     #: document wrote it (None: absent); empty for a design made in this process
     loaded: dict = field(default_factory=dict, compare=False, repr=False)
@@ -297,6 +301,8 @@ class Design:
         if self.scheduling_ops is not None:
             out["scheduling_ops"] = self.scheduling_ops
         out["schema"] = SCHEMA
+        if self.vertices is not None:
+            out["vertices"] = self.vertices
         if self.plant_hash:
             out["plant_hash"] = dict(self.plant_hash)
         if self.accommodation is not None:
@@ -429,6 +435,7 @@ class Design:
             scheduling=doc["scheduling"] if isinstance(doc["scheduling"], str) else "",
             scheduling_ops=ops,
             plant_hash=dict(doc.get("plant_hash") or {}),
+            vertices=doc.get("vertices"),
             accommodation=_accommodation(source, doc.get("accommodation"), int(dims.lf)),
             loaded={"source": source, "schema": int(doc.get("schema", 1)), "certified": doc.get("certified")},
             names=dict(doc.get("names", {})),

@@ -48,18 +48,19 @@ def structure(plant: Plant, *, seed: int = 0, vertices: str | None = None) -> TS
     notes: tuple[str, ...] = ()
     groups = ()
     if auto:
+        vertices = vertices or "grouped"
         form = premise_form(plant, seed=seed)
         premises, models, premise_fn, membership_fn, groups = sector_local_models(
-            form.plant, form.bounds, vertices or "grouped", seed
+            form.plant, form.bounds, vertices, seed
         )
         kind = "sector_auto" if premises else "linear"
         notes = form.notes + group_notes(premises, groups)
     elif plant.method == "sector":
-        premises, models, premise_fn, membership_fn, groups = sector_local_models(
-            plant, None, vertices or "box", seed
-        )
+        vertices = vertices or "box"
+        premises, models, premise_fn, membership_fn, groups = sector_local_models(plant, None, vertices, seed)
         notes = group_notes(premises, groups) if len(groups) < len(premises) else ()
     else:
+        vertices = None  # operating points: no premise to cover
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
     _finite_models(plant, models)
     return TSModel(
@@ -74,6 +75,7 @@ def structure(plant: Plant, *, seed: int = 0, vertices: str | None = None) -> TS
         Fidelity(np.nan, 0, np.nan, np.nan, np.nan, np.nan, 0, 0.0),
         notes,
         groups,
+        vertices,
     )
 
 

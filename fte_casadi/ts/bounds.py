@@ -40,8 +40,8 @@ def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return (2.0 * out.reshape(k, -1) + 1e-12).T
 
 
-def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_SEARCHES):
-    """Minimum of sign*f over the box; returns (value, gap)."""
+def _extremum(FG, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_SEARCHES):
+    """Minimum of sign*f over the box (``FG``: ``x -> (f, grad f)``); returns (value, gap)."""
     v = sign * vals
     cell_lb = v - _local_lipschitz(grads, shape) @ hw
     order = np.argsort(v)
@@ -52,17 +52,9 @@ def _extremum(F, G, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MA
     starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]  # noqa: C401
     searched = set()
 
-    FG = (
-        ca.Function("FG", F.sx_in(), [F.call(F.sx_in())[0], G.call(F.sx_in())[0]])
-        if F.is_a("SXFunction")
-        else None
-    )
-
     def fun(xx):
-        if FG is not None:
-            f, g = FG(xx)
-            return sign * float(f), sign * np.array(g).ravel()
-        return sign * float(F(xx)), sign * np.array(G(xx)).ravel()
+        f, g = FG(xx)
+        return sign * float(f), sign * np.array(g).ravel()
 
     top = set(order[:10])
     for k in starts:
@@ -90,13 +82,15 @@ def _states_used(expr: ca.SX, x: ca.SX) -> tuple[int, ...]:
 
 
 class _Sampled(NamedTuple):
-    """``expr`` as a function of the states it uses (``idx``), and its values on a grid of about
+    """``expr`` as a function of the states it uses (``idx``), and its values and gradients on a grid of about
     ``samples`` points over their box: what :func:`_extremum` searches."""
 
-    F: ca.Function
-    G: ca.Function  # its gradient
+    FG: (
+        ca.Function
+    )  # x -> (f, grad f) in one Function: the gradient's reverse sweep reuses the value's forward one
     points: np.ndarray  # (k, N): the grid, one column a point
     vals: np.ndarray  # (N,)
+    grads: np.ndarray  # (k, N)
     lo: np.ndarray
     hi: np.ndarray
     per: int  # grid points per axis
@@ -110,23 +104,22 @@ class _Sampled(NamedTuple):
             if others
             else expr
         )
-        F = ca.Function("F", [xs], [e])
-        G = ca.Function("G", [xs], [ca.gradient(e, xs)])
+        FG = ca.Function("FG", [xs], [e, ca.gradient(e, xs)])
         k = len(idx)
         per = max(3, int(round(samples ** (1.0 / k))))
         lo_s, hi_s = lo[list(idx)], hi[list(idx)]
         axes = [np.linspace(a, b, per) for a, b in zip(lo_s, hi_s)]
         points = np.array(np.meshgrid(*axes, indexing="ij")).reshape(k, -1)
-        vals = np.array(F.map(points.shape[1])(points)).ravel()
-        return cls(F, G, points, vals, lo_s, hi_s, per)
+        f, g = FG.map(points.shape[1])(points)  # one mapped call for both
+        return cls(FG, points, np.array(f).ravel(), np.array(g).reshape(k, -1), lo_s, hi_s, per)
 
     def extrema(self, signs: tuple[float, ...], max_searches: int) -> list[tuple[float, float]]:
         """``(value, gap)`` of :func:`_extremum` for each sign (1: the minimum, -1: the maximum)."""
-        k, N = self.points.shape
-        grads = np.array(self.G.map(N)(self.points)).reshape(k, N)
+        k = self.points.shape[0]
+        grads = self.grads.copy()
         grads[~np.isfinite(grads)] = 0.0
         hw = (self.hi - self.lo) / (self.per - 1) / 2
-        return [_extremum(self.F, self.G, self.points, self.vals, grads, self.lo, self.hi, hw, sign, (self.per,) * k,
+        return [_extremum(self.FG, self.points, self.vals, grads, self.lo, self.hi, hw, sign, (self.per,) * k,
                           max_searches) for sign in signs]  # fmt: skip
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 from scipy.integrate import LSODA, RK45
 
@@ -86,8 +87,10 @@ def fidelity(
     lo, hi = plant.region_lo, plant.region_hi
     start = plant.x0 + np.where(np.isnan(lo), 0.0, 0.2 * (np.nan_to_num(hi) - np.nan_to_num(lo)))
     start = np.where(np.isnan(lo), start, np.clip(start, np.nan_to_num(lo), np.nan_to_num(hi)))
+    xs = ca.SX.sym("x", plant.n)
+    f_open = ca.Function("open_loop", [xs], [f1(xs, uc, zd, zf)])  # one argument: half the cost of a call
     X, T, stop = _trajectory(
-        lambda t, xx: np.array(f1(xx, uc, zd, zf)).ravel(),
+        lambda t, xx: f_open(xx).full().ravel(),
         start,
         horizon,
         points,

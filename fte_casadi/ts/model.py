@@ -169,6 +169,9 @@ class TSModel:
     notes: tuple[str, ...] = ()
     #: the groups of premises and the polytope covering each (:mod:`.cover`); empty without premises
     groups: tuple = ()
+    #: how the premises were covered (:data:`~fte_casadi.ts.cover.VERTEX_CHOICES`: ``derive(vertices=...)``,
+    #: or the default it resolved to); None for a model of operating points, which has no premises to cover
+    vertices: str | None = None
 
     @property
     def rule_premises(self) -> np.ndarray:
@@ -259,6 +262,7 @@ class TSModel:
             "Df": self.Df.tolist(),
             "fidelity": self.fidelity.to_dict(),
             "premises_found_automatically": self.kind == "sector_auto",
+            "vertices": self.vertices,
             **self._groups_dict(),
             "notes": list(self.notes),
             "states": list(self.plant.state_names),

@@ -32,8 +32,9 @@ TUNED_DEFAULTS = ("alpha", "kappa", "boundary_layer", "bound_weight")
 
 
 @functools.lru_cache(maxsize=4)
-def _plant_ts(blob_hash: str, blob: bytes):
-    """The plant and its T-S model, once per process and plant; the knobs of an earlier tune are
+def _plant_ts(blob_hash: str, blob: bytes, vertices: str | None = None):
+    """The plant and its T-S model (its premises covered as the base design's, ``vertices``), once per process
+    and plant; the knobs of an earlier tune are
     removed from the plant's design defaults (a candidate's knobs set them: ``alpha`` as a fraction of
     the rate the design takes by default at the candidate's other knobs, not the base's fixed rate)."""
     import dataclasses
@@ -48,7 +49,7 @@ def _plant_ts(blob_hash: str, blob: bytes):
     if any(k in defaults for k in TUNED_DEFAULTS):
         kept = {k: v for k, v in defaults.items() if k not in TUNED_DEFAULTS}
         plant = dataclasses.replace(plant, design_defaults=kept)
-    return plant, derive(plant)
+    return plant, derive(plant, vertices=vertices)
 
 
 def default_alpha(task: dict) -> float | None:
@@ -57,7 +58,7 @@ def default_alpha(task: dict) -> float | None:
     from ..design import design as run_design
 
     blob = task["plant"]
-    _, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob)
+    _, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob, task.get("vertices"))
     try:
         d = run_design(ts, variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
                        initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
@@ -132,7 +133,7 @@ def evaluate(task: dict) -> dict:
     from ..sim import Scenario, simulate
 
     blob = task["plant"]
-    plant, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob)
+    plant, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob, task.get("vertices"))
     scenario = Scenario.from_dict(task["scenario"])
     knobs = dict(task["knobs"])
     try:

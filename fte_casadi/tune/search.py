@@ -334,7 +334,7 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
         "plant": plant_bytes(plant), "scenario": scenario.to_dict(), "variant": base_design.variant,
         "solver": base_design.solver, "sample_time": base_design.observer.sample_time or scenario.dt,
         "initial_state": None if base_design.x0 is None else [float(v) for v in base_design.x0],
-        "plant_spec": base_design.plant_spec, "paths": paths, "seed": seed,
+        "plant_spec": base_design.plant_spec, "paths": paths, "seed": seed, "vertices": base_design.vertices,
     }  # fmt: skip
     run, close = _runner(scheduler)
     level = optuna.logging.get_verbosity()
@@ -584,7 +584,7 @@ def _sigma_sup(plant, base_design) -> float | None:
     from ..ts import derive
 
     try:
-        ts = derive(plant)
+        ts = derive(plant, vertices=base_design.vertices)
         aug = augment(ts.local_models, ts.C, ts.Df)
         return sigma_max(aug, None, float(base_design.params.gamma1), base_design.solver)[0]
     except FteError:

@@ -32,20 +32,22 @@ def _blocks(aug: Augmented) -> tuple[int, int, int, int]:
     return aug.n, aug.n, aug.p, aug.ld
 
 
-def _units(aug: Augmented) -> tuple[float, float]:
-    """``(tau, sy)`` in which the bounds are posed: the plant's own time and output size when its X is small.
+def _units(aug: Augmented) -> tuple[float, float, float]:
+    """``(tau, sy, xmin)``: the plant's own time and output size, in which the bounds are posed, and the margin
+    ``X~ >= xmin I`` on the X of those units.
 
-    The bounds fix the scale of X by ``X >= MARGIN I``. (45) of a plant in the time ``t / tau`` with outputs
-    ``y / sy`` is the same LMI at ``X~ = tau sy^2 X`` (:func:`~fte_casadi.design.augment.units_scaled`); a slow
-    plant measured in small units (``tau sy^2 > 1``, e.g. minutes and mm: 1e8) needs an X so small that the
-    absolute margin excludes every one, so there the bounds are posed in its own units, where the margin is
-    relative to them. Elsewhere (``tau sy^2 <= 1``) the absolute margin is the weaker one and is kept: the
-    data are used as they are."""
+    (45) of a plant in the time ``t / tau`` with outputs ``y / sy`` is the same LMI at ``X~ = tau sy^2 X``
+    (:func:`~fte_casadi.design.augment.units_scaled`), so the bounds are always posed there, in numbers of order
+    one: a fast plant left in its own units (the PMSM's rates of 1e3/s, ``tau = 2^-10``) made the conic solver
+    stop inaccurate, at a gamma_min that moved with the order of the states. The margin is the weaker of two:
+    ``X >= MARGIN I`` in the plant's units (``xmin = MARGIN tau sy^2``), the same problem as the data used as
+    they are, or ``X~ >= MARGIN I`` where that absolute margin would exclude every X (``tau sy^2 > 1``, a slow
+    plant measured in small units, e.g. minutes and mm: 1e8)."""
     tau, sy = time_scale(aug), output_scale(aug)
-    return (tau, sy) if tau * sy**2 > 1.0 else (1.0, 1.0)
+    return tau, sy, MARGIN * min(1.0, tau * sy**2)
 
 
-def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: float):
+def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: float, xmin: float = MARGIN):
     """(45) for every rule with one unknown scalar: ``g = gamma^2`` (sigma given) or ``sigma`` (gamma given).
 
     ``gamma=None`` with ``sigma=None`` means sigma unknown and gamma infinite (d block dropped).
@@ -81,7 +83,7 @@ def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: f
                        kron=("X", [(U[:, keep], V[:, keep]) for U, V in lmi45_kron(aug, i)]))
             for i in range(aug.r)]  # fmt: skip
     eye = np.eye(n)
-    lmis.append(affine_lmi("X > 0", layout, lambda X, Y, q: MARGIN * eye - X, support=layout.support("X"),
+    lmis.append(affine_lmi("X > 0", layout, lambda X, Y, q: xmin * eye - X, support=layout.support("X"),
                            kron=("X", [(eye, -0.5 * eye)])))  # fmt: skip
     c = np.zeros(layout.size)
     c[layout.index("q")] = 1.0 if sigma is not None else -1.0
@@ -114,11 +116,11 @@ def _memo(fn):
 def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple[float | None, str]:
     """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status.
 
-    Posed in the plant's own time and output size where that matters (:func:`_units`), so that a plant in
-    minutes and millimetres is solved in numbers of order one."""
-    tau, sy = _units(aug)
+    Posed in the plant's own time and output size (:func:`_units`), so that a plant in minutes and millimetres,
+    or one whose rates are 1e3/s, is solved in numbers of order one."""
+    tau, sy, xmin = _units(aug)
     p = units_params({"sigma": sigma, "gamma": None, "gamma1": gamma1}, tau, sy)
-    layout, lmis, c = _problem(units_scaled(aug, tau, sy), p["sigma"], None, p["gamma1"])
+    layout, lmis, c = _problem(units_scaled(aug, tau, sy), p["sigma"], None, p["gamma1"], xmin)
     res = ConicProblem(layout, lmis, c).solve(solver)
     if res.v is None or res.status not in SOLVED:
         return None, res.status
@@ -131,9 +133,9 @@ def sigma_max(aug: Augmented, gamma: float | None, gamma1: float, solver: str) -
     """The largest sigma with (45) feasible at ``gamma`` (None: gamma infinite), and the status.
 
     None when (45) is infeasible even at sigma -> 0 (then no sigma helps: gamma must rise)."""
-    tau, sy = _units(aug)
+    tau, sy, xmin = _units(aug)
     p = units_params({"sigma": 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy)
-    layout, lmis, c = _problem(units_scaled(aug, tau, sy), None, p["gamma"], p["gamma1"])
+    layout, lmis, c = _problem(units_scaled(aug, tau, sy), None, p["gamma"], p["gamma1"], xmin)
     res = ConicProblem(layout, lmis, c).solve(solver)
     if res.v is None or res.status not in SOLVED:
         return None, res.status
