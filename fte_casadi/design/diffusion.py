@@ -19,7 +19,7 @@ from ..errors import FteError
 from .augment import Augmented
 from .core import conditioned
 
-__all__ = ["Tolerance", "tolerance", "scaled", "scaled_model"]
+__all__ = ["tolerance"]
 
 
 @dataclasses.dataclass(frozen=True)

@@ -19,7 +19,7 @@ from .core.conditioned import KAPPA
 from .options import DesignOptions
 from .record import Design
 
-__all__ = ["remedies"]
+__all__ = []
 
 #: the factors tried on kappa, and on the sample time when the decay rate was lowered for it
 KAPPA_FACTORS = (1e2, 1e4)
