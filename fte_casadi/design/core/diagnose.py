@@ -32,19 +32,21 @@ def _blocks(aug: Augmented) -> tuple[int, int, int, int]:
     return aug.n, aug.n, aug.p, aug.ld
 
 
-def _units(aug: Augmented) -> tuple[float, float, float]:
-    """``(tau, sy, xmin)``: the plant's own time and output size, in which the bounds are posed, and the margin
-    ``X~ >= xmin I`` on the X of those units.
+def _units(aug: Augmented) -> list[tuple[float, float, float]]:
+    """The posings ``(tau, sy, xmin)`` the bounds are tried in, in order: the plant's own time and output size,
+    with the margin ``X~ >= xmin I`` on the X of those units, then the data as they are.
 
     (45) of a plant in the time ``t / tau`` with outputs ``y / sy`` is the same LMI at ``X~ = tau sy^2 X``
-    (:func:`~fte_casadi.design.augment.units_scaled`), so the bounds are always posed there, in numbers of order
-    one: a fast plant left in its own units (the PMSM's rates of 1e3/s, ``tau = 2^-10``) made the conic solver
-    stop inaccurate, at a gamma_min that moved with the order of the states. The margin is the weaker of two:
-    ``X >= MARGIN I`` in the plant's units (``xmin = MARGIN tau sy^2``), the same problem as the data used as
-    they are, or ``X~ >= MARGIN I`` where that absolute margin would exclude every X (``tau sy^2 > 1``, a slow
-    plant measured in small units, e.g. minutes and mm: 1e8)."""
+    (:func:`~fte_casadi.design.augment.units_scaled`). In its own units a fast plant's numbers are of order one:
+    left as it is, the PMSM's rates of 1e3/s made the conic solver stop inaccurate, at a gamma_min that moved
+    with the order of the states. The margin is the weaker of two: ``X >= MARGIN I`` in the plant's units
+    (``xmin = MARGIN tau sy^2``), the same problem as the data used as they are, or ``X~ >= MARGIN I`` where that
+    absolute margin would exclude every X (``tau sy^2 > 1``, a slow plant measured in small units, e.g. minutes
+    and mm: 1e8). Neither posing suits every plant (a flexible joint's fast motor and slow link fail Clarabel in
+    its own units and solve as given), so :func:`_bound` tries both."""
     tau, sy = time_scale(aug), output_scale(aug)
-    return tau, sy, MARGIN * min(1.0, tau * sy**2)
+    own = (tau, sy, MARGIN * min(1.0, tau * sy**2))
+    return [own] if tau * sy**2 > 1.0 or (tau == 1.0 and sy == 1.0) else [own, (1.0, 1.0, MARGIN)]
 
 
 def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: float, xmin: float = MARGIN):
@@ -112,20 +114,39 @@ def _memo(fn):
     return wrapper
 
 
+def _bound(aug: Augmented, sigma, gamma, gamma1: float, solver: str, value) -> tuple[float | None, str]:
+    """Solve the bound problem of :func:`_problem` in each posing of :func:`_units` and map its answer back with
+    ``value(q, tau, sy, params)``: the first answer a solver calls optimal, else the most conservative of the
+    inaccurate ones (``value`` is oriented so that the smallest is: an inaccurate bound can be off either way),
+    else ``(None, status of the first)``. A heavy problem (many PSD rows) takes its first answer."""
+    inaccurate, first = [], None
+    for tau, sy, xmin in _units(aug):
+        p = units_params(
+            {"sigma": sigma if sigma is not None else 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy
+        )
+        layout, lmis, c = _problem(units_scaled(aug, tau, sy), p["sigma"] if sigma is not None else None,
+                                   p["gamma"], p["gamma1"], xmin)  # fmt: skip
+        prob = ConicProblem(layout, lmis, c)
+        res = prob.solve(solver)
+        first = first or res.status
+        if res.v is None or res.status not in SOLVED:
+            continue
+        v = value(layout.unpack(res.v)["q"], tau, sy, p)
+        if res.status == "optimal" or prob.heavy:  # a heavy problem's second solve costs more than it tells
+            return v, res.status
+        inaccurate.append((v, res.status))
+    return min(inaccurate, key=lambda a: a[0]) if inaccurate else (None, first)
+
+
 @_memo
 def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple[float | None, str]:
     """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status.
 
-    Posed in the plant's own time and output size (:func:`_units`), so that a plant in minutes and millimetres,
-    or one whose rates are 1e3/s, is solved in numbers of order one."""
-    tau, sy, xmin = _units(aug)
-    p = units_params({"sigma": sigma, "gamma": None, "gamma1": gamma1}, tau, sy)
-    layout, lmis, c = _problem(units_scaled(aug, tau, sy), p["sigma"], None, p["gamma1"], xmin)
-    res = ConicProblem(layout, lmis, c).solve(solver)
-    if res.v is None or res.status not in SOLVED:
-        return None, res.status
-    g2 = layout.unpack(res.v)["q"]
-    return float(sy * math.sqrt(max(g2, p["gamma1"] ** 2))), res.status
+    Posed in the plant's own time and output size, and as given where that fails (:func:`_units`), so that a plant
+    in minutes and millimetres, or one whose rates are 1e3/s, is solved in numbers of order one."""
+    g, status = _bound(aug, sigma, None, gamma1, solver,
+                       lambda g2, tau, sy, p: -sy * math.sqrt(max(g2, p["gamma1"] ** 2)))  # fmt: skip
+    return (None if g is None else float(-g)), status
 
 
 @_memo
@@ -133,16 +154,9 @@ def sigma_max(aug: Augmented, gamma: float | None, gamma1: float, solver: str) -
     """The largest sigma with (45) feasible at ``gamma`` (None: gamma infinite), and the status.
 
     None when (45) is infeasible even at sigma -> 0 (then no sigma helps: gamma must rise)."""
-    tau, sy, xmin = _units(aug)
-    p = units_params({"sigma": 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy)
-    layout, lmis, c = _problem(units_scaled(aug, tau, sy), None, p["gamma"], p["gamma1"], xmin)
-    res = ConicProblem(layout, lmis, c).solve(solver)
-    if res.v is None or res.status not in SOLVED:
-        return None, res.status
-    s = (
-        layout.unpack(res.v)["q"] / (tau * sy) ** 2
-    )  # back to the plant's units (gamma sy, sigma / (tau sy)^2)
-    return (float(s) if s > 0 else None), res.status
+    # back to the plant's units (gamma sy, sigma / (tau sy)^2)
+    s, status = _bound(aug, None, gamma, gamma1, solver, lambda q, tau, sy, p: q / (tau * sy) ** 2)
+    return (float(s) if s is not None and s > 0 else None), status
 
 
 @dataclass(frozen=True)
