@@ -145,3 +145,18 @@ def test_a_certified_design_too_slow_for_its_windows_is_flagged_with_what_was_tr
         )
         == []
     )
+
+
+def test_explore_returns_the_best_certified_design_or_the_cause_within_its_budget(calm, noisy):
+    from fte_casadi.design import explore
+
+    points, info = explore(calm, count=3, budget=None)
+    certified = [pt for pt in points if pt.certified]
+    assert certified and info["best"] is not None and info["best"].certified and info["cause"] is None
+    assert info["best"].observer.alpha == pytest.approx(max(pt.alpha for pt in certified), rel=1e-12)
+    assert [pt.sigma for pt in points] == sorted(pt.sigma for pt in points)
+    points, info = explore(noisy, count=3, budget=None)
+    assert not any(pt.certified for pt in points) and info["best"] is None
+    assert "tolerates" in info["cause"] and "diffusion is the cause" in info["cause"]
+    points, info = explore(calm, count=3, budget=0.0)  # nothing fits in no time: every sigma said not tried
+    assert info["skipped"] == 3 and all("budget ran out" in pt.note for pt in points)
