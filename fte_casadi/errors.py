@@ -60,7 +60,7 @@ class SolverFailedError(FteError, RuntimeError):
 
 
 class CentringError(ArithmeticError):
-    """The Newton centring of :mod:`fte_casadi.design.core.sdp` could not start (no strictly feasible
+    """The Newton centring of :mod:`fte_casadi.design.core._sdp` could not start (no strictly feasible
     point) or did not converge. Internal: the design catches it and reports a
     :class:`SolverFailedError` or a note, so it never reaches a user."""
 

@@ -18,7 +18,7 @@ measurement ``y`` and observer state ``z``::
     z+      = z + Ts sum_i h_i (R_i z + T Bbar_i u + (L_i1 + L_i2) y + Ls us + T abar_i)
 
 ``abar_i = [a_i; 0; 0]`` is the affine offset of a linearised local model (zero for sector
-models; see :mod:`fte_casadi.ts.linearise`). The sum over rules is expanded (one product per
+models; see :mod:`fte_casadi.ts._linearise`). The sum over rules is expanded (one product per
 rule and signal), not blended into a matrix per sample: that is fewer operations for the
 small rule counts of T-S models and what a hand-written loop would do.
 """
@@ -28,7 +28,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .design.record import Design
+from .design._record import Design
 from .errors import ParameterError
 
 __all__ = ["step_function", "saturate", "STEP_INPUTS", "STEP_OUTPUTS"]

@@ -3,8 +3,8 @@
 A document is data. Loading one never runs code it names or holds: its ``plant_spec`` is imported
 only when it is a built-in plant's name or when the user names the same plant (``--plant``), and its
 scheduling map is rebuilt from that plant, or else replayed from the document's arithmetic tape
-(:mod:`fte_casadi.model.tape`), never deserialised. Then the design is re-certified at its own numbers
-(:func:`fte_casadi.design.recertify.recertify`) and, when the plant is at hand, checked against it: the
+(:mod:`fte_casadi.model._tape`), never deserialised. Then the design is re-certified at its own numbers
+(:func:`fte_casadi.design._recertify.recertify`) and, when the plant is at hand, checked against it: the
 fingerprint of its equations (``plant_hash``) and the local models of its T-S model.
 """
 
@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .design.recertify import recertify
-from .design.record import Design
+from .design._recertify import recertify
+from .design._record import Design
 from .errors import DesignFileError
 from .model import Plant
 
@@ -39,7 +39,7 @@ def plant_for(d: Design, given: str | None) -> tuple[Plant | None, str | None]:
     a built-in name, else None (a document's ``file.py:function`` or ``module:function`` is not imported on
     the document's word)."""
     from .plants import BUILTIN
-    from .plants.loader import load_plant
+    from .plants._loader import load_plant
 
     if given is not None:
         return load_plant(given), given
@@ -73,8 +73,8 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
     Raises :class:`DesignFileError` naming what changed when the plant's equations are not those the design
     was made for (its fingerprint, or, for a document without one, its T-S model).
     """
-    from .model.fingerprint import PARTS, changed_parts
-    from .model.tape import write_tape
+    from .model._fingerprint import PARTS, changed_parts
+    from .model._tape import write_tape
     from .ts import scheduling_from_measurements, structure
 
     src = d.loaded.get("source", "the design")

@@ -1,8 +1,8 @@
 """The verdicts on a metrics document (docs/interface.md), in one place.
 
 ``fte simulate`` warns by them, the report marks by them, ``fte tune`` chooses by them and
-:func:`fte_casadi.design.limits.explain_metrics` explains the windows and faults they single out.
-A module of its own (as :mod:`fte_casadi.rounding`), so that every step of the package can read them
+:func:`fte_casadi.design._limits.explain_metrics` explains the windows and faults they single out.
+A module of its own (as :mod:`fte_casadi._rounding`), so that every step of the package can read them
 without importing the simulator. Every verdict is judged on the figures measured on the true plant.
 """
 

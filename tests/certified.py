@@ -7,7 +7,7 @@ import json
 import re
 from pathlib import Path
 
-#: the first line of ``fte design``'s summary (fte_casadi/design/summary.py)
+#: the first line of ``fte design``'s summary (fte_casadi/design/_summary.py)
 VERDICT = re.compile(r"^design of .+, solver \S+, (NOT CERTIFIED|CERTIFIED)$", re.MULTILINE)
 
 

@@ -1,7 +1,7 @@
 """Plants of the tests of the automatic sector method (issue #10), written as a user would write them.
 
 ``manipulator_plain`` is the paper's manipulator exactly as (82) prints it (plain ``sin(theta_l)``,
-no premise), with the numbers of fte_casadi/plants/manipulator.py; ``linear`` has no nonlinear term
+no premise), with the numbers of fte_casadi/plants/_manipulator.py; ``linear`` has no nonlinear term
 (the example pendulum linearised).
 Each can be given to the CLI as ``tests/plant_auto.py:manipulator_plain``; ``too_few_outputs`` fails assumption (2).
 """
@@ -9,7 +9,7 @@ Each can be given to the CLI as ``tests/plant_auto.py:manipulator_plain``; ``too
 import casadi as ca
 
 from fte_casadi import PlantBuilder
-from fte_casadi.plants.manipulator import ALPHA_D, PARAMS, W
+from fte_casadi.plants._manipulator import ALPHA_D, PARAMS, W
 
 
 def manipulator_plain():

@@ -13,15 +13,15 @@ import numpy as np
 import pytest
 from tolerances import C_DOUBLE
 
-from fte_casadi.codegen import build
-from fte_casadi.codegen.ctypes_step import CStep
-from fte_casadi.codegen.generate import generate_c
-from fte_casadi.design.record import Design
+from fte_casadi.codegen import _build as build
+from fte_casadi.codegen._ctypes_step import CStep
+from fte_casadi.codegen._generate import generate_c
+from fte_casadi.design._record import Design
 from fte_casadi.errors import DesignFileError
 from fte_casadi.plants import SCENARIOS
-from fte_casadi.plants.loader import load_plant, load_scenario
+from fte_casadi.plants._loader import load_plant, load_scenario
 from fte_casadi.sim import simulate
-from fte_casadi.sim.accommodate import accommodated
+from fte_casadi.sim._accommodate import accommodated
 from fte_casadi.step import accommodation_gate, step_function
 
 ROOT = Path(__file__).resolve().parents[1]

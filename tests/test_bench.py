@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from fte_casadi.bench.mc import bench
+from fte_casadi.bench._mc import bench
 from fte_casadi.plants import manipulator
-from fte_casadi.plants.manipulator import scenario
+from fte_casadi.plants._manipulator import scenario
 
 
 def test_monte_carlo_bench_smoke(lqr_designs):
@@ -54,7 +54,7 @@ def test_monte_carlo_bench_smoke(lqr_designs):
 
 
 def test_layers_do_not_import_the_plants():
-    """sim/ and codegen/ sit below the plants: only bench/, report.py and cli/ may import them."""
+    """sim/ and codegen/ sit below the plants: only bench/, _report.py and cli/ may import them."""
     import pathlib
     import re
 
@@ -65,7 +65,7 @@ def test_layers_do_not_import_the_plants():
 
 
 def test_leaving_out_the_libm_calls_changes_only_those_lines():
-    from fte_casadi.bench.anatomy import _no_libm
+    from fte_casadi.bench._anatomy import _no_libm
 
     src = "  for (l = 0; l < V; ++l) w3[l] = sin(w1[l]);\n  w4 = w3 * w2;\n  dw[l] = fte_ndtri_tail(p[l]);"
     assert (
@@ -88,7 +88,7 @@ def test_the_benchmarks_ship_with_the_package():
     assert "fte_casadi.bench" in pkgs and not (root / "benchmarks").exists()
     assert pathlib.Path(bench.__file__).resolve() == root / "fte_casadi" / "bench" / "__init__.py"
     assert callable(bench.run_all) and callable(bench.summary_lines)
-    from fte_casadi.cli.bench import BENCH_PARTS
+    from fte_casadi.cli._bench import BENCH_PARTS
 
     assert BENCH_PARTS == bench.PARTS
 
@@ -116,10 +116,10 @@ def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeyp
     import pytest
 
     import fte_casadi.bench
+    from fte_casadi._report import _c_section
     from fte_casadi.codegen import find_compiler
-    from fte_casadi.codegen.generate import memory_report
+    from fte_casadi.codegen._generate import memory_report
     from fte_casadi.errors import MissingDependencyError
-    from fte_casadi.report import _c_section
 
     if find_compiler() is None:
         pytest.skip("no C compiler")

@@ -10,7 +10,7 @@ is regenerated from it into a temporary folder. Its CasADi part names the CasADi
 - with another CasADi (a new release orders or names its work arrays differently), the committed and
   the fresh C are both compiled and run on the same measurements, and must agree to round-off.
 
-On a failure, run ``python -c "from fte_casadi.generated import regenerate_builtin; regenerate_builtin('generated')"``
+On a failure, run ``python -c "from fte_casadi._generated import regenerate_builtin; regenerate_builtin('generated')"``
 (or ``fte codegen --builtin``) and commit the result.
 """
 
@@ -23,12 +23,12 @@ import casadi
 import numpy as np
 import pytest
 
-from fte_casadi.codegen import build
-from fte_casadi.codegen.ctypes_step import CStep
-from fte_casadi.codegen.generate import BUILTIN_DIRS, c_name, generate_c, output_files
+from fte_casadi.codegen import _build as build
+from fte_casadi.codegen._ctypes_step import CStep
+from fte_casadi.codegen._generate import BUILTIN_DIRS, c_name, generate_c, output_files
 from fte_casadi.design import augment
-from fte_casadi.design.core.certify import certificate, failures
-from fte_casadi.design.record import Design
+from fte_casadi.design._record import Design
+from fte_casadi.design.core._certify import certificate, failures
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"
 #: the line of a header that names the fte_casadi version that wrote it

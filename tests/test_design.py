@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from fte_casadi.design import Design, augment, check_assumptions, design, enforce, invariant_zeros, uio_gain
-from fte_casadi.design.core.lmis import lmi45, lmi46, lmi55, lmi64
+from fte_casadi.design.core._lmis import lmi45, lmi46, lmi55, lmi64
 from fte_casadi.errors import AssumptionError, InfeasibleDesignError, ParameterError
 from fte_casadi.model import PlantBuilder
 from fte_casadi.plants import manipulator, three_tank
@@ -390,8 +390,8 @@ def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
 @pytest.mark.slow
 def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeypatch):
     """Issue #17: a solver's numerical failure is retried with the other solver before it is reported."""
-    from fte_casadi.design.api import design as run_design
-    from fte_casadi.design.core import conditioned
+    from fte_casadi.design._api import design as run_design
+    from fte_casadi.design.core import _conditioned as conditioned
 
     real_step3 = conditioned.step3
     failing = {"CLARABEL"}
@@ -417,8 +417,8 @@ def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(m
     from click.testing import CliRunner
 
     from fte_casadi.cli import main
-    from fte_casadi.cli.common import EXIT_FAILED
-    from fte_casadi.design.core import conditioned
+    from fte_casadi.cli._common import EXIT_FAILED
+    from fte_casadi.design.core import _conditioned as conditioned
     from fte_casadi.errors import FteError, SolverFailedError
 
     assert issubclass(SolverFailedError, FteError)
@@ -437,8 +437,8 @@ def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(m
 
 def test_a_numerical_failure_names_the_worst_scaled_block():
     """Issue #17: the report of a solver's numerical failure says which LMI block was badly scaled, and by how much."""
-    from fte_casadi.design.core.conditioned import _fail, worst_block
-    from fte_casadi.design.core.sdp import AffineLMI, SolveResult
+    from fte_casadi.design.core._conditioned import _fail, worst_block
+    from fte_casadi.design.core._sdp import AffineLMI, SolveResult
 
     F0 = np.diag([-1.0, -2.0, -1e-6, -3e3])
     F = np.zeros((2, 4, 4))

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from fte_casadi.design import design
-from fte_casadi.design.core.bounds import bound_value
-from fte_casadi.design.record import Design
-from fte_casadi.plants.loader import load_plant, load_scenario
+from fte_casadi.design._record import Design
+from fte_casadi.design.core._bounds import bound_value
+from fte_casadi.plants._loader import load_plant, load_scenario
 from fte_casadi.sim import Sinusoid, UniformNoise, simulate
 from fte_casadi.ts import derive
 
@@ -96,7 +96,7 @@ def test_the_analysis_from_step_5s_point_agrees_with_the_conic_solver():
     """With the bound in the objective, the certified bound (common P) is computed by the barrier method in
     numpy from step 5's block-diagonal point; Clarabel's optimum of the same problem agrees with it to the
     centring's gap, and the block-diagonal point itself is a (looser) certificate."""
-    from fte_casadi.design.core import bounds
+    from fte_casadi.design.core import _bounds as bounds
 
     d = design(derive(load_plant(SMALL)), bound_weight=1.0)
     verts, Cz = bounds._vertices(d)
@@ -122,7 +122,7 @@ def test_a_bad_bound_weight_is_refused_with_its_name():
 def test_one_vertex_per_rule_with_a_common_gain_and_a_size_limit_said(monkeypatch):
     """With one common gain the r^2 rule pairs are r distinct vertices; beyond the size limit the bound is
     not computed and the document says why (instead of a conic solve that grows without bound)."""
-    from fte_casadi.design.core import bounds
+    from fte_casadi.design.core import _bounds as bounds
 
     d = Design.load(Path(__file__).resolve().parents[1] / "generated" / "quadruple_tank" / "design.json")
     verts, Cz = bounds._vertices(d)
@@ -138,7 +138,7 @@ def test_the_linear_and_the_schur_form_give_the_same_bound():
     form with a -P block (the same set for P > 0) and several times cheaper. Both forms' points pass the
     numpy check of the linear form, and their optimal sums of g agree to the solver's accuracy; the Schur
     form's point also satisfies the Schur-form matrix (the identity the linear form rests on)."""
-    from fte_casadi.design.core import bounds
+    from fte_casadi.design.core import _bounds as bounds
 
     d = design(derive(load_plant(SMALL)))
     verts, Cz = bounds._vertices(d)

@@ -13,9 +13,10 @@ from plant_chain_far import chainfar
 from plant_fjoint import fjoint, fjoint_calm
 
 from fte_casadi.design import DesignOptions, design
-from fte_casadi.design.core import barrier, sdp
-from fte_casadi.design.diffusion import scaled_model
-from fte_casadi.design.remedy import remedies
+from fte_casadi.design._diffusion import scaled_model
+from fte_casadi.design._remedy import remedies
+from fte_casadi.design.core import _barrier as barrier
+from fte_casadi.design.core import _sdp as sdp
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.sim import Bias, Scenario
 from fte_casadi.ts import derive

@@ -1,4 +1,4 @@
-"""Tests of fte_casadi.design.core.diagnose and the bounds an infeasible design names (issue #9)."""
+"""Tests of fte_casadi.design.core._diagnose and the bounds an infeasible design names (issue #9)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import pytest
 from click.testing import CliRunner
 from plant_tight import tight
 
+from fte_casadi._rounding import nice_ceil, nice_floor
 from fte_casadi.cli import main
 from fte_casadi.design import augment, design, explore
-from fte_casadi.design.core.diagnose import gamma_min, sigma_max
+from fte_casadi.design.core._diagnose import gamma_min, sigma_max
 from fte_casadi.errors import InfeasibleDesignError
-from fte_casadi.rounding import nice_ceil, nice_floor
 from fte_casadi.ts import derive
 
 HERE = Path(__file__).resolve().parent

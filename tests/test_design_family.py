@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from threadpoolctl import threadpool_info
 
-from fte_casadi.bench.plant_chain import chain
+from fte_casadi.bench._plant_chain import chain
 from fte_casadi.design import design
-from fte_casadi.design.core.certify import failures
+from fte_casadi.design.core._certify import failures
 from fte_casadi.ts import derive
 
 
@@ -31,7 +31,7 @@ def test_a_member_designs_at_its_defaults(n, q):
 def test_the_design_limits_the_blas_to_one_thread(monkeypatch):
     """design() runs under threadpoolctl's limit of one BLAS thread (small dense algebra thrashes in many)."""
     seen = []
-    from fte_casadi.design.core import conditioned
+    from fte_casadi.design.core import _conditioned as conditioned
 
     step3 = conditioned.step3
 
@@ -51,7 +51,8 @@ def test_the_numpy_starts_and_the_rule_subsets_do_not_change_the_design(monkeypa
     to the design, not the design: a 16-rule member designed with every start from the conic solver and
     every decision on all rules, and with every problem treated as heavy and subsets of 2 rules, gives the
     same alpha and the same Pbar and K to round-off."""
-    from fte_casadi.design.core import barrier, sdp
+    from fte_casadi.design.core import _barrier as barrier
+    from fte_casadi.design.core import _sdp as sdp
 
     ts = derive(chain(4, 4), fidelity_samples=300)
     out = []

@@ -1,4 +1,4 @@
-"""Tests of fte_casadi.design.options: the design's settings as one frozen record, what was given kept apart
+"""Tests of fte_casadi.design._options: the design's settings as one frozen record, what was given kept apart
 from what it resolved to, and retries that change the record (the plant's own alpha stays the plant's)."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from fte_casadi.design import DesignOptions, design
-from fte_casadi.design.core import conditioned as cond
-from fte_casadi.design.options import resolve
+from fte_casadi.design._options import resolve
+from fte_casadi.design.core import _conditioned as cond
 from fte_casadi.errors import ParameterError
 from fte_casadi.plants import SCENARIOS
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from fte_casadi.design import Design
-from fte_casadi.design.records import Dims, Observer, Params
+from fte_casadi.design._records import Dims, Observer, Params
 from fte_casadi.errors import DesignFileError
-from fte_casadi.ts.model import LOCAL_MODEL_KEYS, LocalModel
+from fte_casadi.ts._model import LOCAL_MODEL_KEYS, LocalModel
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMITTED = sorted((ROOT / "generated").glob("*/design.json"))
@@ -225,7 +225,7 @@ def _numbers(obj):
 
 
 def test_a_nan_check_is_written_as_null_with_its_reason_and_read_back_as_nan(committed, tmp_path):
-    from fte_casadi.design.core.certify import failures
+    from fte_casadi.design.core._certify import failures
 
     d = committed[2]
     checks = json.loads(json.dumps(d.checks))

@@ -1,4 +1,4 @@
-"""Tests of fte_casadi.design.core.sdp and .barrier: affine LMIs, the cvxpy assembly, the centring and phase 1."""
+"""Tests of fte_casadi.design.core._sdp and .barrier: affine LMIs, the cvxpy assembly, the centring and phase 1."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from fte_casadi.design.core.barrier import centre, phase1
-from fte_casadi.design.core.sdp import (
+from fte_casadi.design.core._barrier import centre, phase1
+from fte_casadi.design.core._sdp import (
     AffineLMI,
     CentringError,
     ConicProblem,
@@ -204,7 +204,7 @@ def test_kron_terms_that_are_not_the_builders_are_refused():
 
 def test_proportional_kron_terms_are_merged():
     """``(U, V) + (V, U)`` with ``V = c U`` is one term ``U^T P (2c U)``; the decay term joins ``P A``."""
-    from fte_casadi.design.core.sdp import Kron
+    from fte_casadi.design.core._sdp import Kron
 
     U = np.arange(6.0).reshape(2, 3)
     K = Kron.of(0, [(U, 0.5 * U)], 2, 3)
@@ -219,7 +219,7 @@ def test_proportional_kron_terms_are_merged():
 def test_kron_barrier_derivatives_equal_the_dense_ones(p):
     """The Kronecker route (gradient, Hessian over P's triangle, cross terms with each member's own scalar)
     gives the barrier's derivatives of the dense route to round-off."""
-    from fte_casadi.design.core.barrier import _Barrier
+    from fte_casadi.design.core._barrier import _Barrier
 
     lay, lmis, plain = _kron_family()
     v = 0.05 * np.random.default_rng(4).standard_normal(lay.size)
@@ -254,7 +254,7 @@ def test_phase1_on_a_growing_subset_decides_as_phase1_on_all():
     """phase1_active answers the same question as phase1 on every soft LMI: its point satisfies all of
     them strictly, and its 'no' (a subset without a point) is a 'no' for all. Here x <= hi_k for 20 soft
     LMIs with x >= 1 hard: feasible iff min hi_k > 1, decided by the one smallest hi_k among 20."""
-    from fte_casadi.design.core.barrier import phase1_active
+    from fte_casadi.design.core._barrier import phase1_active
 
     lay = Layout(Var("x", ()))
     hard = [affine_lmi("x >= 1", lay, lambda x: np.array([[1.0 - x]]))]
@@ -277,7 +277,7 @@ def test_phase1_on_a_subset_with_tied_caps_gives_the_full_answers(monkeypatch):
     """The Kron family with 12 members (one scalar rho_i each, capped by an LMI of its own) and I <= P <= 10 I:
     the decay term makes it infeasible for large parameters. Taken two members at a time, with the caps tied
     to their members, the growing subset decides every value as phase 1 on all members does."""
-    from fte_casadi.design.core import barrier
+    from fte_casadi.design.core import _barrier as barrier
 
     monkeypatch.setattr(barrier, "ACTIVE_ADD", 2)
     lay, lmis, _ = _kron_family(r=12)

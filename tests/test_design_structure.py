@@ -8,8 +8,8 @@ from plant_quadtank_leak import measured_twice, plant
 
 from fte_casadi import PlantBuilder
 from fte_casadi.design import augment, design
-from fte_casadi.design.structure import confounded_sets, undecoupled_inputs
-from fte_casadi.design.uio import check_full_column_rank
+from fte_casadi.design._structure import confounded_sets, undecoupled_inputs
+from fte_casadi.design._uio import check_full_column_rank
 from fte_casadi.errors import AssumptionError
 from fte_casadi.ts import derive
 

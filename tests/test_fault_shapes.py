@@ -23,9 +23,9 @@ from fte_casadi.sim import (
     UnknownInputTerms,
     simulate,
 )
-from fte_casadi.sim.engine import plant_schedule
-from fte_casadi.sim.fault_shapes import FAULT_SHAPES
-from fte_casadi.sim.noise import MEASUREMENT_NOISES, UNKNOWN_INPUTS
+from fte_casadi.sim._engine import plant_schedule
+from fte_casadi.sim._fault_shapes import FAULT_SHAPES
+from fte_casadi.sim._noise import MEASUREMENT_NOISES, UNKNOWN_INPUTS
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""Tests of fte_casadi.design.core.lmis: every LMI registered once and read everywhere. A toy LMI, registered
+"""Tests of fte_casadi.design.core._lmis: every LMI registered once and read everywhere. A toy LMI, registered
 here with its builder and nothing else, appears in the certificate, its failures, the re-certification of a
 loaded document, ``fte design``'s summary and ``fte reproduce``'s table."""
 
@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fte_casadi._report import _design_rows
 from fte_casadi.design import design
-from fte_casadi.design.core.lmis import LMI, LMIS, block_sizes, register, unregister
-from fte_casadi.design.recertify import recertify
-from fte_casadi.design.record import Design
-from fte_casadi.design.summary import design_summary
+from fte_casadi.design._recertify import recertify
+from fte_casadi.design._record import Design
+from fte_casadi.design._summary import design_summary
+from fte_casadi.design.core._lmis import LMI, LMIS, block_sizes, register, unregister
 from fte_casadi.errors import InfeasibleDesignError
-from fte_casadi.report import _design_rows
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -73,7 +73,7 @@ def test_a_registered_lmi_that_fails_refuses_the_design(toy, ts_models, tmp_path
 
 
 def _aug(d):
-    from fte_casadi.design.augment import augment
+    from fte_casadi.design._augment import augment
 
     return augment(d.local_models, d.C, d.Df)
 

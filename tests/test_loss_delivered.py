@@ -9,7 +9,7 @@ from plant_deviation import plain, plant, scenario
 from fte_casadi.design import design
 from fte_casadi.errors import FteError
 from fte_casadi.sim import simulate
-from fte_casadi.sim.engine import plant_schedule
+from fte_casadi.sim._engine import plant_schedule
 from fte_casadi.ts import derive
 
 

@@ -16,8 +16,8 @@ from fte_casadi.step import step_function
 
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "fte_casadi"
 #: where ``dt`` (the simulation's step) may be a name: the simulator, the CLI's ``fte simulate --dt``, and
-#: the memory a simulation run will take (resources.py), and the benchmarks of the simulator (bench/)
-DT_HOMES = ("sim/", "cli/", "resources.py", "bench/")
+#: the memory a simulation run will take (_resources.py), and the benchmarks of the simulator (bench/)
+DT_HOMES = ("sim/", "cli/", "_resources.py", "bench/")
 #: calls whose keyword ``dt`` is the simulation's step (a plant's scenario, a simulation run)
 DT_CALLEES = ("Scenario", "simulate", "sweep")
 #: names the sample time had besides ``sample_time`` (``ts_max`` stays: the design document's key)
@@ -48,9 +48,9 @@ def _names(tree) -> list[tuple[str, int]]:
 @pytest.mark.slow
 def test_the_scan_sees_the_package():
     trees = dict(_trees())
-    assert len(trees) > 50 and "sim/engine.py" in trees and "step.py" in trees
+    assert len(trees) > 50 and "sim/_engine.py" in trees and "step.py" in trees
     # and it would see a sample time called dt or ts: the simulator does call its step dt
-    assert any(n == "dt" for n, _ in _names(trees["sim/engine.py"]))
+    assert any(n == "dt" for n, _ in _names(trees["sim/_engine.py"]))
 
 
 @pytest.mark.slow

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from tolerances import C_DOUBLE
 
-from fte_casadi.codegen import build
-from fte_casadi.codegen.ctypes_step import CStep
-from fte_casadi.codegen.generate import generate_c
+from fte_casadi.codegen import _build as build
+from fte_casadi.codegen._ctypes_step import CStep
+from fte_casadi.codegen._generate import generate_c
 from fte_casadi.errors import ParameterError
 from fte_casadi.plants import SCENARIOS
-from fte_casadi.plants.loader import load_plant
+from fte_casadi.plants._loader import load_plant
 from fte_casadi.sim import Scenario, simulate
-from fte_casadi.sim.sweep import sweep
+from fte_casadi.sim._sweep import sweep
 
 needs_cc = pytest.mark.skipif(build.find_compiler() is None, reason="no C compiler (cc, gcc, clang) on PATH")
 

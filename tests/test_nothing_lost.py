@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fte_casadi import atomic
-from fte_casadi.atomic import atomic_write, atomic_write_text, replace_dir
+from fte_casadi import _atomic as atomic
+from fte_casadi._atomic import atomic_write, atomic_write_text, replace_dir
 from fte_casadi.cli import main
 from fte_casadi.errors import SimulationError
 from fte_casadi.sim import load_result
@@ -86,7 +86,7 @@ def test_the_mode_of_the_file_is_kept_or_that_of_open(tmp_path):
 
 _WRITER = """
 import sys, numpy as np
-from fte_casadi.atomic import atomic_write
+from fte_casadi._atomic import atomic_write
 big = np.random.default_rng(0).standard_normal(3_000_000)
 for k in range(1, 1000):
     atomic_write(sys.argv[1], lambda fh: np.savez_compressed(fh, k=np.array(k), big=big + k))
@@ -263,7 +263,7 @@ def _trials(out: Path) -> list[tuple]:
 def test_tune_interrupted_keeps_its_trials_and_resumes(tmp_path, monkeypatch):
     """An earlier set in DIR survives a Ctrl-C; the finished trials are kept in DIR.partial; --resume
     finishes the run, and its trials are those of an uninterrupted run."""
-    import fte_casadi.tune.search as search
+    import fte_casadi.tune._search as search
 
     out = tmp_path / "t"
     r = _tune(out, "--trials", "2")
@@ -309,7 +309,7 @@ def test_tune_failed_write_leaves_the_earlier_set(tmp_path, monkeypatch):
     """Disk full while the new set is written: DIR is the earlier set, whole; --resume writes it later
     without running a trial again."""
     import fte_casadi.plot as plot
-    import fte_casadi.tune.search as search
+    import fte_casadi.tune._search as search
 
     out = tmp_path / "t"
     r = _tune(out, "--trials", "2")

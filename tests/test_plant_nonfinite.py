@@ -15,11 +15,11 @@ from scipy.integrate import RK45
 
 from fte_casadi import PlantBuilder
 from fte_casadi.errors import PlantError
-from fte_casadi.model.finite import region_points
+from fte_casadi.model._finite import region_points
 
 HERE = Path(__file__).resolve().parent
 fid = importlib.import_module(
-    "fte_casadi.ts.fidelity"
+    "fte_casadi.ts._fidelity"
 )  # the module (fte_casadi.ts.fidelity is also a function)
 
 

@@ -11,7 +11,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from fte_casadi.sim import simulate  # noqa: E402
-from fte_casadi.sim.engine import chunk_task  # noqa: E402
+from fte_casadi.sim._engine import chunk_task  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -53,8 +53,8 @@ def test_a_lost_worker_is_retried_without_changing_the_result(cluster, plants, r
     import cloudpickle
 
     from fte_casadi.plants import SCENARIOS
-    from fte_casadi.sim.cluster import run_on_cluster
-    from fte_casadi.sim.engine import SCALES, resolve_dt
+    from fte_casadi.sim._cluster import run_on_cluster
+    from fte_casadi.sim._engine import SCALES, resolve_dt
 
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     d, p = real_designs["manipulator"], plants["manipulator"]
@@ -103,7 +103,7 @@ def test_sweep_on_the_cluster_equals_in_process(cluster, plants, real_designs):
     """One client for all points of a sweep; each point's metrics as in-process."""
 
     from fte_casadi.plants import SCENARIOS
-    from fte_casadi.sim.sweep import sweep
+    from fte_casadi.sim._sweep import sweep
 
     d, p = real_designs["manipulator"], plants["manipulator"]
     sc = SCENARIOS["manipulator"]().until(3.0)

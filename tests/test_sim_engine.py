@@ -6,13 +6,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from fte_casadi.bench.perpath import monte_carlo
+from fte_casadi.bench._perpath import monte_carlo
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.plants import SCENARIOS
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise, simulate
-from fte_casadi.sim import rng as frng
-from fte_casadi.sim.engine import auto_chunk, closed_loop_sample
-from fte_casadi.sim.scenario import fault_schedule
+from fte_casadi.sim import _rng as frng
+from fte_casadi.sim._engine import auto_chunk, closed_loop_sample
+from fte_casadi.sim._scenario import fault_schedule
 
 GBM_A, GBM_B = 0.5, 0.8  # dX = a X dt + b X dW
 
@@ -233,7 +233,7 @@ def test_vectorised_engine_equals_the_per_path_engine(plants, real_designs, name
     """Issue #11: the same trajectories as the per-path engine (benchmarks/perpath.py: compiled blocks mapped over paths)
     when both get the same random numbers (the numpy twin of the generator the C draws from): bit for
     bit, since the lane engine rounds every operation as CasADi's C does (no FMA contraction)."""
-    from fte_casadi.sim.engine import SCALES, Prepared, resolve_dt
+    from fte_casadi.sim._engine import SCALES, Prepared, resolve_dt
 
     plant, design = plants[name], real_designs[name]
     sc = SCENARIOS[name]()
@@ -272,7 +272,7 @@ def test_vectorised_engine_equals_the_per_path_engine(plants, real_designs, name
 
 
 def plant_schedule_for(design, plant, sc, dt, nsteps):
-    from fte_casadi.sim.engine import plant_schedule
+    from fte_casadi.sim._engine import plant_schedule
 
     return plant_schedule(design, plant, sc, np.arange(nsteps + 2000) * dt, dt)
 
@@ -294,7 +294,7 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
     """The metrics reduced in the compiled loop equal those recomputed from every recorded sample."""
     from fte_casadi.plants import SCENARIOS
     from fte_casadi.sim import load_result, save_result
-    from fte_casadi.sim.metrics import metrics_from_arrays
+    from fte_casadi.sim._metrics import metrics_from_arrays
 
     for name in ("manipulator", "three-tank"):
         sc = SCENARIOS[name]()

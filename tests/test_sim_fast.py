@@ -28,9 +28,10 @@ from click.testing import CliRunner
 from fte_casadi.cli import main
 from fte_casadi.errors import ParameterError
 from fte_casadi.plants import SCENARIOS
-from fte_casadi.sim import rng, simulate
-from fte_casadi.sim.engine import SCALES, Prepared, resolve_dt
-from fte_casadi.sim.vector import _VMATH, FAST_FLAGS, FLAGS, VectorEngine
+from fte_casadi.sim import _rng as rng
+from fte_casadi.sim import simulate
+from fte_casadi.sim._engine import SCALES, Prepared, resolve_dt
+from fte_casadi.sim._vector import _VMATH, FAST_FLAGS, FLAGS, VectorEngine
 
 FAST_REL = 1e-9
 SIGNALS = ("x", "xbarhat", "f", "u", "y", "yc")
@@ -253,7 +254,7 @@ def test_every_vector_width_is_close_and_split_free(plants, real_designs, monkey
     """The fast engine as compiled for AVX-512 (libmvec's 8-lane variants), AVX2 (two 4-lane calls per
     lane vector) and without either (the C library lane by lane): each within FAST_REL of the exact
     mode, and each gives the same numbers for a split of the paths at an odd place."""
-    from fte_casadi.sim import vector
+    from fte_casadi.sim import _vector as vector
 
     monkeypatch.setattr(vector, "FAST_FLAGS", vector.FAST_FLAGS + isa)
     plant, design, sc = plants["manipulator"], real_designs["manipulator"], _short(1.0)

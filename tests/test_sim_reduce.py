@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck
-from fte_casadi.sim.engine import PathLayout
-from fte_casadi.sim.reduce import Allowances, finalize, masks, monitor
+from fte_casadi.sim._engine import PathLayout
+from fte_casadi.sim._reduce import Allowances, finalize, masks, monitor
 
 
 def _setup():

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from fte_casadi.sim import rng
+from fte_casadi.sim import _rng as rng
 
 
 def test_uniforms_and_normals_have_their_moments():

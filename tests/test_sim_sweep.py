@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from fte_casadi.cli import main
 from fte_casadi.errors import ParameterError
 from fte_casadi.sim import simulate
-from fte_casadi.sim.sweep import parse_vary, sweep, to_csv
+from fte_casadi.sim._sweep import parse_vary, sweep, to_csv
 
 
 def test_parse_vary_validates():
@@ -81,7 +81,7 @@ def test_a_fault_scale_beyond_a_full_loss_is_refused_before_any_point_runs(plant
 @pytest.mark.slow
 def test_cli_sweep_warns_by_point_where_tolerant_control_is_worse_than_none(monkeypatch):
     """The per-window verdict of fte simulate, for every point of a sweep, on stderr (also with --json)."""
-    import fte_casadi.sim.sweep as sweep_module
+    import fte_casadi.sim._sweep as sweep_module
 
     def fake(d, plant, scenario, grid, **kw):
         w = {"fault": "fa", "start": 2.0, "stop": 4.0, "fault_rel_rms_error": 0.1, "input_saturation": [0.0]}

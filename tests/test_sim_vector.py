@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from fte_casadi.errors import SimulationError
-from fte_casadi.sim import rng
-from fte_casadi.sim.vector import _CALL, _VEC, UnsupportedOperation, VectorEngine, emit, unsupported
+from fte_casadi.sim import _rng as rng
+from fte_casadi.sim._vector import _CALL, _VEC, UnsupportedOperation, VectorEngine, emit, unsupported
 
 NAN, INF = math.nan, math.inf
 #: operand pairs (a, b): ordinary values, signed zeros, ties, NaN and infinities on either side
@@ -112,7 +112,7 @@ def test_an_unknown_operation_runs_through_casadis_c():
 
 
 def test_the_random_numbers_are_the_twins_and_depend_on_seed_and_path_only():
-    """dW and d as drawn inside the C loop equal :mod:`fte_casadi.sim.rng`'s numpy twin bit for bit,
+    """dW and d as drawn inside the C loop equal :mod:`fte_casadi.sim._rng`'s numpy twin bit for bit,
     and path i's numbers do not depend on the chunk it runs in."""
     F = _sample(lambda a, b: [a, b], nw=3)  # rec = the state
     s, w, sh = (F.sx_in(i) for i in range(3))

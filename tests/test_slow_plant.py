@@ -19,8 +19,8 @@ import pytest
 
 from fte_casadi import PlantBuilder
 from fte_casadi.design import design
-from fte_casadi.design.augment import augment
-from fte_casadi.design.core.diagnose import sigma_max
+from fte_casadi.design._augment import augment
+from fte_casadi.design.core._diagnose import sigma_max
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive
 
@@ -102,7 +102,7 @@ def test_the_design_does_not_depend_on_the_outputs_unit():
 def test_an_unstable_mode_barely_reachable_is_named(ts):
     """Coupled more strongly than it decays, the chain is open-loop unstable and its one input, at the chain's
     head, reaches the unstable modes only weakly: the reason (45) may leave no margin sigma at all."""
-    from fte_casadi.design.limits import reachability
+    from fte_casadi.design._limits import reachability
 
     assert reachability(augment(ts.local_models, ts.C, ts.Df)) == ""  # the 4-stage chain is stable
     long_chain = derive(slow_plant(16, 4), fidelity_samples=200)
@@ -115,7 +115,7 @@ def test_an_unstable_mode_barely_reachable_is_named(ts):
 def test_generic_values_follow_the_outputs_size(ts):
     """The generic gamma, gamma1, sigma in the outputs' own size (sy = 1024 here); gamma1 follows only a
     generic gamma, so it stays below a gamma that was given; given values are kept."""
-    from fte_casadi.design.options import _params
+    from fte_casadi.design._options import _params
 
     def params(**given):
         full = {k: given.get(k) for k in ("gamma", "gamma1", "sigma", "delta", "epsilon")}

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from fte_casadi.codegen import template
-from fte_casadi.codegen.generate import c_name, generate_c, output_files
-from fte_casadi.design.record import Design
+from fte_casadi.codegen import _template as template
+from fte_casadi.codegen._generate import c_name, generate_c, output_files
+from fte_casadi.design._record import Design
 from fte_casadi.errors import CodegenError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -71,8 +71,8 @@ def test_fill_names_a_missing_placeholder():
 
 
 def test_fmu_sources_come_from_the_template_files(tmp_path):
-    from fte_casadi.codegen import build
-    from fte_casadi.codegen.fmu import FMI2_HEADER_NAME, generate_fmu, model_identifier
+    from fte_casadi.codegen import _build as build
+    from fte_casadi.codegen._fmu import FMI2_HEADER_NAME, generate_fmu, model_identifier
 
     if build.find_compiler() is None:
         pytest.skip("no C compiler (cc, gcc, clang) on PATH")

@@ -1,4 +1,4 @@
-"""Automatic sector nonlinearity and linear plants (issue #10): fte_casadi/ts/auto.py."""
+"""Automatic sector nonlinearity and linear plants (issue #10): fte_casadi/ts/_auto.py."""
 
 from __future__ import annotations
 
@@ -13,15 +13,16 @@ from hypothesis import strategies as st
 from plant_auto import linear, linear_scenario, manipulator_plain, two_state
 from tolerances import C_DOUBLE, PAPER_A, PAPER_BOUND, ROUNDOFF
 
-from fte_casadi.codegen import build, generate_c
-from fte_casadi.codegen.ctypes_step import CStep, closed_loop_compare
+from fte_casadi.codegen import _build as build
+from fte_casadi.codegen import generate_c
+from fte_casadi.codegen._ctypes_step import CStep, closed_loop_compare
 from fte_casadi.design import design
 from fte_casadi.errors import DerivationError, PlantError
-from fte_casadi.plants.loader import load_plant
+from fte_casadi.plants._loader import load_plant
 from fte_casadi.sim import simulate
 from fte_casadi.ts import derive, scheduling_from_measurements
-from fte_casadi.ts.auto import TAYLOR_BAND, premise_form
-from fte_casadi.ts.fidelity import blended
+from fte_casadi.ts._auto import TAYLOR_BAND, premise_form
+from fte_casadi.ts._fidelity import blended
 
 EXAMPLES = __import__("pathlib").Path(__file__).resolve().parents[1] / "examples"
 
@@ -336,7 +337,7 @@ def test_fidelity_trajectory_of_a_stiff_plant_is_integrated_by_a_stiff_method():
     minutes). RK45 spends its share of the budget, LSODA integrates the whole horizon, and the sector
     model is compared along all of it; with too small a budget for both, the trajectory stops where it
     got to and says so."""
-    from fte_casadi.ts.fidelity import _trajectory
+    from fte_casadi.ts._fidelity import _trajectory
 
     ts = derive(
         two_state(lambda x1, x2, u, fa: [-1e4 * x1 + ca.sin(x2) + u, -1e-3 * x2 + fa]), fidelity_samples=300

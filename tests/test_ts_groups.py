@@ -1,4 +1,4 @@
-"""Premises covered together (fte_casadi/ts/cover.py): groups by the states they depend on, a simplex
+"""Premises covered together (fte_casadi/ts/_cover.py): groups by the states they depend on, a simplex
 or a box per group, memberships that reproduce the premises exactly, vertices a state reaches, the
 same model whatever the order of the states; on plants written as a new user writes them."""
 
@@ -13,9 +13,9 @@ from plant_pmsm import pmsm_dqw, pmsm_wdq
 from plant_twolink import arm, scenario
 from tolerances import C_DOUBLE
 
-from fte_casadi.codegen import build
-from fte_casadi.codegen.ctypes_step import CStep
-from fte_casadi.codegen.generate import generate_c
+from fte_casadi.codegen import _build as build
+from fte_casadi.codegen._ctypes_step import CStep
+from fte_casadi.codegen._generate import generate_c
 from fte_casadi.design import design
 from fte_casadi.errors import ParameterError
 from fte_casadi.step import step_function
@@ -202,7 +202,7 @@ def test_a_design_is_loaded_against_the_cover_it_was_made_with(tmp_path):
     design used the default loads."""
     import json
 
-    from fte_casadi.design.record import Design
+    from fte_casadi.design._record import Design
     from fte_casadi.errors import DesignFileError
     from fte_casadi.trust import check_loaded
 

@@ -12,17 +12,17 @@ from click.testing import CliRunner
 
 from fte_casadi.cli import main
 from fte_casadi.design import design
-from fte_casadi.design.core.certify import failures
-from fte_casadi.design.limits import channel_zeros, explain_metrics
-from fte_casadi.design.record import Design
+from fte_casadi.design._limits import channel_zeros, explain_metrics
+from fte_casadi.design._record import Design
+from fte_casadi.design.core._certify import failures
 from fte_casadi.errors import ParameterError
-from fte_casadi.plants.loader import load_plant, load_scenario
+from fte_casadi.plants._loader import load_plant, load_scenario
 from fte_casadi.ts import derive
 
 pytest.importorskip("optuna")
 
 from fte_casadi.tune import choose, pareto_front, tune  # noqa: E402
-from fte_casadi.tune.search import Record  # noqa: E402
+from fte_casadi.tune._search import Record  # noqa: E402
 
 SPEC = f"{Path(__file__).parent / 'plant_tune.py'}:plant"
 #: every test here searches and simulates many candidates: the module took over 20 minutes on the shared
@@ -262,7 +262,7 @@ def test_trial_zero_of_a_design_file_is_that_design(small, tmp_path):
 
 
 def test_limits_named_when_no_candidate_helps(small):
-    from fte_casadi.tune.search import _limits
+    from fte_casadi.tune._search import _limits
 
     plant, _, _, base = small
     doc = base.to_json()
@@ -291,7 +291,7 @@ def test_bound_is_an_objective(result):
     for r in done:
         gains = Design.from_dict(json.loads(r.design)).bounds["fault_error"]["gains"]
         assert r.values[-1] == r.metrics["fault_error_bound"] == max(gains.values()) > 0
-    from fte_casadi.tune.search import _admissible
+    from fte_casadi.tune._search import _admissible
 
     k, _ = choose(list(result.records), list(result.front), names, "bound")
     front = [result.record(j) for j in result.front]
@@ -379,7 +379,7 @@ def test_three_tank_default_is_the_tuned_design():
 def test_local_steps_are_one_knob_from_the_base(small):
     """The first trials after the base: each float knob times and divided by 2 within its range, then the
     boundary layer switched, then the bound's weight; none when the budget is short."""
-    from fte_casadi.tune.space import LOCAL_FACTOR, LOCAL_SHARE, space_for
+    from fte_casadi.tune._space import LOCAL_FACTOR, LOCAL_SHARE, space_for
 
     _, _, _, base = small
     sp = space_for(base, None)

@@ -10,14 +10,14 @@ import pathlib
 import pytest
 
 from fte_casadi import verdicts
-from fte_casadi.cli.simulate import _warnings
-from fte_casadi.design import limits
-from fte_casadi.tune import search
+from fte_casadi.cli._simulate import _warnings
+from fte_casadi.design import _limits as limits
+from fte_casadi.tune import _search as search
 
 
 @pytest.mark.slow
 def test_every_consumer_reads_the_one_definition():
-    metrics = importlib.import_module("fte_casadi.sim.metrics")  # (fte_casadi.sim.metrics is the function)
+    metrics = importlib.import_module("fte_casadi.sim._metrics")  # (fte_casadi.sim.metrics is the function)
     for mod in (metrics, limits, search):
         for name in ("WORSE_THAN_NONE", "FALSE_ALARM"):
             assert getattr(mod, name) is getattr(verdicts, name), (

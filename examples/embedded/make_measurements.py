@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fte_casadi.codegen.generate import default_sample_time
-from fte_casadi.design.record import Design
+from fte_casadi.codegen._generate import default_sample_time
+from fte_casadi.design._record import Design
 from fte_casadi.plants import manipulator
 from fte_casadi.step import step_function
 

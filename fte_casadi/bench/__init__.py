@@ -2,7 +2,7 @@
 baselines run in the same process.
 
 It ships with the package, so that ``fte bench`` runs from an installed wheel: the baselines (the
-design formulation of 0.1, :mod:`.design_01`; the per-path Monte Carlo engine, :mod:`.perpath`, also
+design formulation of 0.1, :mod:`._design_01`; the per-path Monte Carlo engine, :mod:`._perpath`, also
 the tests' reference; a hand-written C loop) and the measurements around them. The Monte Carlo
 comparison with sdeint needs the ``bench`` extra (``pip install 'fte_casadi[bench]'``). The numbers
 measured are kept in docs/benchmarks.md.
@@ -12,11 +12,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from .cstep import bench_c_step as bench_c_step
-from .design import bench_design as bench_design
-from .growth import bench_growth as bench_growth
-from .growth import growth_lines
-from .mc import bench as bench_monte_carlo
+from ._cstep import bench_c_step as bench_c_step
+from ._design import bench_design as bench_design
+from ._growth import bench_growth as bench_growth
+from ._growth import growth_lines
+from ._mc import bench as bench_monte_carlo
 
 __all__ = ["PARTS", "bench_c_step", "bench_design", "bench_growth", "bench_monte_carlo", "run_all",
            "summary_lines", "fast_lines"]  # fmt: skip

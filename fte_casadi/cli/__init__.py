@@ -3,8 +3,8 @@
 Every command turns the library's errors into a one-paragraph message and exit status 2
 (bad input) or 1 (a failed design/run); ``--debug`` shows the Python traceback instead.
 
-One module per command (``simulate.py`` holds ``fte sweep`` too); what several of them share is in
-``common.py`` (the error guard, the Ctrl-C report, argument checks) and ``targets.py`` (the design or
+One module per command (``_simulate.py`` holds ``fte sweep`` too); what several of them share is in
+``_common.py`` (the error guard, the Ctrl-C report, argument checks) and ``_targets.py`` (the design or
 plant a command works on). A new command is a module with a ``click.command`` and one
 ``add_command`` line below.
 """
@@ -13,9 +13,15 @@ from __future__ import annotations
 
 import click
 
-from . import bench, codegen, derive, design, reproduce, simulate, tune
-from .common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
-from .common import EXIT_FAILED as EXIT_FAILED
+from . import _bench as bench
+from . import _codegen as codegen
+from . import _derive as derive
+from . import _design as design
+from . import _reproduce as reproduce
+from . import _simulate as simulate
+from . import _tune as tune
+from ._common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
+from ._common import EXIT_FAILED as EXIT_FAILED
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})

@@ -1,5 +1,5 @@
 """The symbolic stochastic plant (CasADi), its builder and validation."""
 
-from .plant import Plant as Plant
-from .plant import PlantBuilder as PlantBuilder
-from .validate import triangular_memberships as triangular_memberships
+from ._plant import Plant as Plant
+from ._plant import PlantBuilder as PlantBuilder
+from ._validate import triangular_memberships as triangular_memberships

@@ -17,24 +17,25 @@ Two names for time steps, one meaning each:
 ``checks.ts_max``) is the largest sample time its discrete observer is stable for.
 """
 
-from .engine import simulate as simulate
-from .fault_shapes import FaultRows as FaultRows
-from .fault_shapes import FaultShape as FaultShape
-from .fault_shapes import FaultSite as FaultSite
-from .metrics import metrics as metrics
-from .metrics import metrics_from_arrays as metrics_from_arrays
-from .noise import GaussianNoise as GaussianNoise
-from .noise import MeasurementNoise as MeasurementNoise
-from .noise import UnknownInput as UnknownInput
-from .noise import UnknownInputTerms as UnknownInputTerms
-from .result import RunData as RunData
-from .result import SimulationResult as SimulationResult
-from .result import load_result as load_result
-from .result import save_result as save_result
-from .scenario import Bias as Bias
-from .scenario import Drift as Drift
-from .scenario import LossOfEffectiveness as LossOfEffectiveness
-from .scenario import Scenario as Scenario
-from .scenario import Sinusoid as Sinusoid
-from .scenario import Stuck as Stuck
-from .scenario import UniformNoise as UniformNoise
+from ._accommodate import accommodated as accommodated
+from ._engine import simulate as simulate
+from ._fault_shapes import FaultRows as FaultRows
+from ._fault_shapes import FaultShape as FaultShape
+from ._fault_shapes import FaultSite as FaultSite
+from ._metrics import metrics as metrics
+from ._metrics import metrics_from_arrays as metrics_from_arrays
+from ._noise import GaussianNoise as GaussianNoise
+from ._noise import MeasurementNoise as MeasurementNoise
+from ._noise import UnknownInput as UnknownInput
+from ._noise import UnknownInputTerms as UnknownInputTerms
+from ._result import RunData as RunData
+from ._result import SimulationResult as SimulationResult
+from ._result import load_result as load_result
+from ._result import save_result as save_result
+from ._scenario import Bias as Bias
+from ._scenario import Drift as Drift
+from ._scenario import LossOfEffectiveness as LossOfEffectiveness
+from ._scenario import Scenario as Scenario
+from ._scenario import Sinusoid as Sinusoid
+from ._scenario import Stuck as Stuck
+from ._scenario import UniformNoise as UniformNoise

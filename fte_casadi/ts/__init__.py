@@ -8,18 +8,18 @@ import numpy as np
 
 from ..errors import DerivationError, ParameterError
 from ..model import Plant
-from .auto import premise_form
-from .auto_checks import check_exact
-from .cover import VERTEX_CHOICES as VERTEX_CHOICES
-from .cover import group_notes
-from .fidelity import fidelity as fidelity
-from .linearise import linearised_local_models
-from .memberships import scheduling_from_measurements as scheduling_from_measurements
-from .model import Fidelity as Fidelity
-from .model import LocalModel as LocalModel
-from .model import Premise as Premise
-from .model import TSModel as TSModel
-from .sector import sector_local_models
+from ._auto import premise_form
+from ._auto_checks import check_exact
+from ._cover import VERTEX_CHOICES as VERTEX_CHOICES
+from ._cover import group_notes
+from ._fidelity import fidelity as fidelity
+from ._linearise import linearised_local_models
+from ._memberships import scheduling_from_measurements as scheduling_from_measurements
+from ._model import Fidelity as Fidelity
+from ._model import LocalModel as LocalModel
+from ._model import Premise as Premise
+from ._model import TSModel as TSModel
+from ._sector import sector_local_models
 
 
 def _finite_models(plant: Plant, models) -> None:
@@ -85,8 +85,8 @@ def derive(
     """Derive the T-S fuzzy model of ``plant`` and check its fidelity.
 
     Sector nonlinearity when the plant declares premises, or when it declares neither premises nor
-    operating points: the premises are then found in its plain equations (:mod:`.auto`), the
-    model is checked to equal them to round-off (:func:`.auto_checks.check_exact`), and a plant
+    operating points: the premises are then found in its plain equations (:mod:`._auto`), the
+    model is checked to equal them to round-off (:func:`._auto_checks.check_exact`), and a plant
     without nonlinear term gets one rule. Local linearisation when it declares operating points.
 
     Examples

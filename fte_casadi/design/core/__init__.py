@@ -1,12 +1,12 @@
-"""The numerical core of the design: the LMIs and their registry (:mod:`.lmis`), the conic problems and their
-barrier centring (:mod:`.sdp`, :mod:`.barrier`), the two formulations of steps 3 and 5 (:mod:`.conditioned`,
-:mod:`.paper`) with the decay-rate search (:mod:`.decay`) and the fault-error bound (:mod:`.bounds`,
-:mod:`.bound_objective`), the feasibility bounds (:mod:`.diagnose`) and the a-posteriori certificate
-(:mod:`.certify`). Nothing here retries, searches parameters or builds a Design record."""
+"""The numerical core of the design: the LMIs and their registry (:mod:`._lmis`), the conic problems and their
+barrier centring (:mod:`._sdp`, :mod:`._barrier`), the two formulations of steps 3 and 5 (:mod:`._conditioned`,
+:mod:`._paper`) with the decay-rate search (:mod:`._decay`) and the fault-error bound (:mod:`._bounds`,
+:mod:`._bound_objective`), the feasibility bounds (:mod:`._diagnose`) and the a-posteriori certificate
+(:mod:`._certify`). Nothing here retries, searches parameters or builds a Design record."""
 
-from .lmis import LMI as LMI
-from .lmis import LMIS as LMIS
-from .lmis import register as register
-from .lmis import unregister as unregister
+from ._lmis import LMI as LMI
+from ._lmis import LMIS as LMIS
+from ._lmis import register as register
+from ._lmis import unregister as unregister
 
 __all__ = ["LMI", "LMIS", "register", "unregister"]

@@ -1,0 +1,60 @@
+"""``fte codegen``: the embedded C of the observer/controller step, and the FMU."""
+
+from __future__ import annotations
+
+import click
+
+from ._common import _guard, _outputs, _positive
+from ._targets import _allow_option, _design_or_plant, _plant_option
+
+
+@click.command()
+@click.argument("target", metavar="DESIGN.json|PLANT")
+@click.option(
+    "--out", "out_dir", required=True, type=click.Path(file_okay=False), help="Directory for the C files."
+)
+@click.option(
+    "--sample-time", "sample_time", type=float,
+    help="Sample time (default: the one the design was made for and fte simulate runs, its scenario's step; "
+    "without one, a tenth of the design's ts_max, rounded down).",
+)  # fmt: skip
+@click.option("--ts", "sample_time_alias", type=float, hidden=True)  # the name before 0.2.0
+@click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
+@click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
+@click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
+@_plant_option
+@_allow_option
+@_guard
+def codegen(
+    target, out_dir, sample_time, sample_time_alias, real, boundary_layer, fmu, plant_opt, allow_uncertified
+):
+    """Generate the embedded C of the observer/controller step."""
+    from ..codegen import default_sample_time, generate_c
+    from ..codegen._fmu import check_fmu_target, generate_fmu
+    from ..plants import SCENARIOS
+
+    if sample_time is not None and sample_time_alias is not None:
+        raise click.UsageError("give the sample time once: --sample-time (--ts is its former name)")
+    sample_time = sample_time if sample_time_alias is None else sample_time_alias
+    _positive("sample-time", sample_time)
+    _positive("boundary-layer", boundary_layer)
+    _outputs(out_dir)
+    d, _ = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
+    if fmu:
+        check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
+    made_for = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
+    files = generate_c(d, out_dir, sample_time=made_for if sample_time is None else sample_time, real=real,
+                       boundary_layer=boundary_layer)  # fmt: skip
+    how = (
+        "--sample-time" if sample_time is not None else "the design's sample time, the step fte simulate runs"
+    )
+    if sample_time is not None and abs(sample_time - made_for) > 1e-12 * sample_time:
+        how += f"; the design was made for {made_for:g}"
+    if sample_time is None:
+        sample_time = made_for
+    click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
+    click.echo(f"sample time Ts = {sample_time:g} ({how})")
+    click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")
+    if fmu:
+        path = generate_fmu(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+        click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {sample_time:g} (docs/fmu.md)")

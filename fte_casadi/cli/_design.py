@@ -1,0 +1,187 @@
+"""``fte design``: the observer and tolerant controller by LMIs, or the feasible frontier (--explore)."""
+
+from __future__ import annotations
+
+import sys
+import textwrap
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+from ..errors import ParameterError
+from ._common import _guard, _outputs, _positive, _writable_target
+from ._targets import _VERTICES, _make_design, _scenario
+
+
+def _check_params(**kw) -> dict:
+    out = {}
+    for k, v in kw.items():
+        if v is not None:
+            _positive(k, v, allow_zero=(k in ("alpha", "d_bound", "bound_weight")))
+            out[k] = v
+    return out
+
+
+def _scenario_sample_time(plant_spec: str) -> float | None:
+    """The sample time a design is made for: the plant's scenario step (``Scenario.dt``, the step
+    ``fte simulate`` runs the controller at), when the plant has a scenario."""
+    sc = _scenario(plant_spec)
+    return None if sc is None else float(sc.dt)
+
+
+def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | None = None) -> None:
+    from ..design import explore
+    from ..plants._loader import load_plant
+    from ..plot import frontier_figure
+    from ..ts import derive as derive_ts
+
+    ts = derive_ts(load_plant(plant_spec))
+    with tqdm(total=12, desc=f"explore {ts.plant.name}", unit=" sigma", file=sys.stderr, delay=1.0) as bar:
+        points, info = explore(ts, solver=solver, gamma1=gamma1, sample_time=_scenario_sample_time(plant_spec),
+                               progress=lambda k, n: bar.update(1))  # fmt: skip
+    click.echo(
+        f"feasible frontier of {ts.plant.name} (gamma1 = {info['gamma1']:g}; (45) is feasible for any gamma only with "
+        f"sigma < {info['sigma_sup']:.4g}); the plant's defaults: gamma = {info['gamma']:g}, sigma = {info['sigma']:g}"
+    )
+    click.echo(
+        f"{'sigma':>10} {'gamma_min (45)':>15} {'certified from':>15} {'alpha':>9} {'max|L1|':>9} {'ts_max':>9}"
+    )
+    for pt in points:
+        click.echo(
+            f"{pt.sigma:10.4g} {'-' if pt.gamma_min is None else format(pt.gamma_min, '.4g'):>15} "
+            f"{'-' if pt.gamma_tried is None else format(pt.gamma_tried, 'g'):>15} "
+            f"{'-' if pt.alpha is None else format(pt.alpha, '.3g'):>9} "
+            f"{'-' if pt.max_abs_L1 is None else format(pt.max_abs_L1, '.3g'):>9} "
+            f"{'-' if pt.ts_max is None else format(pt.ts_max, '.3g'):>9}"
+            + (f"  {pt.note}" if pt.note and not pt.certified else "")
+        )
+    fig = frontier_figure(points, info, ts.plant.name, out_dir)
+    click.echo(f"figure written to {fig}")
+    if info["skipped"]:
+        click.echo(f"{info['skipped']} of the sigmas were not tried: the time budget (60 s) ran out")
+    best = info["best"]
+    if best is None:
+        click.echo("no certified design found" + (f": {info['cause']}" if info["cause"] else ""))
+        return
+    click.echo(
+        f"best certified design found (the fastest observer): sigma = {best.params.sigma:.4g}, gamma = "
+        f"{best.params.gamma:g}, decay rate {best.observer.alpha:.4g}"
+    )
+    if output:
+        best.save(output)
+        click.echo(f"design document written to {output}")
+
+
+@click.command()
+@click.argument("plant")
+@click.option(
+    "--variant",
+    type=click.Choice(["paper", "conditioned"]),
+    default="conditioned",
+    show_default=True,
+    help="paper: the problem as printed; conditioned: the same certificate posed with usable numbers.",
+)
+@click.option("--solver", default="CLARABEL", show_default=True, help="SDP solver: CLARABEL or SCS.")
+@click.option(
+    "--gamma", type=float, help="H-infinity level gamma (default: the plant's, the paper's for built-ins)."
+)
+@click.option("--gamma1", type=float, help="gamma1 < gamma.")
+@click.option("--sigma", type=float, help="sigma of Theorem 2.")
+@click.option("--delta", type=float, help="bound on the second derivative of the faults.")
+@click.option("--epsilon", type=float, help="sliding gain margin eps.")
+@click.option(
+    "--alpha",
+    type=float,
+    help="observer decay rate (default: the largest the plant allows, see docs/design.md).",
+)
+@click.option(
+    "--sample-time", "sample_time", type=float,
+    help="sample time the observer must run at (default: the plant's scenario step); caps the default alpha.",
+)  # fmt: skip
+@click.option(
+    "--kappa", type=float,
+    help="Bound on cond(X') and cond(Pbar) (default 1e4); a larger one allows a faster observer decay rate.",
+)  # fmt: skip
+@click.option(
+    "--bound-weight", "bound_weight", type=float,
+    help="Weight of the closed loop's fault-error bound in the observer's objective (default 0: off; 1 counts it "
+    "as much as the rest; docs/design.md).",
+)  # fmt: skip
+@click.option(
+    "--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so)."
+)
+@click.option(
+    "--accept-assumption", "accept", multiple=True, type=click.Choice(["1", "2", "3", "4", "5"]),
+    help="Design even though assumption N of Section 3 fails (repeatable; the document records it).",
+)  # fmt: skip
+@click.option(
+    "--no-remark5",
+    "no_remark5",
+    is_flag=True,
+    help="Refuse a plant whose unknown inputs H cannot decouple (assumption (1)) instead of applying Remark 5.",
+)
+@click.option(
+    "--d-bound", "d_bound", type=float,
+    help="With Remark 5: a bound on |d| for the sliding gain of the undecoupled unknown inputs (default: delta).",
+)  # fmt: skip
+@click.option(
+    "-o", "--output", type=click.Path(dir_okay=False), help="Write the design document (JSON) here."
+)
+@click.option(
+    "--explore",
+    is_flag=True,
+    help="Print and plot the feasible frontier (smallest gamma over sigma) within 60 s; with -o, write the best "
+    "certified design found.",
+)
+@_VERTICES
+@click.option("--out", "out_dir", type=click.Path(file_okay=False),
+              help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
+@_guard
+def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, kappa, bound_weight,
+           allow_uncertified, accept, no_remark5, d_bound, output, explore, out_dir, vertices):  # fmt: skip
+    """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
+    params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
+                           sample_time=sample_time, d_bound=d_bound, bound_weight=bound_weight, kappa=kappa)  # fmt: skip
+    if no_remark5:
+        params["remark5"] = False
+    if explore:
+        if output is not None:
+            _writable_target(output, "-o", "design.json")
+        _outputs(out_dir or "fte-explore", output)
+        _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore", output)
+        return
+    if out_dir is not None:
+        raise ParameterError(
+            f"--out {out_dir} is the directory of --explore's figure; to write the design document use -o FILE"
+        )
+    if output is not None:
+        _writable_target(output, "-o", "design.json")
+    _outputs(output)
+    d, ts, options = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices,
+                                  full=True)  # fmt: skip
+    from ..design._summary import design_summary
+
+    click.echo(design_summary(d))
+    from ..verdicts import design_warnings
+
+    scenario = _scenario(plant)
+    warnings = design_warnings(d.checks, d.observer.alpha, scenario)
+    for w in warnings:
+        click.echo(textwrap.fill("fte: warning: " + w, width=100), err=True)
+    if warnings and d.certified:
+        from ..design._remedy import remedies
+
+        for line in remedies(ts, options, d, scenario):
+            click.echo(textwrap.fill("fte: tried " + line, width=100), err=True)
+    if output:
+        if Path(output).suffix.lower() == ".mat":
+            d.save_mat(output)
+            click.echo(
+                f"design document written to {output} (MAT file: every matrix under its contract name)"
+            )
+        else:
+            d.save(output)
+            click.echo(f"design document written to {output}")
+    else:
+        click.echo("(design document not saved: add -o FILE)")

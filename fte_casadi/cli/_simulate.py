@@ -1,0 +1,308 @@
+"""``fte simulate`` and ``fte sweep``: Monte Carlo of the closed loop, once or over a grid, in words."""
+
+from __future__ import annotations
+
+import json
+import textwrap
+from pathlib import Path
+
+import click
+
+from ..errors import ParameterError
+from ._common import _check_paths, _check_seed, _guard, _outputs, _positive, _writable_target
+from ._targets import _allow_option, _design_or_plant, _need_plant, _plant_option
+
+#: the options fte simulate and fte sweep share
+_seed_option = click.option(
+    "--seed", type=int, default=0, show_default=True, help="Seed of the random generator."
+)
+_scheduler_option = click.option(
+    "--scheduler", help="Address of a dask.distributed scheduler: run the paths on its workers."
+)
+_fast_math_option = click.option("--fast-math", "fast_math", is_flag=True,
+              help="Fast mode: fused multiply-adds and a vector math library (equal to the default within "
+                   "the tolerance of docs/simulation.md; the same numbers for any split of the paths).")  # fmt: skip
+
+
+def _fmt_list(v) -> str:
+    return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
+
+
+def _with_noise(scenario, noise: str | None):
+    """The scenario with ``--measurement-noise`` (comma-separated standard deviations) when given."""
+    if not noise:
+        return scenario
+    import dataclasses
+
+    try:
+        stds = [float(v) for v in noise.split(",")]
+    except ValueError:
+        raise ParameterError(
+            f"--measurement-noise {noise!r}: give one standard deviation per output, comma-separated (e.g. 0.01,0,0.02)"
+        ) from None
+    return dataclasses.replace(scenario, measurement_noise=tuple(stds))
+
+
+def _summary(plant: str, m: dict) -> str:
+    """The metrics document in words (docs/interface.md gives each formula)."""
+    lines = [
+        f"{plant}: {m['paths']} paths x 3 runs, T = {m['T']:g}, dt = {m['dt']:g}, seed {m['seed']}, {m['wall_s']:.2f} s",
+        f"  allowances: start-up transient {m['transient']:.4g}, after each window {m['settle_after']:.4g}",
+        f"  state RMS error (t >= transient, FTC run): {_fmt_list(m['state_rms_error'])}",
+        f"  fault error, relative RMS over whole windows: {_fmt_list(m['fault_rel_rms_error'])} "
+        f"(settled part, each window minus its first 20 %: {_fmt_list(m['fault_rel_rms_error_settled'])})",
+        f"  false alarms, estimate outside its windows: peak / fault's peak {_fmt_list(m['false_alarm_peak'])}, "
+        f"relative RMS {_fmt_list(m['false_alarm_rel_rms'])}",
+        f"  tolerant control, true outputs C x (ftc_true_ratio, < 1: better than none): {_num(m['ftc_true_ratio'])}; "
+        f"compensated reading yc (ftc_compensated_ratio, estimation only): {_num(m['ftc_compensated_ratio'])}",
+    ]
+    for e in m.get("detection") or []:
+        lines.append(
+            f"  detection of {e['fault']}: threshold {_num(e['threshold'])}, false alarms per unit time "
+            f"{_num(e['false_alarm_rate'])} on fault-free paths (asked {_num(e['false_alarm_rate_asked'])}), "
+            f"{_num(e.get('false_alarm_rate_ftc_run'))} outside its windows with the other faults"
+        )
+    if m.get("measurement_noise") is not None:
+        lines.append(f"  measurement noise (std per output): {_fmt_list(m['measurement_noise'])}")
+    lines.append(f"  samples outside the plant's region: {100 * m['outside_region']:.2g} %")
+    lines.append(f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}")
+    return "\n".join(lines)
+
+
+def _num(v, fmt: str = ".3g") -> str:
+    return "n/a" if v is None else format(v, fmt)
+
+
+def _window_lines(m: dict) -> list[str]:
+    """Per fault window: its estimation error, settling, detection and tolerant-control figures."""
+    out = []
+    for w in m.get("windows", []):
+        det = w.get("detection_delay")
+        miss = w.get("missed_detections")
+        out.append(
+            f"  window {w['fault']} [{w['start']:g}, {w['stop']:g}): fault error (relative RMS, whole window) "
+            f"{_num(w['fault_rel_rms_error'])}, settled part {_num(w.get('fault_rel_rms_error_settled'))}, "
+            f"settling time {_num(w.get('settling_time'))}; FTC true ratio {_num(w.get('ftc_true_ratio'))} "
+            f"(per output {_fmt_list(w.get('ftc_true_ratio_per_output') or [])}), compensated "
+            f"{_num(w.get('ftc_compensated_ratio'))}"
+            + ("" if miss is None else f"; detected after {_num(det)} on average, missed on {miss} paths")
+        )
+    return out
+
+
+def _warnings(m: dict, inputs, faults=(), outputs=(), units=()) -> list[str]:
+    """The verdicts of :func:`fte_casadi.verdicts.verdicts`, as warnings."""
+    from ..verdicts import verdicts
+
+    return ["warning: " + v["text"] for v in verdicts(m, inputs, faults, outputs, units)]
+
+
+def _why(d, m: dict) -> list[str]:
+    """The structural cause behind a window where tolerant control is worse than none, or behind false
+    alarms (:func:`fte_casadi.design._limits.explain_metrics`)."""
+    from ..design._limits import explain_metrics
+
+    return ["why (the plant's structure, at this design; `fte tune` searches for a design that does better): " + s
+            for s in explain_metrics(d, m)]  # fmt: skip
+
+
+@click.command()
+@click.argument("target", metavar="DESIGN.json|PLANT")
+@click.option(
+    "--paths", type=int, help="Brownian paths (default: the scenario's, the paper's for built-ins)."
+)
+@_seed_option
+@click.option(
+    "--dt", type=float, help="Euler-Maruyama step = controller sample time (default: the scenario's)."
+)
+@click.option(
+    "--plots", "plots", type=click.Path(file_okay=False), help="Write the figures (PNG) into this directory."
+)
+@click.option(
+    "--save", "save", type=click.Path(dir_okay=False),
+    help="Save per-path arrays of ALL paths (.npz; memory grows with --paths).",
+)  # fmt: skip
+@_scheduler_option
+@_fast_math_option
+@click.option("--measurement-noise", "noise",
+              help="Standard deviations of white noise on the outputs, one per output (e.g. 0.01,0,0.02), in the "
+                   "outputs' units; overrides the scenario's.")  # fmt: skip
+@click.option("--false-alarm-rate", "fa_rate", type=float,
+              help="False alarms per unit of the plant's time the detection thresholds are set for "
+                   "(default: one per hour of operation).")  # fmt: skip
+@click.option("--accommodate", is_flag=True,
+              help="Compensate a fault in the control only while it is detected and isolated (thresholds calibrated "
+                   "on fault-free paths at --false-alarm-rate); the C and FMU of --save-design's document do the same.")  # fmt: skip
+@click.option("--release", "release", type=float, default=0.5, show_default=True,
+              help="With --accommodate: a compensated fault stays compensated until |fhat| / threshold falls below "
+                   "this ratio (hysteresis); 1: the memoryless gate.")  # fmt: skip
+@click.option(
+    "--save-design",
+    "save_design",
+    type=click.Path(dir_okay=False),
+    help="With --accommodate: write the design with its accommodation thresholds (for fte codegen).",
+)
+@click.option(
+    "--no-detection",
+    "no_detect",
+    is_flag=True,
+    help="No detection thresholds (skips the fault-free calibration paths).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the metrics document (JSON) on stdout.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
+@_allow_option
+@_guard
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, accommodate, release, save_design,
+             no_detect, as_json, quiet, plant_opt, allow_uncertified):  # fmt: skip
+    """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
+    faulty without tolerant control, faulty with it."""
+    from .._resources import check_paths_memory
+    from ..plants._loader import load_plant, load_scenario
+    from ..sim import save_result
+    from ..sim import simulate as run_sim
+
+    _check_paths(paths)
+    _check_seed(seed)
+    if dt is not None:
+        _positive("dt", dt)
+    if save:
+        _writable_target(save, "--save", "result.npz")
+    _outputs(save, plots, save_design)
+    d, spec = _design_or_plant(
+        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
+    )
+    spec = _need_plant(d, spec, "simulate")
+    plant = load_plant(spec)
+    scenario = _with_noise(load_scenario(spec), noise)
+    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
+    if not (0 < release <= 1):
+        raise ParameterError(f"--release must be in (0, 1] (1: no hysteresis); got {release}")
+    if save_design and not accommodate:
+        raise ParameterError(
+            "--save-design writes the design with its accommodation thresholds: give --accommodate"
+        )
+    if save_design:
+        _writable_target(save_design, "--save-design", "design.json")
+    if accommodate:
+        from ..sim._accommodate import accommodated
+
+        d = accommodated(
+            d,
+            plant,
+            scenario,
+            paths=paths or scenario.paths,
+            seed=seed,
+            false_alarm_rate=fa_rate,
+            dt=dt,
+            release=release,
+        )
+        click.echo(f"note: {d.status[-1]}", err=True)
+        if save_design:
+            d.save(save_design)
+            click.echo(f"design with accommodation written to {save_design}", err=True)
+    res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
+                  record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
+                  false_alarm_rate=fa_rate)  # fmt: skip
+    m = res.metrics
+    if save:
+        save_result(res, save)
+    figs = []
+    if plots:
+        from ..plot import write_figures
+
+        figs = write_figures(res, plots)
+    warn = _warnings(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names),
+                     list(plant.output_units))  # fmt: skip
+    warn += _why(d, m)
+    change = m.get("dt_change")
+    if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
+        click.echo(
+            f"note: simulated at dt = {change['to']:g}, not the design's sample time {change['from']:g} "
+            f"({change['why']}); the generated C runs {change['from']:g} unless --sample-time says otherwise",
+            err=True,
+        )
+    if as_json:
+        click.echo(json.dumps(m, indent=1))
+    else:
+        click.echo(_summary(d.plant, m))
+        for line in _window_lines(m):
+            click.echo(line)
+        for note in getattr(res, "notes", ()) or ():
+            click.echo(f"  note: {note}")
+    for w in warn:
+        click.echo(textwrap.fill("fte: " + w, width=100), err=True)
+    if save:
+        click.echo(f"per-path arrays of all {res.paths} paths written to {save}", err=True)
+    if figs:
+        click.echo(
+            f"{len(figs)} figures written to {plots} (over the first {res.recorded_paths} paths)", err=True
+        )
+
+
+@click.command()
+@click.argument("target", metavar="DESIGN.json|PLANT")
+@click.option("--vary", "vary", multiple=True, required=True,
+              help="NAME=V1,V2,... with NAME one of fault_scale, noise_scale, d_scale, measurement_noise_scale; "
+                   "repeat for a grid.")  # fmt: skip
+@click.option("--paths", type=int, help="Brownian paths per point (default: the scenario's).")
+@_seed_option
+@_scheduler_option
+@_fast_math_option
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False),
+    help="Write sweep.json, sweep.csv and sweep.png here.",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the list of points (JSON) on stdout.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@_plant_option
+@_allow_option
+@_guard
+def sweep(
+    target, vary, paths, seed, scheduler, fast_math, out_dir, as_json, quiet, plant_opt, allow_uncertified
+):
+    """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
+    from .._atomic import atomic_write_text
+    from .._resources import check_paths_memory
+    from ..plants._loader import load_plant, load_scenario
+    from ..sim._sweep import parse_vary, to_csv, to_json
+    from ..sim._sweep import sweep as run_sweep
+
+    grid = parse_vary(vary)
+    _outputs(out_dir)
+    _check_paths(paths)
+    _check_seed(seed)
+    d, spec = _design_or_plant(
+        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
+    )
+    spec = _need_plant(d, spec, "sweep")
+    plant = load_plant(spec)
+    scenario = load_scenario(spec)
+    check_paths_memory(d, scenario, paths or scenario.paths, None, False)
+    points = run_sweep(d, plant, scenario, grid, paths=paths or scenario.paths, seed=seed, scheduler=scheduler,
+                       progress=not quiet, exact=not fast_math)  # fmt: skip
+    if out_dir:
+        from ..plot import sweep_figure
+
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(out / "sweep.json", to_json(points))
+        atomic_write_text(out / "sweep.csv", to_csv(points))
+        fig = sweep_figure(points, d.plant, out, list(plant.fault_names))
+        click.echo(f"sweep.json, sweep.csv and {fig.name} written to {out_dir}", err=True)
+    if as_json:
+        click.echo(to_json(points))
+    else:
+        for p in points:
+            m = p["metrics"]
+            click.echo(", ".join(f"{k} = {v:g}" for k, v in p["point"].items()) + ": fault error (relative RMS, "
+                       f"whole windows) {_fmt_list(m['fault_rel_rms_error'])}, false-alarm peak "
+                       f"{_fmt_list(m['false_alarm_peak'])}, FTC true ratio {_num(m['ftc_true_ratio'])}")  # fmt: skip
+    for p in points:  # the per-window verdicts, as fte simulate gives them, named by their point
+        at = ", ".join(f"{k} = {v:g}" for k, v in p["point"].items())
+        for w in _warnings(
+            p["metrics"], list(plant.input_names), list(plant.fault_names), list(plant.output_names)
+        ):
+            click.echo(textwrap.fill(f"fte: at {at}: {w}", width=100), err=True)

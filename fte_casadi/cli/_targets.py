@@ -1,0 +1,110 @@
+"""What a command works on: a design document, checked before use, or a plant designed on the fly;
+the plant's scenario; and the options that name them."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import click
+
+from ..errors import ParameterError
+
+_VERTICES = click.option(
+    "--vertices", type=click.Choice(["grouped", "box", "fewest"]), default=None,
+    help="How the premises of a sector model are covered: grouped (premises that depend on the same states "
+    "together, a simplex or a box per group, whichever has fewer vertices; the default for premises found "
+    "automatically), box (each premise its own sector: 2^q rules, the most vertices; the default for declared "
+    "premises), fewest (one simplex over all premises: q + 1 rules, the loosest).",
+)  # fmt: skip
+
+
+def _scenario(plant_spec: str):
+    """The plant's scenario, or None when it has none."""
+    from ..errors import PlantLoadError
+    from ..plants._loader import load_scenario
+
+    try:
+        return load_scenario(plant_spec)
+    except PlantLoadError:
+        return None
+
+
+def _absolute_spec(plant_spec: str) -> str:
+    """A ``file.py:function`` spec with the file's absolute path, so documents work from any directory."""
+    if ":" in plant_spec and plant_spec.rsplit(":", 1)[0].endswith(".py"):
+        target, func = plant_spec.rsplit(":", 1)
+        return f"{Path(target).resolve()}:{func}"
+    return plant_spec
+
+
+def _make_design(
+    plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
+    vertices: str | None = None, full: bool = False,
+):  # fmt: skip
+    """The design of ``plant_spec`` (the plant's scenario step as its sample time, unless given); with ``full``,
+    ``(design, T-S model, options)``."""
+    from ..design import DesignOptions
+    from ..design import design as run_design
+    from ..plants._loader import load_plant
+    from ..ts import derive as derive_ts
+
+    options = DesignOptions(variant=variant, solver=solver, allow_uncertified=allow_uncertified,
+                            accept_assumptions=tuple(accept), plant_spec=_absolute_spec(plant_spec), **params)  # fmt: skip
+    ts = derive_ts(load_plant(plant_spec), vertices=vertices)
+    sc = _scenario(plant_spec)
+    if options.sample_time is None and sc is not None:
+        options = options.replace(sample_time=float(sc.dt))
+    if sc is not None and sc.x0 is not None:  # the simulation's nominal start, for the C's init_from_y
+        options = options.replace(initial_state=sc.x0)
+    d = run_design(ts, options)
+    return (d, ts, options) if full else d
+
+
+def _design_or_plant(
+    target: str, progress: bool = True, plant: str | None = None, allow_uncertified: bool = False
+):
+    """A design document path, or a plant spec designed on the fly (conditioned variant).
+
+    A document is checked before use (:func:`fte_casadi.trust.check_loaded`): re-certified at its numbers,
+    against its plant when that is a built-in one or named with ``plant`` (--plant), never running code it
+    names. Returns ``(design, plant spec or None)``: the spec of the plant it may be simulated on.
+    """
+    from ..design._record import Design
+    from ..trust import check_loaded
+
+    p = Path(target)
+    if target.endswith(".json") or p.is_file():
+        trusted = check_loaded(Design.load(p), plant, allow_uncertified)
+        for note in trusted.notes:
+            click.echo(textwrap.fill("fte: " + note, width=100, break_on_hyphens=False), err=True)
+        return trusted.design, trusted.plant_spec
+    if plant is not None:
+        raise ParameterError(
+            f"--plant names the plant of a design document; {target} is a plant: give one of them"
+        )
+    if progress:
+        click.echo(f"designing {target} (conditioned variant) ...", err=True)
+    return _make_design(target, "conditioned", "CLARABEL", {}), target
+
+
+def _need_plant(d, spec: str | None, command: str) -> str:
+    """The plant spec ``command`` simulates ``d`` on; a document's own non-built-in spec is not imported."""
+    if spec is None:
+        raise ParameterError(
+            f"fte {command} simulates the true nonlinear plant, and the document names {d.plant_spec!r}, which fte does "
+            f"not import on a document's word (it would run that code): name the plant yourself with "
+            f"--plant {d.plant_spec} if you trust it"
+        )
+    return spec
+
+
+_plant_option = click.option(
+    "--plant", "plant_opt", metavar="PLANT",
+    help="The plant of a design document (built-in name, FILE.py:FUNCTION or module:function): checked against "
+    "the document; needed to simulate a document whose plant is not a built-in one (docs/interface.md, Trust model).",
+)  # fmt: skip
+_allow_option = click.option(
+    "--allow-uncertified", "allow_uncertified", is_flag=True,
+    help="Use a design document that does not re-certify at its own numbers (marked NOT CERTIFIED).",
+)  # fmt: skip

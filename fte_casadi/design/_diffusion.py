@@ -1,0 +1,116 @@
+"""How much of a plant's diffusion a design tolerates: the number a refusal names when the diffusion blocks it.
+
+The Brownian terms of the plant (``W x + G u + Gf f + M d2`` in every rule) enter LMIs (45) and (46) through
+``X W^T`` and ``Wbar^T T^T Pbar T Wbar``. Scaled by ``s`` in ``[0, 1]`` (``s = 0``: the plant without
+diffusion, ``s = 1``: as written), the design's feasibility is decided at each ``s`` the way the design
+decides it (step 3, then step 5's feasibility at ``alpha = 0``, each with phase 1 in numpy where the conic
+solver fails), so the answer is a fact about the LMIs. :func:`tolerance` bisects ``s``; a design that is also
+infeasible at ``s = 0`` is not blocked by its diffusion, and then no fraction is named.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..errors import FteError
+from ._augment import Augmented
+from .core import _conditioned as conditioned
+
+__all__ = ["tolerance"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Tolerance:
+    """The largest diffusion scale found feasible (``feasible``) and the smallest found infeasible
+    (``infeasible``), as fractions of the plant's; ``feasible = 0`` and ``infeasible = 0``: infeasible even
+    without diffusion (the diffusion is not the cause)."""
+
+    feasible: float
+    infeasible: float
+    lmi: str  # the LMI that decides at the infeasible end: "45" or "46"
+
+    @property
+    def blocks(self) -> bool:
+        """Is the diffusion the cause (feasible without it, infeasible with all of it)?"""
+        return self.infeasible > 0
+
+    def text(self) -> str:
+        """The sentence a refusal carries."""
+        if not self.blocks:
+            return ""
+        pct = 100.0 * self.feasible
+        got = f"{pct:.2g} %" if self.feasible > 0 else "none"
+        return (
+            f"the plant's diffusion is the cause: the design tolerates {got} of it (LMIs (45)-(46) with every "
+            f"diffusion term scaled by s are feasible at s = {self.feasible:.3g} and infeasible at s = "
+            f"{self.infeasible:.3g}, where ({self.lmi}) fails; at s = 0 they are feasible)"
+        )
+
+
+def scaled(aug: Augmented, s: float) -> Augmented:
+    """``aug`` with every diffusion term (``Wbar``, ``Gbar``, ``Gfbar``, ``Mbar``) multiplied by ``s``."""
+    return dataclasses.replace(
+        aug,
+        Wbar=tuple(s * W for W in aug.Wbar),
+        Gbar=tuple(s * G for G in aug.Gbar),
+        Gfbar=tuple(s * G for G in aug.Gfbar),
+        Mbar=tuple(s * M for M in aug.Mbar),
+    )
+
+
+def scaled_model(ts, s: float):
+    """The T-S model ``ts`` with every rule's diffusion (``W``, ``G``, ``Gf``, ``M``) multiplied by ``s``."""
+    models = tuple(
+        dataclasses.replace(lm, W=s * lm.W, G=s * lm.G, Gf=s * lm.Gf, M=s * lm.M) for lm in ts.local_models
+    )
+    return dataclasses.replace(ts, local_models=models)
+
+
+def has_diffusion(aug: Augmented) -> bool:
+    return any(np.any(M) for group in (aug.Wbar, aug.Gbar, aug.Gfbar, aug.Mbar) for M in group)
+
+
+def _feasible(aug: Augmented, T: np.ndarray, params: dict, solver: str) -> str | None:
+    """None when steps 3 and 5 (at alpha = 0) are feasible for ``aug``, else the LMI that fails ("45", "46")."""
+    try:
+        s3 = conditioned.step3(aug, params, solver)
+    except FteError:
+        return "45"
+    try:
+        prob = conditioned._Step5(aug, params, s3.X, s3.K, T, solver)
+        prob.first()
+    except FteError:
+        return "46"
+    return None if prob.points else "46"
+
+
+def tolerance(
+    aug: Augmented, T: np.ndarray, params: dict, solver: str, *, steps: int = 7
+) -> Tolerance | None:
+    """The fraction of ``aug``'s diffusion for which the design's LMIs are feasible at ``params``, or None
+    when the plant has no diffusion or the whole diffusion is feasible.
+
+    Bisection in ``log s`` between 1e-4 and 1 (``steps`` decisions after the ends), so the bracket is a
+    factor ``1e4 ** (1 / 2**steps)`` wide (7 steps: 7 %)."""
+    if not has_diffusion(aug):
+        return None
+    top = _feasible(aug, T, params, solver)
+    if top is None:
+        return None
+    if _feasible(scaled(aug, 0.0), T, params, solver) is not None:
+        return Tolerance(0.0, 0.0, top)
+    lo, hi, lmi = 1e-4, 1.0, top
+    failed_lo = _feasible(scaled(aug, lo), T, params, solver)
+    if failed_lo is not None:
+        return Tolerance(0.0, lo, failed_lo)
+    for _ in range(steps):
+        mid = math.sqrt(lo * hi)
+        why = _feasible(scaled(aug, mid), T, params, solver)
+        if why is None:
+            lo = mid
+        else:
+            hi, lmi = mid, why
+    return Tolerance(lo, hi, lmi)

@@ -1,0 +1,191 @@
+"""Every number of a design document checked before it is used: a finite number (not a string, not a
+boolean, not null where a number is needed), of the right sign, and every matrix of the shape the
+document's own ``dims`` imply. Each failure is a :class:`~fte_casadi.errors.DesignFileError` naming
+the key, e.g. ``'theta' must be a finite number >= 0; got -1``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import DesignFileError
+from ..ts._cover import VERTEX_CHOICES
+
+__all__ = []  # public: docs/api.md
+
+_REMAKE = "make it again with `fte design PLANT -o FILE`"
+
+
+def _fail(source: str, key: str, what: str) -> DesignFileError:
+    return DesignFileError(f"{source}: {key!r} {what}; {_REMAKE}")
+
+
+def _number(source: str, key: str, v, *, low=None, strict=False, integer=False, optional=False):
+    """A finite JSON number (int or float, not bool), optionally >= / > ``low``."""
+    if v is None and optional:
+        return None
+    kind = "an integer" if integer else "a finite number"
+    bound = "" if low is None else f" {'>' if strict else '>='} {low:g}"
+    ok = not isinstance(v, bool) and isinstance(v, int if integer else (int, float))
+    if ok and not integer:
+        ok = math.isfinite(v)
+    if ok and low is not None:
+        ok = v > low if strict else v >= low
+    if not ok:
+        raise _fail(source, key, f"must be {kind}{bound}; got {v!r}")
+    return v
+
+
+def _leaves_numeric(v, depth: int = 0) -> bool:
+    if isinstance(v, list):
+        return depth < 4 and all(_leaves_numeric(e, depth + 1) for e in v)
+    return not isinstance(v, bool) and isinstance(v, (int, float))
+
+
+def _matrix(source: str, key: str, v, shape: tuple[int, ...]) -> np.ndarray:
+    """A list of rows (or a vector for a 1-tuple ``shape``) of finite numbers, of exactly ``shape``."""
+    if not isinstance(v, list) or not _leaves_numeric(v):
+        raise _fail(source, key, "holds a NaN, null or other non-number entry (a string such as \"inf\", a boolean, "
+                    "or a deeper list): it must be a matrix (a list of rows) of finite numbers")  # fmt: skip
+    try:
+        a = np.array(v, dtype=float)
+    except ValueError:
+        raise _fail(source, key, "has rows of different lengths") from None
+    if len(shape) == 2 and a.size == 0 and 0 in shape:
+        a = a.reshape(shape)  # [] or [[], ...] for a matrix with no columns or rows
+    if a.shape != tuple(shape):
+        want = " x ".join(map(str, shape))
+        got = " x ".join(map(str, a.shape)) or "a number"
+        raise _fail(source, key, f"must be {want} (from the document's dims); got {got}")
+    if not np.all(np.isfinite(a)):
+        raise _fail(source, key, "holds an infinite entry (a number too large for a double, e.g. 1e400)")
+    return a
+
+
+def _matrices(source: str, key: str, v, count: int, shape) -> None:
+    if not isinstance(v, list) or len(v) != count:
+        raise _fail(source, key, f"must be a list of {count} matrices (one per rule)")
+    for i, M in enumerate(v):
+        _matrix(source, f"{key}[{i}]", M, shape)
+
+
+_DIMS = ("n", "m", "p", "ld", "lf", "r", "nbar")
+_PARAMS = {
+    "gamma": (0, True),
+    "gamma1": (0, True),
+    "sigma": (0, True),
+    "delta": (0, False),
+    "epsilon": (0, False),
+}
+_OPTIONAL_PARAMS = {
+    "gamma2": (0, True),
+    "kappa": (0, True),
+    "boundary_layer": (0, True),
+    "bound_weight": (0, False),
+}
+_OBSERVER = {"sample_time": (0, True), "alpha": (0, False), "alpha_max": (0, False), "alpha_max_upper": (0, False),
+             "ts_max": (0, False), "bound_weight": (0, False), "bound_objective_before": (None, False),
+             "bound_objective_unweighted": (None, False),
+             "bound_objective": (None, False)}  # fmt: skip
+
+
+def check_document(doc: dict, source: str) -> None:
+    """Raise :class:`DesignFileError` naming the first key of ``doc`` that is not a finite number of the
+    right type, sign and shape. ``doc`` has every required key (checked before)."""
+    dims = doc["dims"]
+    d = {k: _number(source, f"dims.{k}", dims.get(k), low=0, integer=True) for k in _DIMS}
+    for k in ("n", "m", "p", "lf", "r"):
+        if d[k] < 1:
+            raise _fail(source, f"dims.{k}", f"must be at least 1; got {d[k]}")
+    if d["nbar"] != d["n"] + 2 * d["lf"]:
+        raise _fail(source, "dims.nbar", f"must be n + 2 lf = {d['n'] + 2 * d['lf']}; got {d['nbar']}")
+    if max(d.values()) > 10_000:
+        raise _fail(source, "dims", f"holds a size above 10000 ({max(d.values())}): not a design fte makes")
+    n, m, p, ld, lf, r, nbar = (d[k] for k in _DIMS)
+    params = doc["params"]
+    for k, (low, strict) in _PARAMS.items():
+        _number(source, f"params.{k}", params.get(k), low=low, strict=strict)
+    for k, (low, strict) in _OPTIONAL_PARAMS.items():
+        if k in params:
+            _number(source, f"params.{k}", params[k], low=low, strict=strict, optional=True)
+    observer = doc.get("observer") or {}
+    if not isinstance(observer, dict):
+        raise _fail(source, "observer", "must be a JSON object")
+    for k, (low, strict) in _OBSERVER.items():
+        if k in observer:
+            _number(source, f"observer.{k}", observer[k], low=low, strict=strict, optional=True)
+    _number(source, "theta", doc["theta"], low=0)
+    r5 = doc.get("remark5") or {}
+    if not isinstance(r5, dict):
+        raise _fail(source, "remark5", "must be a JSON object")
+    k5 = 0
+    if r5.get("used"):
+        bdu = r5.get("Bdu")
+        if not isinstance(bdu, list) or not bdu or not isinstance(bdu[0], list):
+            raise _fail(source, "remark5.Bdu", f"must be an {nbar} x k matrix")
+        k5 = len(bdu[0])
+        _matrix(source, "remark5.Bdu", bdu, (nbar, k5))
+        _matrix(source, "remark5.gain", r5.get("gain"), (k5,))
+    ls = doc["Ls"]
+    if not k5 and isinstance(ls, list) and ls and isinstance(ls[0], list) and len(ls[0]) > lf:
+        raise _fail(source, "Ls", f"has {len(ls[0]) - lf} more columns than faults but 'remark5' is not used")
+    ns = lf + k5
+    shapes = {"C": (p, n), "Df": (p, lf), "H": (nbar, p), "T": (nbar, nbar), "X": (n, n), "P": (n, n),
+              "Kf": (m, lf), "Pbar": (nbar, nbar), "N": (ns, p), "Ls": (nbar, ns)}  # fmt: skip
+    for k, shape in shapes.items():
+        _matrix(source, k, doc[k], shape)
+    lists = {"K": (m, n), "Q": (nbar, p), "L1": (nbar, p), "L2": (nbar, p), "R": (nbar, nbar)}
+    for k, shape in lists.items():
+        _matrices(source, k, doc[k], r, shape)
+    if doc.get("Kf_rules") is not None:
+        _matrices(source, "Kf_rules", doc["Kf_rules"], r, (m, lf))
+    _matrix(source, "u_ref", doc["u_ref"], (m,))
+    for k in ("x_ref", "x0"):
+        if doc.get(k) is not None:
+            _matrix(source, k, doc[k], (n,))
+    lms = doc["local_models"]
+    if not isinstance(lms, list) or len(lms) != r:
+        raise _fail(source, "local_models", f"must hold r = {r} models")
+    lm_shapes = {"A": (n, n), "B": (n, m), "Bd": (n, ld), "Bf": (n, lf), "W": (n, n), "a": (n,), "G": (n, m),
+                 "Gf": (n, lf)}  # fmt: skip
+    for i, lm in enumerate(lms):
+        if not isinstance(lm, dict):
+            raise _fail(
+                source, f"local_models[{i}]", "must be a JSON object of matrices (A, B, Bd, Bf, W, ...)"
+            )
+        for k, shape in lm_shapes.items():
+            if k in lm:
+                _matrix(source, f"local_models[{i}].{k}", lm[k], shape)
+        if "M" in lm:
+            M = lm["M"]
+            cols = len(M[0]) if isinstance(M, list) and M and isinstance(M[0], list) else 0
+            _matrix(source, f"local_models[{i}].M", M, (n, cols))
+    if not isinstance(doc["premises"], list):
+        raise _fail(source, "premises", "must be a list")
+    for i, pr in enumerate(doc["premises"]):
+        if not isinstance(pr, dict):
+            raise _fail(source, f"premises[{i}]", "must be a JSON object")
+        lo = _number(source, f"premises[{i}].min", pr.get("min"))
+        _number(source, f"premises[{i}].max", pr.get("max"), low=lo)
+    for key in ("checks", "timings"):
+        if not isinstance(doc[key], dict):
+            raise _fail(source, key, "must be a JSON object")
+    for k, v in doc["timings"].items():
+        _number(source, f"timings.{k}", v, low=0)
+    if "certified" in doc and not isinstance(doc["certified"], bool):
+        raise _fail(source, "certified", f"must be true or false; got {doc['certified']!r}")
+    schema = doc.get("schema", 1)
+    if isinstance(schema, bool) or not isinstance(schema, int) or schema < 1:
+        raise _fail(source, "schema", f"must be a positive integer; got {schema!r}")
+    ph = doc.get("plant_hash", {})
+    if not isinstance(ph, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in ph.items()):
+        raise _fail(source, "plant_hash", "must be a JSON object of hexadecimal strings")
+    for k in ("plant", "plant_spec", "variant", "solver"):
+        if k in doc and not isinstance(doc[k], str):
+            raise _fail(source, k, f"must be a string; got {doc[k]!r}")
+    if doc.get("vertices") is not None and doc["vertices"] not in VERTEX_CHOICES:
+        raise _fail(
+            source, "vertices", f"must be one of {', '.join(VERTEX_CHOICES)} or null; got {doc['vertices']!r}"
+        )

@@ -1,0 +1,110 @@
+"""The diagnosis of a design that fails: which LMI, which bounds are feasible, and a value that was checked
+to give a certified design (each suggestion is a whole design run at it: :func:`~._search.try_design`)."""
+
+from __future__ import annotations
+
+import math
+
+from .._rounding import nice_ceil, nice_floor
+from ..errors import InfeasibleDesignError
+from ._limits import reachability
+from ._options import DesignOptions, default_gamma1
+from ._search import Attempt, refusals, try_design
+from .core._diagnose import gamma_min, sigma_max
+
+__all__ = []
+
+
+def outside_45(aug, params: dict, solver: str) -> str | None:
+    """Why (45) is infeasible at ``params`` by its bounds (one SDP each, well posed), or None.
+
+    The conditioned step 3 is homogeneous in its unknowns, so an infeasible (45) can end in a solver's
+    numerical failure rather than a certificate of infeasibility; before the other solver is tried (SCS
+    takes minutes to fail there), the bounds decide whether the parameters lie outside what (45) allows.
+    """
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    smax, _ = sigma_max(aug, g, g1, solver)
+    if smax is None:
+        return f"LMI (45) is infeasible: no sigma > 0 makes it feasible at gamma = {g:g}"
+    if sg >= smax:
+        return f"LMI (45) is infeasible: sigma = {sg:g} is above the largest sigma {smax:.3g} it allows at gamma = {g:g}"
+    return None
+
+
+def explain_45(attempt: Attempt, ts, options: DesignOptions, aug, params: dict,
+               refused: list | None = None) -> InfeasibleDesignError:  # fmt: skip
+    """The error for an infeasible (45): the smallest feasible gamma and the largest feasible sigma,
+    each followed by a value that was tried and gives a certified design."""
+    solver = options.solver
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    gmin, _ = gamma_min(aug, sg, g1, solver)
+    smax, _ = sigma_max(aug, g, g1, solver)
+    parts, fixes = [], []
+    if gmin is None:
+        sup, _ = sigma_max(aug, None, g1, solver)
+        parts.append(f"no gamma makes (45) feasible at sigma = {sg:g}"
+                     + (f" (any gamma needs sigma < {sup:.3g})" if sup else ""))  # fmt: skip
+        if sup is None and (why := reachability(aug, getattr(ts, "rule_distances", None))):
+            parts.append(why)
+    else:
+        lowered = options.gamma1 is None and not math.isclose(g1, default_gamma1(ts, options), rel_tol=1e-12)
+        parts.append(
+            f"the smallest gamma for which (45) is feasible with gamma1 = {g1:g}"
+            + (
+                " (the default gamma1, lowered with gamma to stay below it; --gamma1 sets it)"
+                if lowered
+                else ""
+            )
+            + f", sigma = {sg:g} is {gmin:.3g}"
+        )
+        for f in (1.05, 1.25, 1.6, 2.5, 4.0):
+            cand = nice_ceil(max(gmin * f, g1 * 1.01))
+            if try_design(attempt, ts, options, refused, gamma=cand) is not None:
+                fixes.append(f"raise gamma to >= {cand:g}")
+                break
+    if smax is None:
+        parts.append(f"no sigma > 0 makes it feasible at gamma = {g:g}")
+    else:
+        parts.append(f"the largest sigma for which it is feasible with gamma = {g:g} is {smax:.3g}")
+        for f in (0.95, 0.8, 0.6, 0.4, 0.2, 0.1):
+            cand = nice_floor(smax * f)
+            if try_design(attempt, ts, options, refused, sigma=cand) is not None:
+                fixes.append(f"lower sigma to <= {cand:g}")
+                break
+    checked = "each checked: it gives" if len(fixes) > 1 else "checked: it gives"
+    advice = (
+        (" or ".join(fixes) + f" ({checked} a certified design)")
+        if fixes
+        else (
+            "no value tried gives a certified design: see `fte design PLANT --explore` for the feasible frontier"
+        )
+    )
+    return InfeasibleDesignError(
+        f"LMI (45) is infeasible: {'; '.join(parts)}. {advice[0].upper() + advice[1:]}."
+        + ("" if fixes else refusals(refused or []))
+    )
+
+
+def explain_46(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, exc: Exception,
+               refused: list | None = None) -> InfeasibleDesignError:  # fmt: skip
+    """The error for an infeasible (46) at alpha = 0: a larger sigma (within what (45) allows) that works."""
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    smax, _ = sigma_max(aug, g, g1, options.solver)
+    fix = None
+    if smax is not None and smax > sg:
+        for f in (0.2, 0.4, 0.6, 0.8, 0.95):
+            cand = nice_floor(sg + f * (smax - sg))
+            if cand > sg and try_design(attempt, ts, options, refused, sigma=cand) is not None:
+                fix = cand
+                break
+    msg = (f"{str(exc).rstrip('.')}. The -sigma I block of (46) must dominate the coupling of the observer with the loop; (45) allows "
+           f"sigma up to {smax:.3g} at gamma = {g:g}." if smax else f"{exc}")  # fmt: skip
+    msg += (
+        f" Raise sigma to {fix:g} (checked: it gives a certified design)."
+        if fix
+        else (
+            " No larger sigma tried gives a certified design: see `fte design PLANT --explore`."
+            + refusals(refused or [])
+        )
+    )
+    return InfeasibleDesignError(msg)

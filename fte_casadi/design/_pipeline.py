@@ -1,0 +1,324 @@
+"""The design as a pipeline of records: structure (augment, H, assumptions) -> step 3 -> step 5 -> certificate
+-> bounds, each stage a function of the records before it.
+
+No stage retries or searches: a stage that fails raises (:class:`~fte_casadi.errors.InfeasibleDesignError`,
+:class:`~fte_casadi.design.core._conditioned.SolverFailedError`), and :func:`fte_casadi.design.design` decides
+what to try next (:mod:`fte_casadi.design._search`) or what to say (:mod:`fte_casadi.design._explain`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from types import SimpleNamespace
+
+import casadi as ca
+import numpy as np
+
+from ..errors import AssumptionError, InfeasibleDesignError
+from ..model._fingerprint import plant_fingerprint
+from ..ts import TSModel, scheduling_from_measurements
+from ._augment import Augmented, augment
+from ._options import DesignOptions, Resolved
+from ._record import Design
+from ._records import Dims, Observer, Params
+from ._remark5 import explain_causes, with_remark5
+from ._remark5 import fallback as remark5_fallback
+from ._remark5 import record as remark5_record
+from ._uio import check_assumptions, enforce, uio_gain
+from .core import _conditioned as conditioned
+from .core import _paper as paper
+from .core._certify import certificate, discrete_certificate, failures
+
+__all__ = ["structure", "step3", "step5"]
+
+PAPER_NOTE = "paper variant: problem as printed (with the corrections of docs/method.md); expect an ill-conditioned Pbar"
+
+
+@dataclass(frozen=True)
+class Structure:
+    """The augmented system of a design, its unknown-input gain ``H`` (``T = I - H Cbar``), the assumption
+    checks of Section 3 (``checks``), Remark 5's record (``r5doc``, empty where not used) and the stage's notes."""
+
+    aug: Augmented
+    H: np.ndarray
+    T: np.ndarray
+    checks: list
+    r5doc: dict
+    notes: tuple
+
+    @property
+    def assumptions_hold(self) -> bool:
+        return all(c.holds for c in self.checks)
+
+
+def structure(ts: TSModel, options: DesignOptions, resolved: Resolved) -> Structure:
+    """Augment ``ts``, find H and T, check the assumptions (with Remark 5's fallback where H cannot decouple
+    the unknown inputs); raises :class:`~fte_casadi.errors.AssumptionError` on a failed assumption that is
+    not accepted."""
+    notes: list[str] = []
+    aug = augment(ts.local_models, ts.C, ts.Df)
+    if any(lm.has_diffusion_extension for lm in ts.local_models):
+        notes.append(
+            "Theorem 5: faults/inputs/d2 in the diffusion, LMIs (78)-(81) (keys 45/46/55/64 hold the same values)"
+        )
+    H, T = uio_gain(aug)
+    checks_a = check_assumptions(aug, T)
+    r5 = remark5_fallback(aug, checks_a, options.remark5)
+    if r5 is not None:  # Remark 5: H decouples what it can, the sliding term attenuates the rest
+        H, T, aug = r5.H, r5.T, with_remark5(aug, r5)
+        checks_a = check_assumptions(aug, T, remark5=r5)
+    checks_a = explain_causes(_named(checks_a, aug, ts.plant), aug, ts.plant, options.remark5)
+    try:
+        notes += enforce(checks_a, options.accept_assumptions)
+    except AssumptionError as exc:
+        raise AssumptionError(str(exc) + _scaling_note(ts)) from None
+    r5doc = (
+        {}
+        if r5 is None
+        else remark5_record(r5, options.d_bound, resolved.params, ts.plant.unknown_input_names)
+    )
+    notes += [r5doc["message"]] if r5doc else []
+    return Structure(aug, H, T, checks_a, r5doc, tuple(notes))
+
+
+def paper_steps(st: Structure, resolved: Resolved, solver: str):
+    """Steps 3 and 5 as printed (:mod:`~fte_casadi.design.core._paper`): ``(step3, K, step5)``."""
+    s3, K = paper.step3(st.aug, resolved.params, solver)
+    s5 = paper.step5(st.aug, resolved.params, s3.X, K, st.T, solver)
+    return s3, K, s5
+
+
+def step3(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
+    """Step 3, conditioned: the common gain K from (45)."""
+    return conditioned.step3(st.aug, resolved.params, solver)
+
+
+def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3) -> conditioned.Step5:
+    """Step 5, conditioned: Pbar, Q_i, N, theta from (46), (55), (64) at the resolved decay rate (a rate from
+    the plant's defaults gives way, as a default, where it is infeasible or the sample time needs it)."""
+    K = [s3.K] * st.aug.r
+    view = _closed_loop_view(ts, st.T, K, st.r5doc) if resolved.params.get("bound_weight") else None
+    return conditioned.step5(st.aug, resolved.params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
+                             sample_time=options.sample_time, bound_view=view,
+                             alpha_is_default=resolved.alpha_source == "plant")  # fmt: skip
+
+
+def finish(
+    ts: TSModel, options: DesignOptions, resolved: Resolved, st: Structure, s3, K, s5, t0: float
+) -> Design:
+    """The design at the steps' point: the observer gains, the certificate (raised when it fails, unless
+    ``options.allow_uncertified``), the reference input, the bounds, and the Design record."""
+    aug, T, H, params = st.aug, st.T, st.H, resolved.params
+    status = list(resolved.notes) + list(st.notes)
+    if options.variant == "paper":
+        status.append(PAPER_NOTE)
+    status += s3.notes + s5.notes
+    X = s3.X
+    P = np.linalg.inv(X)
+    L1 = [np.linalg.solve(s5.Pbar, Q) for Q in s5.Q]
+    R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
+    L2 = [Ri @ H for Ri in R]
+    Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
+    Kf, Kf_rules = _fault_gains(ts, status)
+    point = dict(X=X, K=K, P=P, T=T, Pbar=s5.Pbar, Q=s5.Q, N=s5.N, theta=s5.theta, R=R, L1=L1)
+    checks = certificate(aug, point, params)
+    sample_time = options.sample_time
+    if sample_time is not None:  # the step that runs: z+ = z + Ts (...), checked with Pbar for any blending
+        checks["discrete"] = discrete_certificate(R, s5.Pbar, float(sample_time))
+    checks["assumptions"] = [c.to_dict() for c in st.checks]
+    # the plant's region (null: a state without bounds): the generated C checks y against its image
+    checks["region"] = {
+        side: [None if np.isnan(v) else float(v) for v in vals]
+        for side, vals in (("lo", ts.plant.region_lo), ("hi", ts.plant.region_hi))
+    }
+    checks["alpha"] = float(s5.alpha)
+    bad = failures(checks)
+    certified = not bad
+    if bad:
+        what = "; ".join(bad)
+        hint = (
+            "use variant='conditioned'"
+            if options.variant == "paper"
+            else "raise sigma, or lower alpha, or try solver='SCS'"
+        )
+        msg = f"the design is not certified at the returned point: {what} does not hold; {hint}"
+        if not options.allow_uncertified:
+            raise InfeasibleDesignError(msg, result=checks)
+        status.append("NOT CERTIFIED: " + msg)
+    u_ref, x_ref = _u_reference(ts, K, status)
+    sched, sources = scheduling_from_measurements(ts)
+    plant = ts.plant
+    total = time.perf_counter() - t0
+    observer = {k: (float(v) if isinstance(v, (int, float, np.floating)) and v is not None else v)
+                for k, v in s5.observer.items()}  # fmt: skip
+    return Design(
+        plant=plant.name,
+        plant_spec=options.plant_spec or plant.name,
+        variant=options.variant,
+        solver=options.solver,
+        params=Params.from_mapping(params),
+        dims=Dims.from_mapping(
+            {"n": ts.n, "m": ts.m, "p": ts.p, "ld": ts.ld, "lf": ts.lf, "r": ts.r, "nbar": aug.nbar}
+        ),
+        premises=[p.to_dict() for p in ts.premises],
+        local_models=ts.local_models,
+        C=np.array(ts.C, dtype=float),
+        Df=np.array(ts.Df, dtype=float),
+        H=H,
+        T=T,
+        X=X,
+        P=P,
+        K=tuple(K),
+        Kf=Kf,
+        Kf_rules=Kf_rules,
+        Pbar=s5.Pbar,
+        Q=tuple(s5.Q),
+        N=s5.N,
+        theta=float(s5.theta),
+        L1=tuple(L1),
+        L2=tuple(L2),
+        R=tuple(R),
+        Ls=Ls,
+        checks=checks,
+        timings={"total_s": total, "solver_s": s3.seconds + s5.seconds},
+        u_ref=u_ref,
+        x_ref=x_ref,
+        scheduling=sched,  # the record keeps it as data (scheduling_ops) and, for older readers, serialised
+        plant_hash=plant_fingerprint(plant),
+        vertices=ts.vertices,
+        names={
+            "states": list(plant.state_names),
+            "inputs": list(plant.input_names),
+            "outputs": list(plant.output_names),
+            "faults": list(plant.fault_names),
+            "state_units": list(plant.state_units),
+            "output_units": list(plant.output_units),
+            "scheduling_sources": sources,
+        },  # fmt: skip
+        certified=certified,
+        status=status,
+        solves={"step3": int(s3.solves), "step5": int(s5.solves), "total": int(s3.solves + s5.solves)},
+        observer=Observer.from_mapping(observer),
+        input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
+        x0=resolved.x0,
+        bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, st.r5doc, getattr(s5, "bound", None)),
+        remark5=st.r5doc,
+    )
+
+
+def _u_reference(ts: TSModel, K, status: list):
+    plant = ts.plant
+    if plant.u_ref is not None:
+        return np.asarray(plant.u_ref, dtype=float).ravel(), None
+    if plant.x_ref is None:
+        return np.zeros(ts.m), None
+    xr = np.asarray(plant.x_ref, dtype=float).ravel()
+    F = plant.drift_function()
+    u = ca.SX.sym("u", ts.m)
+    g = F(xr, u, np.zeros(ts.ld), np.zeros(ts.lf))
+    J = ca.Function("J", [u], [g, ca.jacobian(g, u)])
+    ue = np.zeros(ts.m)
+    for _ in range(50):  # Gauss-Newton on the drift at x_ref with d = f = 0
+        r, Jm = (np.array(v) for v in J(ue))
+        step = np.linalg.lstsq(Jm, -r.ravel(), rcond=None)[0]
+        ue = ue + step
+        if np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(ue)):
+            break
+    res = float(np.linalg.norm(np.array(J(ue)[0])))
+    lim = plant.input_limits
+    if lim is not None and np.any((ue < lim[:, 0]) | (ue > lim[:, 1])):
+        status.append(f"warning: the input holding x_ref, u_eq = {np.round(ue, 6).tolist()}, lies outside the input "
+                      f"limits {np.asarray(lim).tolist()}: the loop saturates at rest")  # fmt: skip
+    h = ts.memberships(xr)
+    Kx = sum(h[j] * K[j] for j in range(len(K)))
+    status.append(f"u_ref = u_eq - (sum_j h_j(x_ref) K_j) x_ref with u_eq = {np.round(ue, 6).tolist()} holding the "
+                  f"nonlinear plant at x_ref (drift residual {res:.2g}); u = u_eq + K (xhat - x_ref)")  # fmt: skip
+    return ue - Kx @ xr, xr
+
+
+def _scaling_note(ts: TSModel) -> str:
+    """Where the local models' coefficients span more than 1e10, a sentence saying that the rank decisions
+    behind an assumption's verdict are made at a tolerance relative to the largest one ('' otherwise)."""
+    big, small, where = 0.0, np.inf, ""
+    for i, lm in enumerate(ts.local_models):
+        for key in ("A", "B", "Bd", "Bf"):
+            M = np.abs(np.asarray(lm[key], dtype=float))
+            nz = M[M > 1e-12 * M.max()] if M.size else M  # not the round-off of an exact zero
+            if nz.size and nz.max() > big:
+                k = np.unravel_index(np.argmax(M), M.shape)
+                big, where = (
+                    float(nz.max()),
+                    f"{key}[{k[0] + 1}, {k[1] + 1}] = {float(lm[key][k]):.3g} in rule {i + 1}",
+                )
+            if nz.size:
+                small = min(small, float(nz.min()))
+    if not (big > 0 and small < np.inf and big / small > 1e10):
+        return ""
+    return (
+        f" Note: the plant's coefficients span a factor {big / small:.1e} (largest {where}, "
+        f"smallest {small:.3g}); the rank decisions behind this verdict use a tolerance relative to the largest, so "
+        "it may come from that scaling rather than from the plant's structure: rescale its units (states, inputs) "
+        "so that its coefficients lie within about 1e6 of each other, and design again."
+    )
+
+
+def _fault_gains(ts: TSModel, status: list):
+    """``(Kf, Kf_rules)``: the fault compensation ``Kf_i = -pinv(B_i) Bf_i``, one for all rules when they agree."""
+    Kfs = [-np.linalg.pinv(lm.B) @ lm.Bf for lm in ts.local_models]
+    Kf, Kf_rules = Kfs[0], None
+    # B_i and Bf_i may both vary (an actuator fault enters where u does: Bf = B E) and still give one Kf
+    spread = max(float(np.max(np.abs(Ki - Kfs[0]))) for Ki in Kfs)
+    if spread > 1e-9 * max(1.0, float(np.max(np.abs(Kfs[0])))):
+        Kf_rules = tuple(Kfs)
+        status.append(f"Kf scheduled: -pinv(B_i) Bf_i differs between rules (by up to {spread:.3g}); the step blends "
+                      "Kf(h) = sum_i h_i Kf_i (document: Kf_rules; Kf is rule 1's)")  # fmt: skip
+    return Kf, Kf_rules
+
+
+def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known):
+    """The closed loop's data the bound needs (:mod:`fte_casadi.design.core._bounds`), or None where it is not posed
+    (Remark 5's fallback, Theorem 5's diffusion). ``gains = (Kf, Kf_rules)`` and ``u_ref`` once the design has
+    them (before step 5 they are computed here, their messages left to the design); ``known``: ``R`` once the
+    observer is designed."""
+    if (r5doc and r5doc.get("used")) or any(lm.has_diffusion_extension for lm in ts.local_models):
+        return None
+    scratch: list = []
+    Kf, Kf_rules = _fault_gains(ts, scratch) if gains is None else gains
+    u_ref = _u_reference(ts, K, scratch)[0] if u_ref is None else u_ref
+    return SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
+                           local_models=ts.local_models, K=K, **known)  # fmt: skip
+
+
+def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, fallback=None) -> dict:
+    """The certified bounds on the fault- and state-estimation errors at the returned design (
+    :mod:`fte_casadi.design.core._bounds`), for a certified design; {} otherwise."""
+    if not certified:
+        return {}
+    if r5doc and r5doc.get("used"):
+        why = {"holds": False, "why": "not computed where Remark 5's fallback is used"}
+        return {"fault_error": why, "state_error": dict(why)}
+    from .core._bounds import fault_error_bound, state_error_bound
+
+    view = _closed_loop_view(ts, T, K, None, (Kf, Kf_rules), u_ref, R=R)
+    if view is None:  # Theorem 5's diffusion: the bounds say so
+        view = SimpleNamespace(local_models=ts.local_models)
+    fe = fault_error_bound(view, fallback=fallback)
+    return {"fault_error": fe, "state_error": state_error_bound(view, start=fe)}
+
+
+def _named(checks: list, aug, plant) -> list:
+    """The failed assumptions (1) and (2) with the faults and unknown inputs behind them named, and the
+    measurement that would separate them (:mod:`fte_casadi.design._structure`)."""
+    import dataclasses
+
+    from ._structure import describe
+
+    out = []
+    for c in checks:
+        if not c.holds and c.name in ("(1)", "(2)"):
+            why = describe(aug, plant, {c.name})
+            if why:
+                c = dataclasses.replace(c, message=f"{c.message}. Which: {why}")
+        out.append(c)
+    return out

@@ -1,0 +1,114 @@
+"""The parameter search: what a design tries when the record it was given does not give a certified design.
+
+Every trial is the given :class:`~fte_casadi.design._options.DesignOptions` changed with
+:meth:`~fte_casadi.design._options.DesignOptions.replace` (another sigma, another gamma) and designed again by
+``attempt`` (one attempt of :func:`fte_casadi.design.design`, passed in so that this module does not import
+the one that calls it). A trial's settings are resolved afresh, so what the plant's defaults gave stays a
+default in every trial.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+from .._rounding import nice_ceil, nice_floor
+from ..errors import FteError
+from ._options import DesignOptions
+from ._record import Design
+from .core._diagnose import gamma_min, sigma_max
+
+__all__ = ["choose"]
+
+#: one attempt of the design: ``attempt(ts, options) -> Design``
+Attempt = Callable[..., Design]
+
+#: fractions of the largest feasible sigma tried, in order, when the tool chooses sigma itself
+SIGMA_TRIALS = (0.8, 0.6, 0.4, 0.2, 0.1, 0.05)
+#: multiples of the smallest feasible gamma tried when the tool chooses gamma itself
+GAMMA_TRIALS = (1.25, 1.6, 2.5, 4.0, 10.0)
+
+
+def try_design(
+    attempt: Attempt, ts, options: DesignOptions, refused: list | None = None, **change
+) -> Design | None:
+    """The whole design with ``options`` changed by ``change`` (without diagnosis, a certificate required), or
+    None when it does not give a certified design (then ``(change, why)`` is appended to ``refused``)."""
+    try:
+        d = attempt(ts, options.replace(diagnose=False, allow_uncertified=False, **change))
+    except FteError as exc:
+        if refused is not None:
+            refused.append((change, " ".join(str(exc).split())))
+        return None
+    if not d.certified and refused is not None:
+        refused.append((change, "not certified"))
+    return d if d.certified else None
+
+
+def refusals(refused: list) -> str:
+    """What stopped the values tried (the first of each kind), for the refusal's message: a bound can be
+    right and the design still fail at it for another reason (e.g. the sample time)."""
+    seen, out = set(), []
+    for change, why in refused:
+        kind = why[:40]
+        if kind in seen:
+            continue
+        seen.add(kind)
+        at = ", ".join(f"{k} = {v:g}" for k, v in change.items())
+        out.append(f"at {at}: {why[:700]}")
+    return (" The values tried were refused for other reasons: " + "; ".join(out[:2]) + ".") if out else ""
+
+
+def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, generic, lmi: str, exc,
+           refused: list | None = None) -> Design | None:  # fmt: skip
+    """Parameters the tool finds itself: when sigma and/or gamma came from the generic defaults (neither the
+    user nor the plant set them) and the design fails at them, the feasibility bounds say where to look:
+    sigma below the largest sigma (45) allows, else gamma above the smallest one it allows. The first value
+    tried that gives a certified design is taken, and the document's ``params_chosen`` says what was chosen
+    and why. None when nothing was generic or nothing tried works. ``lmi``: the LMI that failed, "45" or "46"."""
+    if not generic:
+        return None
+    solver = options.solver
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+
+    def trials():  # lazily: each bound is one conic solve, asked for only when the values before it failed
+        if "sigma" in generic:
+            smax, _ = sigma_max(aug, g, g1, solver)
+            if smax is not None:
+                if lmi == "45":
+                    cands = [nice_floor(smax * f) for f in SIGMA_TRIALS]
+                else:  # (46) wants sigma large enough to dominate the observer-loop coupling
+                    cands = [
+                        nice_floor(sg + f * (smax - sg)) for f in (0.2, 0.4, 0.6, 0.8, 0.95) if smax > sg
+                    ]
+                    cands += [nice_floor(smax * f) for f in SIGMA_TRIALS]
+                why = f"the largest sigma for which (45) is feasible at gamma = {g:g}, gamma1 = {g1:g} is {smax:.3g}"
+                yield from (({"sigma": c}, why) for c in dict.fromkeys(cands) if c > 0)
+        if {"sigma", "gamma"} <= generic and sigma_max(aug, g, g1, solver)[0] is None:
+            sup, _ = sigma_max(aug, None, g1, solver)  # no sigma works at this gamma: move both
+            for f in (0.5, 0.2, 0.05) if sup is not None else ():
+                sc = nice_floor(sup * f)
+                gm, _ = gamma_min(aug, sc, g1, solver)
+                if gm is None:
+                    continue
+                why = (f"no sigma makes (45) feasible at gamma = {g:g}; any gamma needs sigma < {sup:.3g}, and at "
+                       f"sigma = {sc:g} the smallest feasible gamma is {gm:.3g}")  # fmt: skip
+                yield from (
+                    ({"sigma": sc, "gamma": nice_ceil(max(gm * gf, g1 * 1.01))}, why) for gf in (1.25, 2.5)
+                )
+        if "gamma" in generic:
+            gmin, _ = gamma_min(aug, sg, g1, solver)
+            if gmin is not None:
+                why = f"the smallest gamma for which (45) is feasible at sigma = {sg:g}, gamma1 = {g1:g} is {gmin:.3g}"
+                yield from (({"gamma": nice_ceil(max(gmin * f, g1 * 1.01))}, why) for f in GAMMA_TRIALS)
+
+    for change, why in trials():
+        d = try_design(attempt, ts, options, refused, **change)
+        if d is not None:
+            first = " ".join(str(exc).split())[:160]
+            chosen = {k: {"value": v, "why": f"the generic default {params[k]:g} failed ({first}); {why}; "
+                          f"{k} = {v:g} is the first value tried that gives a certified design"}
+                      for k, v in change.items()}  # fmt: skip
+            notes = [f"{k} = {c['value']:g} chosen by the tool: {c['why']}" for k, c in chosen.items()]
+            return dataclasses.replace(d, params_chosen=chosen, status=notes + list(d.status))
+    return None

@@ -1,0 +1,67 @@
+"""The text ``fte design`` prints for a design: its certificate, observer, bound, timings and notes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .core._lmis import LMIS
+
+__all__ = []  # public: docs/api.md
+
+
+def _lmi_keys(checks: dict) -> list[str]:
+    """The keys of the registered LMIs the certificate holds (:data:`~.core._lmis.LMIS`), then under Theorem 5
+    their Theorem 5 numbers (the same values)."""
+    lmi = checks["lmi_max_eig"]
+    keys = [k for k in LMIS if k in lmi]
+    if checks.get("theorem") == 5:
+        keys += [e.theorem5 for e in LMIS.values() if e.theorem5 and e.theorem5 in lmi]
+    return keys
+
+
+def design_summary(d) -> str:
+    """The summary of the Design ``d`` that ``fte design`` prints (one string, lines joined)."""
+    c = d.checks
+    lmi = c["lmi_max_eig"]
+    shown = _lmi_keys(c)
+    K = max(float(np.max(np.abs(k))) for k in d.K)
+    obs = d.observer
+    lines = [
+        f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
+        f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
+        "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.to_dict().items()),
+        "  largest eigenvalue of each LMI at the returned point (negative = holds): "
+        + ", ".join(f"({k}) {lmi[k]:.3g}" for k in shown)
+        + (
+            "; round-off of each, 8 dim eps ||M||: "
+            + ", ".join(f"{c['lmi_roundoff'][k]:.1g}" for k in shown if k in c["lmi_roundoff"])
+            if c.get("lmi_roundoff")
+            else ""
+        ),
+        f"  theta = {d.theta:.3g}, cond(Pbar) = {c['cond_Pbar']:.3g}, max|L1| = {c['max_abs_L1']:.3g}, max|K| = {K:.3g}",
+        f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
+        f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",
+    ]
+    disc = c.get("discrete")
+    if disc:
+        lines.append(
+            f"  discrete step at the sample time Ts = {disc['sample_time']:g}: "
+            + ("proven stable" if disc["holds"] else "NOT proven stable")
+            + f" for any blending of the rules (Pbar decreases for Ts < {disc['ts_max_lyapunov']:.4g})"
+        )
+    for key, what, err in (("fault_error", "fault", "f - fhat"), ("state_error", "state", "x - xhat")):
+        fb = (d.bounds or {}).get(key)
+        if fb and fb.get("holds"):
+            lines.append(f"  certified bound on the {what}-estimation error: E int |{err}|^2 dt <= "
+                         + " + ".join(f"{g:.3g}^2 t" if c == "const" else f"{g:.3g}^2 E int |{c}|^2" for c, g in fb["gains"].items())
+                         + " + E xi0' P xi0 (docs/tune.md)")  # fmt: skip
+        elif fb:
+            lines.append(f"  no bound on the {what}-estimation error: {fb.get('why')}")
+    if obs.alpha is not None:
+        lines.append(f"  observer decay rate alpha = {obs.alpha:.4g}: {obs.why or ''}")
+    solves = f", {d.solves.get('total')} conic solves" if d.solves else ""
+    lines.append(
+        f"  time: {d.timings['total_s']:.2f} s in all, {d.timings['solver_s']:.2f} s in the solver{solves}"
+    )
+    lines += [f"  note: {s}" for s in d.status]
+    return "\n".join(lines)

@@ -1,0 +1,764 @@
+"""The conditioned design (the default): the printed LMIs, posed to be well scaled, unique and cheap.
+
+The certificate is exactly the printed one ((45), (46), (55), (64), or (78)-(81) for Theorem 5,
+recomputed at the end by :func:`fte_casadi.design.core._certify.certificate`); what changes is how the
+solver is asked for a point. Every choice below is an equivalent reformulation or an added
+constraint, never a changed certificate.
+
+Step 3 — LMI (45) for X and the gains
+    *Common gain.* (45) has no term coupling different gains: a Y_j that satisfies (45) for
+    every rule i is itself a valid gain for every j, so one gain ``K`` (``K_j = K``) loses
+    nothing and gives r LMIs instead of r^2 near-duplicates.
+    *Input scaling.* ``u = Su u~`` with ``Su`` making every column of B unit length (the
+    three-tank's B entries are 6.5e-3): ``B Y = (B Su)(Su^-1 Y)``, an exact change of variables.
+    *Homogenisation.* ``X = X'/s, Y = Y'/s``; ``s (45)(X'/s, Y'/s)`` is affine in ``(X', Y', s)``
+    (the builders multiply their constant terms by ``s``), so the scale of X is an unknown of
+    the one solve, and ``I <= X' <= 1e4 I`` bounds cond(X) without fixing its size.
+    *Objective.* ``min t`` with ``||Y'||_2 <= t``: since ``X' >= I``, ``||K~|| <= t`` — the
+    smallest gain the LMI allows, which keeps K implementable.
+
+Step 5 — LMIs (46), (55), (64) for Pbar, Q_i, N, theta
+    *Congruence by X*: ``diag(X, I) (46) diag(X, I)`` turns ``-sigma P P`` into ``-sigma I``
+    and ``-P Be`` into ``-Be``, so the fixed P = X^-1 no longer enters squared.
+    *Finsler*: for a given Pbar, ``-Q_i Cbar - Cbar^T Q_i^T`` can be restricted to
+    ``Q_i = rho_i Cbar^T / 2`` without losing feasibility (Finsler's lemma), so the observer
+    gains are ``L_i1 = (rho_i / 2) Pbar^-1 Cbar^T``.
+    *N eliminated*: for a given Pbar, ``N = J1^T T^T Pbar Cbar^+`` is the exact minimiser of
+    ``||J1^T T^T Pbar - N Cbar||_2``, the mismatch of (55).
+    *Homogenisation*: ``Pbar = Pt/s`` with ``I <= Pt <= kappa I`` (kappa = 1e4 bounds
+    cond(Pbar)); (55) and (64) in the balanced form ``||E(Pt)|| <= tau`` so that
+    ``theta = (tau/s)^2``; the scale of Pbar is an unknown instead of a grid.
+    *Decay rate*: ``2 alpha Pbar`` in the (3,3) block makes every R_i decay at least as fast as
+    ``exp(-alpha t)``; alpha is a DPP parameter (re-solved without re-canonicalisation).
+    *Objective*: ``min sy^2 sum_i rho_i + tau`` (observer gain scale and sliding mismatch, both in
+    the normalised units of Pt; ``sy`` the outputs' size, :func:`~fte_casadi.design._augment.output_scale`,
+    so that the balance does not depend on the outputs' unit).
+    *Observer speed*: by default alpha is ``ALPHA_FRACTION`` times the largest alpha for which
+    (46) is feasible with ``I <= Pt <= kappa I`` (found by bisection, each trial one solve of the
+    same problem), lowered when needed so that ``ts_max >= TS_FACTOR * sample_time``.
+
+Margins are per diagonal block and relative to that block's own size (``MARGIN`` of sigma, of
+gamma1^2, of Pt >= I, ...; ``2 MARGIN`` in the conic solve, ``MARGIN`` in the centring, so that
+the solver's point starts the centring strictly inside). After each conic solve,
+:func:`fte_casadi.design.core._barrier.centre` moves to the unique central-path point with relative gap
+``ETA``: the design is a smooth function of the plant and does not depend on the solver or the
+machine beyond round-off.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..._rounding import nice_floor
+from ...errors import CentringError, InfeasibleDesignError
+from ...errors import SolverFailedError as SolverFailedError
+from .._augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
+from ._barrier import centre, numpy_first, phase1, phase1_active
+from ._bound_objective import bound_term
+from ._certify import lyapunov_ts_max, ts_max
+from ._decay import ALPHA_RTOL as ALPHA_RTOL
+from ._decay import TS_FACTOR, alpha_max, cap_for_sample_time
+from ._lmis import (
+    diffusion_coupling,
+    lmi45,
+    lmi45_kron,
+    lmi46,
+    lmi46_kron,
+    sliding_kron,
+    sliding_mismatch,
+)
+from ._sdp import (
+    SOLVED,
+    AffineLMI,
+    ConicProblem,
+    Layout,
+    MarginLMI,
+    SolveResult,
+    Var,
+    affine_lmi,
+    margin_lmi,
+)
+
+__all__ = ["Step3", "Step5", "step3", "step5", "input_scaling", "alpha_max", "MARGIN", "KAPPA", "ETA",
+           "ALPHA_FRACTION", "TS_FACTOR", "SolverFailedError"]  # fmt: skip
+
+#: relative margin of every diagonal block (the conic solve uses twice this)
+MARGIN = 1e-3
+#: bound on cond(X') and cond(Pt) (the normalised X and Pbar)
+KAPPA = 1e4
+#: relative duality gap of the centred point
+ETA = 0.5
+#: default observer decay rate as a fraction of the largest feasible one
+ALPHA_FRACTION = 0.9
+#: phase 1 bounds the gains by rho_i <= RHO_CAP kappa max ||T Abar_i|| / sigma_min(Cbar)^2 (never active in a design)
+RHO_CAP = 1e3
+
+
+def _kappa(params: dict) -> float:
+    """The bound on cond(X') and cond(Pt): ``params["kappa"]`` when the design was asked for one, else KAPPA."""
+    return float(params.get("kappa", KAPPA))
+
+
+@dataclass
+class Step3:
+    X: np.ndarray
+    K: np.ndarray
+    status: str
+    solves: int
+    seconds: float
+    notes: list = field(default_factory=list)
+
+
+@dataclass
+class Step5:
+    Pbar: np.ndarray
+    Q: list
+    N: np.ndarray
+    theta: float
+    alpha: float
+    status: str
+    solves: int
+    seconds: float
+    observer: dict
+    notes: list = field(default_factory=list)
+    #: the block-diagonal certificate of the fault-error bound when it was in the objective (bound_objective)
+    bound: dict | None = None
+
+
+def input_scaling(aug: Augmented) -> np.ndarray:
+    """``Su``: diagonal, making the largest column norm of the B_i of each input 1 (1 for a zero column)."""
+    norms = np.max([np.linalg.norm(B[: aug.n], axis=0) for B in aug.Bbar], axis=0)
+    return np.diag(np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0))
+
+
+def _diag(sizes, values) -> np.ndarray:
+    return np.diag(np.concatenate([np.full(k, float(v)) for k, v in zip(sizes, values)]))
+
+
+def _normalisation(layout: Layout, name: str, size: int, kappa: float = KAPPA) -> list[MarginLMI]:
+    eye = np.eye(size)
+    return [
+        margin_lmi(f"{name} >= I", layout, lambda **u: eye - u[name], margin=lambda **u: eye,
+                   support=layout.support(name), kron=(name, [(eye, -0.5 * eye)])),
+        margin_lmi(f"{name} <= {kappa:g} I", layout, lambda **u: u[name] - kappa * eye,
+                   margin=lambda **u: kappa * eye, support=layout.support(name), kron=(name, [(eye, 0.5 * eye)])),
+    ]  # fmt: skip
+
+
+def _balanced(E: np.ndarray, tau) -> np.ndarray:
+    """``[[-tau I, E^T], [E, -tau I]] <= 0``, i.e. ``||E||_2 <= tau``."""
+    a, b = E.shape[1], E.shape[0]
+    return np.block([[-tau * np.eye(a), E.T], [E, -tau * np.eye(b)]])
+
+
+def _balanced_margin(tau, a: int, b: int) -> np.ndarray:
+    """The relative margin of :func:`_balanced`: ``||E||_2 <= (1 - m) tau``."""
+    return tau * np.eye(a + b)
+
+
+def _accept(res: SolveResult, lmis, p: float) -> bool:
+    """A solver's point counts when it is strictly inside ``lmis`` (the LMIs with the centring's
+    margins, half the conic solve's), checked with numpy, whatever the solver's status says."""
+    if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
+        return False
+    for L in lmis:
+        try:
+            np.linalg.cholesky(-L.value(res.v, p))
+        except np.linalg.LinAlgError:
+            return False
+    return True
+
+
+def _into_normalisation(layout: Layout, v: np.ndarray, name: str, kappa: float = KAPPA) -> np.ndarray:
+    """``v`` with the eigenvalues of the normalised matrix ``name`` clipped into ``[1 + 3 MARGIN, KAPPA (1 - 3 MARGIN)]``.
+
+    A first-order solver's point can miss the normalisation by its tolerance; after this, the
+    normalisation holds strictly and phase 1 can take the point as it is.
+    """
+    u = layout.unpack(v)
+    w, V = np.linalg.eigh(u[name])
+    M = (V * np.clip(w, 1 + 3 * MARGIN, kappa * (1 - 3 * MARGIN))) @ V.T
+    out = v.copy()
+    n = M.shape[0]
+    out[layout.index(name)] = M[np.triu_indices(n)]
+    return out
+
+
+def _start(
+    res: SolveResult, layout: Layout, name: str, soft, hard, note: list, kappa: float = KAPPA
+) -> np.ndarray | None:
+    """A strictly feasible point of ``soft`` and ``hard`` from the solver's answer, or None.
+
+    The solver's point is taken if it is strictly feasible; otherwise (an approximate point, e.g.
+    SCS at its tolerance) its normalisation is repaired and :func:`~fte_casadi.design.core._barrier.phase1`
+    decides, in numpy, from there. A status that is neither a point nor infeasibility is a failure.
+    """
+    if res.v is None or res.status not in SOLVED or not np.all(np.isfinite(res.v)):
+        return None
+    if _accept(res, list(soft) + list(hard), 0.0):
+        return res.v
+    v = _into_normalisation(layout, res.v, name, kappa)
+    try:
+        out = phase1(list(soft), list(hard), v)
+    except CentringError:
+        return None
+    if out is not None:
+        note.append(
+            f"the solver's point ({res.status}) missed the LMIs by its tolerance; phase 1 in numpy repaired it"
+        )
+    return out
+
+
+def worst_block(lmis, blocks: dict[int, list[tuple[str, int]]]) -> tuple[str, float, float] | None:
+    """The diagonal block whose data (constant term and the coefficients of every unknown, in the rows of
+    that block) spans the most orders of magnitude, over ``lmis``: ``(where, smallest, largest)`` of its
+    nonzero magnitudes. ``blocks[k]`` names the blocks of an LMI of size k as ``[(name, rows), ...]``."""
+    worst = None
+    for L in lmis:
+        start = 0
+        for name, rows in blocks.get(L.k, [("", L.k)]):
+            r = slice(start, start + rows)
+            start += rows
+            vals = np.abs(np.concatenate([L.F0[r].ravel(), L.F[:, r].ravel()]))
+            vals = vals[vals > 1e-300]
+            if not vals.size:
+                continue
+            lo, hi = float(vals.min()), float(vals.max())
+            if worst is None or hi / lo > worst[2] / worst[1]:
+                worst = (f"{L.name}, {name} rows" if name else L.name, lo, hi)
+    return worst
+
+
+def _fail(
+    step: str, res: SolveResult, solver: str, hint: str, spread=None
+) -> InfeasibleDesignError | SolverFailedError:
+    solver = res.solver or solver
+    if res.infeasible:
+        return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
+    other = "SCS" if solver == "CLARABEL" else "CLARABEL"
+    data = ""
+    if spread is not None:
+        where, lo, hi = spread
+        data = (f" The worst-scaled block the solver saw ({where}) holds numbers from {lo:.2g} to {hi:.2g}, "
+                f"{np.log10(hi / lo):.0f} orders of magnitude.")  # fmt: skip
+    return SolverFailedError(
+        f"{step}: the solver {solver} failed numerically ({res.status}), also on rescaled data; this is a "
+        f"numerical failure, not a proof of infeasibility: try solver='{other}', or {hint}.{data}"
+    )
+
+
+# -- step 3 ----------------------------------------------------------------------------------
+def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
+    n, m, p, ld = aug.n, aug.m, aug.p, aug.ld
+    sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
+    layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("s", ()), Var("t", ()))
+    D = _diag([n, n, p, ld], [sg, 0.0, 1.0, g**2 - g1**2])
+    lmis = [
+        margin_lmi(f"(45) rule {i + 1}", layout, lambda X, Y, s, t, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
+                   margin=lambda X, Y, s, t: s * D, support=layout.support("X", "Y", "s"),
+                   kron=("X", lmi45_kron(aug, i)))
+        for i in range(aug.r)
+    ]  # fmt: skip
+    lmis += _normalisation(layout, "X", n, _kappa(params))
+    lmis.append(margin_lmi("||Y'|| <= t", layout, lambda X, Y, s, t: _balanced(Y, t),
+                           margin=lambda X, Y, s, t: _balanced_margin(t, m, n)))  # fmt: skip
+    c = np.zeros(layout.size)
+    c[layout.index("t")] = 1.0
+    return layout, lmis, c
+
+
+def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: Layout, Su: np.ndarray):
+    """The feasibility solve of step 3, posed in the time ``t / tau`` with outputs divided by ``sy``
+    (:func:`~fte_casadi.design._augment.units_scaled`), its point mapped back exactly to the unknowns of the
+    unscaled problem (``X = X~ / (tau sy^2)``, the same K).
+
+    Only the starting point comes from here: the centring that follows runs on the unscaled LMIs, and
+    Newton's method is invariant under such changes of variables, so the design does not depend on tau.
+    """
+    sy = output_scale(aug)
+    aug_s = units_scaled(aug, tau, sy)
+    params_s = units_params(params, tau, sy)
+    Su_s = input_scaling(aug_s)
+    layout_s, family_s, _ = _step3_problem(aug_s, params_s, Su_s)
+    prob = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in family_s[:-1]])  # without the epigraph of t
+    res = prob.solve(solver)
+    if (tau == 1.0 and sy == 1.0) or res.v is None or not np.all(np.isfinite(res.v)):
+        return prob, res
+    u = layout_s.unpack(res.v)
+    try:
+        K = Su_s @ u["Y"] @ np.linalg.inv(u["X"])
+    except np.linalg.LinAlgError:
+        return prob, replace(res, v=None)
+    v = layout.pack(X=u["X"], Y=np.linalg.solve(Su, K @ u["X"]), s=tau * sy**2 * u["s"], t=0.0)
+    return prob, replace(res, v=v)
+
+
+def _scalar_cap(layout: Layout, name: str, hi: float) -> list[AffineLMI]:
+    """``0 < v[name] <= hi`` as two 1 x 1 LMIs."""
+    F = np.zeros((layout.size, 1, 1))
+    F[layout.index(name), 0, 0] = 1.0
+    return [AffineLMI(f"{name} <= cap", np.array([[-hi]]), F), AffineLMI(f"{name} > 0", np.zeros((1, 1)), -F)]
+
+
+def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list, keep_infeasible: bool = False):
+    """A heavy step 3's start point by phase 1 in numpy (:func:`~fte_casadi.design.core._barrier.numpy_first`),
+    or None (then the conic solvers).
+
+    (45) is a cone in ``(X', Y', s)`` cut by ``I <= X' <= kappa I``; phase 1's barrier pushes along the
+    cone towards the upper normalisation, so it starts there (``X' = kappa/2 I``, ``s = 1``, ``Y' = 0``;
+    from ``X' = sqrt(kappa) I`` the damped Newton steps creep up the ray 0.25 % at a time). Phase 1 needs
+    a bounded set: ``||Y'|| <= RHO_CAP kappa max(max ||A_i||, sigma)`` (a gain ``||K~||`` of RHO_CAP times
+    the plant's fastest rate) and ``0 < s <= `` that cap times ``max(1, 1/sigma, ||C||^2)``. The caps only
+    serve phase 1: an answer "infeasible" under them goes to the conic solver, which has none (returned,
+    with ``keep_infeasible``, where the conic solver has already failed numerically).
+    """
+    n, m, r = aug.n, aug.m, aug.r
+    kappa, sg = _kappa(params), float(params["sigma"])
+    a = max(np.linalg.norm(A[:n, :n], 2) for A in aug.Abar)
+    ycap = RHO_CAP * kappa * max(a, sg, 1e-300)
+    scap = ycap * max(1.0, 1.0 / max(sg, 1e-300), np.linalg.norm(aug.Cbar[:, :n], 2) ** 2)
+    ycap_lmi = affine_lmi(
+        "||Y'|| <= cap", layout, lambda X, Y, s, t: _balanced(Y, ycap), support=layout.support("Y")
+    )
+    prob = ConicProblem(layout, feas)
+    v0 = layout.pack(X=0.5 * kappa * np.eye(n), Y=np.zeros((m, n)), s=1.0, t=0.0)
+    res = numpy_first(prob, r, v0, [ycap_lmi] + _scalar_cap(layout, "s", scap))
+    if res is None or (res.v is None and not keep_infeasible):
+        return None
+    return prob, res
+
+
+def step3(aug: Augmented, params: dict, solver: str) -> Step3:
+    """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
+
+    One feasibility solve gives a strictly feasible point (for a problem with many PSD cones, phase 1 in
+    numpy, :func:`_step3_numpy`; the conic solvers when it finds none);
+    :func:`~fte_casadi.design.core._barrier.centre` then minimises ``t`` along the central path to the unique
+    centred point, which does not depend on where it started.
+    """
+    Su = input_scaling(aug)
+    layout, family, c = _step3_problem(aug, params, Su)
+    tau = time_scale(aug)
+    feas = [L.at(2 * MARGIN) for L in family[:-1]]  # without the epigraph of t
+    first = _step3_numpy(aug, params, layout, feas) if ConicProblem(layout, feas).heavy else None
+    if first is not None:
+        prob, res = first
+    else:
+        prob, res = _step3_conic(aug, params, solver, tau, layout, Su)
+        if res.failed:  # a numerical failure of the solver: phase 1 in numpy decides instead
+            fallback = _step3_numpy(aug, params, layout, feas, keep_infeasible=True)
+            if fallback is not None:
+                fallback[0].notes.insert(
+                    0, f"{solver} failed numerically ({res.status}); phase 1 in numpy decided"
+                )
+                prob, res = fallback
+    g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    lmis = [L.at(MARGIN) for L in family]
+    repaired: list[str] = []
+    v0 = _start(res, layout, "X", lmis[: aug.r], lmis[aug.r : aug.r + 2], repaired, _kappa(params))
+    if v0 is None:
+        hint = f"see the bounds on gamma and sigma (gamma = {g:g}, gamma1 = {g1:g}, sigma = {sg:g})"
+        n, p, ld = aug.n, aug.p, aug.ld
+        names = {2 * n + p + ld: [("x", n), ("x (diffusion)", n), ("y", p), ("d", ld)]}
+        raise _fail("LMI (45)", res, solver, hint, worst_block(prob.lmis, names))
+    v0 = v0.copy()  # t starts well above ||Y'||: the epigraph is then strictly feasible
+    v0[layout.index("t")] = 2.0 * np.linalg.norm(layout.unpack(v0)["Y"], 2) + 1.0
+    res = replace(res, v=v0)
+    floor = 0.01 * max(np.linalg.norm(A[: aug.n, : aug.n], 2) for A in aug.Abar)
+    try:
+        cen = centre(lmis, c, res.v, eta=ETA, floor=floor)
+    except CentringError as exc:
+        raise SolverFailedError(
+            f"step 3: the centring of the solver's point failed ({exc}); try the other solver"
+        ) from None
+    u = layout.unpack(cen.v)
+    X = u["X"] / u["s"]
+    K = Su @ u["Y"] @ np.linalg.inv(u["X"])
+    notes = [
+        f"step 3: one common gain K (K_j = K), inputs scaled by Su = diag({', '.join(f'{v:.4g}' for v in np.diag(Su))}), "
+        f"X = X'/s with I <= X' <= {_kappa(params):g} I, min ||Y'||: {prob.solves} feasibility solve ({res.status}"
+        + (", on rescaled data" if res.rescaled else "") + f"), then {cen.newton_steps} Newton steps to the centred "
+        f"point (gap {ETA:g} of the objective)"
+    ]  # fmt: skip
+    notes += [f"step 3: {solver} warned: {w!r}" for w in res.warned] + [f"step 3: {r}" for r in repaired]
+    notes += [f"step 3: {x}" for x in prob.notes]
+    return Step3(X, K, res.status, prob.solves, prob.seconds, notes)
+
+
+# -- step 5 ----------------------------------------------------------------------------------
+def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
+    """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule."""
+    n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.ns  # ns = lf (+ Remark 5's directions)
+    sg, g1 = params["sigma"], params["gamma1"]
+    g2 = params.get("gamma2", params["gamma"])
+    P = np.linalg.inv(X)
+    Cb = aug.Cbar
+    Cp = np.linalg.pinv(Cb)
+    layout = Layout(Var("Pt", (nbar, nbar), True), Var("s", ()), Var("rho", (r,)), Var("tau", ()))
+    l2 = aug.Mbar[0].shape[1]
+    k46 = n + ld + nbar + l2
+    Dx = np.eye(k46)
+    Dx[:n, :n] = X
+    # The d block of (46)/(79) is decoupled (-gamma1^2 I, zero off its diagonal): it holds iff
+    # s > 0, which the x block already demands; the solve leaves it out (-1e-4 for the
+    # manipulator, it only made the problem badly scaled), the certificate keeps it.
+    keep = np.r_[0:n, n + ld : k46]
+    sub = np.ix_(keep, keep)
+
+    def b46(i):
+        def f(Pt, s, rho, tau):
+            return (Dx @ lmi46(aug, i, K, P, T, Pt, rho[i] * Cb.T / 2, sg, g1, g2, const=s) @ Dx)[sub]
+
+        return f
+
+    def m46(Pt, s, rho, tau):
+        return _diag([n, nbar, l2], [sg * s, 1.0, g2**2 * s])
+
+    def decay(Pt, s, rho, tau):
+        M = np.zeros((n + nbar + l2, n + nbar + l2))
+        M[n : n + nbar, n : n + nbar] = 2 * Pt
+        return M
+
+    def k46(i):  # the Kron terms of (46) after the congruence by Dx, without the d rows
+        return (
+            "Pt",
+            [(U @ Dx[:, keep], None if V is None else V @ Dx[:, keep]) for U, V in lmi46_kron(aug, i, K, T)],
+        )
+
+    Ee = np.eye(n + ld + nbar + l2)[n + ld : n + ld + nbar][:, keep]
+    feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46, support=layout.support("Pt", "s", ("rho", i)),
+                       kron=k46(i), kron_param=("Pt", [(Ee, Ee)]))
+            for i in range(r)]  # fmt: skip
+    feas += _normalisation(layout, "Pt", nbar, _kappa(params))
+    if not rest:  # the feasibility solve needs (46) and the normalisation only
+        return layout, feas, [], None
+
+    def N_of(Pt):
+        return aug.Js.T @ T.T @ Pt @ Cp
+
+    others = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
+                       margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf), support=layout.support("Pt", "tau"),
+                       kron=("Pt", sliding_kron(aug, T, np.eye(nbar) - Cp @ Cb)))]  # fmt: skip
+    others += [margin_lmi(f"(64) rule {i + 1}", layout,
+                        lambda Pt, s, rho, tau, i=i: _balanced(diffusion_coupling(aug, i, T, Pt), tau),
+                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, n, lf), support=layout.support("Pt", "tau"),
+                        kron=("Pt", sliding_kron(aug, T, T @ aug.Wbar[i])))
+             for i in range(r)]  # fmt: skip
+    c = np.zeros(layout.size)
+    # rho_i enters as rho_i Cbar^T Cbar: outputs sy times larger (mm for m) give the same observer at rho_i / sy^2,
+    # and an unweighted sum rho_i + tau then weighs the gains sy^2 times less (a slow 4-state plant in mm needed a
+    # sample time of 3.6e-4 s where in m it runs at 1 s); weighted by sy^2 the objective, and the design, do not
+    # depend on the outputs' units (sy = 1 for every built-in plant: their designs are unchanged)
+    c[layout.index("rho")] = output_scale(aug) ** 2
+    c[layout.index("tau")] = 1.0
+    return layout, feas, others, c
+
+
+class _Step5:
+    """Step 5 built once per design: the LMIs, one conic solve, and deterministic decisions in alpha.
+
+    The one conic solve is the feasibility of (46) with the normalisation at ``alpha = 0``. Every
+    further question "is (46) feasible at alpha?" is answered by :func:`~fte_casadi.design.core._barrier.phase1`
+    (a barrier method in numpy) on a growing subset of the rules (:func:`~fte_casadi.design.core._barrier.phase1_active`:
+    a few rules decide; the answer is the same fact as on all of them), started from the last point found
+    feasible: its answer does
+    not depend on the solver, so the default alpha (and hence the design) is the same with
+    Clarabel and SCS. (46) is monotone in alpha (``2 alpha Pt >= 0``): a point feasible at some
+    alpha is a strictly feasible start for the centring at every smaller alpha.
+    """
+
+    def __init__(self, aug, params, X, K, T, solver):
+        self.aug, self.T, self.solver, self.kappa = aug, T, solver, _kappa(params)
+        self.params, self.X, self.K, self.tau = params, X, K, time_scale(aug)
+        self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T)
+        r = aug.r
+        self.feas = self.feas0 = ConicProblem(self.layout, [L.at(2 * MARGIN) for L in feas])
+        self.soft = [L.at(MARGIN) for L in feas[:r]]  # (46) per rule: depends on alpha
+        self.fixed = [L.at(MARGIN) for L in feas[r:]]  # the normalisation of Pt
+        self.centring = [L.at(MARGIN) for L in feas + rest]
+        # phase 1 needs bounded gains: rho_i <= RHO_CAP (far above any design's; see module docstring)
+        self.rho_cap = RHO_CAP * self.kappa * max(np.linalg.norm(T @ A, 2) for A in aug.Abar) / max(
+            np.linalg.svd(aug.Cbar, compute_uv=False)[-1] ** 2, 1e-300)  # fmt: skip
+        ir = self.layout.index("rho")
+        self.caps = []
+        for i in range(r):
+            F = np.zeros((self.layout.size, 1, 1))
+            F[ir.start + i, 0, 0] = 1.0
+            self.caps.append(AffineLMI(f"rho_{i + 1} <= cap", np.array([[-self.rho_cap]]), F))
+        self.notes: list[str] = []
+        self.points: dict[float, np.ndarray] = {}  # alpha -> a strictly feasible point there
+        self.newton = 0
+        self.decisions = 0
+        self.active: list[int] = []  # the rules that decided the last phase 1 (phase1_active)
+        self.bound = None  # the closed-loop bound's term of the objective (bound_objective), when asked for
+
+    @property
+    def solves(self) -> int:
+        return self.feas.solves
+
+    @property
+    def seconds(self) -> float:
+        return self.feas.seconds
+
+    def _conic(self) -> SolveResult:
+        """The feasibility solve of (46) with the normalisation at alpha = 0, posed in the time ``t / tau``
+        (:func:`~fte_casadi.design._augment.time_scaled`: ``Pbar' = Pbar / tau``, ``P' = P / tau``, the same
+        Q_i) and mapped back exactly to the unknowns of the unscaled problem. Only the starting point
+        comes from here; the centring runs on the unscaled LMIs."""
+        if self.feas.heavy and self.feas.layout is self.layout:
+            res = self._numpy()
+            if res is not None:
+                return res
+        if self.tau == 1.0:
+            return self.feas.solve(self.solver, 0.0)
+        tau = self.tau
+        if self.feas.layout is self.layout:  # not built in the scaled time yet
+            aug_s = time_scaled(self.aug, tau)
+            params_s = dict(self.params, sigma=self.params["sigma"] * tau**2)
+            layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T, rest=False)
+            self.feas = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in feas_s])
+        layout_s = self.feas.layout
+        res = self.feas.solve(self.solver, 0.0)
+        if res.v is None or not np.all(np.isfinite(res.v)):
+            return res
+        u = layout_s.unpack(res.v)
+        v = self.layout.pack(Pt=u["Pt"], s=u["s"] / tau, rho=u["rho"] / tau, tau=0.0)
+        return replace(res, v=v)
+
+    def _numpy(self) -> SolveResult | None:
+        """The feasibility of (46) at alpha = 0 by phase 1 in numpy (:func:`~._barrier.numpy_first`): (46) per rule
+        soft, the normalisation and the gain caps hard, from ``Pt = sqrt(kappa) I``, ``s = rho_i = 1``."""
+        v0 = self.layout.pack(Pt=np.sqrt(self.kappa) * np.eye(self.aug.nbar), s=1.0, rho=np.ones(self.aug.r))
+        res = numpy_first(self.feas0, self.aug.r, v0, self.caps)
+        if res is not None and self.feas0 is not self.feas:  # the time-scaled problem keeps the account
+            self.feas.seconds += res.seconds
+            self.feas.notes.append(self.feas0.notes[-1])
+        return res
+
+    def first(self) -> SolveResult:
+        """The conic solve at alpha = 0; its point (gains clipped to the cap) starts everything else.
+
+        Where the solver fails numerically, or its point cannot be repaired into a strictly feasible one,
+        phase 1 in numpy decides instead (a point, or a proof that none exists under the gain caps); failing
+        that, the other solver is tried here: only this point comes from a solver (the decisions and the
+        centring run in numpy), so the design does not change, and steps 1-3 are not run again."""
+        res = self._conic()
+        if not self._take(res):
+            numpy_res = self._numpy()
+            if numpy_res is not None:
+                self.notes.append(f"step 5: {self.solver}'s feasibility solve gave no usable point ({res.status[:120]}); "
+                                  f"phase 1 in numpy decided")  # fmt: skip
+                res = replace(numpy_res, seconds=res.seconds + numpy_res.seconds, warned=res.warned)
+                self._take(res)
+        if not self.points and res.failed:
+            other = "SCS" if self.solver == "CLARABEL" else "CLARABEL"
+            first, self.solver = res, other
+            res = self._conic()
+            res = replace(res, seconds=first.seconds + res.seconds, warned=first.warned + res.warned)
+            self.notes.append(
+                f"step 5: {'SCS' if other == 'CLARABEL' else 'CLARABEL'} failed numerically on the feasibility solve "
+                f"({first.status[:120]}, also on rescaled data); {other}'s point ({res.status}) starts the centring"
+            )
+            self._take(res)
+        return res
+
+    def _take(self, res: SolveResult) -> bool:
+        """Record a strictly feasible start from ``res`` (its gains clipped to the cap); False when there is none."""
+        if res.v is None or not np.all(np.isfinite(res.v)):
+            return False
+        v = res.v.copy()
+        ir = self.layout.index("rho")
+        v[ir] = np.minimum(v[ir], 0.5 * self.rho_cap)
+        start = _start(
+            replace(res, v=v), self.layout, "Pt", self.soft, self.fixed + self.caps, self.notes, self.kappa
+        )
+        if start is None:
+            return False
+        self.points[self.reach(start)] = start
+        return True
+
+    def reach(self, v: np.ndarray) -> float:
+        """The largest alpha at which the point ``v`` itself satisfies every (46): with
+        ``-F(v) = L L^T`` and the decay term ``alpha G(v)``, ``1 / lambda_max(L^-1 G(v) L^-T)`` (exact)."""
+        best = np.inf
+        for Lm in self.soft:
+            Lc = np.linalg.cholesky(-Lm.value(v, 0.0))
+            G = np.tensordot(v, Lm.G, 1)
+            Li = np.linalg.inv(Lc)
+            lam = float(np.linalg.eigvalsh(Li @ G @ Li.T)[-1])
+            if lam > 0:
+                best = min(best, 1.0 / lam)
+        return best * (1 - 1e-9)
+
+    def feasible(self, alpha: float) -> bool:
+        """Is (46) with ``I <= Pt <= kappa I`` strictly feasible at ``alpha``? (phase 1 in numpy)
+
+        A known point whose reach covers ``alpha`` answers without a new phase 1. The answer is a
+        fact about the LMIs, so the sequence of questions the bisection asks, and hence the
+        default alpha, does not depend on which point happened to answer it."""
+        if any(r >= alpha for r in self.points):
+            return True
+        below = [a for a in self.points if a <= alpha]
+        if not below:
+            return False
+        try:
+            v, self.active = phase1_active([L.at(alpha) for L in self.soft], self.fixed, self.points[max(below)],
+                                           self.active, tied=[[cap] for cap in self.caps])  # fmt: skip
+        except CentringError as exc:
+            self.notes.append(f"step 5: phase 1 at alpha = {alpha:.4g} failed ({exc}); counted as infeasible")
+            return False
+        self.decisions += 1
+        if v is None:
+            return False
+        self.points[max(alpha, self.reach(v))] = v
+        return True
+
+    def start(self, alpha: float) -> np.ndarray | None:
+        """A strictly feasible point for the centring at ``alpha`` (from a feasible alpha' >= alpha)."""
+        above = [a for a in self.points if a >= alpha]
+        if not above:
+            return None
+        v = self.points[min(above)].copy()
+        Pt = self.layout.unpack(v)["Pt"]
+        aug, T, Cp = self.aug, self.T, np.linalg.pinv(self.aug.Cbar)
+        E = [sliding_mismatch(aug, T, Pt, aug.Js.T @ T.T @ Pt @ Cp)] + [
+            diffusion_coupling(aug, i, T, Pt) for i in range(aug.r)
+        ]
+        v[self.layout.index("tau")] = 2.0 * max(np.linalg.norm(e, 2) for e in E) + 1.0
+        return v
+
+    def design(self, alpha: float) -> dict | None:
+        """The centred design at ``alpha``, or None when (46) is not known feasible there."""
+        if self.start(alpha) is None and not self.feasible(alpha):
+            return None
+        v0 = self.start(alpha)
+        try:
+            cen = centre([L.at(alpha) for L in self.centring], self.c, v0, eta=ETA)
+        except CentringError as exc:
+            self.notes.append(f"step 5: centring failed at alpha = {alpha:.4g} ({exc})")
+            return None
+        self.newton += cen.newton_steps
+        v, info = cen.v, None
+        if self.bound is not None:
+            got = self.bound.improve([L.at(alpha) for L in self.centring], self.c, v, ETA)
+            if got is not None:
+                v, info = got[0][: self.layout.size], got[1]
+                self.newton += info["newton_steps"]
+        u = self.layout.unpack(v)
+        aug, T, s = self.aug, self.T, u["s"]
+        Pbar = u["Pt"] / s
+        Q = [u["rho"][i] * aug.Cbar.T / (2 * s) for i in range(aug.r)]
+        N = aug.Js.T @ T.T @ Pbar @ np.linalg.pinv(aug.Cbar)
+        L1 = [np.linalg.solve(Pbar, Qi) for Qi in Q]
+        R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
+        return dict(Pbar=Pbar, Q=Q, N=N, theta=float((u["tau"] / s) ** 2), R=R, ts_max=ts_max(R),
+                    ts_cert=lyapunov_ts_max(R, Pbar), bound=info)  # fmt: skip
+
+
+def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | None = None,
+          sample_time: float | None = None, bound_view=None, alpha_is_default: bool = False) -> Step5:  # fmt: skip
+    """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate.
+
+    With ``params["bound_weight"] > 0``, the closed loop's fault-error bound is a term of the objective
+    (:mod:`fte_casadi.design.core._bound_objective`; ``bound_view`` the closed loop's data without R).
+    ``alpha_is_default``: ``alpha`` is the plant's recorded default (``fte tune``'s), not the user's: like the
+    rate found by default, it is lowered when the sample time needs it."""
+    prob = _Step5(aug, params, X, K, T, solver)
+    prob.bound, why_not = bound_term(
+        prob.layout, aug, T, np.linalg.inv(X), bound_view, params.get("bound_weight")
+    )
+    if why_not:
+        prob.notes.append(f"step 5: {why_not}")
+    res0 = prob.first()
+    if not prob.points:
+        l2 = aug.Mbar[0].shape[1]
+        names = {aug.n + aug.nbar + l2: [("x", aug.n), ("e", aug.nbar)] + ([("d2", l2)] if l2 else [])}
+        raise _fail(f"LMI (46) with cond(Pbar) <= {prob.kappa:g}", res0, solver,
+                    "its -sigma P^2 block must dominate the observer's coupling with the loop and the diffusion",
+                    worst_block(prob.feas.lmis, names))  # fmt: skip
+    n = aug.n
+    decays = [
+        -float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ K).real))
+        for i in range(aug.r)
+    ]
+    start = max(min(decays), 1e-6)
+    observer: dict = {"sample_time": sample_time}
+    if alpha is None:
+        lo, hi = alpha_max(prob, start)
+        a = ALPHA_FRACTION * lo if np.isfinite(hi) else lo
+        observer.update(alpha_max=lo, alpha_max_upper=hi)
+        why = (f"{ALPHA_FRACTION:g} x the largest decay rate for which (46) is feasible with cond(Pbar) <= {prob.kappa:g} "
+               f"(alpha_max in [{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
+    else:
+        a = float(alpha)
+        why = "the plant's design defaults (fte tune's choice)" if alpha_is_default else "set by the user"
+    pt = prob.design(a)
+    if (
+        pt is None and alpha_is_default
+    ):  # the plant's rate, tuned at its own parameters, is not feasible at these
+        lo, hi = alpha_max(prob, start)
+        observer.update(alpha_max=lo, alpha_max_upper=hi)
+        a = ALPHA_FRACTION * lo if np.isfinite(hi) else lo
+        why = (f"the plant's default alpha = {float(alpha):g} is infeasible at these parameters: {ALPHA_FRACTION:g} x the "
+               f"largest decay rate for which (46) is feasible with cond(Pbar) <= {prob.kappa:g} (alpha_max in "
+               f"[{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
+        pt = prob.design(a)
+    elif pt is None and alpha is not None:
+        lo, hi = alpha_max(prob, start)
+        raise InfeasibleDesignError(
+            f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which (46) is "
+            f"feasible with cond(Pbar) <= {prob.kappa:g} is about {lo:.4g}; lower alpha to <= "
+            f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
+        )
+    if pt is None and (
+        alpha is None or alpha_is_default
+    ):  # the rate is the tool's choice: a slower one is inside
+        for f in (0.5, 0.25):
+            pt = prob.design(f * a)
+            if pt is not None:
+                why = (f"{f:g} x the rate first chosen ({a:.4g}), at which the centring failed ({prob.notes[-1]}); "
+                       + why)  # fmt: skip
+                a *= f
+                break
+    if pt is None:
+        raise SolverFailedError(
+            f"step 5: no centred design found ({'; '.join(prob.notes[-2:])})", solver_independent=True
+        )
+    if (
+        (alpha is None or alpha_is_default)
+        and sample_time is not None
+        and pt["ts_cert"] < TS_FACTOR * sample_time
+    ):
+        a, pt, why = cap_for_sample_time(prob, a, pt, why, sample_time)
+    observer.update(alpha=a, why=why)  # ts_max is the certificate's (checks.ts_max)
+    if pt["bound"] is not None:
+        b = pt["bound"]  # its weight is params.bound_weight
+        observer.update(bound_objective_unweighted=b["before"], bound_objective=b["after"])
+        prob.notes.append(
+            f"step 5: the closed-loop fault-error bound (block-diagonal P = diag(P1, Pbar), the smallest sum of the "
+            f"squared channel gains at the observer) is in the objective with weight {b['weight']:g}: "
+            f"{b['before']:.4g} without it, {b['after']:.4g} with it"
+        )
+    elif prob.bound is not None:
+        prob.notes += [f"step 5: {x}" for x in prob.bound.notes[-1:]]
+    notes = [
+        f"step 5: Q_i = rho_i Cbar^T / 2 (Finsler), N = J1^T T^T Pbar Cbar^+, Pbar = Pt/s with I <= Pt <= {prob.kappa:g} I, "
+        f"min sum rho_i + tau; observer decay rate alpha = {a:.4g} ({why}); {prob.solves} conic solve "
+        f"({res0.status}" + (", on rescaled data" if res0.rescaled else "") + f") at alpha = 0, then "
+        f"{prob.decisions} phase-1 decisions and {prob.newton} centring steps in numpy"
+    ] + prob.notes + [f"step 5: {solver} warned: {w!r}" for w in res0.warned] + [f"step 5: {x}" for x in prob.feas.notes]  # fmt: skip
+    return Step5(
+        pt["Pbar"],
+        pt["Q"],
+        pt["N"],
+        pt["theta"],
+        a,
+        res0.status,
+        prob.solves,
+        prob.seconds,
+        observer,
+        notes,
+        pt["bound"],
+    )

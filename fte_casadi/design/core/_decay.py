@@ -1,0 +1,94 @@
+"""The observer's decay rate in step 5 (conditioned variant): the largest feasible one, and the one the
+sample time allows.
+
+``prob`` is step 5's problem (:class:`fte_casadi.design.core._conditioned._Step5`): ``prob.feasible(alpha)`` decides
+whether (46) with the normalisation is feasible at ``alpha``, ``prob.design(alpha)`` returns the centred design
+there (or None)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..._rounding import nice_floor
+from ...errors import InfeasibleDesignError
+
+__all__ = ["alpha_max"]  # public: docs/api.md
+
+#: the default decay rate keeps ts_max >= TS_FACTOR * sample_time
+TS_FACTOR = 2.0
+#: relative precision of the bisection on alpha
+ALPHA_RTOL = 0.1
+
+
+def alpha_max(prob, start: float, rtol: float = ALPHA_RTOL) -> tuple[float, float]:
+    """``(lo, hi)``: (46) with ``I <= Pt <= kappa I`` is feasible at ``lo`` and not at ``hi``
+    (``hi / lo <= 1 + rtol``); bracketing by factors of 4 from ``start``, then bisection in log
+    scale, every decision by ``prob.feasible``. The trials depend on the answers only, not
+    on the points found. ``hi`` is ``inf`` when every trial up to ``start * 4^12`` was feasible;
+    ``lo = 0`` when no trial down to ``1e-6 start`` was."""
+    lo, a = 0.0, start
+    for _ in range(12):
+        if prob.feasible(a):
+            lo, a = a, 4 * a
+        else:
+            break
+    else:
+        return lo, float("inf")
+    hi = a
+    if lo == 0.0:
+        while hi > 1e-6 * start:
+            a = hi / 8
+            if prob.feasible(a):
+                lo = a
+                break
+            hi = a
+        else:
+            return 0.0, hi
+    while hi / lo > 1 + rtol:
+        mid = float(np.sqrt(lo * hi))
+        if prob.feasible(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo, hi
+
+
+#: decay rates tried below the default when the sample time asks for it, as fractions of it
+CAP_GRID = (0.875, 0.75, 0.625, 0.5, 0.375, 0.25, 0.125, 0.0)
+
+
+def cap_for_sample_time(prob, a: float, pt: dict, why: str, sample_time: float):
+    """The largest alpha of ``CAP_GRID x a`` whose centred design runs at ``sample_time`` with margin.
+
+    The measure is ``ts_cert`` (:func:`~fte_casadi.design.core._certify.lyapunov_ts_max`): the largest Ts for
+    which Pbar proves the blended discrete step stable (not monotone in alpha: the centred point
+    moves with it, hence a scan, not a bisection). The target is ``TS_FACTOR * sample_time``; when no
+    alpha tried reaches it but some reach ``sample_time``, the largest such alpha is taken (stable at
+    the sample time, with less margin; said so). When none does, no design of this formulation was
+    found that runs at that rate, and the error names the fastest sample time found and what limits it.
+    """
+    target = TS_FACTOR * sample_time
+    tried = [(a, pt)] + [(f * a, prob.design(f * a)) for f in CAP_GRID]
+    tried = [(al, p) for al, p in tried if p is not None]
+    for need, how in ((target, f">= {TS_FACTOR:g} x"), (sample_time, "above")):
+        for al, p in tried:
+            if p["ts_cert"] >= need:
+                why += (f"; lowered to {al:.4g} so that the discrete step is proven stable for Ts < {p['ts_cert']:.3g} "
+                        f"({how} the sample time {sample_time:g})")  # fmt: skip
+                return al, p, why
+    al, best = max(tried, key=lambda t: t[1]["ts_cert"]) if tried else (None, None)
+    fastest = 0.0 if best is None else best["ts_cert"]
+    limit = ""
+    if best is not None:
+        lam = max((lam for Ri in best["R"] for lam in np.linalg.eigvals(Ri)), key=abs)
+        limit = (
+            f" (at alpha = {al:.3g}); what limits it is the observer's fastest mode, |lambda| = {abs(lam):.3g} "
+            "(Ts |lambda| must stay well below 2), set by the gains L_i1 that (46) needs to dominate the loop's "
+            "coupling"
+        )
+    raise InfeasibleDesignError(
+        f"no certified design runs at the sample time {sample_time:g}: over the observer decay rates tried "
+        f"(0 to {a:.3g}) the discrete step z+ = z + Ts (...) is proven stable at best for Ts < {fastest:.3g}{limit}. "
+        f"Run the observer at a sample time <= {nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
+        "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)"
+    )

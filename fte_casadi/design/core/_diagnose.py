@@ -1,0 +1,174 @@
+"""What is feasible: the bounds an infeasible design names, and the frontier of ``--explore``.
+
+gamma and sigma enter LMI (45) linearly (``(gamma1^2 - gamma^2) I`` in its d block, ``+ sigma I``
+in its first block), so one SDP each gives
+
+- ``gamma_min(sigma, gamma1)``: the smallest gamma for which (45) is feasible (``min g`` with
+  ``g = gamma^2`` as an unknown), and
+- ``sigma_max(gamma, gamma1)``: the largest sigma for which it is (``gamma = inf``: the d block
+  dropped, the supremum over every gamma).
+
+Both are posed with the same per-block margins as the design, so a value slightly inside them
+is feasible with margin. A suggestion is only ever printed after the whole design (both steps
+and the certificate) has been run at the suggested value and certified.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._augment import Augmented, output_scale, time_scale, units_params, units_scaled
+from ._conditioned import MARGIN, input_scaling
+from ._lmis import lmi45, lmi45_kron
+from ._sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
+
+__all__ = ["sigma_max"]  # public: docs/api.md
+
+
+def _blocks(aug: Augmented) -> tuple[int, int, int, int]:
+    return aug.n, aug.n, aug.p, aug.ld
+
+
+def _units(aug: Augmented) -> list[tuple[float, float, float]]:
+    """The posings ``(tau, sy, xmin)`` the bounds are tried in, in order: the plant's own time and output size,
+    with the margin ``X~ >= xmin I`` on the X of those units, then the data as they are.
+
+    (45) of a plant in the time ``t / tau`` with outputs ``y / sy`` is the same LMI at ``X~ = tau sy^2 X``
+    (:func:`~fte_casadi.design._augment.units_scaled`). In its own units a fast plant's numbers are of order one:
+    left as it is, the PMSM's rates of 1e3/s made the conic solver stop inaccurate, at a gamma_min that moved
+    with the order of the states. The margin is the weaker of two: ``X >= MARGIN I`` in the plant's units
+    (``xmin = MARGIN tau sy^2``), the same problem as the data used as they are, or ``X~ >= MARGIN I`` where that
+    absolute margin would exclude every X (``tau sy^2 > 1``, a slow plant measured in small units, e.g. minutes
+    and mm: 1e8). Neither posing suits every plant (a flexible joint's fast motor and slow link fail Clarabel in
+    its own units and solve as given), so :func:`_bound` tries both."""
+    tau, sy = time_scale(aug), output_scale(aug)
+    own = (tau, sy, MARGIN * min(1.0, tau * sy**2))
+    return [own] if tau * sy**2 > 1.0 or (tau == 1.0 and sy == 1.0) else [own, (1.0, 1.0, MARGIN)]
+
+
+def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: float, xmin: float = MARGIN):
+    """(45) for every rule with one unknown scalar: ``g = gamma^2`` (sigma given) or ``sigma`` (gamma given).
+
+    ``gamma=None`` with ``sigma=None`` means sigma unknown and gamma infinite (d block dropped).
+    Returns (layout, lmis, objective) of ``min g`` or ``max sigma``.
+    """
+    n, m, p, ld = aug.n, aug.m, aug.p, aug.ld
+    Su = input_scaling(aug)
+    layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("q", ()))
+    k = 2 * n + p + ld
+    keep = np.arange(k) if gamma is not None or sigma is not None else np.arange(2 * n + p)
+    Ex = np.zeros((k, k))
+    Ex[:n, :n] = np.eye(n)
+    Ed = np.zeros((k, k))
+    Ed[2 * n + p :, 2 * n + p :] = np.eye(ld)
+    sub = np.ix_(keep, keep)
+
+    def b(i):
+        def f(X, Y, q):
+            if sigma is not None:  # q = gamma^2
+                M = lmi45(aug, i, X, Su @ Y, sigma, gamma1, gamma1) - q * Ed
+                marg = np.diag(
+                    np.concatenate([np.full(n, sigma), np.zeros(n), np.ones(p), np.full(ld, gamma1**2)])
+                )
+            else:  # q = sigma
+                M = lmi45(aug, i, X, Su @ Y, 0.0, gamma if gamma is not None else gamma1, gamma1) + q * Ex
+                gap = (gamma**2 - gamma1**2) if gamma is not None else 1.0
+                marg = np.diag(np.concatenate([np.zeros(n), np.zeros(n), np.ones(p), np.full(ld, gap)]))
+            return (M + MARGIN * marg)[sub]
+
+        return f
+
+    lmis = [affine_lmi(f"(45) rule {i + 1}", layout, b(i),
+                       kron=("X", [(U[:, keep], V[:, keep]) for U, V in lmi45_kron(aug, i)]))
+            for i in range(aug.r)]  # fmt: skip
+    eye = np.eye(n)
+    lmis.append(affine_lmi("X > 0", layout, lambda X, Y, q: xmin * eye - X, support=layout.support("X"),
+                           kron=("X", [(eye, -0.5 * eye)])))  # fmt: skip
+    c = np.zeros(layout.size)
+    c[layout.index("q")] = 1.0 if sigma is not None else -1.0
+    return layout, lmis, c
+
+
+#: the last answers of :func:`gamma_min` and :func:`sigma_max`: one design asks the same question up to three
+#: times (the bound in the refusal, the parameter search, the message), each a conic solve of its own
+_MEMO: dict = {}
+_MEMO_SIZE = 16
+
+
+def _memo(fn):
+    def wrapper(aug: Augmented, a, gamma1: float, solver: str):
+        key = (fn.__name__, id(aug), a, gamma1, solver)
+        hit = _MEMO.get(key)
+        if hit is not None and hit[0] is aug:  # the entry holds aug itself, so its id was not reused
+            return hit[1]
+        out = fn(aug, a, gamma1, solver)
+        while len(_MEMO) >= _MEMO_SIZE:
+            _MEMO.pop(next(iter(_MEMO)))
+        _MEMO[key] = (aug, out)
+        return out
+
+    wrapper.__name__, wrapper.__doc__, wrapper.__wrapped__ = fn.__name__, fn.__doc__, fn
+    return wrapper
+
+
+def _bound(aug: Augmented, sigma, gamma, gamma1: float, solver: str, value) -> tuple[float | None, str]:
+    """Solve the bound problem of :func:`_problem` in each posing of :func:`_units` and map its answer back with
+    ``value(q, tau, sy, params)``: the first answer a solver calls optimal, else the most conservative of the
+    inaccurate ones (``value`` is oriented so that the smallest is: an inaccurate bound can be off either way),
+    else ``(None, status of the first)``. A heavy problem (many PSD rows) takes its first answer."""
+    inaccurate, first = [], None
+    for tau, sy, xmin in _units(aug):
+        p = units_params(
+            {"sigma": sigma if sigma is not None else 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy
+        )
+        layout, lmis, c = _problem(units_scaled(aug, tau, sy), p["sigma"] if sigma is not None else None,
+                                   p["gamma"], p["gamma1"], xmin)  # fmt: skip
+        prob = ConicProblem(layout, lmis, c)
+        res = prob.solve(solver)
+        first = first or res.status
+        if res.v is None or res.status not in SOLVED:
+            continue
+        v = value(layout.unpack(res.v)["q"], tau, sy, p)
+        if res.status == "optimal" or prob.heavy:  # a heavy problem's second solve costs more than it tells
+            return v, res.status
+        inaccurate.append((v, res.status))
+    return min(inaccurate, key=lambda a: a[0]) if inaccurate else (None, first)
+
+
+@_memo
+def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple[float | None, str]:
+    """The smallest gamma with (45) feasible at ``sigma``, ``gamma1`` (None: no gamma is), and the status.
+
+    Posed in the plant's own time and output size, and as given where that fails (:func:`_units`), so that a plant
+    in minutes and millimetres, or one whose rates are 1e3/s, is solved in numbers of order one."""
+    g, status = _bound(aug, sigma, None, gamma1, solver,
+                       lambda g2, tau, sy, p: -sy * math.sqrt(max(g2, p["gamma1"] ** 2)))  # fmt: skip
+    return (None if g is None else float(-g)), status
+
+
+@_memo
+def sigma_max(aug: Augmented, gamma: float | None, gamma1: float, solver: str) -> tuple[float | None, str]:
+    """The largest sigma with (45) feasible at ``gamma`` (None: gamma infinite), and the status.
+
+    None when (45) is infeasible even at sigma -> 0 (then no sigma helps: gamma must rise)."""
+    # back to the plant's units (gamma sy, sigma / (tau sy)^2)
+    s, status = _bound(aug, None, gamma, gamma1, solver, lambda q, tau, sy, p: q / (tau * sy) ** 2)
+    return (float(s) if s is not None and s > 0 else None), status
+
+
+@dataclass(frozen=True)
+class FrontierPoint:
+    """One sigma of the frontier: the smallest feasible gamma, and the design tried just above it."""
+
+    sigma: float
+    gamma_min: float | None
+    gamma_tried: float | None
+    certified: bool
+    alpha: float | None
+    max_abs_L1: float | None
+    note: str = ""
+    #: the certified design's largest stable sample time (eigenvalues of I + Ts R_i), None without one
+    ts_max: float | None = None

@@ -1,0 +1,312 @@
+"""The LMIs of Theorems 3 and 5: their left sides built with numpy, and the registry that names them once.
+
+The builders are written once for Theorem 5 (diffusion ``W_i x + G_i u + Gf_i f + M_i d2``);
+with ``G = Gf = 0`` and no ``d2`` they are exactly (45), (46) of Theorem 3. Corrections of the
+printed formulas (docs/method.md, "The paper's misprints"): block (1,4) of (45)/(78) is ``Bd_i`` (not ``P Bd_i``);
+``Psi = A X + X A^T + B Y + Y^T B^T + sigma I``; block (3,3) of (45) is ``-I_p``. In (79) the
+term ``(Wbar_i + Gbar_i K_j)^T T^T Pbar T Gbar_eij`` of Theta_13 enters with a minus sign: it
+is the cross term of the error diffusion ``T (Wbar + Gbar K) x - T Gbar_e e``, exactly like
+``-(W_i + G_i K_j)^T P G_eij`` beside it (the paper prints ``+``).
+
+The same builders pose the LMIs for the solver (:mod:`~fte_casadi.design.core._conditioned`,
+:mod:`~fte_casadi.design.core._paper`): there the unknowns are scaled (``X = X'/s``, ``Pbar = Pt/s``) and
+every term free of the unknowns is multiplied by ``const = s``, which is ``s`` times the printed LMI at the
+unscaled point. With the default ``const = 1`` they are the printed LMIs, which is what the certificate
+evaluates.
+
+:data:`LMIS` registers each LMI once: its key in the design document (``checks["lmi_max_eig"]["45"]``), its
+Theorem 5 number, what it certifies, its block sizes and how its left sides are built at a design point.
+The certificate (:func:`~fte_casadi.design.core._certify.certificate`), its failures, the re-certification of
+a loaded document, ``fte design``'s summary and ``fte reproduce``'s table read it; a new LMI is one
+:class:`LMI` given to :func:`register` (with its builder).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._augment import Augmented
+from ._linalg import sym as _sym
+
+__all__ = ["LMI", "LMIS", "register", "unregister", "block_sizes", "distinct", "theta_lmi_max_eig",
+           "lmi45", "lmi46", "lmi55", "lmi64", "lmi45_kron", "lmi46_kron", "lmi46_terms", "sliding_kron",
+           "sliding_mismatch", "diffusion_coupling"]  # fmt: skip
+
+
+def _parts(aug: Augmented, i: int):
+    n, lf = aug.n, aug.lf
+    A = aug.Abar[i][:n, :n]
+    B = aug.Bbar[i][:n]
+    Bf = aug.Abar[i][:n, n + lf :]
+    W = aug.Wbar[i][:n]
+    G = aug.Gbar[i][:n]
+    Gf = aug.Gfbar[i][:n]
+    M = aug.Mbar[i][:n]
+    return A, B, Bf, W, G, Gf, M
+
+
+def lmi45(
+    aug: Augmented, i: int, X: np.ndarray, Y: np.ndarray, sigma: float, gamma: float, gamma1: float, const=1.0
+):
+    """Left side of (45) (and (78) when G_i != 0) for rule i and gain Y = Y_j.
+
+    ``const`` multiplies every term that involves neither X nor Y (see the module docstring).
+    """
+    n, p, ld = aug.n, aug.p, aug.ld
+    A, B, _, W, G, _, _ = _parts(aug, i)
+    C = aug.Cbar[:, :n]
+    Bd = aug.Bdbar[i][:n]
+    Psi = A @ X + X @ A.T + B @ Y + Y.T @ B.T + const * sigma * np.eye(n)
+    XW = X @ W.T + Y.T @ G.T
+    Z = np.zeros
+    L = np.block([
+        [Psi, XW, X @ C.T, const * Bd],
+        [XW.T, -X, Z((n, p)), Z((n, ld))],
+        [C @ X, Z((p, n)), -const * np.eye(p), Z((p, ld))],
+        [const * Bd.T, Z((ld, n)), Z((ld, p)), const * (gamma1**2 - gamma**2) * np.eye(ld)],
+    ])  # fmt: skip
+    return _sym(L)
+
+
+def _selector(sizes, which: int) -> np.ndarray:
+    """``E`` with ``E @ [z_0; z_1; ...] = z_which`` for blocks of ``sizes``."""
+    E = np.zeros((sizes[which], sum(sizes)))
+    a = sum(sizes[:which])
+    E[:, a : a + sizes[which]] = np.eye(sizes[which])
+    return E
+
+
+def lmi45_kron(aug: Augmented, i: int):
+    """How X enters (45) for rule i: pairs ``(U, V)`` meaning ``U^T X V + V^T X U`` (:meth:`~fte_casadi.design.core._sdp.Kron.of`):
+    ``A X + X A^T`` and ``X W^T`` and ``X C^T`` in the first block row, ``-X`` in the second diagonal block."""
+    n, p, ld = aug.n, aug.p, aug.ld
+    A, _, _, W, _, _, _ = _parts(aug, i)
+    C = aug.Cbar[:, :n]
+    sizes = (n, n, p, ld)
+    E1, E2, E3 = (_selector(sizes, b) for b in range(3))
+    return [(E1, A.T @ E1 + W.T @ E2 + C.T @ E3), (E2, -0.5 * E2)]
+
+
+def lmi46_kron(aug: Augmented, i: int, K: np.ndarray, T: np.ndarray):
+    """How Pbar enters (46)/(79) for rule i (blocks x, d, e, d2; :func:`lmi45_kron`; ``(U, None)`` is
+    ``U^T Pbar U``): ``Phi^T T^T Pbar T Phi`` with ``Phi = [Wbk, 0, -Gbe, Mb]`` and
+    ``Pbar T Abar_i + Abar_i^T T^T Pbar`` in the e block (the decay term ``2 alpha Pbar`` is ``(Ee, alpha Ee)``)."""
+    t = lmi46_terms(aug, i, K)
+    n, ld, nbar, l2 = aug.n, aug.ld, aug.nbar, t["Mb"].shape[1]
+    Ee = _selector((n, ld, nbar, l2), 2)
+    Phi = np.hstack([t["Wbk"], np.zeros((nbar, ld)), -t["Gbe"], t["Mb"]])
+    TPhi = T @ Phi
+    return [(TPhi, None), (Ee, T @ aug.Abar[i] @ Ee)]
+
+
+def sliding_kron(aug: Augmented, T: np.ndarray, right: np.ndarray):
+    """How Pbar enters ``[[-tau I, E^T], [E, -tau I]]`` with ``E = Js^T T^T Pbar right`` (:func:`lmi45_kron`):
+    (55) with ``right = I - Cbar^+ Cbar`` (N eliminated), (64) with ``right = T Wbar_i``."""
+    a, b = right.shape[1], aug.ns
+    return [(T @ aug.Js @ _selector((a, b), 1), right @ _selector((a, b), 0))]
+
+
+def lmi46_terms(aug: Augmented, i: int, K: np.ndarray):
+    """The constant pieces of (46)/(79) for rule i, gain K = K_j (everything but Pbar and Q_i)."""
+    n, lf = aug.n, aug.lf
+    _, B, Bf, W, G, Gf, M = _parts(aug, i)
+    J0, J2 = aug.J0, aug.J2
+    De = aug.Cbar[:, n + lf :] @ J2
+    Be = B @ K @ J0 - Bf @ J2
+    Ge = G @ K @ J0 - Gf @ J2
+    Wk = W + G @ K
+    Wbk = aug.Wbar[i] + aug.Gbar[i] @ K
+    Gbe = aug.Gbar[i] @ K @ J0 - aug.Gfbar[i] @ J2
+    return dict(De=De, Be=Be, Ge=Ge, Wk=Wk, Wbk=Wbk, Gbe=Gbe, M=M, Mb=aug.Mbar[i], C=aug.Cbar[:, :n])
+
+
+def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0, const=1.0):
+    """Left side of (46) (Theorem 3) or (79) (Theorem 5) for rule i, gain K_j, observer Q_i.
+
+    ``alpha > 0`` adds the decay-rate term ``2 alpha Pbar`` to the (3,3) block (the
+    conditioned variant's design constraint); the recorded certificate uses ``alpha = 0``.
+    ``const`` multiplies every term that involves neither Pbar nor Q (module docstring).
+    """
+    t = lmi46_terms(aug, i, K)
+    Ab, Cb = aug.Abar[i], aug.Cbar
+    TPT = T.T @ Pbar @ T
+    C, De, Be, Ge, Wk, Wbk, Gbe, M, Mb = (
+        t[k] for k in ("C", "De", "Be", "Ge", "Wk", "Wbk", "Gbe", "M", "Mb")
+    )
+    n, ld, nbar, l2 = aug.n, aug.ld, aug.nbar, M.shape[1]
+    T11 = -const * sigma * P @ P + Wbk.T @ TPT @ Wbk
+    T13 = const * (-P @ Be - Wk.T @ P @ Ge + C.T @ De) - Wbk.T @ TPT @ Gbe
+    T33 = (
+        Pbar @ T @ Ab
+        + Ab.T @ T.T @ Pbar
+        - Q @ Cb
+        - Cb.T @ Q.T
+        + const * (Ge.T @ P @ Ge + De.T @ De)
+        + Gbe.T @ TPT @ Gbe
+    )
+    T33 = T33 + 2 * alpha * Pbar
+    Z = np.zeros
+    rows = [
+        [T11, Z((n, ld)), T13],
+        [Z((ld, n)), -const * (gamma1**2) * np.eye(ld), Z((ld, nbar))],
+        [T13.T, Z((nbar, ld)), T33],
+    ]
+    if l2:
+        T14 = const * (Wk.T @ P @ M) + Wbk.T @ TPT @ Mb
+        T34 = -const * (Ge.T @ P @ M) - Gbe.T @ TPT @ Mb
+        T44 = const * (M.T @ P @ M - gamma2**2 * np.eye(l2)) + Mb.T @ TPT @ Mb
+        rows[0].append(T14)
+        rows[1].append(Z((ld, l2)))
+        rows[2].append(T34)
+        rows.append([T14.T, Z((l2, ld)), T34.T, T44])
+    return _sym(np.block(rows))
+
+
+def sliding_mismatch(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray) -> np.ndarray:
+    """``J1^T T^T Pbar - N Cbar``: how far the sliding surface (20) is from holding (the E of (55)).
+
+    With Remark 5, ``J1`` is ``[Bdbar_u J1]`` (:attr:`~fte_casadi.design._augment.Augmented.Js`)."""
+    return aug.Js.T @ T.T @ Pbar - N @ aug.Cbar
+
+
+def diffusion_coupling(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray) -> np.ndarray:
+    """``J1^T T^T Pbar T Wbar_i``: the diffusion seen by the sliding variable (the E of (64));
+    ``[Bdbar_u J1]`` in place of ``J1`` with Remark 5."""
+    return aug.Js.T @ T.T @ Pbar @ T @ aug.Wbar[i]
+
+
+def lmi55(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray, theta: float):
+    E = sliding_mismatch(aug, T, Pbar, N)
+    return _sym(np.block([[-theta * np.eye(aug.nbar), E.T], [E, -np.eye(aug.ns)]]))
+
+
+def lmi64(aug: Augmented, i: int, T: np.ndarray, Pbar: np.ndarray, theta: float):
+    E = diffusion_coupling(aug, i, T, Pbar)
+    return _sym(np.block([[-theta * np.eye(aug.n), E.T], [E, -np.eye(aug.ns)]]))
+
+
+def theta_lmi_max_eig(L: np.ndarray, a: int) -> float:
+    """The largest eigenvalue of ``[[-theta I_a, E^T], [E, -I_b]]`` ((55), (64)), exactly from the singular
+    values s of E: ``2 (s^2 - theta) / ((theta + 1) + sqrt((theta - 1)^2 + 4 s^2))`` (and ``-theta``, ``-1``
+    for the directions E does not couple). eigvalsh loses it when theta is large: a plant measured in mm has
+    theta of order 1e16-1e23 beside the ``-I`` block, and the eigenvalue near -1 drowns in round-off of
+    theta's size (it came out as +1e-8 for a design whose (55) holds with margin)."""
+    theta = float(-L[0, 0])
+    E = L[a:, :a]
+    sv = np.linalg.svd(E, compute_uv=False) if E.size else np.zeros(0)
+    cand = [2.0 * (x * x - theta) / ((theta + 1.0) + np.hypot(theta - 1.0, 2.0 * x)) for x in sv]
+    if a > len(sv):
+        cand.append(-theta)
+    if L.shape[0] - a > len(sv):
+        cand.append(-1.0)
+    return float(max(cand))
+
+
+def distinct(K) -> list[int]:
+    """The indices of the distinct gains among ``K_1..K_r`` (the first of equal ones): a pair (i, j) with
+    ``K_j`` equal to an earlier ``K_j'`` gives the very same matrices as (i, j'), so it is checked once
+    (the conditioned design has one common gain: r checks instead of r^2, 64 rules: 64 instead of 4096)."""
+    out: list[int] = []
+    for j, Kj in enumerate(K):
+        if not any(np.array_equal(Kj, K[k]) for k in out):
+            out.append(j)
+    return out
+
+
+# -- the registry -----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LMI:
+    """One LMI of the design, registered once (:func:`register`).
+
+    ``key``: its name in the design document (``checks["lmi_max_eig"][key]``) and its number as printed
+    (Theorem 3); ``theorem5``: its number in Theorem 5, under which the document repeats its values (None:
+    none); ``what``: what it certifies, in a few words; ``matrices(aug, point, params)``: its left sides at the
+    design point (every one must be negative definite; ``point`` holds X, K, P, T, Pbar, Q, N, theta, R, L1 and
+    ``params`` the design's parameters); ``blocks(aug)``: the sizes of its diagonal blocks;
+    ``max_eig(L, blocks)``: its largest eigenvalue where a formula is more exact than ``eigvalsh`` (None:
+    ``eigvalsh``)."""
+
+    key: str
+    theorem5: str | None
+    what: str
+    matrices: Callable[[Augmented, dict, dict], Iterable[np.ndarray]]
+    blocks: Callable[[Augmented], list]
+    max_eig: Callable[[np.ndarray, list], float] | None = None
+
+    def number(self, theorem: int | None = 3) -> str:
+        """Its number in ``theorem`` (3 or 5): ``"45"`` or ``"78"``."""
+        return self.theorem5 if theorem == 5 and self.theorem5 else self.key
+
+    def name(self, theorem: int | None = 3) -> str:
+        """Its printed name in ``theorem``: ``"LMI (45)"`` or ``"LMI (78)"``."""
+        return f"LMI ({self.number(theorem)})"
+
+
+#: every LMI of the design, by key, in the order they are reported (:func:`register` adds one)
+LMIS: dict[str, LMI] = {}
+
+
+def register(lmi: LMI) -> LMI:
+    """Add ``lmi`` to :data:`LMIS` (a key already there is refused); returns it."""
+    if lmi.key in LMIS:
+        raise ValueError(f"an LMI with the key {lmi.key!r} is registered already ({LMIS[lmi.key].what})")
+    LMIS[lmi.key] = lmi
+    return lmi
+
+
+def unregister(key: str) -> None:
+    """Remove the LMI ``key`` from :data:`LMIS`."""
+    del LMIS[key]
+
+
+def block_sizes(aug: Augmented) -> dict:
+    """The sizes of the diagonal blocks of every registered LMI, by key."""
+    return {k: list(e.blocks(aug)) for k, e in LMIS.items()}
+
+
+def _parameters(params: dict):
+    return params["sigma"], params["gamma"], params["gamma1"], params.get("gamma2", params["gamma"])
+
+
+def _at_45(aug, d: dict, params: dict):
+    s, g, g1, _ = _parameters(params)
+    X, K = d["X"], d["K"]
+    for i in range(aug.r):
+        for j in distinct(K):
+            yield lmi45(aug, i, X, K[j] @ X, s, g, g1)
+
+
+def _at_46(aug, d: dict, params: dict):
+    s, _, g1, g2 = _parameters(params)
+    K = d["K"]
+    for i in range(aug.r):
+        for j in distinct(K):
+            yield lmi46(aug, i, K[j], d["P"], d["T"], d["Pbar"], d["Q"][i], s, g1, g2)
+
+
+def _at_55(aug, d: dict, params: dict):
+    yield lmi55(aug, d["T"], d["Pbar"], d["N"], d["theta"])
+
+
+def _at_64(aug, d: dict, params: dict):
+    for i in range(aug.r):
+        yield lmi64(aug, i, d["T"], d["Pbar"], d["theta"])
+
+
+def _theta_max_eig(L: np.ndarray, blocks) -> float:
+    return theta_lmi_max_eig(L, blocks[0])
+
+
+register(LMI("45", "78", "the state-feedback loop: X, K_j, the attenuation gamma of d (step 3)", _at_45,
+             lambda aug: [aug.n, aug.n, aug.p, aug.ld]))  # fmt: skip
+register(LMI("46", "79", "the observer: Pbar, Q_i at the loop's K_j, the attenuation gamma1 (step 5)", _at_46,
+             lambda aug: [aug.n, aug.ld, aug.nbar] + ([aug.Mbar[0].shape[1]] if aug.Mbar[0].shape[1] else [])))  # fmt: skip
+register(LMI("55", "80", "the sliding surface (20): ||J1^T T^T Pbar - N Cbar||^2 <= theta", _at_55,
+             lambda aug: [aug.nbar, aug.ns], _theta_max_eig))  # fmt: skip
+register(LMI("64", "81", "the diffusion the sliding variable sees: ||J1^T T^T Pbar T Wbar_i||^2 <= theta", _at_64,
+             lambda aug: [aug.n, aug.ns], _theta_max_eig))  # fmt: skip
