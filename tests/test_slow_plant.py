@@ -113,16 +113,21 @@ def test_an_unstable_mode_barely_reachable_is_named(ts):
 
 
 def test_generic_values_follow_the_outputs_size(ts):
-    """The generic gamma, gamma1, sigma in the outputs' own size (sy = 1024 here); gamma1 follows only a
-    generic gamma, so it stays below a gamma that was given; given values are kept."""
-    from fte_casadi.design._options import _params
+    """The generic gamma, gamma1, sigma in the outputs' own size (sy = 1024 here), gamma and gamma1 also in the
+    unknown input's (sd); gamma1, when not given, is in that size even beside a given gamma, lowered below it
+    where needed; a generic gamma rises above a given gamma1; given values are kept."""
+    from fte_casadi.design._options import _params, generic_sizes
 
     def params(**given):
         full = {k: given.get(k) for k in ("gamma", "gamma1", "sigma", "delta", "epsilon")}
         return _params(ts, full, [])
 
+    sy, sd = generic_sizes(ts)
+    assert sy == 1024.0 and 0.01 < sd < 1.0
     p = params()
-    assert (p["gamma"], p["gamma1"], p["sigma"]) == (1024.0, 512.0, 1024.0**-2)
-    assert params(gamma=2000.0)["gamma1"] == 0.5  # the generic 0.5, below the given gamma
-    assert params(gamma1=100.0)["gamma"] == 1024.0
+    assert (p["gamma"], p["gamma1"], p["sigma"]) == (sy * sd, 0.5 * sy * sd, 1024.0**-2)
+    assert params(gamma=2000.0)["gamma1"] == 0.5 * sy * sd  # in d's size, below the given gamma
+    assert params(gamma=10.0)["gamma1"] == 5.0  # lowered below a given gamma
+    assert params(gamma1=1.0)["gamma"] == sy * sd
+    assert params(gamma1=2 * sy)["gamma"] == 4 * sy  # the generic gamma raised above a given gamma1
     assert params(sigma=3e-11)["sigma"] == 3e-11 and p["delta"] == 1e-4  # delta, epsilon are not scaled

@@ -14,13 +14,12 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .._rounding import nice_ceil
 from ..errors import FteError, InfeasibleDesignError
 from ..ts import TSModel
 from . import _diffusion as diffusion
 from . import _pipeline as pipeline
 from ._explain import explain_45, explain_46, outside_45
-from ._options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, resolve
+from ._options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
 from ._record import Design
 from ._search import choose, try_design
 from .core import _conditioned as conditioned
@@ -229,6 +228,7 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                 "dominate the plant's diffusion with this output; check W_i and C"
             )
         sigmas = np.geomspace(min(params["sigma"] / 30, sup * 1e-3), sup * 0.98, count)
+    gs = gamma_size(ts)
     base = DesignOptions(diagnose=False, solver=solver, gamma1=g1, sample_time=sample_time)
     points, best, skipped, refused_46 = [], None, 0, None
     # the largest sigma first ((46) asks for a large one, (45) for a small one), within 70 % of the budget: the
@@ -252,7 +252,7 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
         else:
             point, why = None, ""
             for f in LADDER:  # the smallest gamma on the ladder whose whole design is certified
-                gt = nice_ceil(max(f * gmin, 1.01 * g1))
+                gt = round_gamma(max(f * gmin, 1.01 * g1), gs)
                 try:
                     d = design(ts, base.replace(gamma=gt, sigma=float(sg)))
                 except FteError as exc:

@@ -179,22 +179,70 @@ def output_size(C) -> float:
     return float(2.0 ** round(np.log2(c)))
 
 
-def units_scaled(aug: Augmented, tau: float, sy: float) -> Augmented:
-    """(8) in the time ``t / tau`` (:func:`time_scaled`) with outputs divided by ``sy``: ``Cbar / sy``.
+def unknown_input_size(aug: Augmented) -> float:
+    """The unknown inputs' own size ``sd``: how far the largest of them moves the outputs while its direction
+    lasts, in units of the outputs' size: ``max_{i,j} ||C A_i^k b||_2 t_ij^(k+1) / sy`` with ``b = Bd_i e_j``,
+    ``t_ij = ||b|| / ||A_i b||`` the time the plant takes to turn d's direction (``tau``,
+    :func:`time_scale`, where ``A_i b = 0``) and k the first power for which the outputs see b (k = 0,
+    ``C Bd_i``, under assumption (1)); 1 without unknown inputs or when the outputs see none.
 
-    LMI (45) of these data at ``(sigma tau^2 sy^2, gamma / sy, gamma1 / sy)`` and ``X~ = tau sy^2 X`` (the same
-    gain K) is a congruence of (45) at ``(sigma, gamma, gamma1)`` and X, times ``sy^2``: multiply (45) by
-    ``sy^2``, then take the congruence ``diag(I, I, I / sy, I / sy^2)`` of its (x, x, y, d) blocks (the
-    time's part as in :func:`time_scaled`). Both scale factors are powers of two, so the map is exact.
+    Covariant: an unknown input measured in another unit, ``d' = c d`` (``Bd' = Bd / c``), has
+    ``sd' = sd / c`` (t_ij does not change); outputs ``k`` times larger (k a power of two) leave it as it is.
+    Not rounded (a power of two would keep the covariance only for c a power of two): a design at
+    ``gamma = g sy sd`` is the same design whatever unit d is in (:func:`~fte_casadi.design._options._generic_scale`).
+    ``t_ij`` rather than the plant's fastest time ``tau``: a flexible joint whose load torque d acts on the
+    slow link (16 rad/s) while the motor's spring sets ``tau = 2^-11 s`` needs gamma 170 times the value
+    ``tau`` gives, and 12 times less than ``t_ij`` gives (docs/design.md).
+    """
+    n = aug.n
+    if aug.ld == 0:
+        return 1.0
+    tau, sy = time_scale(aug), output_scale(aug)
+    C = aug.Cbar[:, :n]
+    best = 0.0
+    for j in range(aug.ld):
+        for k in range(n):
+            sizes = []
+            for A, Bd in zip(aug.Abar, aug.Bdbar):
+                A, b = A[:n, :n], Bd[:n, j]
+                nb, nab = np.linalg.norm(b), np.linalg.norm(A @ b)
+                t = nb / nab if nab > 1e-12 * np.linalg.norm(A, 2) * nb else tau
+                v = b
+                for _ in range(k):
+                    v = A @ v
+                tol = 1e-12 * np.linalg.norm(C, 2) * max(np.linalg.norm(A, 2), 1.0 / tau) ** k * nb
+                w = float(np.linalg.norm(C @ v))
+                sizes.append(w * t ** (k + 1) if w > tol else 0.0)
+            if max(sizes) > 0:
+                best = max(best, max(sizes) / sy)
+                break
+    return best if best > 0 and np.isfinite(best) else 1.0
+
+
+def units_scaled(aug: Augmented, tau: float, sy: float, sd: float = 1.0) -> Augmented:
+    """(8) in the time ``t / tau`` (:func:`time_scaled`) with outputs divided by ``sy``: ``Cbar / sy``, and the
+    unknown inputs in units ``sd`` times larger: ``Bdbar / sd`` (:func:`unknown_input_size`).
+
+    LMI (45) of these data at ``(sigma tau^2 sy^2, gamma / (sy sd), gamma1 / (sy sd))`` and ``X~ = tau sy^2 X``
+    (the same gain K) is a congruence of (45) at ``(sigma, gamma, gamma1)`` and X, times ``sy^2``: multiply
+    (45) by ``sy^2``, then take the congruence ``diag(I, I, I / sy, I / (sy^2 sd))`` of its (x, x, y, d)
+    blocks (the time's part as in :func:`time_scaled`). tau and sy are powers of two, so their part of the
+    map is exact; sd is not (an unknown input's unit is any number), and d's block only meets X through
+    ``Bd``: the unknowns ``(X, Y)`` of the map are the same whatever sd is.
     """
     out = time_scaled(aug, tau)
-    return out if sy == 1.0 else replace(out, Cbar=aug.Cbar / sy)
+    if sy != 1.0:
+        out = replace(out, Cbar=aug.Cbar / sy)
+    if sd != 1.0:
+        out = replace(out, Bdbar=tuple(B / sd for B in out.Bdbar))
+    return out
 
 
-def units_params(params: dict, tau: float, sy: float) -> dict:
-    """The parameters of (45) in the units of :func:`units_scaled` (sigma, gamma, gamma1; the rest as given)."""
+def units_params(params: dict, tau: float, sy: float, sd: float = 1.0) -> dict:
+    """The parameters of (45) in the units of :func:`units_scaled` (sigma, gamma, gamma1; gamma2, the d2
+    attenuation, in the outputs' size only; the rest as given)."""
     out = dict(params, sigma=params["sigma"] * tau**2 * sy**2)
     for k in ("gamma", "gamma1", "gamma2"):
         if out.get(k) is not None:
-            out[k] = out[k] / sy
+            out[k] = out[k] / (sy if k == "gamma2" else sy * sd)
     return out

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import math
 
-from .._rounding import nice_ceil, nice_floor
+from .._rounding import nice_floor
 from ..errors import InfeasibleDesignError
 from ._limits import reachability
-from ._options import DesignOptions, default_gamma1
+from ._options import DesignOptions, default_gamma1, gamma_size, round_gamma
 from ._search import Attempt, refusals, try_design
 from .core._diagnose import gamma_min, sigma_max
 
@@ -58,7 +58,7 @@ def explain_45(attempt: Attempt, ts, options: DesignOptions, aug, params: dict,
             + f", sigma = {sg:g} is {gmin:.3g}"
         )
         for f in (1.05, 1.25, 1.6, 2.5, 4.0):
-            cand = nice_ceil(max(gmin * f, g1 * 1.01))
+            cand = round_gamma(max(gmin * f, g1 * 1.01), gamma_size(ts))
             if try_design(attempt, ts, options, refused, gamma=cand) is not None:
                 fixes.append(f"raise gamma to >= {cand:g}")
                 break

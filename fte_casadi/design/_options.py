@@ -47,7 +47,8 @@ class DesignOptions:
         ``"paper"`` (as printed).
     solver : ``"CLARABEL"`` (default) or ``"SCS"`` (any case).
     gamma, gamma1, sigma, delta, epsilon : the LMI parameters of Theorem 3 (positive; default: the plant's,
-        else :data:`GENERIC_DEFAULTS`, gamma, gamma1 and sigma taken in the outputs' own size).
+        else :data:`GENERIC_DEFAULTS`, gamma, gamma1 and sigma taken in the outputs' own size, gamma and
+        gamma1 also in the unknown inputs' own size).
     gamma2 : the d2 attenuation of Theorem 5 (default gamma).
     alpha : the observer decay rate of the conditioned variant (>= 0; default: the plant's, else a fraction
         of the largest feasible one; either is lowered so that ``ts_max >= 2 sample_time``).
@@ -139,29 +140,52 @@ class Resolved:
     notes: tuple
 
 
-def _generic_scale(ts: TSModel, given: dict) -> tuple[float, dict]:
-    """Factors for the generic gamma, gamma1 and sigma: they are taken in the outputs' own size ``sy`` (the
-    power of two nearest the largest row norm of C, as :func:`~fte_casadi.design._augment.output_scale`).
+def generic_sizes(ts: TSModel) -> tuple[float, float]:
+    """``(sy, sd)``: the outputs' own size (the power of two nearest the largest row norm of C,
+    :func:`~fte_casadi.design._augment.output_size`) and the unknown inputs' own size in units of it
+    (:func:`~fte_casadi.design._augment.unknown_input_size`)."""
+    from ._augment import augment, output_size, unknown_input_size
 
-    gamma bounds the gain from the unknown input to the outputs, so a number for it carries the outputs'
-    units: the generic 1 asks a plant measured in mm for 1000 times the attenuation it asks of the same
-    plant measured in m. (45) with outputs ``y / sy`` at ``(sigma, gamma, gamma1)`` is (45) with y at
+    return output_size(ts.C), unknown_input_size(augment(ts.local_models, ts.C, ts.Df))
+
+
+def gamma_size(ts: TSModel) -> float:
+    """The size the generic gamma and gamma1 are taken in, ``sy sd``; the parameter search rounds its gammas in
+    this unit (:func:`round_gamma`), so that its choice does not depend on the units of y and d either."""
+    sy, sd = generic_sizes(ts)
+    return sy * sd
+
+
+def round_gamma(v: float, size: float) -> float:
+    """``v`` rounded up to two significant digits in units of ``size`` (:func:`gamma_size`)."""
+    from .._rounding import nice_ceil
+
+    return nice_ceil(v / size) * size
+
+
+def _generic_scale(ts: TSModel, given: dict) -> tuple[tuple[float, float], dict]:
+    """Factors for the generic gamma, gamma1 and sigma: they are taken in the outputs' own size ``sy`` and
+    gamma, gamma1 also in the unknown inputs' own size ``sd`` (:func:`generic_sizes`).
+
+    gamma bounds the gain from the unknown input to the outputs, so a number for it carries the units of
+    both. Outputs: the generic 1 asks a plant measured in mm for 1000 times the attenuation it asks of the
+    same plant measured in m. (45) with outputs ``y / sy`` at ``(sigma, gamma, gamma1)`` is (45) with y at
     ``(sigma / sy^2, gamma sy, gamma1 sy)`` (:func:`~fte_casadi.design._augment.units_params`), and (46),
-    (55), (64) and step 5's objective follow (:func:`~fte_casadi.design.core._conditioned._step5_problem`), so
-    with the generic values taken in the outputs' own size a plant gets the same design whatever unit its
-    outputs (and its sensor faults) are in: Pbar scaled by ``sy^2``, the gains L_i1 by ``1 / sy``, the same K,
-    decay rate and largest sample time (``tests/test_slow_plant.py``). gamma1 follows only a generic gamma (it
-    stays below a gamma that was given). Values the user or the plant's defaults gave are kept; sy = 1 (every
-    built-in plant) leaves everything as it is."""
-    from ._augment import output_size
-
-    sy = output_size(ts.C)
+    (55), (64) and step 5's objective follow (:func:`~fte_casadi.design.core._conditioned._step5_problem`):
+    Pbar scaled by ``sy^2``, the gains L_i1 by ``1 / sy``, the same K, decay rate and largest sample time
+    (``tests/test_slow_plant.py``). Unknown inputs: with ``d' = c d`` (``Bd' = Bd / c``) the d block
+    ``[.., Bd; Bd^T, (gamma1^2 - gamma^2) I]`` of (45) is congruent, by ``diag(I, I, I, c I)``, to the one at
+    ``(gamma / c, gamma1 / c)``, and step 3's margin on it with it; d enters (46) only in a decoupled
+    ``-gamma1^2 I`` block, and (55), (64) and H not at all (H and T depend on the range of C Bd). So at
+    ``gamma = 1 sy sd``, ``gamma1 = 0.5 sy sd`` a plant gets the same design whatever unit its outputs and
+    its unknown inputs are in (``tests/test_d_units.py``). gamma1, when not given, is in that size even
+    where gamma was given (then lowered below it where needed). Values the user or the plant's defaults gave
+    are kept."""
+    sy, sd = generic_sizes(ts)
     defaults = getattr(ts.plant, "design_defaults", {}) or {}
     generic = {k for k in ("gamma", "gamma1", "sigma") if given.get(k) is None and k not in defaults}
-    if "gamma" not in generic:
-        generic.discard("gamma1")
-    scale = {"gamma": sy, "gamma1": sy, "sigma": sy**-2}
-    return sy, {k: (scale[k] if k in generic else 1.0) for k in given}
+    scale = {"gamma": sy * sd, "gamma1": sy * sd, "sigma": sy**-2}
+    return (sy, sd), {k: (scale[k] if k in generic else 1.0) for k in given}
 
 
 def _params(ts: TSModel, given: dict, status: list) -> dict:
@@ -174,16 +198,18 @@ def _params(ts: TSModel, given: dict, status: list) -> dict:
             if not (_number(v) and v > 0):
                 raise ParameterError(f"{k} must be a positive finite number; got {v!r}")
             out[k] = float(v)
-    sy, factor = _generic_scale(ts, given)
+    (sy, sd), factor = _generic_scale(ts, given)
     for k in given:
         if k not in out:
             out[k] = float(plant_defaults.get(k, GENERIC_DEFAULTS[k] * factor[k]))
     scaled = sorted(k for k, f in factor.items() if f != 1.0)
     if scaled:
         status.append(
-            f"generic values in the outputs' own size (C's largest row norm, as a power of two, is {sy:g}): "
+            f"generic values in the outputs' own size (C's largest row norm, as a power of two, is {sy:g}) and, "
+            f"for gamma and gamma1, the unknown inputs' own size ({sd:.4g}: how far the largest moves the outputs "
+            "in the plant's time): "
             + ", ".join(f"{k} = {out[k]:g}" for k in scaled)
-            + ", so that what they ask does not depend on the outputs' units"
+            + ", so that what they ask does not depend on the units of y and d"
         )
     if given["gamma1"] is None and out["gamma1"] >= out["gamma"]:
         ratio = plant_defaults.get("gamma1", GENERIC_DEFAULTS["gamma1"]) / plant_defaults.get(
@@ -192,6 +218,19 @@ def _params(ts: TSModel, given: dict, status: list) -> dict:
         out["gamma1"] = min(ratio, 0.5) * out["gamma"]
         status.append(
             f"gamma1 lowered to {out['gamma1']:g} (the default {ratio:g} * gamma) to keep gamma1 < gamma"
+        )
+    if (
+        given["gamma1"] is not None
+        and "gamma" not in plant_defaults
+        and given["gamma"] is None
+        and out["gamma1"] >= out["gamma"]
+    ):
+        ratio = GENERIC_DEFAULTS["gamma1"] / GENERIC_DEFAULTS["gamma"]
+        out["gamma"] = (
+            out["gamma1"] / ratio
+        )  # a generic gamma follows a given gamma1, as gamma1 follows gamma
+        status.append(
+            f"gamma raised to {out['gamma']:g} (the given gamma1 / {ratio:g}) to keep gamma1 < gamma"
         )
     if out["gamma1"] >= out["gamma"]:
         raise ParameterError(
@@ -202,7 +241,7 @@ def _params(ts: TSModel, given: dict, status: list) -> dict:
 
 def default_gamma1(ts: TSModel, options: DesignOptions) -> float:
     """The gamma1 the defaults give before it is lowered below gamma (the plant's, else the generic one in the
-    outputs' own size)."""
+    outputs' and unknown inputs' own size)."""
     given = {k: getattr(options, k) for k in ("gamma", "gamma1", "sigma")}
     return float(
         (getattr(ts.plant, "design_defaults", {}) or {}).get(

@@ -12,9 +12,9 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 
-from .._rounding import nice_ceil, nice_floor
+from .._rounding import nice_floor
 from ..errors import FteError
-from ._options import DesignOptions
+from ._options import DesignOptions, gamma_size, round_gamma
 from ._record import Design
 from .core._diagnose import gamma_min, sigma_max
 
@@ -63,13 +63,15 @@ def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, gene
            refused: list | None = None) -> Design | None:  # fmt: skip
     """Parameters the tool finds itself: when sigma and/or gamma came from the generic defaults (neither the
     user nor the plant set them) and the design fails at them, the feasibility bounds say where to look:
-    sigma below the largest sigma (45) allows, else gamma above the smallest one it allows. The first value
+    sigma below the largest sigma (45) allows, else gamma above the smallest one it allows (rounded to two
+    digits in the size of the outputs and unknown inputs, :func:`~.options.gamma_size`). The first value
     tried that gives a certified design is taken, and the document's ``params_chosen`` says what was chosen
     and why. None when nothing was generic or nothing tried works. ``lmi``: the LMI that failed, "45" or "46"."""
     if not generic:
         return None
     solver = options.solver
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
+    gs = gamma_size(ts)  # gammas rounded in the size of y and d: the choice does not depend on their units
 
     def trials():  # lazily: each bound is one conic solve, asked for only when the values before it failed
         if "sigma" in generic:
@@ -94,13 +96,14 @@ def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, gene
                 why = (f"no sigma makes (45) feasible at gamma = {g:g}; any gamma needs sigma < {sup:.3g}, and at "
                        f"sigma = {sc:g} the smallest feasible gamma is {gm:.3g}")  # fmt: skip
                 yield from (
-                    ({"sigma": sc, "gamma": nice_ceil(max(gm * gf, g1 * 1.01))}, why) for gf in (1.25, 2.5)
+                    ({"sigma": sc, "gamma": round_gamma(max(gm * gf, g1 * 1.01), gs)}, why)
+                    for gf in (1.25, 2.5)
                 )
         if "gamma" in generic:
             gmin, _ = gamma_min(aug, sg, g1, solver)
             if gmin is not None:
                 why = f"the smallest gamma for which (45) is feasible at sigma = {sg:g}, gamma1 = {g1:g} is {gmin:.3g}"
-                yield from (({"gamma": nice_ceil(max(gmin * f, g1 * 1.01))}, why) for f in GAMMA_TRIALS)
+                yield from (({"gamma": round_gamma(max(gmin * f, g1 * 1.01), gs)}, why) for f in GAMMA_TRIALS)
 
     for change, why in trials():
         d = try_design(attempt, ts, options, refused, **change)

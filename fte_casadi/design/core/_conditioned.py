@@ -54,7 +54,14 @@ import numpy as np
 from ..._rounding import nice_floor
 from ...errors import CentringError, InfeasibleDesignError
 from ...errors import SolverFailedError as SolverFailedError
-from .._augment import Augmented, output_scale, time_scale, time_scaled, units_params, units_scaled
+from .._augment import (
+    Augmented,
+    output_scale,
+    time_scale,
+    time_scaled,
+    units_params,
+    units_scaled,
+)
 from ._barrier import centre, numpy_first, phase1, phase1_active
 from ._bound_objective import bound_term
 from ._certify import lyapunov_ts_max, ts_max
@@ -277,14 +284,17 @@ def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: 
     Only the starting point comes from here: the centring that follows runs on the unscaled LMIs, and
     Newton's method is invariant under such changes of variables, so the design does not depend on tau.
     """
+    # d in the size of gamma (gamma~ = 1): the d block's numbers of order one whatever unit d is in, and the
+    # same numbers for the same plant with d in another unit (gamma scales with it, as the generic one does)
     sy = output_scale(aug)
-    aug_s = units_scaled(aug, tau, sy)
-    params_s = units_params(params, tau, sy)
+    sd = params["gamma"] / sy
+    aug_s = units_scaled(aug, tau, sy, sd)
+    params_s = units_params(params, tau, sy, sd)
     Su_s = input_scaling(aug_s)
     layout_s, family_s, _ = _step3_problem(aug_s, params_s, Su_s)
     prob = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in family_s[:-1]])  # without the epigraph of t
     res = prob.solve(solver)
-    if (tau == 1.0 and sy == 1.0) or res.v is None or not np.all(np.isfinite(res.v)):
+    if (tau == 1.0 and sy == 1.0 and sd == 1.0) or res.v is None or not np.all(np.isfinite(res.v)):
         return prob, res
     u = layout_s.unpack(res.v)
     try:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._augment import Augmented, output_scale, time_scale, units_params, units_scaled
+from .._augment import Augmented, output_scale, time_scale, units_params, units_scaled, unknown_input_size
 from ._conditioned import MARGIN, input_scaling
 from ._lmis import lmi45, lmi45_kron
 from ._sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
@@ -47,6 +47,14 @@ def _units(aug: Augmented) -> list[tuple[float, float, float]]:
     tau, sy = time_scale(aug), output_scale(aug)
     own = (tau, sy, MARGIN * min(1.0, tau * sy**2))
     return [own] if tau * sy**2 > 1.0 or (tau == 1.0 and sy == 1.0) else [own, (1.0, 1.0, MARGIN)]
+
+
+def _d_size(aug: Augmented) -> float:
+    """The size the unknown inputs are posed in (:func:`~fte_casadi.design._augment.unknown_input_size`): d's
+    block of (45) meets X only through ``Bd``, so this change of d's unit leaves X alone and the margins (the
+    d block's is relative) as they are, whatever the time and output units: a plant whose d is in N m and the
+    same plant with d in rad/s^2 give the solver the same numbers."""
+    return unknown_input_size(aug)
 
 
 def _problem(aug: Augmented, sigma: float | None, gamma: float | None, gamma1: float, xmin: float = MARGIN):
@@ -119,12 +127,12 @@ def _bound(aug: Augmented, sigma, gamma, gamma1: float, solver: str, value) -> t
     ``value(q, tau, sy, params)``: the first answer a solver calls optimal, else the most conservative of the
     inaccurate ones (``value`` is oriented so that the smallest is: an inaccurate bound can be off either way),
     else ``(None, status of the first)``. A heavy problem (many PSD rows) takes its first answer."""
-    inaccurate, first = [], None
+    inaccurate, first, sd = [], None, _d_size(aug)
     for tau, sy, xmin in _units(aug):
         p = units_params(
-            {"sigma": sigma if sigma is not None else 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy
+            {"sigma": sigma if sigma is not None else 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy, sd
         )
-        layout, lmis, c = _problem(units_scaled(aug, tau, sy), p["sigma"] if sigma is not None else None,
+        layout, lmis, c = _problem(units_scaled(aug, tau, sy, sd), p["sigma"] if sigma is not None else None,
                                    p["gamma"], p["gamma1"], xmin)  # fmt: skip
         prob = ConicProblem(layout, lmis, c)
         res = prob.solve(solver)
@@ -145,7 +153,7 @@ def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple
     Posed in the plant's own time and output size, and as given where that fails (:func:`_units`), so that a plant
     in minutes and millimetres, or one whose rates are 1e3/s, is solved in numbers of order one."""
     g, status = _bound(aug, sigma, None, gamma1, solver,
-                       lambda g2, tau, sy, p: -sy * math.sqrt(max(g2, p["gamma1"] ** 2)))  # fmt: skip
+                       lambda g2, tau, sy, p: -sy * _d_size(aug) * math.sqrt(max(g2, p["gamma1"] ** 2)))  # fmt: skip
     return (None if g is None else float(-g)), status
 
 
