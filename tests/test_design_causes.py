@@ -1,6 +1,6 @@
 """A design that fails names its cause with a number, its parameter search stays within a few designs' work,
 and a certified design too slow for its scenario is flagged with what was tried; on plants written as a new
-user writes them (tests/plant_fjoint.py, tests/plant_chain_far.py)."""
+user writes them (tests/plant_fjoint.py, tests/plant_chain_far.py, tests/plant_twin_fans.py)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from plant_chain_far import chainfar
 from plant_fjoint import fjoint, fjoint_calm
+from plant_twin_fans import fans_alike, fans_one_fault
 
 from fte_casadi.design import DesignOptions, design
 from fte_casadi.design._diffusion import scaled_model
@@ -161,3 +162,40 @@ def test_explore_returns_the_best_certified_design_or_the_cause_within_its_budge
     assert "tolerates" in info["cause"] and "diffusion is the cause" in info["cause"]
     points, info = explore(calm, count=3, budget=0.0)  # nothing fits in no time: every sigma said not tried
     assert info["skipped"] == 3 and all("budget ran out" in pt.note for pt in points)
+
+
+def _separation(M: np.ndarray) -> float:
+    """Smallest singular value of M with its columns scaled to unit length (written here, not imported)."""
+    return float(np.linalg.svd(M / np.linalg.norm(M, axis=0), compute_uv=False)[-1])
+
+
+def test_faults_the_outputs_tell_apart_only_weakly_are_named_and_the_advice_certifies():
+    """Two fans that act almost alike: the refusal names both faults, the separation it quotes is the one
+    recomputed here from the local models, the LMIs without one fault are feasible at the parameters it names
+    (a whole design certifies there), and its advice (one fault for both fans) certifies at the defaults."""
+    ts = derive(fans_alike())
+    with pytest.raises(InfeasibleDesignError) as info:
+        design(ts)
+    msg = " ".join(str(info.value).split())
+    m = re.search(
+        rf"faults 'fan1_loss', 'fan2_loss' are the cause: .* is {NUMBER} at rule ([0-9]+); {NUMBER} without "
+        rf"'fan1_loss', {NUMBER} without 'fan2_loss'\), and without any one of them LMIs \(45\)-\(46\) are "
+        rf"feasible at sigma = {NUMBER}, gamma = {NUMBER}, gamma1 = {NUMBER} \(checked\)",
+        msg,
+    )
+    assert m, msg
+    C, Df = np.asarray(ts.C), np.asarray(ts.Df)
+
+    def sep(cols):
+        return min(
+            _separation(np.block([[lm.A, lm.Bf[:, cols], lm.Bd], [C, Df[:, cols], np.zeros((3, 1))]]))
+            for lm in ts.local_models
+        )
+
+    assert np.isclose(float(m[1]), sep([0, 1]), rtol=0.05) and sep([0, 1]) < 1e-3
+    assert np.isclose(float(m[3]), sep([1]), rtol=0.05) and np.isclose(float(m[4]), sep([0]), rtol=0.05)
+    one = derive(fans_one_fault())
+    params = dict(sigma=float(m[5]), gamma=float(m[6]), gamma1=float(m[7]))
+    assert design(one, diagnose=False, **params).certified  # feasible without one fault: a whole design
+    assert design(one).certified  # the advice, at the defaults
+    assert "--explore" not in msg

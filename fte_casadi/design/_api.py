@@ -18,6 +18,7 @@ from ..errors import FteError, InfeasibleDesignError
 from ..ts import TSModel
 from . import _diffusion as diffusion
 from . import _pipeline as pipeline
+from . import _separability as separability
 from ._explain import explain_45, explain_46, outside_45
 from ._options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
 from ._record import Design
@@ -108,8 +109,8 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
         chosen = choose(_attempt, ts, options, st.aug, params, generic, "45", exc, refused)
         if chosen is not None:
             return chosen
-        raise _naming_diffusion(explain_45(_attempt, ts, options, st.aug, params, refused), ts, options, st,
-                                params, refused) from None  # fmt: skip
+        raise _naming_cause(explain_45(_attempt, ts, options, st.aug, params, refused), ts, options, st,
+                               params, refused, "45") from None  # fmt: skip
     K = [s3.K] * st.aug.r
     try:
         s5 = pipeline.step5(ts, st, options, res, s3)
@@ -121,23 +122,28 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
             chosen = choose(_attempt, ts, options, st.aug, params, generic, "46", exc, refused)
             if chosen is not None:
                 return chosen
-            raise _naming_diffusion(explain_46(_attempt, ts, options, st.aug, params, exc, refused), ts, options,
-                                    st, params, refused) from None  # fmt: skip
+            raise _naming_cause(explain_46(_attempt, ts, options, st.aug, params, exc, refused), ts, options,
+                                   st, params, refused, "46") from None  # fmt: skip
         raise
     return pipeline.finish(ts, options, res, st, s3, K, s5, t0)
 
 
-def _naming_diffusion(err: InfeasibleDesignError, ts: TSModel, options: DesignOptions, st, params: dict,
-                      refused: list) -> InfeasibleDesignError:  # fmt: skip
-    """``err`` with the diffusion named as its cause, when it is (:func:`~._diffusion.tolerance`): the fraction
-    of it the design tolerates, at the parameters tried where (45) held (else the given ones), and whether the
-    whole design certifies with the diffusion scaled to that fraction (run, not guessed)."""
+def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOptions, st, params: dict,
+                  refused: list, lmi: str) -> InfeasibleDesignError:  # fmt: skip
+    """``err`` with its cause named, where one is found, at the parameters tried where (45) held (else the given
+    ones): the diffusion (:func:`~._diffusion.tolerance`: the fraction of it the design tolerates, and whether
+    the whole design certifies with the diffusion scaled to that fraction, run, not guessed), else, where (46)
+    fails, a fault the outputs tell apart only weakly (:func:`~._separability.blocking`)."""
     at = next((change for change, why in refused if "(46)" in why), {})
     p = dict(params, **at)
+    where = ", ".join(f"{k} = {p[k]:g}" for k in ("sigma", "gamma", "gamma1"))
+    msg = str(err).split(" No value tried")[0].split(" No larger sigma tried")[0].rstrip(".")
     tol = diffusion.tolerance(st.aug, st.T, p, options.solver)
     if tol is None or not tol.blocks:
+        if (at or lmi == "46") and not st.r5doc and (found := separability.blocking(ts, p, options.solver)):
+            text = separability.text(found, where)
+            return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.")
         return err
-    where = ", ".join(f"{k} = {p[k]:g}" for k in ("sigma", "gamma", "gamma1"))
     text = f"{tol.text()} at {where}"
     fix = ""
     if tol.feasible > 0:
@@ -151,7 +157,6 @@ def _naming_diffusion(err: InfeasibleDesignError, ts: TSModel, options: DesignOp
             else f" Even with the diffusion scaled by {tol.feasible:.3g} the whole design is not certified: "
             f"{why[0][1][:300] if why else 'not certified'}."
         )
-    msg = str(err).split(" No value tried")[0].split(" No larger sigma tried")[0].rstrip(".")
     return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.{fix}")
 
 

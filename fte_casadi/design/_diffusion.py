@@ -73,7 +73,7 @@ def has_diffusion(aug: Augmented) -> bool:
     return any(np.any(M) for group in (aug.Wbar, aug.Gbar, aug.Gfbar, aug.Mbar) for M in group)
 
 
-def _feasible(aug: Augmented, T: np.ndarray, params: dict, solver: str) -> str | None:
+def feasible(aug: Augmented, T: np.ndarray, params: dict, solver: str) -> str | None:
     """None when steps 3 and 5 (at alpha = 0) are feasible for ``aug``, else the LMI that fails ("45", "46")."""
     try:
         s3 = conditioned.step3(aug, params, solver)
@@ -97,18 +97,18 @@ def tolerance(
     factor ``1e4 ** (1 / 2**steps)`` wide (7 steps: 7 %)."""
     if not has_diffusion(aug):
         return None
-    top = _feasible(aug, T, params, solver)
+    top = feasible(aug, T, params, solver)
     if top is None:
         return None
-    if _feasible(scaled(aug, 0.0), T, params, solver) is not None:
+    if feasible(scaled(aug, 0.0), T, params, solver) is not None:
         return Tolerance(0.0, 0.0, top)
     lo, hi, lmi = 1e-4, 1.0, top
-    failed_lo = _feasible(scaled(aug, lo), T, params, solver)
+    failed_lo = feasible(scaled(aug, lo), T, params, solver)
     if failed_lo is not None:
         return Tolerance(0.0, lo, failed_lo)
     for _ in range(steps):
         mid = math.sqrt(lo * hi)
-        why = _feasible(scaled(aug, mid), T, params, solver)
+        why = feasible(scaled(aug, mid), T, params, solver)
         if why is None:
             lo = mid
         else:
