@@ -199,3 +199,24 @@ def test_faults_the_outputs_tell_apart_only_weakly_are_named_and_the_advice_cert
     assert design(one, diagnose=False, **params).certified  # feasible without one fault: a whole design
     assert design(one).certified  # the advice, at the defaults
     assert "--explore" not in msg
+
+
+def test_a_heavy_bound_asked_of_scs_is_bisected_by_phase_1_and_agrees_with_clarabel_and_the_design():
+    """The 64-rule chain's sigma_max with SCS: phase 1's bisection in numpy, not a conic solve of 13 000 rows
+    of PSD cones (minutes); within 10 % of Clarabel's conic bound, and the design's own step 3 agrees with
+    it: feasible a little below, infeasible a little above."""
+    from fte_casadi.design._augment import augment
+    from fte_casadi.design.core import _conditioned as conditioned
+    from fte_casadi.design.core import _diagnose
+
+    ts = derive(chainfar(), fidelity_samples=300)
+    aug = augment(ts.local_models, ts.C, ts.Df)
+    _diagnose._MEMO.clear()
+    smax, status = _diagnose.sigma_max(aug, 1.0, 0.5, "SCS")
+    assert status.startswith("phase 1 (numpy)") and smax is not None
+    conic, _ = _diagnose._bound(aug, None, 1.0, 0.5, "CLARABEL", lambda q, tau, sy, p: q / (tau * sy) ** 2)
+    assert abs(smax - conic) <= 0.1 * conic, (smax, conic)
+    params = dict(gamma=1.0, gamma1=0.5, delta=1e-4, epsilon=1e-4)
+    assert conditioned.step3(aug, dict(params, sigma=0.9 * smax), "CLARABEL").K is not None
+    with pytest.raises(InfeasibleDesignError):
+        conditioned.step3(aug, dict(params, sigma=1.25 * smax), "CLARABEL")

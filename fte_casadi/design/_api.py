@@ -167,7 +167,7 @@ def _refuse_beyond_sigma_max(aug, params: dict, solver: str) -> None:
     (24-state chain at sigma = 1: SCS 45 s); the bound is one solve that the parameter search needs anyway,
     and only a definite bound is taken as a refusal here."""
     smax, st = sigma_max(aug, params["gamma"], params["gamma1"], solver)
-    if smax is None and st in ("optimal", "infeasible"):  # solved: no sigma > 0 at all
+    if smax is None and (st in ("optimal", "infeasible") or st.startswith("phase 1")):  # no sigma > 0 at all
         raise InfeasibleDesignError(
             f"LMI (45) is infeasible: no sigma > 0 makes it feasible at gamma = {params['gamma']:g}"
         )
