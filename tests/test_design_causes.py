@@ -220,3 +220,24 @@ def test_a_heavy_bound_asked_of_scs_is_bisected_by_phase_1_and_agrees_with_clara
     assert conditioned.step3(aug, dict(params, sigma=0.9 * smax), "CLARABEL").K is not None
     with pytest.raises(InfeasibleDesignError):
         conditioned.step3(aug, dict(params, sigma=1.25 * smax), "CLARABEL")
+
+
+def test_a_cover_whose_vertices_block_the_design_is_named_and_the_other_cover_certifies():
+    """The two-link arm (M(q)^-1 terms) covered by the fewest vertices: a simplex whose corners no
+    configuration reaches. The refusal says how many rules' vertices are unreached and that the grouped
+    cover certifies; both checked here from the model and by a whole design."""
+    from plant_twolink import arm
+
+    ts = derive(arm(), vertices="fewest", fidelity_samples=300)
+    with pytest.raises(InfeasibleDesignError) as info:
+        design(ts)
+    msg = " ".join(str(info.value).split())
+    m = re.search(rf"([0-9]+) of the ([0-9]+) rules \(fewest cover\) have vertices no state of the region reaches "
+                  rf"\(up to {NUMBER} of the image's extent away\).*covered with --vertices grouped \(([0-9]+) rules\) "
+                  r"the whole design is certified \(checked\)", msg)  # fmt: skip
+    assert m, msg
+    far = np.asarray(ts.rule_distances)
+    assert int(m[1]) == int(np.sum(far > 0.05)) > 0 and int(m[2]) == ts.r
+    assert np.isclose(float(m[3]), far.max(), rtol=0.05)
+    grouped = derive(arm(), vertices="grouped", fidelity_samples=300)
+    assert grouped.r == int(m[4]) and design(grouped).certified

@@ -19,6 +19,7 @@ from ..ts import TSModel
 from . import _diffusion as diffusion
 from . import _pipeline as pipeline
 from . import _separability as separability
+from ._cover import other_cover
 from ._explain import explain_45, explain_46, outside_45
 from ._options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
 from ._record import Design
@@ -133,7 +134,8 @@ def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOption
     """``err`` with its cause named, where one is found, at the parameters tried where (45) held (else the given
     ones): the diffusion (:func:`~._diffusion.tolerance`: the fraction of it the design tolerates, and whether
     the whole design certifies with the diffusion scaled to that fraction, run, not guessed), else, where (46)
-    fails, a fault the outputs tell apart only weakly (:func:`~._separability.blocking`)."""
+    fails, a fault the outputs tell apart only weakly (:func:`~._separability.blocking`), else the cover's
+    vertices where another cover gives a certified design (:func:`~._cover.other_cover`)."""
     at = next((change for change, why in refused if "(46)" in why), {})
     p = dict(params, **at)
     where = ", ".join(f"{k} = {p[k]:g}" for k in ("sigma", "gamma", "gamma1"))
@@ -142,6 +144,8 @@ def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOption
     if tol is None or not tol.blocks:
         if (at or lmi == "46") and not st.r5doc and (found := separability.blocking(ts, p, options.solver)):
             text = separability.text(found, where)
+            return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.")
+        if text := other_cover(_attempt, ts, options):
             return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.")
         return err
     text = f"{tol.text()} at {where}"

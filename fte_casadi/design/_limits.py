@@ -217,8 +217,7 @@ def vertex_reach(distances, i: int) -> str:
     if v <= NEAR_IMAGE:
         return f"rule {i + 1}'s vertex is one a state of the region reaches (distance {v:.2g} of the image's extent)"
     return (f"rule {i + 1}'s vertex is {v:.2g} of the image's extent away from every premise value a state of the "
-            "region takes: no real state reaches it, it is there to enclose the image (fte derive --vertices box "
-            "or grouped may give a tighter cover)")  # fmt: skip
+            "region takes: no real state reaches it, it is there to enclose the image")  # fmt: skip
 
 
 #: a vertex this close to the premises' image (relative to its extent) is taken as reached by a state

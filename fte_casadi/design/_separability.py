@@ -77,11 +77,15 @@ def _separation(models, C, Df) -> tuple[float, int]:
 def blocking(ts, params: dict, solver: str) -> list[Blocking]:
     """The faults of ``ts`` without which the design's LMIs are feasible at ``params`` (each decided by
     :func:`~._diffusion.feasible`); empty with fewer than two faults (without its only fault there is no
-    observer to design) or when no single fault is the cause."""
+    observer to design), when the LMIs are feasible with every fault (the refusal has another cause) or
+    when no single fault is the cause."""
     names = list(ts.plant.fault_names)
     models, C, Df = list(ts.local_models), np.asarray(ts.C, float), np.asarray(ts.Df, float)
     if Df.shape[1] < 2:
         return []
+    whole = augment(models, C, Df)
+    if feasible(whole, uio_gain(whole)[1], params, solver) is None:
+        return []  # feasible with every fault: what failed is not (45)-(46) at alpha = 0 (e.g. the sample time)
     with_it, rule = _separation(models, C, Df)
     out = []
     for k in range(Df.shape[1]):
