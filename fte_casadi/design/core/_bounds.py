@@ -163,7 +163,8 @@ def _solve(verts, Cz, names, sizes, solver: str, schur: bool):
             warnings.simplefilter("ignore", UserWarning)
             prob.solve(solver=solver, **SOLVER_SETTINGS.get(solver, {}))
     except cp.error.SolverError as exc:
-        return None, None, f"the analysis LMI failed in the solver ({' '.join(str(exc).split())[:100]})"
+        del exc  # cvxpy's text ("Try another solver, or solve with verbose=True") is not advice for a user
+        return None, None, f"{solver} failed numerically on the analysis LMI"
     if P.value is None or g.value is None:
         return None, None, f"the analysis LMI is {prob.status}"
     return sym(P.value), np.maximum(np.asarray(g.value, float), 0.0), prob.status
@@ -265,7 +266,8 @@ def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = 
     The LMIs are posed with the diffusion term linear in P; when the solver gives no point that passes
     the numpy check there, the Schur form of the same set is solved too. When neither passes, ``fallback``
     (``{"P", "g", "names"}``: step 5's block-diagonal certificate, :mod:`~fte_casadi.design.core._bound_objective`)
-    is checked the same way and recorded (``"P_structure": "block-diagonal"``)."""
+    is checked the same way and recorded (``"P_structure": "block-diagonal"``); when that fails too, phase 1
+    and centring in numpy (:func:`_from_scratch`) decide."""
     verts, Cz, why = _posed(design)
     if why:
         return why
@@ -285,8 +287,11 @@ def fault_error_bound(design, solver: str = "CLARABEL", fallback: dict | None = 
         ok = _checked(verts, Cz, names, sizes, *point)
         if ok is not None:
             found, structure = (point[0], *ok), "block-diagonal (step 5's)"
-    if found is None:
-        return {"holds": False, "why": why}
+    if found is None:  # the conic solver failed or its point misses: phase 1 and centring in numpy decide
+        found, how = _from_scratch(verts, Cz, names, sizes)
+        if found is None:
+            return {"holds": False, "why": f"{why}; {how}"}
+        structure = f"common ({how}, where {solver} gave none)"
     return _record(found, "f - fhat", structure, names, sizes)
 
 
