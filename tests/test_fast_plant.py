@@ -47,6 +47,7 @@ def test_a_fast_plants_fault_error_bound_is_found_and_holds():
     from fte_casadi.ts import derive
 
     d = design(derive(pmsm_speed_sensor(), fidelity_samples=300), sample_time=1e-4)
+    assert d.certified  # the issue's motor, which never certified, at its defaults
     b = d.bounds["fault_error"]
     assert b["holds"], b
     verts, Cz, _ = _posed(d)
@@ -56,3 +57,30 @@ def test_a_fast_plants_fault_error_bound_is_found_and_holds():
     assert np.linalg.eigvalsh(P)[0] > 0
     for _, _, Ac, ch, Wc in verts:
         assert np.linalg.eigvalsh(_lmi(Ac, np.hstack([ch[c] for c in names]), Wc, Cz, P, G))[-1] < 0
+
+
+def test_a_loop_that_does_not_act_is_named_as_why_tolerant_control_ties():
+    """With the bias on the i_d sensor the stable motor gets a zero gain (step 3's smallest ||Y'||): the
+    verdict's "why" says the controller does not act, with max ||B_i K_j|| recomputed here; with the speed
+    sensor's bias the loop acts and nothing is said."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from plant_pmsm_sensor import pmsm_id_sensor, pmsm_speed_sensor
+
+    from fte_casadi.design import design
+    from fte_casadi.design._limits import explain_metrics, loop_idle
+    from fte_casadi.ts import derive
+
+    d = design(derive(pmsm_id_sensor(), fidelity_samples=300), sample_time=1e-4)
+    assert d.certified
+    bk = max(np.linalg.norm(lm.B @ np.asarray(k), 2) for lm in d.local_models for k in d.K)
+    a = max(np.linalg.norm(lm.A, 2) for lm in d.local_models)
+    assert bk < 1e-6 * a
+    text = loop_idle(d)
+    assert f"max ||B_i K_j|| = {bk:.2g}" in text and "a ratio of 1 is a tie" in text
+    metrics = {"windows": [{"fault": "i_d_bias", "start": 0.5, "stop": 1.0, "ftc_true_ratio": 1.0}]}
+    assert "the controller does not act" in explain_metrics(d, metrics)[0]
+    acting = design(derive(pmsm_speed_sensor(), fidelity_samples=300), sample_time=1e-4)
+    assert loop_idle(acting) == ""

@@ -183,6 +183,26 @@ def causes(lim: FaultLimits, window: float | None) -> tuple[list[str], str]:
     return found, seen
 
 
+#: a loop whose gain moves the state this much less than the plant's own rates does not act (relative)
+IDLE_GAIN = 1e-6
+
+
+def loop_idle(design) -> str:
+    """Why tolerant control changes nothing: the controller's gain is zero in effect (``max ||B_i K_j||``
+    below :data:`IDLE_GAIN` times ``max ||A_i||``: a stable open loop, where step 3's smallest ``||Y'||`` asks
+    no feedback). The estimates of sensor faults then reach the plant through no term, and an FTC ratio of 1
+    is a tie. "" when the loop acts."""
+    K = [np.asarray(k, float) for k in design.K]
+    bk = max(float(np.linalg.norm(lm.B @ k, 2)) for lm in design.local_models for k in K)
+    a = max(float(np.linalg.norm(lm.A, 2)) for lm in design.local_models)
+    if bk > IDLE_GAIN * max(a, 1e-300):
+        return ""
+    return (f"the controller does not act: max ||B_i K_j|| = {bk:.2g} against the plant's rates max ||A_i|| = {a:.3g} "
+            "(the open loop is stable and step 3 asks the smallest gain), so a fault estimate reaches the plant "
+            "only through Kf fhat (none for a sensor fault) and tolerant control changes nothing: a ratio of 1 "
+            "is a tie")  # fmt: skip
+
+
 def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list[str]:
     """One sentence per fault window where tolerant control is not better than none (FTC ratio >=
     :data:`~fte_casadi.verdicts.WORSE_THAN_NONE`) and per fault whose false-alarm ratio is >=
@@ -201,6 +221,8 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
         j = names.index(w["fault"]) if w["fault"] in names else 0
         lim = fault_limits(design, j)
         found, seen = causes(lim, float(w["stop"]) - float(w["start"]))
+        if idle := loop_idle(design):
+            found.insert(0, idle)
         r = w.get("ftc_true_ratio")
         head = (f"in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) (FTC ratio "
                 f"{'n/a' if r is None else format(r, '.3g')})")  # fmt: skip

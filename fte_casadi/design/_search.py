@@ -108,7 +108,8 @@ def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, gene
     for change, why in trials():
         d = try_design(attempt, ts, options, refused, **change)
         if d is not None:
-            first = " ".join(str(exc).split())[:160]
+            first = " ".join(str(exc).split())
+            first = first if len(first) <= 200 else first[:200].rsplit(" ", 1)[0] + " ..."
             chosen = {k: {"value": v, "why": f"the generic default {params[k]:g} failed ({first}); {why}; "
                           f"{k} = {v:g} is the first value tried that gives a certified design"}
                       for k, v in change.items()}  # fmt: skip
