@@ -129,6 +129,10 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
     return pipeline.finish(ts, options, res, st, s3, K, s5, t0)
 
 
+#: the solver the causes of a refusal are decided with (:func:`_naming_cause`)
+DECIDING_SOLVER = "CLARABEL"
+
+
 def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOptions, st, params: dict,
                   refused: list, lmi: str) -> InfeasibleDesignError:  # fmt: skip
     """``err`` with its cause named, where one is found, at the parameters tried where (45) held (else the given
@@ -140,9 +144,11 @@ def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOption
     p = dict(params, **at)
     where = ", ".join(f"{k} = {p[k]:g}" for k in ("sigma", "gamma", "gamma1"))
     msg = str(err).split(" No value tried")[0].split(" No larger sigma tried")[0].rstrip(".")
-    tol = diffusion.tolerance(st.aug, st.T, p, options.solver)
+    # the causes are decisions about the LMIs: made with the interior-point solver (and phase 1 in numpy where
+    # it fails), whichever solver the design asked for; SCS's first-order answers near the boundary decide less
+    tol = diffusion.tolerance(st.aug, st.T, p, DECIDING_SOLVER)
     if tol is None or not tol.blocks:
-        if (at or lmi == "46") and not st.r5doc and (found := separability.blocking(ts, p, options.solver)):
+        if (at or lmi == "46") and not st.r5doc and (found := separability.blocking(ts, p, DECIDING_SOLVER)):
             text = separability.text(found, where)
             return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.")
         if text := other_cover(_attempt, ts, options):

@@ -73,15 +73,21 @@ def has_diffusion(aug: Augmented) -> bool:
     return any(np.any(M) for group in (aug.Wbar, aug.Gbar, aug.Gfbar, aug.Mbar) for M in group)
 
 
-def feasible(aug: Augmented, T: np.ndarray, params: dict, solver: str) -> str | None:
-    """None when steps 3 and 5 (at alpha = 0) are feasible for ``aug``, else the LMI that fails ("45", "46")."""
+def feasible(aug: Augmented, T: np.ndarray, params: dict, solver: str, *, strict: bool = False) -> str | None:
+    """None when steps 3 and 5 (at alpha = 0) are feasible for ``aug``, else the LMI that fails ("45", "46").
+    A solver's numerical failure (where phase 1 in numpy did not decide either) counts as a failure, or, with
+    ``strict``, gives "undecided": a claim that the LMIs are infeasible needs a decision, not a failure."""
     try:
         s3 = conditioned.step3(aug, params, solver)
+    except conditioned.SolverFailedError:
+        return "undecided" if strict else "45"
     except FteError:
         return "45"
     try:
         prob = conditioned._Step5(aug, params, s3.X, s3.K, T, solver)
         prob.first()
+    except conditioned.SolverFailedError:
+        return "undecided" if strict else "46"
     except FteError:
         return "46"
     return None if prob.points else "46"

@@ -84,8 +84,9 @@ def blocking(ts, params: dict, solver: str) -> list[Blocking]:
     if Df.shape[1] < 2:
         return []
     whole = augment(models, C, Df)
-    if feasible(whole, uio_gain(whole)[1], params, solver) is None:
-        return []  # feasible with every fault: what failed is not (45)-(46) at alpha = 0 (e.g. the sample time)
+    if feasible(whole, uio_gain(whole)[1], params, solver, strict=True) not in ("45", "46"):
+        return []  # feasible with every fault (what failed is not (45)-(46) at alpha = 0, e.g. the sample time),
+        # or not decided: no claim
     with_it, rule = _separation(models, C, Df)
     out = []
     for k in range(Df.shape[1]):

@@ -1,0 +1,49 @@
+"""A refusal's cause is a decision about the LMIs, never a solver's failure read as one: a numerical failure
+leaves the fault-separability claim unmade, and the causes are decided with the interior-point solver
+whichever solver the design asked for (SCS's first-order answers had named a fault of the flexible joint
+instead of its diffusion)."""
+
+from __future__ import annotations
+
+import pytest
+from plant_twin_fans import fans_alike
+
+from fte_casadi.design import _api as api
+from fte_casadi.design import design
+from fte_casadi.design._separability import blocking
+from fte_casadi.design.core import _conditioned as conditioned
+from fte_casadi.errors import InfeasibleDesignError
+from fte_casadi.ts import derive
+
+pytestmark = pytest.mark.slow  # a design with SCS: 45 s
+
+PARAMS = dict(sigma=0.0062, gamma=16.0997, gamma1=2.23607, delta=1e-4, epsilon=1e-4)
+
+
+@pytest.fixture(scope="module")
+def fans():
+    return derive(fans_alike(), fidelity_samples=300)
+
+
+def test_a_numerical_failure_is_no_claim_that_a_fault_blocks(fans, monkeypatch):
+    assert [b.name for b in blocking(fans, PARAMS, "CLARABEL")] == ["fan1_loss", "fan2_loss"]
+
+    def failing(*args, **kwargs):
+        raise conditioned.SolverFailedError("a numerical failure")
+
+    monkeypatch.setattr(conditioned, "step3", failing)
+    assert blocking(fans, PARAMS, "CLARABEL") == []
+
+
+def test_the_causes_are_decided_with_clarabel_when_scs_designs(fans, monkeypatch):
+    asked = []
+    real = api.separability.blocking
+
+    def spy(ts, params, solver):
+        asked.append(solver)
+        return real(ts, params, solver)
+
+    monkeypatch.setattr(api.separability, "blocking", spy)
+    with pytest.raises(InfeasibleDesignError, match="'fan1_loss', 'fan2_loss' are the cause"):
+        design(fans, solver="SCS")
+    assert asked and set(asked) == {api.DECIDING_SOLVER} == {"CLARABEL"}
