@@ -19,7 +19,7 @@ import numpy as np
 
 from ._augment import augment
 from ._diffusion import feasible
-from ._limits import separation
+from ._limits import WEAK_SEPARATION, separation
 from ._uio import uio_gain
 
 __all__ = ["blocking"]
@@ -77,8 +77,9 @@ def _separation(models, C, Df) -> tuple[float, int]:
 def blocking(ts, params: dict, solver: str) -> list[Blocking]:
     """The faults of ``ts`` without which the design's LMIs are feasible at ``params`` (each decided by
     :func:`~._diffusion.feasible`); empty with fewer than two faults (without its only fault there is no
-    observer to design), when the LMIs are feasible with every fault (the refusal has another cause) or
-    when no single fault is the cause."""
+    observer to design), when the LMIs are feasible with every fault (the refusal has another cause), when
+    the outputs tell the faults apart well (separation >= :data:`~._limits.WEAK_SEPARATION`) or when no
+    single fault is the cause."""
     names = list(ts.plant.fault_names)
     models, C, Df = list(ts.local_models), np.asarray(ts.C, float), np.asarray(ts.Df, float)
     if Df.shape[1] < 2:
@@ -88,6 +89,8 @@ def blocking(ts, params: dict, solver: str) -> list[Blocking]:
         return []  # feasible with every fault (what failed is not (45)-(46) at alpha = 0, e.g. the sample time),
         # or not decided: no claim
     with_it, rule = _separation(models, C, Df)
+    if with_it >= WEAK_SEPARATION:
+        return []  # the outputs do tell the faults apart: leaving one out may help, but not for this reason
     out = []
     for k in range(Df.shape[1]):
         mk, Dk = _drop(models, k), np.delete(Df, k, axis=1)
