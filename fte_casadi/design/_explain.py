@@ -42,6 +42,8 @@ def explain_45(attempt: Attempt, ts, options: DesignOptions, aug, params: dict,
     parts, fixes = [], []
     if gmin is None:
         sup, _ = sigma_max(aug, None, g1, solver)
+        if sup is not None and smax is not None and smax > sup:
+            smax = sup  # sigma_max at a gamma is at most the one over every gamma: two solves that agree to their accuracy
         parts.append(f"no gamma makes (45) feasible at sigma = {sg:g}"
                      + (f" (any gamma needs sigma < {sup:.3g})" if sup else ""))  # fmt: skip
         if sup is None and (why := reachability(aug, getattr(ts, "rule_distances", None))):
