@@ -47,3 +47,12 @@ def test_the_causes_are_decided_with_clarabel_when_scs_designs(fans, monkeypatch
     with pytest.raises(InfeasibleDesignError, match="'fan1_loss', 'fan2_loss' are the cause"):
         design(fans, solver="SCS")
     assert asked and set(asked) == {api.DECIDING_SOLVER} == {"CLARABEL"}
+
+
+def test_explore_names_the_faults_when_no_sigma_gives_a_design(fans):
+    from fte_casadi.design import explore
+
+    _, info = explore(fans)
+    assert info["best"] is None
+    assert "the faults 'fan1_loss', 'fan2_loss' are the cause" in info["cause"]
+    assert "(checked)" in info["cause"]

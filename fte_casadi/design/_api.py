@@ -294,12 +294,15 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
             progress(k + 1, len(sigmas))
     points.sort(key=lambda pt: pt.sigma)
     cause = None
-    if best is None and refused_46 is not None:
-        from . import _diffusion as diffusion
-
+    if (
+        best is None and refused_46 is not None
+    ):  # the causes of a refusal (_naming_cause), decided the same way
         _, T = uio_gain(aug)
-        tol = diffusion.tolerance(aug, T, refused_46, solver)
+        where = f"sigma = {refused_46['sigma']:.3g}, gamma = {refused_46['gamma']:g}"
+        tol = diffusion.tolerance(aug, T, refused_46, DECIDING_SOLVER)
         if tol is not None and tol.blocks:
-            cause = f"{tol.text()} at sigma = {refused_46['sigma']:.3g}, gamma = {refused_46['gamma']:g}"
+            cause = f"{tol.text()} at {where}"
+        elif found := separability.blocking(ts, refused_46, DECIDING_SOLVER):
+            cause = separability.text(found, where)
     return points, {"gamma": params["gamma"], "gamma1": g1, "sigma": params["sigma"], "sigma_sup": sup,
                     "best": best, "cause": cause, "skipped": skipped}  # fmt: skip
