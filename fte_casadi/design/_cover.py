@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import FteError
 from ..ts import VERTEX_CHOICES, structure
 from ._limits import NEAR_IMAGE
+from ._search import try_design
 
 __all__ = ["other_cover"]
 
@@ -28,12 +29,9 @@ def _certified(attempt, ts, options):
     again), or None when it is refused or not certified."""
     _ACTIVE.append(True)
     try:
-        d = attempt(ts, options.replace(allow_uncertified=False))
-    except FteError:
-        return None
+        return try_design(attempt, ts, options, diagnose=True)
     finally:
         _ACTIVE.pop()
-    return d if d.certified else None
 
 
 def other_cover(attempt, ts, options) -> str:

@@ -32,10 +32,11 @@ GAMMA_TRIALS = (1.25, 1.6, 2.5, 4.0, 10.0)
 def try_design(
     attempt: Attempt, ts, options: DesignOptions, refused: list | None = None, **change
 ) -> Design | None:
-    """The whole design with ``options`` changed by ``change`` (without diagnosis, a certificate required), or
-    None when it does not give a certified design (then ``(change, why)`` is appended to ``refused``)."""
+    """The whole design with ``options`` changed by ``change`` (without diagnosis unless ``change`` asks for it,
+    a certificate required), or None when it does not give a certified design (then ``(change, why)`` is
+    appended to ``refused``)."""
     try:
-        d = attempt(ts, options.replace(diagnose=False, allow_uncertified=False, **change))
+        d = attempt(ts, options.replace(**{"diagnose": False, "allow_uncertified": False, **change}))
     except FteError as exc:
         if refused is not None:
             refused.append((change, " ".join(str(exc).split())))
