@@ -18,17 +18,18 @@ __all__ = ["builtin_design", "regenerate_builtin"]
 
 
 def builtin_design(plant_name: str) -> Design:
-    """The design used for ``generated/``: the conditioned LMI design of the built-in plant."""
+    """The design used for ``generated/``: the conditioned LMI design of the built-in plant for its scenario, with
+    the gate ``fte design`` writes (:func:`fte_casadi.sim.protected`)."""
     from .design import DesignOptions
     from .design import design as lmi_design
     from .plants import BUILTIN, SCENARIOS
+    from .sim import protected
     from .ts import derive
 
     sc = SCENARIOS[plant_name]()
-    options = DesignOptions(
-        variant="conditioned", plant_spec=plant_name, sample_time=sc.dt, initial_state=sc.x0
-    )
-    return lmi_design(derive(BUILTIN[plant_name]()), options)
+    plant = BUILTIN[plant_name]()
+    options = sc.design_options(DesignOptions(variant="conditioned", plant_spec=plant_name))
+    return protected(lmi_design(derive(plant), options), plant, sc, paths=sc.paths, seed=0)
 
 
 def regenerate_builtin(root: str | os.PathLike, names=None) -> dict[str, list[Path]]:

@@ -27,6 +27,7 @@ from .design.core._lmis import LMIS
 from .errors import InfeasibleDesignError, SolverFailedError
 from .plants import BUILTIN, SCENARIOS
 from .plants._paper import PRINTED
+from .sim import protected
 from .ts import derive
 
 __all__ = ["reproduce", "versions"]
@@ -304,10 +305,11 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         log(f"[{name}] design, variant {variant}")
         try:
             given = SECTION_6_PARAMS.get(name, {}) if variant == "paper" else {}
-            options = DesignOptions(
-                variant=variant, plant_spec=name, sample_time=SCENARIOS[name]().dt, **given
-            )
+            sc = SCENARIOS[name]()
+            options = sc.design_options(DesignOptions(variant=variant, plant_spec=name, **given))
             designs[variant] = run_design(ts, options)
+            if variant == "conditioned":  # as fte design writes it (the paper's variant compensates always)
+                designs[variant] = protected(designs[variant], plant, sc, paths=sc.paths, seed=seed)
         except (InfeasibleDesignError, SolverFailedError) as exc:
             designs[variant] = " ".join(str(exc).split())
             log(f"[{name}]   variant {variant} failed: {designs[variant][:160]}")

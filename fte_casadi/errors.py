@@ -39,11 +39,17 @@ class AssumptionError(FteError, ValueError):
 
 
 class InfeasibleDesignError(FteError, ValueError):
-    """The LMI design has no certified solution; the message names the LMI and what to relax."""
+    """The LMI design has no certified solution; the message names the LMI and what to relax.
 
-    def __init__(self, message: str, result=None):
+    ``lmi``: the registered LMI that is infeasible, where one is (``"45"``, ``"46"``; None: another cause);
+    ``bounded``: True when it was infeasible under the bound kappa on cond(X') or cond(Pbar) (a larger bound may
+    make it feasible). Code reads these fields, never the message."""
+
+    def __init__(self, message: str, result=None, *, lmi: str | None = None, bounded: bool = False):
         super().__init__(message)
         self.result = result
+        self.lmi = lmi
+        self.bounded = bounded
 
 
 class SolverFailedError(FteError, RuntimeError):

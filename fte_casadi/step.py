@@ -62,9 +62,11 @@ def saturate(u: ca.SX, limits) -> ca.SX:
 
 
 def accommodation_gate(fhat: ca.SX, acc: dict, latch: ca.SX | None = None) -> ca.SX:
-    """Per fault, 1 while its estimate is compensated in ``u``, else 0 (``r_j = |fhat_j| / threshold_j``).
+    """Per fault, 1 while its estimate is compensated in ``u``, else 0.
 
-    Fault j switches on when it is detected and isolated: ``r_j >= 1`` and ``r_j >= r_q`` for every other
+    Rule ``"explain"`` (what ``fte design`` writes for a plant whose faults' estimates cross-talk):
+    :func:`_explained_gate`. Rule ``"isolate"`` (``fte simulate --accommodate``), with
+    ``r_j = |fhat_j| / threshold_j``: fault j switches on when it is detected and isolated: ``r_j >= 1`` and ``r_j >= r_q`` for every other
     fault q (the largest normalised residual wins; a tie keeps both). Without ``latch`` (no ``"release"``
     in ``acc``, or 1) that is the gate, memoryless. With ``latch`` (the previous sample's gates, 0 or 1) and
     the release ratio ``rho = acc["release"]`` < 1, a fault that was on stays on while ``r_j >= rho``,
@@ -74,6 +76,8 @@ def accommodation_gate(fhat: ca.SX, acc: dict, latch: ca.SX | None = None) -> ca
     switches on."""
     thr = [float(v) for v in acc["thresholds"]]
     lf = len(thr)
+    if acc.get("rule") == "explain":
+        return _explained_gate(fhat, acc, thr, latch)
     rr = [ca.fabs(fhat[j]) / thr[j] for j in range(lf)]
     on = []
     for j in range(lf):
@@ -92,6 +96,31 @@ def accommodation_gate(fhat: ca.SX, acc: dict, latch: ca.SX | None = None) -> ca
             if q != j:
                 hold = hold * (1 - on[q] * (rr[q] > rr[j]))
         gates.append(ca.fmax(on[j], hold))
+    return ca.vertcat(*gates)
+
+
+def _explained_gate(fhat: ca.SX, acc: dict, thr: list, latch: ca.SX | None) -> ca.SX:
+    """The gate of rule ``"explain"`` (:mod:`fte_casadi.design._isolation`): fault j is compensated while
+    ``r_j = |fhat_j| / (threshold_j + sum_q crosstalk[j][q] |fhat_q|) >= 1``, i.e. detected and larger than the
+    other faults' estimates can explain; with a release ratio ``rho < 1`` and ``latch``, it stays on while
+    ``r_j >= rho``. A fault that no other fault's estimate explains (its row of ``crosstalk`` zero: a plant with
+    one fault) is compensated always, as in the paper: a gate would only delay it."""
+    ct = np.asarray(acc["crosstalk"], dtype=float)
+    lf = len(thr)
+    gates = []
+    for j in range(lf):
+        sources = [q for q in range(lf) if q != j and ct[j, q] > 0]
+        if not sources:
+            gates.append(ca.SX(1.0))
+            continue
+        b = thr[j]
+        for q in sources:
+            b = b + float(ct[j, q]) * ca.fabs(fhat[q])
+        r = ca.fabs(fhat[j]) / b
+        on = r >= 1.0
+        if latch is not None:
+            on = ca.fmax(on, (latch[j] > 0.5) * (r >= float(acc["release"])))
+        gates.append(on)
     return ca.vertcat(*gates)
 
 

@@ -220,7 +220,12 @@ def test_certificate_recomputed_from_saved_json(designs, name, tmp_path):
     worst["55"] = np.linalg.eigvalsh(lmi55(aug, e.T, e.Pbar, e.N, e.theta))[-1]
     for k, v in worst.items():
         assert v < 0
-        assert v == pytest.approx(e.checks["lmi_max_eig"][k], rel=1e-6, abs=1e-12)
+        assert v == pytest.approx(e.checks["lmi_raw_max_eig"][k], rel=1e-6, abs=1e-12)
+    # the form certified: each LMI balanced by D = diag(|L_kk|^-1/2) (the same definiteness), recomputed here
+    bal = lambda L: L / np.sqrt(np.outer(np.abs(np.diag(L)), np.abs(np.diag(L))))  # noqa: E731
+    b45 = max(np.linalg.eigvalsh(bal(lmi45(aug, i, e.X, e.K[j] @ e.X, pr["sigma"], pr["gamma"], pr["gamma1"])))[-1]
+              for i in range(e.r) for j in range(e.r))  # fmt: skip
+    assert b45 < 0 and b45 == pytest.approx(e.checks["lmi_max_eig"]["45"], rel=1e-6)
 
 
 def test_three_tank_reference_input(designs):
@@ -396,10 +401,10 @@ def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeyp
     real_step3 = conditioned.step3
     failing = {"CLARABEL"}
 
-    def step3(aug, params, solver):
+    def step3(aug, params, solver, **kw):
         if solver in failing:
             raise conditioned.SolverFailedError(f"{solver} stalled (test)")
-        return real_step3(aug, params, solver)
+        return real_step3(aug, params, solver, **kw)
 
     monkeypatch.setattr(conditioned, "step3", step3)
     d = run_design(ts_models["manipulator"], solver="CLARABEL")
@@ -425,7 +430,7 @@ def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(m
     assert not issubclass(SolverFailedError, InfeasibleDesignError)
     assert conditioned.SolverFailedError is SolverFailedError
 
-    def step3(aug, params, solver):
+    def step3(aug, params, solver, **kw):
         raise SolverFailedError(f"{solver} stalled (test)")
 
     monkeypatch.setattr(conditioned, "step3", step3)

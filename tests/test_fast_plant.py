@@ -59,8 +59,11 @@ def test_a_fast_plants_fault_error_bound_is_found_and_holds():
         assert np.linalg.eigvalsh(_lmi(Ac, np.hstack([ch[c] for c in names]), Wc, Cz, P, G))[-1] < 0
 
 
-def test_a_loop_that_does_not_act_is_named_as_why_tolerant_control_ties():
-    """With the bias on the i_d sensor the stable motor gets a zero gain (step 3's smallest ||Y'||): the
+def test_the_stable_motor_gets_a_loop_that_acts_and_an_idle_one_is_named():
+    """With the bias on the i_d sensor the smallest gain of (45) alone is zero for this stable motor. By default
+    the loop is asked to be faster than the open loop: here 2x its slowest rate asks an observer beyond the
+    sample time, so the loop is designed at the lower default rate, 1.25x, and acts (the rate the LMI 'decay'
+    certifies, recomputed here from X and K). Asked for no rate (beta = 0) the gain is zero again, and the
     verdict's "why" says the controller does not act, with max ||B_i K_j|| recomputed here; with the speed
     sensor's bias the loop acts and nothing is said."""
     import sys
@@ -73,7 +76,22 @@ def test_a_loop_that_does_not_act_is_named_as_why_tolerant_control_ties():
     from fte_casadi.design._limits import explain_metrics, loop_idle
     from fte_casadi.ts import derive
 
-    d = design(derive(pmsm_id_sensor(), fidelity_samples=300), sample_time=1e-4)
+    ts = derive(pmsm_id_sensor(), fidelity_samples=300)
+    acts = design(ts, sample_time=1e-4)
+    A = [np.asarray(lm.A) for lm in acts.local_models]
+    Bs = [np.asarray(lm.B) for lm in acts.local_models]
+    open_loop = min(-np.max(np.linalg.eigvals(a).real) for a in A)
+    X, K = np.asarray(acts.X), np.asarray(acts.K[0])
+    w, V = np.linalg.eigh(X)
+    Xi = (V / np.sqrt(w)) @ V.T
+    certified = min(
+        -0.5 * np.linalg.eigvalsh(Xi @ ((a + b @ K) @ X + X @ (a + b @ K).T) @ Xi)[-1] for a, b in zip(A, Bs)
+    )
+    assert (
+        acts.certified and acts.params.beta >= 1.25 * open_loop * (1 - 1e-6) and certified >= acts.params.beta
+    )
+    assert "so the loop is designed at the lower rate" in acts.checks["loop"]["why"] and loop_idle(acts) == ""
+    d = design(ts, sample_time=1e-4, beta=0.0)
     assert d.certified
     bk = max(np.linalg.norm(lm.B @ np.asarray(k), 2) for lm in d.local_models for k in d.K)
     a = max(np.linalg.norm(lm.A, 2) for lm in d.local_models)

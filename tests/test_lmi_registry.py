@@ -35,8 +35,8 @@ def toy(request):
 
 
 def test_the_paper_lmis_are_registered_in_order():
-    assert list(LMIS) == ["45", "46", "55", "64"]
-    assert [e.theorem5 for e in LMIS.values()] == ["78", "79", "80", "81"]
+    assert list(LMIS) == ["45", "decay", "46", "55", "64"]
+    assert [e.theorem5 for e in LMIS.values()] == ["78", None, "79", "80", "81"]
     assert LMIS["46"].name(3) == "LMI (46)" and LMIS["46"].name(5) == "LMI (79)"
     with pytest.raises(ValueError, match="registered already"):
         register(LMI("45", None, "again", LMIS["45"].matrices, LMIS["45"].blocks))
@@ -47,9 +47,14 @@ def test_a_registered_lmi_is_certified_and_summarised(toy, ts_models):
     d = design(ts_models["manipulator"], sample_time=1e-3)
     assert list(LMIS)[-1] == "toy"
     c = d.checks
-    # the certificate recomputed it, independently of the registry: its largest eigenvalue is -min eig(X)
-    expected = -float(np.linalg.eigvalsh(0.5 * (d.X + d.X.T))[0])
-    assert c["lmi_max_eig"]["toy"] == pytest.approx(expected, rel=1e-9) and expected < 0
+    # the certificate recomputed it, independently of the registry: its largest eigenvalue is -min eig(X) as
+    # posed, and -min eig(D X D), D = diag(X_kk^-1/2), in the balanced form it is certified in
+    X = 0.5 * (d.X + d.X.T)
+    expected = -float(np.linalg.eigvalsh(X)[0])
+    Dx = np.diag(np.diag(X) ** -0.5)
+    balanced = -float(np.linalg.eigvalsh(Dx @ X @ Dx)[0])
+    assert c["lmi_raw_max_eig"]["toy"] == pytest.approx(expected, rel=1e-9) and expected < 0
+    assert c["lmi_max_eig"]["toy"] == pytest.approx(balanced, rel=1e-9) and balanced < 0
     assert c["lmi_block_max_eig"]["toy"] == [pytest.approx(expected, rel=1e-9)]
     assert c["lmi_roundoff"]["toy"] > 0 and d.certified
     assert block_sizes(_aug(d))["toy"] == [d.dims.n]
@@ -61,7 +66,9 @@ def test_a_registered_lmi_is_certified_and_summarised(toy, ts_models):
 
 @pytest.mark.parametrize("toy", [1.0], indirect=True)
 def test_a_registered_lmi_that_fails_refuses_the_design(toy, ts_models, tmp_path):
-    with pytest.raises(InfeasibleDesignError, match=r"LMI \(toy\) \(largest eigenvalue [0-9.e+]+\)"):
+    with pytest.raises(
+        InfeasibleDesignError, match=r"LMI \(toy\) \(largest eigenvalue \+[0-9.e+]+, balanced"
+    ):
         design(ts_models["manipulator"], sample_time=1e-3)
     d = design(ts_models["manipulator"], sample_time=1e-3, allow_uncertified=True)
     assert not d.certified and "NOT CERTIFIED" in design_summary(d).splitlines()[0]
@@ -82,9 +89,9 @@ def test_the_documents_list_the_registered_lmis():
     """docs/interface.md names the keys of ``checks.lmi_max_eig``; docs/design.md has a table of the registry."""
     interface = (ROOT / "docs" / "interface.md").read_text()
     row = next(line for line in interface.splitlines() if line.startswith("| `lmi_max_eig` |"))
-    assert re.findall(r'"(\d+)"', row.split(":")[0]) == list(LMIS)
+    assert re.findall(r'"(\w+)"', row.split(":")[0]) == list(LMIS)
     table = (ROOT / "docs" / "design.md").read_text().split("<!-- lmis -->")[1]
     rows = [line for line in table.splitlines() if line.startswith("| (")]
-    assert [re.match(r"\| \((\w+)\) \| \((\w+)\)", r).groups() for r in rows] == [
+    assert [re.match(r"\| \((\w+)\) \| (?:\((\w+)\)|-)", r).groups() for r in rows] == [
         (k, e.theorem5) for k, e in LMIS.items()
     ]

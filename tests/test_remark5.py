@@ -80,7 +80,11 @@ def test_fallback_designs_and_certifies_with_the_widened_sliding_term(r5):
     E = np.hstack([Bdu, J1]).T @ d.T.T @ d.Pbar - d.N @ Cbar
     L55 = np.block([[-d.theta * np.eye(nbar), E.T], [E, -np.eye(lf + 1)]])
     assert np.max(np.linalg.eigvalsh(L55)) == pytest.approx(
-        d.checks["lmi_max_eig"]["55"], rel=1e-9, abs=1e-12
+        d.checks["lmi_raw_max_eig"]["55"], rel=1e-9, abs=1e-12
+    )
+    # and in the form certified, balanced by D = diag(|L_kk|^-1/2): [[-I, E^T/sqrt(theta)], [E/sqrt(theta), -I]]
+    assert np.linalg.norm(E, 2) / np.sqrt(d.theta) - 1 == pytest.approx(
+        d.checks["lmi_max_eig"]["55"], rel=1e-9
     )
     # ... and it differs from the unwidened one, so the widening is not a no-op
     aug = augment(d.local_models, d.C, d.Df)

@@ -18,7 +18,7 @@ def _check_params(**kw) -> dict:
     out = {}
     for k, v in kw.items():
         if v is not None:
-            _positive(k, v, allow_zero=(k in ("alpha", "d_bound", "bound_weight")))
+            _positive(k, v, allow_zero=(k in ("alpha", "beta", "d_bound", "bound_weight", "settle_window")))
             out[k] = v
     return out
 
@@ -96,6 +96,17 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | N
     help="observer decay rate (default: the largest the plant allows, see docs/design.md).",
 )
 @click.option(
+    "--beta",
+    type=float,
+    help="the closed loop's decay rate (default: twice the open loop's slowest, or as fast as it diverges, lowered "
+    "to what (45) allows; docs/design.md).",
+)
+@click.option(
+    "--settle-within", "settle_window", type=float,
+    help="the fault window the observer must settle in, three time constants (default: the scenario's shortest; "
+    "0: no requirement); kappa is searched for it.",
+)  # fmt: skip
+@click.option(
     "--sample-time", "sample_time", type=float,
     help="sample time the observer must run at (default: the plant's scenario step); caps the default alpha.",
 )  # fmt: skip
@@ -107,6 +118,11 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | N
     "--bound-weight", "bound_weight", type=float,
     help="Weight of the closed loop's fault-error bound in the observer's objective (default 0: off; 1 counts it "
     "as much as the rest; docs/design.md).",
+)  # fmt: skip
+@click.option(
+    "--always-compensate", "always_compensate", is_flag=True,
+    help="Compensate every fault estimate always, as the paper does (default: a fault whose estimate the other "
+    "faults' estimates cross-talk into is compensated only while detected and more than they explain).",
 )  # fmt: skip
 @click.option(
     "--allow-uncertified", is_flag=True, help="Write the design even when a certificate fails (marked so)."
@@ -138,11 +154,13 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | N
 @click.option("--out", "out_dir", type=click.Path(file_okay=False),
               help="With --explore: the directory of the frontier figure (default: fte-explore).")  # fmt: skip
 @_guard
-def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, sample_time, kappa, bound_weight,
-           allow_uncertified, accept, no_remark5, d_bound, output, explore, out_dir, vertices):  # fmt: skip
+def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, beta, settle_window, sample_time, kappa,
+           bound_weight, always_compensate, allow_uncertified, accept, no_remark5, d_bound, output, explore, out_dir,
+           vertices):  # fmt: skip
     """Design the observer and tolerant controller of PLANT by LMIs, with certificates."""
     params = _check_params(gamma=gamma, gamma1=gamma1, sigma=sigma, delta=delta, epsilon=epsilon, alpha=alpha,
-                           sample_time=sample_time, d_bound=d_bound, bound_weight=bound_weight, kappa=kappa)  # fmt: skip
+                           beta=beta, settle_window=settle_window, sample_time=sample_time, d_bound=d_bound,
+                           bound_weight=bound_weight, kappa=kappa)  # fmt: skip
     if no_remark5:
         params["remark5"] = False
     if explore:
@@ -159,7 +177,7 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
         _writable_target(output, "-o", "design.json")
     _outputs(output)
     d, ts, options = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices,
-                                  full=True)  # fmt: skip
+                                  full=True, always_compensate=always_compensate or variant == "paper")  # fmt: skip
     from ..design._summary import design_summary
 
     click.echo(design_summary(d))

@@ -40,10 +40,12 @@ def _absolute_spec(plant_spec: str) -> str:
 
 def _make_design(
     plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
-    vertices: str | None = None, full: bool = False,
+    vertices: str | None = None, full: bool = False, always_compensate: bool = False,
 ):  # fmt: skip
-    """The design of ``plant_spec`` (the plant's scenario step as its sample time, unless given); with ``full``,
-    ``(design, T-S model, options)``."""
+    """The design of ``plant_spec`` for its scenario (:meth:`~fte_casadi.sim.Scenario.design_options`: its sample
+    time, fault windows and start, unless given), with the gate that keeps the other faults' estimates out of a
+    fault's compensation where they cross-talk (:func:`fte_casadi.sim.protected`; not with ``always_compensate``,
+    the paper's policy); with ``full``, ``(design, T-S model, options)``."""
     from ..design import DesignOptions
     from ..design import design as run_design
     from ..plants._loader import load_plant
@@ -53,11 +55,15 @@ def _make_design(
                             accept_assumptions=tuple(accept), plant_spec=_absolute_spec(plant_spec), **params)  # fmt: skip
     ts = derive_ts(load_plant(plant_spec), vertices=vertices)
     sc = _scenario(plant_spec)
-    if options.sample_time is None and sc is not None:
-        options = options.replace(sample_time=float(sc.dt))
-    if sc is not None and sc.x0 is not None:  # the simulation's nominal start, for the C's init_from_y
-        options = options.replace(initial_state=sc.x0)
+    if sc is not None:  # its sample time, the window the observer settles in, the C's nominal start
+        options = sc.design_options(options)
     d = run_design(ts, options)
+    if (
+        sc is not None and not always_compensate
+    ):  # the other faults' estimates kept out of a fault's compensation
+        from ..sim import protected
+
+        d = protected(d, ts.plant, sc, paths=sc.paths, seed=0)
     return (d, ts, options) if full else d
 
 

@@ -387,8 +387,13 @@ def _gate_texts(design: Design, NAME: str) -> dict:
     if acc is None:
         return out
     thr = ", ".join(f"{v:.6g}" for v in acc["thresholds"])
-    rule = (f"fault j is compensated in u (the Kf fhat term) when |fhat_j| >= threshold_j and |fhat_j| / "
-            f"threshold_j is the largest (thresholds {thr})")  # fmt: skip
+    if acc.get("rule") == "explain":
+        ct = "; ".join(", ".join(f"{v:.4g}" for v in row) for row in acc["crosstalk"])
+        rule = (f"fault j is compensated in u (the Kf fhat term) while |fhat_j| >= threshold_j + sum_q crosstalk[j][q] "
+                f"|fhat_q| (thresholds {thr}; crosstalk rows {ct}), a fault no other one cross-talks into always")  # fmt: skip
+    else:
+        rule = (f"fault j is compensated in u (the Kf fhat term) when |fhat_j| >= threshold_j and |fhat_j| / "
+                f"threshold_j is the largest (thresholds {thr})")  # fmt: skip
     if not design.latched:
         out["accommodation_text"] = (
             f"\nAccommodation after detection: {rule}, in each sample anew (no memory)."
@@ -397,6 +402,8 @@ def _gate_texts(design: Design, NAME: str) -> dict:
     rho = float(acc["release"])
     held = (f"and stays compensated while |fhat_j| / threshold_j >= {rho:g}, unless another fault switches on "
             "with a larger ratio")  # fmt: skip
+    if acc.get("rule") == "explain":
+        held = f"and stays compensated while that ratio >= {rho:g}"
     out["accommodation_text"] = (
         f"\nAccommodation after detection: {rule}, {held}. The latches (1: compensated in the last sample) follow "
         f"the observer state in `z`, from `z[FTE_{NAME}_NXBAR]` on; `init` and `init_from_y` set them to 0."

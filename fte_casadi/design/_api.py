@@ -112,9 +112,8 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
             return chosen
         raise _naming_cause(explain_45(_attempt, ts, options, st.aug, params, refused), ts, options, st,
                                params, refused, "45") from None  # fmt: skip
-    K = [s3.K] * st.aug.r
     try:
-        s5 = pipeline.step5(ts, st, options, res, s3)
+        s3, s5 = pipeline.loop_then_observer(ts, st, options, res, s3)
     except conditioned.SolverFailedError as exc:
         return _other_solver(ts, options, exc, "step 5 (LMIs (46), (55), (64))", retried)
     except InfeasibleDesignError as exc:
@@ -126,7 +125,7 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
             raise _naming_cause(explain_46(_attempt, ts, options, st.aug, params, exc, refused), ts, options,
                                    st, params, refused, "46") from None  # fmt: skip
         raise
-    return pipeline.finish(ts, options, res, st, s3, K, s5, t0)
+    return pipeline.finish(ts, options, res, st, s3, [s3.K] * st.aug.r, s5, t0)
 
 
 #: the solver the causes of a refusal are decided with (:func:`_naming_cause`)

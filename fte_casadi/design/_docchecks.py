@@ -84,6 +84,7 @@ _OPTIONAL_PARAMS = {
     "kappa": (0, True),
     "boundary_layer": (0, True),
     "bound_weight": (0, False),
+    "beta": (0, False),
 }
 _OBSERVER = {"sample_time": (0, True), "alpha": (0, False), "alpha_max": (0, False), "alpha_max_upper": (0, False),
              "ts_max": (0, False), "bound_weight": (0, False), "bound_objective_before": (None, False),

@@ -187,6 +187,28 @@ def causes(lim: FaultLimits, window: float | None) -> tuple[list[str], str]:
 IDLE_GAIN = 1e-6
 
 
+#: an FTC ratio this close to 1 is a tie (a window where tolerant control adds nothing to the loop)
+TIE = 0.02
+
+
+def gated_out(design, j: int) -> str:
+    """Why tolerant control adds nothing in a window of fault ``j``: its own estimate does not enter u (a zero
+    column of Kf: a sensor fault, which the observer already removes from xhat for both runs) and the gate of
+    rule "explain" keeps the other faults' estimates out (:mod:`fte_casadi.design._isolation`). "" otherwise."""
+    acc = design.accommodation
+    if acc is None or acc.get("rule") != "explain":
+        return ""
+    kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
+    if any(np.any(np.asarray(k)[:, j]) for k in kfs):
+        return ""
+    names = list(design.names.get("faults") or [])
+    name = names[j] if j < len(names) else f"fault {j + 1}"
+    return (f"{name}'s estimate does not enter u (its column of Kf is zero: the observer already removes it from xhat, "
+            "which the loop without tolerant control uses too), and the gate keeps the other faults' estimates out of "
+            "u while they are no more than its cross-talk explains, so tolerant control adds nothing here: a ratio of "
+            "1 is a tie")  # fmt: skip
+
+
 def loop_idle(design) -> str:
     """Why tolerant control changes nothing: the controller's gain is zero in effect (``max ||B_i K_j||``
     below :data:`IDLE_GAIN` times ``max ||A_i||``: a stable open loop, where step 3's smallest ``||Y'||`` asks
@@ -221,9 +243,12 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
         j = names.index(w["fault"]) if w["fault"] in names else 0
         lim = fault_limits(design, j)
         found, seen = causes(lim, float(w["stop"]) - float(w["start"]))
-        if idle := loop_idle(design):
-            found.insert(0, idle)
         r = w.get("ftc_true_ratio")
+        tie = r is not None and abs(r - 1.0) <= TIE
+        if tie and (idle := loop_idle(design)):
+            found.insert(0, idle)
+        if tie and (kept := gated_out(design, j)):
+            found.insert(0, kept)
         head = (f"in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) (FTC ratio "
                 f"{'n/a' if r is None else format(r, '.3g')})")  # fmt: skip
         out.append(head + (": " + "; ".join(found) if found else ": no structural cause found")

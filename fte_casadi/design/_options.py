@@ -23,7 +23,7 @@ __all__ = ["DesignOptions", "resolve"]
 GENERIC_DEFAULTS = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}
 VARIANTS = ("paper", "conditioned")
 #: the design defaults a plant may record from `fte tune` (beside the LMI parameters)
-TUNED_KNOBS = ("alpha", "kappa", "boundary_layer", "bound_weight")
+TUNED_KNOBS = ("alpha", "beta", "kappa", "boundary_layer", "bound_weight")
 SOLVERS = ("CLARABEL", "SCS")
 #: the LMI parameters of Theorems 3 and 5, resolved together by :func:`_params`
 LMI_PARAMETERS = ("gamma", "gamma1", "sigma", "delta", "epsilon")
@@ -52,7 +52,12 @@ class DesignOptions:
     gamma2 : the d2 attenuation of Theorem 5 (default gamma).
     alpha : the observer decay rate of the conditioned variant (>= 0; default: the plant's, else a fraction
         of the largest feasible one; either is lowered so that ``ts_max >= 2 sample_time``).
+    beta : the closed loop's decay rate asked of (45) in the conditioned variant (>= 0; default: twice the open
+        loop's slowest decay rate, or as fast as it diverges, lowered to a fraction of the largest (45) allows;
+        :func:`~fte_casadi.design.core._decay.loop_decay_target`).
     sample_time : the step the design is certified for (positive; default none).
+    settle_window : the shortest fault window the observer must settle in, three time constants (positive;
+        default none: no requirement; ``fte design`` takes the plant's scenario's); kappa is searched for it.
     kappa : the bound on cond(X') and cond(Pbar) (above 1).
     bound_weight : the fault-error bound's weight in step 5's objective (>= 0; 0 is off).
     initial_state : the nominal x(0) (default: the plant's).
@@ -80,7 +85,9 @@ class DesignOptions:
     epsilon: float | None = None
     gamma2: float | None = None
     alpha: float | None = None
+    beta: float | None = None
     sample_time: float | None = None
+    settle_window: float | None = None
     kappa: float | None = None
     bound_weight: float | None = None
     initial_state: Any = None
@@ -113,8 +120,17 @@ class DesignOptions:
             )
         if self.alpha is not None and not (_number(self.alpha) and self.alpha >= 0):
             raise ParameterError(f"alpha must be a non-negative finite number; got {self.alpha!r}")
+        if self.beta is not None and not (_number(self.beta) and self.beta >= 0):
+            raise ParameterError(
+                f"beta (the closed loop's decay rate) must be a non-negative finite number; got {self.beta!r}"
+            )
         if self.sample_time is not None and not (_number(self.sample_time) and self.sample_time > 0):
             raise ParameterError(f"sample_time must be a positive finite number; got {self.sample_time!r}")
+        if self.settle_window is not None and not (_number(self.settle_window) and self.settle_window >= 0):
+            raise ParameterError(
+                f"settle_window (the fault window the observer must settle in) must be a finite number >= 0 (0: no "
+                f"requirement); got {self.settle_window!r}"
+            )
 
     def replace(self, **changes) -> DesignOptions:
         """This record with ``changes`` (:func:`dataclasses.replace`)."""
@@ -130,7 +146,8 @@ class Resolved:
     came from: ``"user"`` (refused where infeasible), ``"plant"`` (the plant's recorded default: lowered where
     infeasible or where the sample time needs it, like the rate found by default) or ``None`` (found by
     default). ``generic``: the parameters among gamma and sigma that came from the generic defaults, which the
-    parameter search may change. ``notes``: the status lines of the resolution."""
+    parameter search may change. ``notes``: the status lines of the resolution. ``beta``: the closed loop's decay
+    rate asked (the user's or the plant's; None: the default of step 3)."""
 
     params: dict
     alpha: float | None
@@ -138,6 +155,7 @@ class Resolved:
     generic: frozenset
     x0: np.ndarray
     notes: tuple
+    beta: float | None = None
 
 
 def generic_sizes(ts: TSModel) -> tuple[float, float]:
@@ -291,4 +309,5 @@ def resolve(ts: TSModel, options: DesignOptions) -> Resolved:
     if any(lm.has_diffusion_extension for lm in ts.local_models):  # Theorem 5: d2 attenuated as gamma
         params.setdefault("gamma2", params["gamma"])
     x0 = _initial_state(ts.plant, o.initial_state)
-    return Resolved(params, alpha, alpha_source, generic, x0, tuple(status))
+    beta = o.beta if o.beta is not None else tuned.get("beta")
+    return Resolved(params, alpha, alpha_source, generic, x0, tuple(status), beta)

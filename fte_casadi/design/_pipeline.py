@@ -8,18 +8,21 @@ what to try next (:mod:`fte_casadi.design._search`) or what to say (:mod:`fte_ca
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
+from textwrap import shorten
 from types import SimpleNamespace
 
 import casadi as ca
 import numpy as np
 
-from ..errors import AssumptionError, InfeasibleDesignError
+from ..errors import AssumptionError, FteError, InfeasibleDesignError
 from ..model._fingerprint import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
 from ._augment import Augmented, augment
 from ._options import DesignOptions, Resolved
+from ._recertify import certify
 from ._record import Design
 from ._records import Dims, Observer, Params
 from ._remark5 import explain_causes, with_remark5
@@ -28,7 +31,8 @@ from ._remark5 import record as remark5_record
 from ._uio import check_assumptions, enforce, uio_gain
 from .core import _conditioned as conditioned
 from .core import _paper as paper
-from .core._certify import certificate, discrete_certificate, failures
+from .core._certify import failures
+from .core._lmis import loop_decay
 
 __all__ = ["structure", "step3", "step5"]
 
@@ -90,18 +94,148 @@ def paper_steps(st: Structure, resolved: Resolved, solver: str):
 
 
 def step3(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
-    """Step 3, conditioned: the common gain K from (45)."""
-    return conditioned.step3(st.aug, resolved.params, solver)
+    """Step 3, conditioned: the common gain K from (45), the closed loop asked to decay at ``options.beta`` (None:
+    the default of :func:`~fte_casadi.design.core._decay.loop_decay_target`)."""
+    return conditioned.step3(st.aug, resolved.params, solver, beta=resolved.beta)
+
+
+#: the bounds on cond(Pbar) tried, in order, for an observer too slow for the fault windows it must settle in
+KAPPA_LADDER = (1e4, 1e5, 1e6, 1e7, 1e8)
+#: observer time constants that must fit in the shortest fault window (as the verdict ``slow observer``)
+SETTLE = 3.0
+
+
+def slowest_rate(st: Structure, s5) -> float:
+    """``min_i -max Re eig(R_i)`` of step 5's observer: its slowest decay rate (negative: a mode grows)."""
+    aug = st.aug
+    return min(
+        -float(
+            np.max(np.linalg.eigvals(st.T @ aug.Abar[i] - np.linalg.solve(s5.Pbar, s5.Q[i]) @ aug.Cbar).real)
+        )
+        for i in range(aug.r)
+    )
 
 
 def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3) -> conditioned.Step5:
     """Step 5, conditioned: Pbar, Q_i, N, theta from (46), (55), (64) at the resolved decay rate (a rate from
-    the plant's defaults gives way, as a default, where it is infeasible or the sample time needs it)."""
+    the plant's defaults gives way, as a default, where it is infeasible or the sample time needs it).
+
+    With ``options.settle_window`` (the scenario's shortest fault window), the observer must settle in it:
+    :data:`SETTLE` of its slowest time constants at most that long. Where the default decay rate is too slow for
+    that at the bound kappa on cond(Pbar), the larger bounds of :data:`KAPPA_LADDER` are tried (kappa searched,
+    not fixed), and the first that fits is kept; where none does, the design is refused naming what binds
+    (:func:`_too_slow`). Where (46) is infeasible under the bound (and ``options.diagnose``: not in the parameter
+    search's trials), the larger bounds are tried too, and a refusal says the cap was not what binds. A decay
+    rate or a kappa the user gave is kept as given (then only a warning)."""
     K = [s3.K] * st.aug.r
     view = _closed_loop_view(ts, st.T, K, st.r5doc) if resolved.params.get("bound_weight") else None
-    return conditioned.step5(st.aug, resolved.params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
-                             sample_time=options.sample_time, bound_view=view,
-                             alpha_is_default=resolved.alpha_source == "plant")  # fmt: skip
+
+    def at(params):
+        return conditioned.step5(st.aug, params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
+                                 sample_time=options.sample_time, bound_view=view,
+                                 alpha_is_default=resolved.alpha_source == "plant")  # fmt: skip
+
+    try:
+        s5 = at(resolved.params)
+    except InfeasibleDesignError as exc:
+        if not options.diagnose or "kappa" in resolved.params or not (exc.lmi == "46" and exc.bounded):
+            raise
+        s5 = _kappa_for_46(at, resolved.params, exc)
+    window = options.settle_window
+    if not window or resolved.alpha_source == "user" or "kappa" in resolved.params:
+        return s5
+    need = SETTLE / float(window)
+    rate = slowest_rate(st, s5)
+    if rate >= need:
+        return s5
+    tried = [(s5.kappa, rate, s5)]
+    for kappa in (k for k in KAPPA_LADDER if k > s5.kappa):
+        try:
+            s5k = at(dict(resolved.params, kappa=kappa))
+        except FteError as exc:
+            tried.append((kappa, None, exc))
+            continue
+        rate = slowest_rate(st, s5k)
+        tried.append((kappa, rate, s5k))
+        if rate >= need:
+            s5k.notes.insert(0, f"step 5: kappa = {kappa:g}, the smallest bound on cond(Pbar) of {KAPPA_LADDER} whose "
+                                f"observer settles within the shortest fault window {window:g} ({SETTLE:g} time constants "
+                                f"{SETTLE / rate:.3g}; at kappa = {s5.kappa:g}: {SETTLE / tried[0][1]:.3g})")  # fmt: skip
+            return s5k
+    raise InfeasibleDesignError(_too_slow(ts, st, options, resolved, s3, window, need, tried))
+
+
+def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
+    """Step 5 under the larger bounds of :data:`KAPPA_LADDER` where (46) is infeasible under the default one: the
+    first feasible, said so; else ``exc``, saying that no bound up to the ladder's end made it feasible."""
+    base = float(params.get("kappa", conditioned.KAPPA))
+    for kappa in (k for k in KAPPA_LADDER if k > base):
+        try:
+            s5 = at(dict(params, kappa=kappa))
+        except InfeasibleDesignError:
+            continue
+        s5.notes.insert(0, f"step 5: kappa = {kappa:g}: (46) is infeasible with cond(Pbar) <= {base:g} (the bound "
+                           f"binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
+        return s5
+    raise InfeasibleDesignError(f"{str(exc).rstrip('.')}; and with cond(Pbar) <= {KAPPA_LADDER[-1]:g} too (the bound "
+                                "is not what binds)", lmi="46") from None  # fmt: skip
+
+
+def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3):
+    """``(s3, s5)``: step 5 at step 3's loop. A faster loop asks more of the observer ((46)'s ``-sigma P^2`` block
+    must dominate its coupling with the loop, ``P B K``): where the loop's DEFAULT rate (posed in step 3) asks an
+    observer that step 5 cannot give (infeasible, too slow for the fault windows, or not at the sample time),
+    the loop is designed again at the default's lower rate, then with the smallest gain of (45) alone, and the
+    first whose observer step 5 gives is kept, said so. A rate the user gave is kept (its failure raised)."""
+    try:
+        return s3, step5(ts, st, options, resolved, s3)
+    except (InfeasibleDesignError, conditioned.SolverFailedError) as exc:
+        if resolved.beta is not None or not getattr(s3, "posed", False):
+            raise
+        first = exc
+    for b in (s3.low, 0.0) if s3.low > 0 else (0.0,):
+        what = f"at the lower rate {b:.4g}" if b > 0 else "with the smallest gain (45) allows (no rate asked)"
+        why = (f"{s3.beta_why}; the loop at {s3.beta:.4g} asks an observer that step 5 cannot give ("
+               f"{shorten(str(first), 240, placeholder=' ...')}), so the loop is designed {what}")  # fmt: skip
+        s3b = conditioned.step3(st.aug, resolved.params, options.solver, beta=b, why=why)
+        try:
+            s5 = step5(ts, st, options, resolved, s3b)
+        except (InfeasibleDesignError, conditioned.SolverFailedError):
+            continue
+        if (
+            b == 0.0
+        ):  # the rate this loop decays at, for any blending (recorded; the LMI "decay" certifies it)
+            s3b.beta = float(loop_decay(st.aug, s3b.X, [s3b.K])) * (1 - 4 * conditioned.MARGIN)
+        return s3b, s5
+    raise first
+
+
+def _too_slow(ts, st, options, resolved, s3, window: float, need: float, tried: list) -> str:
+    """Why no observer of the kappa ladder settles within ``window``: the limit that binds, with its number."""
+    rates = [(k, r) for k, r, _ in tried if r is not None]
+    best_k, best_r = max(rates, key=lambda t: t[1]) if rates else (None, None)
+    best = next((s for k, r, s in tried if k == best_k), None)
+    head = (f"no certified observer settles within the scenario's shortest fault window {window:g}: {SETTLE:g} time "
+            f"constants need a decay rate of {need:.3g}, and the fastest found decays at "
+            + (f"{best_r:.3g} (kappa = {best_k:g}; " + ", ".join(f"{r:.3g} at kappa = {k:g}" for k, r in rates) + ")"
+               if best_r is not None else "none (every kappa tried was refused)"))  # fmt: skip
+    why = (best.observer.get("why") or "") if best is not None else ""
+    if "sample time" in why and "lowered" in why:
+        limit = (f"What binds is the sample time {options.sample_time:g}: the decay rate was lowered so that the "
+                 "discrete step z+ = z + Ts (...) is proven stable; a shorter sample time allows a faster observer")  # fmt: skip
+    elif len(rates) >= 2 and rates[-1][1] > 1.1 * rates[-2][1]:
+        limit = (f"What binds is kappa, the bound on cond(Pbar): the rate still grows with it ({rates[-2][1]:.3g} at "
+                 f"{rates[-2][0]:g}, {rates[-1][1]:.3g} at {rates[-1][0]:g}); a larger --kappa may reach it, with larger "
+                 "observer gains (checked only up to the ladder's end)")  # fmt: skip
+    else:
+        limit = (
+            "What binds is (46) itself, not kappa (the rate stopped growing with it): its -sigma P^2 block must "
+            "dominate the observer's coupling with the loop (K) and the diffusion"
+        )
+    return (
+        f"{head}. {limit}. To accept a slower observer, design with --settle-within a longer window (0: none) or "
+        "give --alpha"
+    )
 
 
 def finish(
@@ -109,7 +243,13 @@ def finish(
 ) -> Design:
     """The design at the steps' point: the observer gains, the certificate (raised when it fails, unless
     ``options.allow_uncertified``), the reference input, the bounds, and the Design record."""
-    aug, T, H, params = st.aug, st.T, st.H, resolved.params
+    aug, T, H, params = st.aug, st.T, st.H, dict(resolved.params)
+    if getattr(s3, "beta", 0.0) > 0:  # the closed loop's decay rate the registered LMI "decay" certifies
+        params["beta"] = float(s3.beta)
+    if getattr(s5, "kappa", None) is not None and float(s5.kappa) != float(
+        params.get("kappa", conditioned.KAPPA)
+    ):
+        params["kappa"] = float(s5.kappa)  # raised to settle within the fault windows (step5)
     status = list(resolved.notes) + list(st.notes)
     if options.variant == "paper":
         status.append(PAPER_NOTE)
@@ -121,38 +261,13 @@ def finish(
     L2 = [Ri @ H for Ri in R]
     Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
     Kf, Kf_rules = _fault_gains(ts, status)
-    point = dict(X=X, K=K, P=P, T=T, Pbar=s5.Pbar, Q=s5.Q, N=s5.N, theta=s5.theta, R=R, L1=L1)
-    checks = certificate(aug, point, params)
-    sample_time = options.sample_time
-    if sample_time is not None:  # the step that runs: z+ = z + Ts (...), checked with Pbar for any blending
-        checks["discrete"] = discrete_certificate(R, s5.Pbar, float(sample_time))
-    checks["assumptions"] = [c.to_dict() for c in st.checks]
-    # the plant's region (null: a state without bounds): the generated C checks y against its image
-    checks["region"] = {
-        side: [None if np.isnan(v) else float(v) for v in vals]
-        for side, vals in (("lo", ts.plant.region_lo), ("hi", ts.plant.region_hi))
-    }
-    checks["alpha"] = float(s5.alpha)
-    bad = failures(checks)
-    certified = not bad
-    if bad:
-        what = "; ".join(bad)
-        hint = (
-            "use variant='conditioned'"
-            if options.variant == "paper"
-            else "raise sigma, or lower alpha, or try solver='SCS'"
-        )
-        msg = f"the design is not certified at the returned point: {what} does not hold; {hint}"
-        if not options.allow_uncertified:
-            raise InfeasibleDesignError(msg, result=checks)
-        status.append("NOT CERTIFIED: " + msg)
     u_ref, x_ref = _u_reference(ts, K, status)
     sched, sources = scheduling_from_measurements(ts)
     plant = ts.plant
     total = time.perf_counter() - t0
     observer = {k: (float(v) if isinstance(v, (int, float, np.floating)) and v is not None else v)
                 for k, v in s5.observer.items()}  # fmt: skip
-    return Design(
+    d = Design(
         plant=plant.name,
         plant_spec=options.plant_spec or plant.name,
         variant=options.variant,
@@ -180,7 +295,7 @@ def finish(
         L2=tuple(L2),
         R=tuple(R),
         Ls=Ls,
-        checks=checks,
+        checks={},
         timings={"total_s": total, "solver_s": s3.seconds + s5.seconds},
         u_ref=u_ref,
         x_ref=x_ref,
@@ -196,15 +311,40 @@ def finish(
             "output_units": list(plant.output_units),
             "scheduling_sources": sources,
         },  # fmt: skip
-        certified=certified,
+        certified=False,
         status=status,
         solves={"step3": int(s3.solves), "step5": int(s5.solves), "total": int(s3.solves + s5.solves)},
         observer=Observer.from_mapping(observer),
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=resolved.x0,
-        bounds=_bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, st.r5doc, getattr(s5, "bound", None)),
         remark5=st.r5doc,
     )
+    # the certificate at the numbers the record holds, by the very function a loaded document is judged with
+    checks = certify(d)
+    checks["assumptions"] = [c.to_dict() for c in st.checks]
+    # the plant's region (null: a state without bounds): the generated C checks y against its image
+    checks["region"] = {
+        side: [None if np.isnan(v) else float(v) for v in vals]
+        for side, vals in (("lo", ts.plant.region_lo), ("hi", ts.plant.region_hi))
+    }
+    checks["alpha"] = float(s5.alpha)
+    checks["loop"].update(
+        beta=float(getattr(s3, "beta", 0.0)), why=getattr(s3, "beta_why", "as printed (paper variant)")
+    )
+    bad = failures(checks)
+    if bad:
+        what = "; ".join(bad)
+        hint = (
+            "use variant='conditioned'"
+            if options.variant == "paper"
+            else "raise sigma, or lower alpha, or try solver='SCS'"
+        )
+        msg = f"the design is not certified at the returned point: {what} does not hold; {hint}"
+        if not options.allow_uncertified:
+            raise InfeasibleDesignError(msg, result=checks)
+        status.append("NOT CERTIFIED: " + msg)
+    bounds = _bounds(not bad, d.R, K, Kf, Kf_rules, T, ts, u_ref, st.r5doc, getattr(s5, "bound", None))
+    return dataclasses.replace(d, checks=checks, certified=not bad, bounds=bounds, status=status)
 
 
 def _u_reference(ts: TSModel, K, status: list):

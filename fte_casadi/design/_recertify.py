@@ -15,7 +15,7 @@ import numpy as np
 
 from ._augment import augment
 from .core._certify import certificate, discrete_certificate, failures
-from .core._lmis import LMIS, distinct
+from .core._lmis import LMIS, distinct, loop_decay
 
 __all__ = []  # public: docs/api.md
 
@@ -29,17 +29,68 @@ def _far(stored: np.ndarray, made: np.ndarray) -> float:
     return float(np.max(np.abs(stored - made))) / scale if made.size else 0.0
 
 
-def recertify(d) -> list[str]:
-    """What does not hold at the numbers of the design ``d`` (empty: certified), each item a phrase such as
-    ``"LMI (45) recomputes to +34.6 at the loaded numbers (it must be negative)"``."""
+def _augmented(d):
+    """The augmented system of ``d`` (with Remark 5's undecoupled directions where its fallback is used)."""
     aug = augment(d.local_models, d.C, d.Df)
     if d.remark5.get("used"):
         aug = dataclasses.replace(aug, Jd=np.asarray(d.remark5["Bdu"], dtype=float))
-    out: list[str] = []
-    T, H, Pbar = np.asarray(d.T), np.asarray(d.H), np.asarray(d.Pbar)
+    return aug
+
+
+def _stored_point(d, aug) -> dict:
+    """The certificate's point at the numbers the step uses: the observer rebuilt from the stored ``L1``
+    (``Q_i = Pbar L1_i``, ``R_i = T Abar_i - L1_i Cbar``)."""
+    T, Pbar = np.asarray(d.T), np.asarray(d.Pbar)
     L1 = [np.asarray(M) for M in d.L1]
     R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
-    Q = [Pbar @ M for M in L1]
+    return dict(X=np.asarray(d.X), K=[np.asarray(M) for M in d.K], P=np.asarray(d.P), T=T, Pbar=Pbar,
+                Q=[Pbar @ M for M in L1], N=np.asarray(d.N), theta=float(d.theta), R=R, L1=L1)  # fmt: skip
+
+
+def certify(d) -> dict:
+    """The certificate of the design ``d`` at its own numbers: every registered LMI and eigenvalue condition
+    (:func:`~.core._certify.certificate`) and, at its sample time, the discrete step. The one evaluation of
+    "certified": a design is certified when it is made (:func:`~._pipeline.finish` calls this on the record it
+    is about to return) exactly when it is certified on load, in ``simulate``, ``codegen``, the FMU and
+    ``tune`` (:func:`recertify`): the same numbers (a document holds every double exactly), the same code, the
+    same decision (:func:`~.core._certify.failures`)."""
+    aug = _augmented(d)
+    point = _stored_point(d, aug)
+    checks = certificate(aug, point, d.params.to_dict())
+    checks["loop"] = loop_record(aug, point["X"], point["K"])
+    sample_time = d.observer.sample_time
+    if sample_time is not None:
+        checks["discrete"] = discrete_certificate(point["R"], point["Pbar"], float(sample_time))
+    return checks
+
+
+def loop_record(aug, X, K) -> dict:
+    """How fast the closed loops ``A_i + B_i K_j`` decay: ``decay_certified`` (the largest rate (45) with the
+    decay term holds for at the design's X, :func:`~.core._lmis.loop_decay`), ``decay_spectral`` (``min -max Re
+    eig(A_i + B_i K_j)``), ``open_loop_decay`` (``min -max Re eig(A_i)``, negative: unstable) and ``gain_ratio``
+    (``max ||B_i K_j|| / max ||A_i||``: how much the controller acts against the plant)."""
+    n = aug.n
+    A = [Ab[:n, :n] for Ab in aug.Abar]
+    B = [Bb[:n] for Bb in aug.Bbar]
+    js = distinct(K)
+    spectral = min(
+        -float(np.max(np.linalg.eigvals(A[i] + B[i] @ K[j]).real)) for i in range(aug.r) for j in js
+    )
+    ol = min(-float(np.max(np.linalg.eigvals(a).real)) for a in A)
+    na = max(float(np.linalg.norm(a, 2)) for a in A)
+    nbk = max(float(np.linalg.norm(B[i] @ K[j], 2)) for i in range(aug.r) for j in js)
+    return {"decay_certified": loop_decay(aug, X, K), "decay_spectral": spectral, "open_loop_decay": ol,
+            "gain_ratio": nbk / na if na > 0 else float("inf")}  # fmt: skip
+
+
+def recertify(d) -> list[str]:
+    """What does not hold at the numbers of the design ``d`` (empty: certified): the stored matrices that are not
+    what they are made of, then the certificate's failures (:func:`certify`, :func:`~.core._certify.failures`)."""
+    aug = _augmented(d)
+    out: list[str] = []
+    T, H = np.asarray(d.T), np.asarray(d.H)
+    point = _stored_point(d, aug)
+    R = point["R"]
     for name, stored, made, how in (
         ("T", [T], [np.eye(aug.nbar) - H @ aug.Cbar], "I - H Cbar"),
         ("P", [np.asarray(d.P)], [np.linalg.pinv(np.asarray(d.X))], "X^-1"),
@@ -52,36 +103,49 @@ def recertify(d) -> list[str]:
             if not gap <= _REL:
                 which = name if len(stored) == 1 else f"{name}_{i + 1}"
                 out.append(f"{which} is not {how.replace('_i', f'_{i + 1}')} (off by {gap:.3g} relative)")
-    point = dict(X=np.asarray(d.X), K=[np.asarray(M) for M in d.K], P=np.asarray(d.P), T=T, Pbar=Pbar, Q=Q,
-                 N=np.asarray(d.N), theta=float(d.theta), R=R, L1=L1)  # fmt: skip
+    acc = d.accommodation
+    if (
+        acc is not None and acc.get("rule") == "explain"
+    ):  # the gate's ratios are the observer's own cross-talk
+        from ._isolation import crosstalk
+
+        made = crosstalk(R, T, aug.n, aug.lf)
+        gap = _far(np.asarray(acc["crosstalk"], dtype=float), made)
+        if not gap <= _REL:
+            out.append(f"accommodation.crosstalk is not the observer's cross-talk (off by {gap:.3g} relative; "
+                       f"recomputed {np.round(made, 4).tolist()})")  # fmt: skip
     try:
-        checks = certificate(aug, point, d.params.to_dict())
+        checks = certify(d)
     except np.linalg.LinAlgError as exc:
         return out + [f"the certificate cannot be evaluated at the loaded numbers ({exc})"]
-    sample_time = d.observer.sample_time
-    if sample_time is not None:
-        checks["discrete"] = discrete_certificate(R, Pbar, float(sample_time))
-    for k, lmi in LMIS.items():
-        v = checks["lmi_max_eig"][k]
-        if not v < 0:
-            out.append(
-                f"{lmi.name(checks.get('theorem'))} recomputes to {v:+.3g} at the loaded numbers (it must be negative)"
-            )
-    for i, Ri in enumerate(R):
-        top = float(np.max(np.linalg.eigvals(Ri).real))
-        if not top < 0:
-            out.append(f"the observer matrix R_{i + 1} = T Abar_{i + 1} - L1_{i + 1} Cbar has an eigenvalue with real "
-                       f"part {top:+.3g}")  # fmt: skip
-    for i in range(aug.r):
-        for j in distinct(point["K"]):
-            Kj = point["K"][j]
-            top = float(
-                np.max(np.linalg.eigvals(aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ Kj).real)
-            )
-            if not top < 0:
-                out.append(
-                    f"the closed loop A_{i + 1} + B_{i + 1} K_{j + 1} has an eigenvalue with real part {top:+.3g}"
-                )
-    said = ("LMI (", "R_i Hurwitz", "A_i + B_i K_j Hurwitz")
-    out += [f for f in failures(checks) if not f.startswith(said) or "within the round-off" in f]
+    return out + _described(failures(checks), checks, aug, point)
+
+
+def _described(bad: list[str], checks: dict, aug, point: dict) -> list[str]:
+    """The failures of :func:`~.core._certify.failures` (the decision) in the words of a loaded document: the LMI's
+    recomputed value, and the rule behind a non-Hurwitz matrix."""
+    out = []
+    names = {lmi.name(checks.get("theorem")): k for k, lmi in LMIS.items()}
+    for f in bad:
+        name = f[: f.index(")") + 1] if f.startswith("LMI (") else None
+        if name in names:
+            k = names[name]
+            out.append(f"{name} recomputes to {checks['lmi_max_eig'][k]:+.3g} at the loaded numbers (balanced; it must "
+                       f"be below -{checks['lmi_roundoff'][k]:.1g}, its round-off)")  # fmt: skip
+        elif f.startswith("R_i Hurwitz"):
+            for i, Ri in enumerate(point["R"]):
+                top = float(np.max(np.linalg.eigvals(Ri).real))
+                if not top < 0:
+                    out.append(f"the observer matrix R_{i + 1} = T Abar_{i + 1} - L1_{i + 1} Cbar has an eigenvalue with "
+                               f"real part {top:+.3g}")  # fmt: skip
+        elif f.startswith("A_i + B_i K_j Hurwitz"):
+            for i in range(aug.r):
+                for j in distinct(point["K"]):
+                    A = aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ point["K"][j]
+                    top = float(np.max(np.linalg.eigvals(A).real))
+                    if not top < 0:
+                        out.append(f"the closed loop A_{i + 1} + B_{i + 1} K_{j + 1} has an eigenvalue with real part "
+                                   f"{top:+.3g}")  # fmt: skip
+        else:
+            out.append(f)
     return out

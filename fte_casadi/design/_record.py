@@ -137,11 +137,13 @@ class Design:
     #: the fingerprint of the plant's equations (:func:`fte_casadi.model._fingerprint.plant_fingerprint`);
     #: empty for documents older than it
     plant_hash: dict = field(default_factory=dict)
-    #: accommodation after detection (:mod:`fte_casadi.sim._accommodate`): {"rule": "isolate", "thresholds":
-    #: [one per fault], "release": ratio, ...}: fault j switches on in u when |fhat_j| >= threshold_j and its
-    #: normalised residual |fhat_j| / threshold_j is the largest, and with a release ratio below 1 stays on
-    #: until that ratio falls below it (:func:`fte_casadi.step.accommodation_gate`; no "release": 1, the
-    #: memoryless gate); None: every estimate is compensated always (the paper)
+    #: accommodation after detection (:mod:`fte_casadi.sim._accommodate`): {"rule": "explain", "thresholds": [one
+    #: per fault], "crosstalk": lf x lf, "release": ratio, ...}: fault j is compensated in u while |fhat_j| >=
+    #: threshold_j + sum_q crosstalk[j][q] |fhat_q| (what ``fte design`` writes where the faults' estimates
+    #: cross-talk); or {"rule": "isolate", ...}: fault j switches on when |fhat_j| >= threshold_j and its normalised
+    #: residual |fhat_j| / threshold_j is the largest (``fte simulate --accommodate``); with a release ratio below
+    #: 1 either stays on until that ratio falls below it (:func:`fte_casadi.step.accommodation_gate`; no "release":
+    #: 1, the memoryless gate); None: every estimate is compensated always (the paper)
     accommodation: dict | None = None
     #: how the T-S model's premises were covered (``derive(vertices=...)``: grouped, box or fewest); loading
     #: re-derives the plant's model with it. None: the derivation's default (a document older than the key, or a
@@ -477,9 +479,9 @@ def _accommodation(source: str, value, lf: int) -> dict | None:
     """The document's ``accommodation``: None, or a rule fte knows with ``lf`` finite positive thresholds."""
     if value is None:
         return None
-    if not isinstance(value, dict) or value.get("rule") != "isolate":
+    if not isinstance(value, dict) or value.get("rule") not in ("isolate", "explain"):
         raise DesignFileError(
-            f"{source}: 'accommodation' must be null or an object with rule 'isolate'; got {value!r}"
+            f"{source}: 'accommodation' must be null or an object with rule 'isolate' or 'explain'; got {value!r}"
         )
     thr = value.get("thresholds")
     ok = (
@@ -494,6 +496,20 @@ def _accommodation(source: str, value, lf: int) -> dict | None:
             f"{source}: 'accommodation.thresholds' must be {lf} finite positive numbers (one per fault); got {thr!r}"
         )
     out = {**value, "thresholds": [float(v) for v in thr]}
+    if (
+        value["rule"] == "explain"
+    ):  # the observer's cross-talk ratios (design/_isolation.py), checked on load too
+        ct = value.get("crosstalk")
+        try:
+            a = np.array(ct, dtype=float)
+        except (TypeError, ValueError):
+            a = np.zeros(0)
+        if a.shape != (lf, lf) or not np.all(np.isfinite(a)) or np.any(a < 0):
+            raise DesignFileError(
+                f"{source}: 'accommodation.crosstalk' must be a {lf} x {lf} matrix of finite numbers >= 0 (the "
+                f"observer's cross-talk ratios); got {ct!r}"
+            )
+        out["crosstalk"] = a.tolist()
     if "release" in value:  # absent (documents older than it): 1, the memoryless gate
         rel = value["release"]
         if not (

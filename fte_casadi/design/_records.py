@@ -139,7 +139,8 @@ class Params(_Record):
     ``gamma1``, the coupling weight ``sigma``, the sliding gains ``delta``, ``epsilon``; optional ones are
     ``None`` when not used: ``gamma2`` (Theorem 5's d2 attenuation), ``kappa`` (the bound on cond(Pbar)
     when asked for one), ``boundary_layer`` (the sliding term's ``sat(s/phi)`` width, set by the tuner),
-    ``bound_weight`` (the fault-error bound's weight in step 5's objective, when positive).
+    ``bound_weight`` (the fault-error bound's weight in step 5's objective, when positive), ``beta`` (the
+    closed loop's decay rate the registered LMI ``decay`` certifies; absent in older documents: 0).
     """
 
     gamma: float
@@ -151,6 +152,7 @@ class Params(_Record):
     kappa: float | None = None
     boundary_layer: float | None = None
     bound_weight: float | None = None
+    beta: float | None = None
     extra: dict = field(default_factory=dict, repr=False)
     order: tuple = field(default=(), repr=False)
 

@@ -30,10 +30,11 @@ def design_summary(d) -> str:
         f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
         f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
         "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.to_dict().items()),
-        "  largest eigenvalue of each LMI at the returned point (negative = holds): "
+        "  largest eigenvalue of each LMI at the returned point, balanced (D L D, D = diag(|L_kk|^-1/2): the same "
+        "definiteness; it holds below minus its round-off): "
         + ", ".join(f"({k}) {lmi[k]:.3g}" for k in shown)
         + (
-            "; round-off of each, 8 dim eps ||M||: "
+            "; round-off of each, 8 dim eps ||D L D||: "
             + ", ".join(f"{c['lmi_roundoff'][k]:.1g}" for k in shown if k in c["lmi_roundoff"])
             if c.get("lmi_roundoff")
             else ""
@@ -42,6 +43,15 @@ def design_summary(d) -> str:
         f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
         f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",
     ]
+    loop = c.get("loop")
+    if loop:
+        held = f", the LMI 'decay' at beta = {loop['beta']:.4g}" if loop.get("beta") else ""
+        lines.append(
+            f"  closed loop: decays at {loop['decay_certified']:.4g} or faster for any blending of the rules "
+            f"(certified{held}), at {loop['decay_spectral']:.4g} per rule (eigenvalues); the open loop at "
+            f"{loop['open_loop_decay']:.4g}; max ||B_i K|| / max ||A_i|| = {loop['gain_ratio']:.3g}"
+            + (f"; {loop['why']}" if loop.get("why") else "")
+        )
     disc = c.get("discrete")
     if disc:
         lines.append(

@@ -4,11 +4,16 @@ The paper compensates every fault estimate at all times (``u = ... + Kf fhat``).
 other faults' estimates show cross-talk (docs/interface.md, ``crosstalk_peak``), and ``Kf`` feeds it into
 the plant: on a sensor fault, whose own column of ``Kf`` is zero, tolerant control can then leave the true
 outputs worse than none. :func:`accommodated` returns the design with the gate of
-:func:`fte_casadi.step.accommodation_gate`: fault j switches on in ``Kf fhat`` when ``|fhat_j|`` reaches its
-detection threshold and its normalised residual ``r_j = |fhat_j| / threshold_j`` is the largest, and stays on
-(hysteresis) until ``r_j`` falls below the release ratio (default :data:`RELEASE`) or another fault switches on
-with a larger ratio; ``release=1`` is the memoryless gate. The thresholds are the detection thresholds of
-:mod:`._detect`, calibrated on fault-free paths of the scenario.
+:func:`fte_casadi.step.accommodation_gate`, its thresholds the detection thresholds of :mod:`._detect`,
+calibrated on fault-free paths of the scenario:
+
+- rule ``"explain"`` (:func:`protected`, what ``fte design`` writes): fault j is compensated while
+  ``|fhat_j| >= threshold_j + sum_q kappa[j, q] |fhat_q|``, ``kappa`` the observer's cross-talk
+  (:func:`fte_casadi.design._isolation.crosstalk`): detected, and more than the other faults can explain;
+- rule ``"isolate"`` (``fte simulate --accommodate``): fault j switches on when ``|fhat_j|`` reaches its
+  threshold and its normalised residual ``r_j = |fhat_j| / threshold_j`` is the largest, and stays on
+  (hysteresis) until ``r_j`` falls below the release ratio (default :data:`RELEASE`) or another fault switches
+  on with a larger ratio; ``release=1`` is the memoryless gate.
 
 The latches are state: they follow the observer state ``z`` in the step (``Design.nz``), so that the Python
 step, the generated C and the FMU carry the same ones. The gate turns the closed loop into a switched system:
@@ -21,21 +26,24 @@ from __future__ import annotations
 import dataclasses
 
 from ..design._record import Design
-from ..errors import ParameterError
+from ..errors import ParameterError, SimulationError
 from ._engine import calibrate_thresholds
 
-__all__ = ["accommodated"]
+__all__ = ["accommodated", "protected"]
 
 #: the default release ratio: a compensated fault is released when ``|fhat_j| / threshold_j`` falls below it
 RELEASE = 0.5
 
 
 def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, false_alarm_rate: float | None = None,
-                 dt: float | None = None, threads: int | None = None, release: float = RELEASE) -> Design:  # fmt: skip
+                 dt: float | None = None, threads: int | None = None, release: float = RELEASE,
+                 rule: str = "isolate") -> Design:  # fmt: skip
     """``design`` with accommodation after detection, its thresholds calibrated at ``false_alarm_rate``
     (alarms per unit of the plant's time; default one per hour) on ``max(paths, 8)`` fault-free paths;
     ``release`` in (0, 1]: the ratio ``|fhat_j| / threshold_j`` below which a compensated fault is released
-    (1: no hysteresis, the memoryless gate)."""
+    (1: no hysteresis, the memoryless gate); ``rule`` ``"isolate"`` or ``"explain"`` (module docstring)."""
+    if rule not in ("isolate", "explain"):
+        raise ParameterError(f"the accommodation rule must be 'isolate' or 'explain'; got {rule!r}")
     if not (isinstance(release, (int, float)) and not isinstance(release, bool) and 0 < release <= 1):
         raise ParameterError(
             f"the release ratio must be a number in (0, 1] (1: no hysteresis); got {release!r}"
@@ -51,7 +59,7 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
             "few calibration paths): accommodation needs a positive finite threshold per fault"
         )
     acc = {
-        "rule": "isolate",
+        "rule": rule,
         "thresholds": [float(v) for v in thr],
         "release": float(release),
         "false_alarm_rate": entries[0]["false_alarm_rate_asked"],
@@ -64,7 +72,60 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
     listed = ", ".join(f"{e['fault']} {v:.4g}" for e, v in zip(entries, thr))
     held = ("memoryless" if release >= 1 else
             f"held until |fhat| / threshold < {float(release):g} or another fault switches on")  # fmt: skip
-    note = (f"accommodation after detection: a fault is compensated only while detected and isolated (thresholds "
-            f"{listed}, calibrated on "
+    if rule == "explain":
+        acc["crosstalk"] = _crosstalk(design).tolist()
+        held = "memoryless" if release >= 1 else f"held until that ratio < {float(release):g}"
+        what = (
+            "while detected and more than the other faults' estimates explain (|fhat_j| >= threshold_j + "
+            "sum_q crosstalk[j][q] |fhat_q|; crosstalk " + _ratios(design, acc["crosstalk"]) + ")"
+        )
+    else:
+        what = "only while detected and isolated"
+    note = (f"accommodation after detection: a fault is compensated {what} (thresholds {listed}, calibrated on "
             f"{entries[0]['calibration_paths']} fault-free paths; {held})")  # fmt: skip
     return dataclasses.replace(design, accommodation=acc, status=[*design.status, note])
+
+
+def _crosstalk(design: Design):
+    from ..design._isolation import crosstalk
+
+    return crosstalk(design.R, design.T, int(design.dims.n), int(design.dims.lf))
+
+
+def _ratios(design: Design, ct) -> str:
+    names = list(design.names.get("faults") or [f"f{j + 1}" for j in range(len(ct))])
+    return ", ".join(f"{names[j]} from {names[q]} {ct[j][q]:.3g}" for j in range(len(ct)) for q in range(len(ct))
+                     if j != q)  # fmt: skip
+
+
+def needs_gate(design: Design) -> bool:
+    """True when some fault that tolerant control feeds into the plant (a nonzero column of ``Kf``) shows
+    cross-talk from another fault (:func:`fte_casadi.design._isolation.crosstalk`): then always compensating it
+    feeds the other faults into the plant, and :func:`protected` gates it."""
+    import numpy as np
+
+    lf = int(design.dims.lf)
+    if lf < 2:
+        return False
+    ct = _crosstalk(design)
+    kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
+    fed = [j for j in range(lf) if any(np.any(np.asarray(k)[:, j]) for k in kfs)]
+    return any(ct[j, q] > 0 for j in fed for q in range(lf) if q != j)
+
+
+def protected(design: Design, plant, scenario, *, paths: int = 8, seed: int = 0, false_alarm_rate=None,
+              dt=None, threads=None) -> Design:  # fmt: skip
+    """``design`` as ``fte design`` writes it: where its faults' estimates cross-talk (:func:`needs_gate`) and the
+    plant has a scenario with faults, with the gate of rule ``"explain"``, memoryless, calibrated on the
+    scenario's fault-free paths (:func:`accommodated`); otherwise unchanged (every estimate compensated always,
+    the paper: with one fault nothing can leak into its compensation, and a gate would only delay it)."""
+    if scenario is None or not scenario.faults or design.accommodation is not None or not needs_gate(design):
+        return design
+    try:
+        return accommodated(design, plant, scenario, paths=paths, seed=seed, false_alarm_rate=false_alarm_rate,
+                            dt=dt, threads=threads, release=1.0, rule="explain")  # fmt: skip
+    except (SimulationError, ParameterError) as exc:  # the design stands; its gate could not be calibrated
+        why = " ".join(str(exc).split())
+        note = (f"warning: every fault estimate is compensated always (no gate): its thresholds could not be calibrated "
+                f"on the scenario's fault-free paths ({why})")  # fmt: skip
+        return dataclasses.replace(design, status=[*design.status, note])

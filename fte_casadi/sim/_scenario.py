@@ -159,6 +159,24 @@ class Scenario:
         faults = tuple(replace(fp, stop=min(float(fp.stop), float(T))) for fp in self.faults if fp.start < T)
         return replace(self, T=float(T), faults=faults)
 
+    def shortest_window(self) -> float | None:
+        """The shortest fault window (None without faults): the observer must settle within it (three of its
+        time constants; ``DesignOptions.settle_window``)."""
+        return min((float(f.stop) - float(f.start) for f in self.faults), default=None)
+
+    def design_options(self, options):
+        """``options`` (a :class:`~fte_casadi.design.DesignOptions`) completed with what this scenario says of
+        the design, where not given: the sample time (its step ``dt``, the controller's), the window the observer
+        must settle in (:meth:`shortest_window`) and the nominal initial state."""
+        changes = {}
+        if options.sample_time is None:
+            changes["sample_time"] = float(self.dt)
+        if options.settle_window is None and self.faults:
+            changes["settle_window"] = self.shortest_window()
+        if options.initial_state is None and self.x0 is not None:
+            changes["initial_state"] = self.x0
+        return options.replace(**changes) if changes else options
+
     def windows(self, fault: str) -> list[tuple[float, float]]:
         """The (start, stop) windows of every profile acting on ``fault``."""
         return [(fp.start, fp.stop) for fp in self.faults if fp.fault == fault]

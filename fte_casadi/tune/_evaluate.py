@@ -130,7 +130,7 @@ def evaluate(task: dict) -> dict:
     from ..design import design as run_design
     from ..design._record import Design
     from ..design.core._conditioned import KAPPA
-    from ..sim import Scenario, simulate
+    from ..sim import Scenario, protected, simulate
 
     blob = task["plant"]
     plant, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob, task.get("vertices"))
@@ -160,6 +160,11 @@ def evaluate(task: dict) -> dict:
                 "state": "fail",
                 "reason": "not certified: " + "; ".join(s for s in d.status if "CERTIF" in s),
             }
+        if (
+            task.get("design") is None
+        ):  # as fte design writes it: the gate where the faults' estimates cross-talk
+            d = protected(d, plant, scenario, paths=int(task["paths"]), seed=int(task["seed"]),
+                          threads=task.get("threads"))  # fmt: skip
         res = simulate(d, plant, scenario, paths=int(task["paths"]), seed=int(task["seed"]), progress=False,
                        record_paths=PEAK_PATHS, threads=task.get("threads"), detect=False)  # fmt: skip
     except FteError as exc:

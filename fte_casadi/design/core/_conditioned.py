@@ -66,13 +66,16 @@ from ._barrier import centre, numpy_first, phase1, phase1_active
 from ._bound_objective import bound_term
 from ._certify import lyapunov_ts_max, ts_max
 from ._decay import ALPHA_RTOL as ALPHA_RTOL
-from ._decay import TS_FACTOR, alpha_max, cap_for_sample_time
+from ._decay import TS_FACTOR, alpha_max, cap_for_sample_time, loop_decay_target
 from ._lmis import (
     diffusion_coupling,
     lmi45,
     lmi45_kron,
     lmi46,
     lmi46_kron,
+    lmi_decay,
+    lmi_decay_kron,
+    loop_decay,
     sliding_kron,
     sliding_mismatch,
 )
@@ -116,6 +119,12 @@ class Step3:
     solves: int
     seconds: float
     notes: list = field(default_factory=list)
+    #: the closed loop's decay rate the LMI "decay" certifies, and why it is what it is
+    beta: float = 0.0
+    beta_why: str = ""
+    #: True when the rate's LMI was posed (the gain is not the smallest of (45) alone); the default's lower rate
+    posed: bool = False
+    low: float = 0.0
 
 
 @dataclass
@@ -132,6 +141,8 @@ class Step5:
     notes: list = field(default_factory=list)
     #: the block-diagonal certificate of the fault-error bound when it was in the objective (bound_objective)
     bound: dict | None = None
+    #: the bound on cond(Pbar) this observer was designed under
+    kappa: float = KAPPA
 
 
 def input_scaling(aug: Augmented) -> np.ndarray:
@@ -239,11 +250,12 @@ def worst_block(lmis, blocks: dict[int, list[tuple[str, int]]]) -> tuple[str, fl
 
 
 def _fail(
-    step: str, res: SolveResult, solver: str, hint: str, spread=None
+    step: str, res: SolveResult, solver: str, hint: str, spread=None, lmi: str | None = None
 ) -> InfeasibleDesignError | SolverFailedError:
     solver = res.solver or solver
     if res.infeasible:
-        return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}")
+        return InfeasibleDesignError(f"{step} is infeasible ({solver}: {res.status}); {hint}", lmi=lmi,
+                                     bounded=lmi is not None)  # fmt: skip
     other = "SCS" if solver == "CLARABEL" else "CLARABEL"
     data = ""
     if spread is not None:
@@ -260,6 +272,7 @@ def _fail(
 def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
     n, m, p, ld = aug.n, aug.m, aug.p, aug.ld
     sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
+    beta = float(params.get("beta", 0.0))  # the closed loop's decay rate asked (2 beta X in the (1,1) block)
     layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("s", ()), Var("t", ()))
     D = _diag([n, n, p, ld], [sg, 0.0, 1.0, g**2 - g1**2])
     lmis = [
@@ -268,12 +281,26 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
                    kron=("X", lmi45_kron(aug, i)))
         for i in range(aug.r)
     ]  # fmt: skip
+    if beta > 0:  # homogeneous in (X', Y'); its margin relative to the rate: <= -2 beta m I (X' >= I)
+        eye = np.eye(n)
+        lmis += [
+            margin_lmi(f"decay rule {i + 1}", layout, lambda X, Y, s, t, i=i: lmi_decay(aug, i, X, Su @ Y, beta),
+                       margin=lambda X, Y, s, t: 2 * beta * eye, support=layout.support("X", "Y"),
+                       kron=("X", lmi_decay_kron(aug, i, beta)))
+            for i in range(aug.r)
+        ]  # fmt: skip
     lmis += _normalisation(layout, "X", n, _kappa(params))
     lmis.append(margin_lmi("||Y'|| <= t", layout, lambda X, Y, s, t: _balanced(Y, t),
                            margin=lambda X, Y, s, t: _balanced_margin(t, m, n)))  # fmt: skip
     c = np.zeros(layout.size)
     c[layout.index("t")] = 1.0
     return layout, lmis, c
+
+
+def _soft(family) -> int:
+    """How many of step 3's LMIs (:func:`_step3_problem`) are soft: (45) and the decay LMI per rule; the two of
+    the normalisation of X' follow, then the epigraph of t."""
+    return sum(1 for L in family if getattr(L, "base", L).name.startswith(("(45)", "decay")))
 
 
 def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: Layout, Su: np.ndarray):
@@ -290,6 +317,7 @@ def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: 
     sd = params["gamma"] / sy
     aug_s = units_scaled(aug, tau, sy, sd)
     params_s = units_params(params, tau, sy, sd)
+    params_s["beta"] = tau * float(params.get("beta", 0.0))  # a rate, in the scaled time
     Su_s = input_scaling(aug_s)
     layout_s, family_s, _ = _step3_problem(aug_s, params_s, Su_s)
     prob = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in family_s[:-1]])  # without the epigraph of t
@@ -324,7 +352,20 @@ def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list, keep_
     serve phase 1: an answer "infeasible" under them goes to the conic solver, which has none (returned,
     with ``keep_infeasible``, where the conic solver has already failed numerically).
     """
-    n, m, r = aug.n, aug.m, aug.r
+    n, m = aug.n, aug.m
+    kappa = _kappa(params)
+    prob = ConicProblem(layout, feas)
+    v0 = layout.pack(X=0.5 * kappa * np.eye(n), Y=np.zeros((m, n)), s=1.0, t=0.0)
+    res = numpy_first(prob, _soft(feas), v0, _step3_caps(aug, params, layout))
+    if res is None or (res.v is None and not keep_infeasible):
+        return None
+    return prob, res
+
+
+def _step3_caps(aug: Augmented, params: dict, layout: Layout) -> list[AffineLMI]:
+    """The bounds phase 1 needs on step 3's cone (:func:`_step3_numpy`): ``||Y'|| <= RHO_CAP kappa max(max
+    ||A_i||, sigma)`` and ``0 < s <=`` that cap times ``max(1, 1/sigma, ||C||^2)``."""
+    n = aug.n
     kappa, sg = _kappa(params), float(params["sigma"])
     a = max(np.linalg.norm(A[:n, :n], 2) for A in aug.Abar)
     ycap = RHO_CAP * kappa * max(a, sg, 1e-300)
@@ -332,25 +373,13 @@ def _step3_numpy(aug: Augmented, params: dict, layout: Layout, feas: list, keep_
     ycap_lmi = affine_lmi(
         "||Y'|| <= cap", layout, lambda X, Y, s, t: _balanced(Y, ycap), support=layout.support("Y")
     )
-    prob = ConicProblem(layout, feas)
-    v0 = layout.pack(X=0.5 * kappa * np.eye(n), Y=np.zeros((m, n)), s=1.0, t=0.0)
-    res = numpy_first(prob, r, v0, [ycap_lmi] + _scalar_cap(layout, "s", scap))
-    if res is None or (res.v is None and not keep_infeasible):
-        return None
-    return prob, res
+    return [ycap_lmi] + _scalar_cap(layout, "s", scap)
 
 
-def step3(aug: Augmented, params: dict, solver: str) -> Step3:
-    """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
-
-    One feasibility solve gives a strictly feasible point (for a problem with many PSD cones, phase 1 in
-    numpy, :func:`_step3_numpy`; the conic solvers when it finds none);
-    :func:`~fte_casadi.design.core._barrier.centre` then minimises ``t`` along the central path to the unique
-    centred point, which does not depend on where it started.
-    """
-    Su = input_scaling(aug)
+def _step3_start(aug: Augmented, params: dict, solver: str, Su: np.ndarray, tau: float):
+    """``(layout, family, c, prob, res, v0)``: step 3's problem at ``params`` (its ``beta`` the decay rate asked)
+    and a strictly feasible start for its centring, or the error of an infeasible or failed (45)."""
     layout, family, c = _step3_problem(aug, params, Su)
-    tau = time_scale(aug)
     feas = [L.at(2 * MARGIN) for L in family[:-1]]  # without the epigraph of t
     first = _step3_numpy(aug, params, layout, feas) if ConicProblem(layout, feas).heavy else None
     if first is not None:
@@ -367,34 +396,164 @@ def step3(aug: Augmented, params: dict, solver: str) -> Step3:
     g, g1, sg = params["gamma"], params["gamma1"], params["sigma"]
     lmis = [L.at(MARGIN) for L in family]
     repaired: list[str] = []
-    v0 = _start(res, layout, "X", lmis[: aug.r], lmis[aug.r : aug.r + 2], repaired, _kappa(params))
+    k = _soft(family)
+    v0 = _start(res, layout, "X", lmis[:k], lmis[k : k + 2], repaired, _kappa(params))
     if v0 is None:
         hint = f"see the bounds on gamma and sigma (gamma = {g:g}, gamma1 = {g1:g}, sigma = {sg:g})"
         n, p, ld = aug.n, aug.p, aug.ld
         names = {2 * n + p + ld: [("x", n), ("x (diffusion)", n), ("y", p), ("d", ld)]}
-        raise _fail("LMI (45)", res, solver, hint, worst_block(prob.lmis, names))
+        what = "LMI (45)" + (
+            f" with the closed loop's decay rate beta = {params['beta']:.4g}" if params.get("beta") else ""
+        )
+        raise _fail(what, res, solver, hint, worst_block(prob.lmis, names))
+    prob.notes += [f"step 3: {r}" for r in repaired]
+    return layout, family, c, prob, res, v0
+
+
+def _beta_max(
+    aug: Augmented, params: dict, Su: np.ndarray, v0: np.ndarray, hi: float
+) -> tuple[float, np.ndarray]:
+    """``(lo, v)``: (45) with the decay term holds strictly at ``beta = lo`` (at the point ``v``), decided by phase 1
+    in numpy from ``v0`` (a point at a smaller beta), by bisection in log scale below ``hi`` (where it does not
+    hold) to :data:`~._decay.ALPHA_RTOL`; ``lo`` starts at what ``v0`` itself reaches."""
+    layout = _step3_problem(aug, dict(params, beta=0.0), Su)[0]
+    caps = _step3_caps(aug, params, layout)
+
+    def point(b: float, start: np.ndarray) -> np.ndarray | None:
+        fam = _step3_problem(aug, dict(params, beta=b), Su)[1]
+        lm = [L.at(MARGIN) for L in fam]
+        k = _soft(fam)
+        try:
+            return phase1(lm[:k], lm[k : k + 2] + caps, start)
+        except CentringError:
+            return None
+
+    u = layout.unpack(v0)
+    lo = min(max(loop_decay(aug, u["X"], [Su @ u["Y"] @ np.linalg.inv(u["X"])]) / (1 + 2 * MARGIN), 0.0), hi)
+    v = v0
+    while hi > max(lo, 1e-12 * hi) * (1 + ALPHA_RTOL):
+        mid = float(np.sqrt(lo * hi)) if lo > 0 else hi / 8
+        w = point(mid, v)
+        if w is None:
+            hi = mid
+            if lo == 0 and hi < 1e-6 * abs(mid) + 1e-300:
+                break
+        else:
+            lo, v = mid, w
+    return lo, v
+
+
+def step3(
+    aug: Augmented, params: dict, solver: str, *, beta: float | None = None, why: str | None = None
+) -> Step3:
+    """Step 3 (conditioned): one common gain K and X from (45)/(78); see the module docstring.
+
+    One feasibility solve gives a strictly feasible point (for a problem with many PSD cones, phase 1 in
+    numpy, :func:`_step3_numpy`; the conic solvers when it finds none);
+    :func:`~fte_casadi.design.core._barrier.centre` then minimises ``t`` along the central path to the unique
+    centred point, which does not depend on where it started.
+
+    The loop is asked to decay at least at ``beta``: the LMI :func:`~._lmis.lmi_decay` with the same X and Y
+    (``x^T X^-1 x`` decreases at least as ``exp(-2 beta t)`` for any blending of the rules). Given, a rate is
+    refused where (45) does not allow it; by default (``None``) it is :func:`~._decay.loop_decay_target` (twice
+    the open loop's slowest decay rate, or as fast as it diverges), lowered to ``ALPHA_FRACTION`` of the largest
+    rate (45) allows with it at these parameters where that is slower. The smallest gain of (45) alone is kept
+    where it meets the rate (then the rate LMI is not posed, and the design is the one without it); otherwise
+    the smallest gain is sought among the gains that make the loop that fast: never the gain 0 of a stable plant.
+    """
+    Su = input_scaling(aug)
+    tau = time_scale(aug)
+    layout, family, c, prob, res, v0 = _step3_start(aug, dict(params, beta=0.0), solver, Su, tau)
+    if beta is not None and beta > 0:  # the user's rate: posed, refused where (45) does not allow it
+        return _step3_at(aug, params, solver, Su, tau, float(beta), why or "set by the user", v0, refuse=True)
+    if beta is not None:
+        return _step3_result(aug, params, Su, layout, _centre3(aug, layout, family, c, res, v0), prob, res, solver,
+                             0.0, why or "set by the user: no rate asked")  # fmt: skip
+    # the default: the smallest gain of (45) alone where its loop is already fast enough (the rate's LMI is posed
+    # only where it binds: posed, it would move the centred point even where it does not)
+    (high, low), why = loop_decay_target(aug)
+    cen0 = _centre3(aug, layout, family, c, res, v0)
+    u = layout.unpack(cen0.v)
+    X0, K0 = u["X"] / u["s"], Su @ u["Y"] @ np.linalg.inv(u["X"])
+    fast0 = min(-float(np.max(np.linalg.eigvals(A[: aug.n, : aug.n] + B[: aug.n] @ K0).real))
+                for A, B in zip(aug.Abar, aug.Bbar))  # fmt: skip
+    certified0 = loop_decay(aug, X0, [K0]) * (1 - 4 * MARGIN)
+    if high <= 0 or fast0 >= high:
+        return _step3_result(aug, params, Su, layout, cen0, prob, res, solver, certified0,
+                             f"{why}; met by the smallest gain (45) allows: its loop decays at {fast0:.4g} per rule, "
+                             f"at {certified0:.4g} for any blending (the rate recorded)")  # fmt: skip
+    try:
+        out = _step3_at(aug, params, solver, Su, tau, high, why, v0, refuse=low < high)
+    except (InfeasibleDesignError, SolverFailedError):
+        if fast0 >= low:
+            return _step3_result(aug, params, Su, layout, cen0, prob, res, solver, certified0,
+                                 f"{why}, infeasible with (45) at these parameters; the smallest gain (45) allows decays "
+                                 f"at {fast0:.4g} per rule (>= {low:.4g}, no slower than asked at least), at "
+                                 f"{certified0:.4g} for any blending (the rate recorded)")  # fmt: skip
+        out = _step3_at(aug, params, solver, Su, tau, low, why + f"; {high:.4g} is infeasible with (45) at these "
+                        f"parameters, so at least {low:.4g}", v0, refuse=False)  # fmt: skip
+    out.low = low if out.beta > low else 0.0
+    return out
+
+
+def _step3_at(aug, params, solver, Su, tau, target: float, why: str, v_low, *, refuse: bool) -> Step3:
+    """Step 3 with the closed loop asked to decay at ``target``; where (45) does not allow it, refused (``refuse``)
+    or at ``ALPHA_FRACTION`` of the largest rate it allows (by bisection from ``v_low``, a point of (45) alone)."""
+    try:
+        layout, family, c, prob, res, v0 = _step3_start(aug, dict(params, beta=target), solver, Su, tau)
+    except (InfeasibleDesignError, SolverFailedError):
+        if refuse and why.startswith("set by the user"):
+            lo, _ = _beta_max(aug, params, Su, v_low, target)
+            raise InfeasibleDesignError(
+                f"LMI (45) with the closed loop's decay rate beta = {target:g} is infeasible at sigma = "
+                f"{params['sigma']:g}, gamma = {params['gamma']:g}: the largest rate it allows there is about "
+                f"{lo:.4g}; lower beta to <= {nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
+            ) from None
+        if refuse:
+            raise
+        lo, v0 = _beta_max(aug, params, Su, v_low, target)
+        target = ALPHA_FRACTION * lo
+        why += (f"; lowered to {ALPHA_FRACTION:g} x the largest decay rate (45) allows with it at these parameters "
+                f"(about {lo:.4g}, by bisection)")  # fmt: skip
+        layout, family, c = _step3_problem(aug, dict(params, beta=target), Su)
+        prob, res = None, SolveResult("phase 1 (numpy)", v0, 0.0)
+    cen = _centre3(aug, layout, family, c, res, v0)
+    out = _step3_result(aug, params, Su, layout, cen, prob, res, solver, target, why)
+    out.posed = True
+    return out
+
+
+def _centre3(aug: Augmented, layout: Layout, family: list, c: np.ndarray, res: SolveResult, v0: np.ndarray):
+    """The centred point of step 3 from the strictly feasible ``v0``."""
     v0 = v0.copy()  # t starts well above ||Y'||: the epigraph is then strictly feasible
     v0[layout.index("t")] = 2.0 * np.linalg.norm(layout.unpack(v0)["Y"], 2) + 1.0
-    res = replace(res, v=v0)
+    lmis = [L.at(MARGIN) for L in family]
     floor = 0.01 * max(np.linalg.norm(A[: aug.n, : aug.n], 2) for A in aug.Abar)
     try:
-        cen = centre(lmis, c, res.v, eta=ETA, floor=floor)
+        return centre(lmis, c, v0, eta=ETA, floor=floor)
     except CentringError as exc:
         raise SolverFailedError(
             f"step 3: the centring of the solver's point failed ({exc}); try the other solver"
         ) from None
+
+
+def _step3_result(aug, params, Su, layout, cen, prob, res, solver, b, why) -> Step3:
+    """The Step3 record of the centred point ``cen`` (the rate asked ``b``, and why)."""
+    if prob is None:  # the start came from the bisection's phase 1
+        prob = ConicProblem(layout, [])
     u = layout.unpack(cen.v)
     X = u["X"] / u["s"]
     K = Su @ u["Y"] @ np.linalg.inv(u["X"])
     notes = [
         f"step 3: one common gain K (K_j = K), inputs scaled by Su = diag({', '.join(f'{v:.4g}' for v in np.diag(Su))}), "
-        f"X = X'/s with I <= X' <= {_kappa(params):g} I, min ||Y'||: {prob.solves} feasibility solve ({res.status}"
+        f"X = X'/s with I <= X' <= {_kappa(params):g} I, min ||Y'|| with the closed loop's decay rate beta = {b:.4g} "
+        f"({why}): {prob.solves} feasibility solve ({res.status}"
         + (", on rescaled data" if res.rescaled else "") + f"), then {cen.newton_steps} Newton steps to the centred "
         f"point (gap {ETA:g} of the objective)"
     ]  # fmt: skip
-    notes += [f"step 3: {solver} warned: {w!r}" for w in res.warned] + [f"step 3: {r}" for r in repaired]
-    notes += [f"step 3: {x}" for x in prob.notes]
-    return Step3(X, K, res.status, prob.solves, prob.seconds, notes)
+    notes += [f"step 3: {solver} warned: {w!r}" for w in res.warned]
+    notes += [f"step 3: {x}" if not x.startswith("step 3: ") else x for x in prob.notes]
+    return Step3(X, K, res.status, prob.solves, prob.seconds, notes, beta=b, beta_why=why)
 
 
 # -- step 5 ----------------------------------------------------------------------------------
@@ -687,7 +846,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         names = {aug.n + aug.nbar + l2: [("x", aug.n), ("e", aug.nbar)] + ([("d2", l2)] if l2 else [])}
         raise _fail(f"LMI (46) with cond(Pbar) <= {prob.kappa:g}", res0, solver,
                     "its -sigma P^2 block must dominate the observer's coupling with the loop and the diffusion",
-                    worst_block(prob.feas.lmis, names))  # fmt: skip
+                    worst_block(prob.feas.lmis, names), lmi="46")  # fmt: skip
     n = aug.n
     decays = [
         -float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ K).real))
@@ -771,4 +930,5 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         observer,
         notes,
         pt["bound"],
+        prob.kappa,
     )

@@ -92,3 +92,44 @@ def cap_for_sample_time(prob, a: float, pt: dict, why: str, sample_time: float):
         f"Run the observer at a sample time <= {nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
         "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)"
     )
+
+
+#: the default closed loop's decay rate, as a multiple of the open loop's slowest one (a stable open loop)
+LOOP_SPEEDUP = 2.0
+#: where that rate is infeasible at the design's parameters, at least this multiple
+LOOP_AT_LEAST = 1.25
+
+
+def loop_decay_target(aug) -> tuple[tuple[float, float], str]:
+    """``((asked, at_least), why)``: the decay rates asked of the closed loops ``A_i + B_i K`` by default.
+
+    A control engineer expects the loop to be faster than the plant left alone, with a gain that is not
+    negligible against it. For a stable open loop (every ``A_i`` Hurwitz), :data:`LOOP_SPEEDUP` times its slowest
+    decay rate ``min_i -max Re eig(A_i)`` is asked, and at least :data:`LOOP_AT_LEAST` times it where that is
+    infeasible; for an open loop that diverges, the rate at which it grows (the mirror image a smallest
+    stabilising gain gives), or its slowest decaying mode where that is faster; for a marginal one (an
+    integrator), its slowest decaying mode. Both zero (no requirement) only for a plant without a decaying mode
+    (every eigenvalue on the imaginary axis)."""
+    n = aug.n
+    eigs = [np.linalg.eigvals(A[:n, :n]) for A in aug.Abar]
+    rho = max(float(np.max(np.abs(e))) for e in eigs) if n else 0.0
+    decay_ol = min(-float(np.max(e.real)) for e in eigs) if n else 0.0
+    tiny = 1e-9 * max(rho, 1e-300)
+    slow = [-float(x.real) for e in eigs for x in e if -x.real > tiny]
+    slowest = min(slow) if slow else 0.0
+    if decay_ol > tiny:
+        return (LOOP_SPEEDUP * decay_ol, LOOP_AT_LEAST * decay_ol), (
+            f"asked {LOOP_SPEEDUP:g} x the open loop's slowest decay rate {decay_ol:.4g} (the default: a loop faster "
+            "than the plant left alone)"
+        )
+    if decay_ol < -tiny:
+        b = max(-decay_ol, slowest)
+        return (b, b), (
+            f"the open loop diverges at the rate {-decay_ol:.4g}: asked to decay at least at {b:.4g} (the default)"
+        )
+    return (slowest, slowest), (
+        f"the open loop is marginally stable: asked to decay at least as fast as its slowest decaying mode "
+        f"({slowest:.4g}, the default)"
+        if slowest > 0
+        else "the open loop has no decaying mode: no rate asked"
+    )

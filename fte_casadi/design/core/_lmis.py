@@ -32,7 +32,7 @@ from .._augment import Augmented
 from ._linalg import sym as _sym
 
 __all__ = ["LMI", "LMIS", "register", "unregister", "block_sizes", "distinct", "theta_lmi_max_eig",
-           "lmi45", "lmi46", "lmi55", "lmi64", "lmi45_kron", "lmi46_kron", "lmi46_terms", "sliding_kron",
+           "lmi45", "lmi_decay", "lmi_decay_kron", "loop_decay", "lmi46", "lmi55", "lmi64", "lmi45_kron", "lmi46_kron", "lmi46_terms", "sliding_kron",
            "sliding_mismatch", "diffusion_coupling"]  # fmt: skip
 
 
@@ -88,6 +88,38 @@ def lmi45_kron(aug: Augmented, i: int):
     sizes = (n, n, p, ld)
     E1, E2, E3 = (_selector(sizes, b) for b in range(3))
     return [(E1, A.T @ E1 + W.T @ E2 + C.T @ E3), (E2, -0.5 * E2)]
+
+
+def lmi_decay(aug: Augmented, i: int, X: np.ndarray, Y: np.ndarray, beta: float) -> np.ndarray:
+    """Left side of the closed loop's decay-rate LMI for rule i and gain ``Y = Y_j``:
+    ``A_i X + X A_i^T + B_i Y + Y^T B_i^T + 2 beta X``. With X common to the rules (and to (45)), negative for
+    every rule means ``V = x^T X^-1 x`` decreases at least as ``exp(-2 beta t)`` along ``xdot = (A(h) + B(h) K)
+    x`` for ANY blending ``h`` of the rules: the loop decays at least at ``beta`` (no noise, no d). Not in the
+    paper: the conditioned variant's requirement on the controller, as ``alpha`` is on the observer."""
+    A, B = aug.Abar[i][: aug.n, : aug.n], aug.Bbar[i][: aug.n]
+    return _sym(A @ X + X @ A.T + B @ Y + Y.T @ B.T + 2 * beta * X)
+
+
+def lmi_decay_kron(aug: Augmented, i: int, beta: float):
+    """How X enters :func:`lmi_decay` (:func:`lmi45_kron`): ``(A_i + beta I) X + X (A_i + beta I)^T``."""
+    A = aug.Abar[i][: aug.n, : aug.n]
+    return [(np.eye(aug.n), A.T + beta * np.eye(aug.n))]
+
+
+def loop_decay(aug: Augmented, X: np.ndarray, K) -> float:
+    """The largest ``beta`` for which :func:`lmi_decay` holds at ``(X, K_j)`` for every rule and gain: the decay
+    rate of the closed loop that X certifies for any blending of the rules, exactly,
+    ``min_ij lambda_min(X^-1/2 (-(A_i + B_i K_j) X - X (A_i + B_i K_j)^T) X^-1/2) / 2`` (negative: not even
+    stable with this X)."""
+    Xs = _sym(X)
+    w, V = np.linalg.eigh(Xs)
+    Xi = (V / np.sqrt(w)) @ V.T
+    best = np.inf
+    for i in range(aug.r):
+        for j in distinct(K):
+            M = lmi_decay(aug, i, Xs, K[j] @ Xs, 0.0)
+            best = min(best, -0.5 * float(np.linalg.eigvalsh(_sym(Xi @ M @ Xi))[-1]))
+    return float(best)
 
 
 def lmi46_kron(aug: Augmented, i: int, K: np.ndarray, T: np.ndarray):
@@ -281,6 +313,14 @@ def _at_45(aug, d: dict, params: dict):
             yield lmi45(aug, i, X, K[j] @ X, s, g, g1)
 
 
+def _at_decay(aug, d: dict, params: dict):
+    beta = float(params.get("beta", 0.0))
+    X, K = d["X"], d["K"]
+    for i in range(aug.r):
+        for j in distinct(K):
+            yield lmi_decay(aug, i, X, K[j] @ X, beta)
+
+
 def _at_46(aug, d: dict, params: dict):
     s, _, g1, g2 = _parameters(params)
     K = d["K"]
@@ -304,6 +344,8 @@ def _theta_max_eig(L: np.ndarray, blocks) -> float:
 
 register(LMI("45", "78", "the state-feedback loop: X, K_j, the attenuation gamma of d (step 3)", _at_45,
              lambda aug: [aug.n, aug.n, aug.p, aug.ld]))  # fmt: skip
+register(LMI("decay", None, "the closed loop's decay rate beta (params.beta, 0 when absent): A_i X + X A_i^T + "
+             "B_i Y_j + Y_j^T B_i^T + 2 beta X < 0 (step 3; not in the paper)", _at_decay, lambda aug: [aug.n]))  # fmt: skip
 register(LMI("46", "79", "the observer: Pbar, Q_i at the loop's K_j, the attenuation gamma1 (step 5)", _at_46,
              lambda aug: [aug.n, aug.ld, aug.nbar] + ([aug.Mbar[0].shape[1]] if aug.Mbar[0].shape[1] else [])))  # fmt: skip
 register(LMI("55", "80", "the sliding surface (20): ||J1^T T^T Pbar - N Cbar||^2 <= theta", _at_55,

@@ -1,0 +1,102 @@
+"""How far each fault's estimate moves while only another fault is present: the observer's cross-talk.
+
+In a sensor-fault window the loop without tolerant control already uses the observer's ``xhat``, from which
+the observer removes the sensor fault; tolerant control adds only ``Kf fhat``, whose sensor columns are zero
+(``Kf = -pinv(B) Bf``), so what it feeds into the plant there is the actuator-fault estimate's cross-talk from
+the sensor fault. :func:`crosstalk` measures that cross-talk on the design itself, noise-free: after a unit
+step of fault q alone, the estimate error of the augmented observer is ``e(t) = exp(R_i t) T e_q`` (the step
+moves the state, not z; ``xbarhat = z + H y`` takes ``H Cbar e_q`` of it at once), so that
+
+    fhat_q(t) = 1 - [exp(R_i t) T e_q]_q,     fhat_j(t) = -[exp(R_i t) T e_q]_j   (j != q),
+
+and ``kappa[j, q] = sup_t |fhat_j(t)| / |fhat_q(t)|``, the largest over the rules (each frozen), is how much
+of fault j's estimate fault q's estimate can explain at any moment. The step's gate
+(:func:`fte_casadi.step.accommodation_gate`, rule ``"explain"``) compensates fault j only while
+``|fhat_j| >= threshold_j + sum_q kappa[j, q] |fhat_q|``: detected, and more than the other faults' estimates
+can explain. A fault whose step is a sum of steps of one sign (a ramp, a stuck sensor drifting away) gives a
+weighted mean of such ratios, below the same bound. Noise, the unknown inputs and the blending of the rules
+are not in it: the gate's effect is measured by the Monte Carlo, not certified (docs/design.md).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+__all__: list[str] = []  # internal: docs/design.md describes it
+
+#: a ratio beyond this is reported as this (fault q's estimate explains any size of fault j's: the pair is not
+#: told apart by this observer)
+KAPPA_CAP = 1e3
+#: points of the logarithmic time grid, from 1e-6 of the fastest mode's time constant to 30 of the slowest's
+POINTS = 400
+#: the largest ratio found (on the grid, refined around its peak) is rounded up by this fraction: a bound
+REFINE_MARGIN = 0.01
+
+
+class _StepResponse:
+    """``(exp(R t) - I) e0`` for many t, without the cancellation of ``1 - exp(..)`` at small t (the ratio's
+    limit at t -> 0 is often its largest): expm1 of the eigenvalues, or the phi-function by a block expm where
+    the eigenvectors are ill-conditioned."""
+
+    def __init__(self, R: np.ndarray):
+        self.R = R
+        w, V = np.linalg.eig(R)
+        self.w, self.V, self.Vi = w, V, None
+        if np.linalg.cond(V) < 1e8:
+            self.Vi = np.linalg.inv(V)
+
+    def delta(self, e0: np.ndarray, ts: np.ndarray) -> np.ndarray:
+        if self.Vi is not None:
+            return np.real((self.V[None, :, :] * np.expm1(np.outer(ts, self.w))[:, None, :]) @ (self.Vi @ e0))
+        return np.array([_phi_step(self.R, t) @ e0 for t in ts])
+
+    def ratios(self, e0: np.ndarray, own: int, other: int, ts: np.ndarray) -> np.ndarray:
+        """``|fhat_other(t)| / |fhat_own(t)|`` after a unit step of the fault at ``own``."""
+        D = self.delta(e0, ts)
+        f_own = np.abs((1.0 - e0[own]) - D[:, own])
+        f_other = np.abs(e0[other] + D[:, other])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(
+                f_own > 0, f_other / np.where(f_own > 0, f_own, 1.0), np.where(f_other > 0, np.inf, 0.0)
+            )
+
+
+def _phi_step(R: np.ndarray, t: float) -> np.ndarray:
+    """``exp(R t) - I`` accurately for small ``t``: ``R t phi1(R t)`` from ``expm([[R t, I], [0, 0]])``."""
+    k = R.shape[0]
+    M = np.zeros((2 * k, 2 * k))
+    M[:k, :k] = R * t
+    M[:k, k:] = np.eye(k)
+    phi = sla.expm(M)[:k, k:]
+    return (R * t) @ phi
+
+
+def crosstalk(R, T, n: int, lf: int) -> np.ndarray:
+    """``kappa`` (lf x lf, zero diagonal): the largest ratio ``|fhat_j(t)| / |fhat_q(t)|`` after a unit step of
+    fault q alone, over the rules ``R`` (each ``T Abar_i - L1_i Cbar``) and a logarithmic time grid; see the
+    module docstring. Capped at :data:`KAPPA_CAP`; zeros for a rule whose observer does not decay."""
+    T = np.asarray(T, dtype=float)
+    kappa = np.zeros((lf, lf))
+    if lf < 2:
+        return kappa
+    for Ri in R:
+        Ri = np.asarray(Ri, dtype=float)
+        lam = np.linalg.eigvals(Ri)
+        if not np.all(lam.real < 0):
+            continue
+        slow, fast = float(np.min(-lam.real)), float(np.max(np.abs(lam)))
+        ts = np.geomspace(1e-6 / fast, 30.0 / slow, POINTS)
+        steps = _StepResponse(Ri)
+        for q in range(lf):
+            e0 = T[:, n + lf + q]
+            for j in range(lf):
+                if j == q:
+                    continue
+                ratio = steps.ratios(e0, n + lf + q, n + lf + j, ts)
+                k = int(np.argmax(ratio))
+                # the grid's largest, refined between its neighbours, then rounded up by REFINE_MARGIN
+                fine = np.geomspace(ts[max(k - 1, 0)], ts[min(k + 1, len(ts) - 1)], 65)
+                top = max(float(ratio[k]), float(np.max(steps.ratios(e0, n + lf + q, n + lf + j, fine))))
+                kappa[j, q] = max(kappa[j, q], min(top * (1 + REFINE_MARGIN), KAPPA_CAP))
+    return kappa
