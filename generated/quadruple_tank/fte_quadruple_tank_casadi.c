@@ -469,7 +469,17 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a28=(a10*a28);
   a30=(a30+a28);
   a28=-9.9999999999999989e-01;
-  a28=(a28*a27);
+  a34=1.;
+  a32=casadi_fabs(a27);
+  a31=2.6616269451891567e-02;
+  a09=5.1961258091637874e-01;
+  a20=casadi_fabs(a29);
+  a09=(a09*a20);
+  a31=(a31+a09);
+  a32=(a32/a31);
+  a34=(a34<=a32);
+  a34=(a27*a34);
+  a28=(a28*a34);
   a30=(a30+a28);
   a28=-3.;
   a30=casadi_fmax(a30,a28);
