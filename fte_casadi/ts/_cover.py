@@ -109,7 +109,7 @@ class GroupCover:
         """Per column of the group's premise values ``Z`` (k, N): inside the polytope (to ``tol``)?"""
         if self.polytope == "box":
             mn, mx = self.vertices.min(axis=0)[:, None], self.vertices.max(axis=0)[:, None]
-            t = tol * (1.0 + np.maximum(np.abs(mn), np.abs(mx)))
+            t = tol * np.maximum(np.abs(mn), np.abs(mx))  # relative: premises in any unit
             return np.all((Z >= mn - t) & (Z <= mx + t), axis=0)
         Tinv, W, c = self._map
         h = Tinv @ np.vstack([W @ (Z - c[:, None]), np.ones(Z.shape[1])])
