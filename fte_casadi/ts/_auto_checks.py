@@ -14,6 +14,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .._text import shorten
 from ..errors import BoundsError, DerivationError
 from ..model import Plant
 from ._bounds import premise_bounds
@@ -64,8 +65,7 @@ def expr_text(e: ca.SX, limit: int = 160) -> str:
                 memo[key] = ca.print_operator(v, args)
         return memo[key]
 
-    s = _strip(rec(e))
-    return s if len(s) <= limit else s[: limit - 3] + "..."
+    return shorten(_strip(rec(e)), limit)
 
 
 def _atomic(s: str) -> bool:
