@@ -37,6 +37,10 @@ def test_quadrotor_derives_to_64_rules_or_fewer(quad):
                                                                       ["r"]]  # fmt: skip
     assert ts.r == 48 <= MERGE_ABOVE and ts.r == int(np.prod([len(g.vertices) for g in ts.groups]))
     assert [p.expr for p in ts.premises if p.states == (6,)] == ["cos(phi)", "sin(phi)"]
+    # with the total thrust as the input, the tilt acts on vx, vy only through the thrust's coefficients, 0 at
+    # hover: derive says that no design exists, and why (tests/test_ts_reach.py checks such a refusal)
+    (note,) = [n for n in ts.notes if n.startswith("at the origin")]
+    assert "the mode s = 0 of px, py:" in note and "B[vx, thrust], B[vy, thrust] are 0 there" in note
 
 
 def test_quadrotor_model_is_exact_at_random_states(quad):
