@@ -20,15 +20,22 @@ extremes, which no configuration has). Here:
   the best value; not sampling alone). Its memberships are the barycentric coordinates, affine in
   ``z`` and in closed form: ``h = T^-1 [W (z - c); 1]``;
 - the box of the group's premises (today's product of sector weights) is the alternative; each group
-  takes the one with fewer vertices (a single premise: the sector, rule 1 at ``max``).
+  takes the one with fewer vertices (a single premise: the sector, rule 1 at ``max``);
+- where one group per set of states would give more than :data:`MERGE_ABOVE` rules, groups whose states are
+  nested are covered together (:func:`_groups`): a quadrotor's premises of roll alone join those of roll
+  and pitch, 48 rules instead of 108, each merged simplex looser around its image;
+- an image of :data:`LARGE_IMAGE` dimensions or more gets its simplex's normals from a simplex inside the
+  sampled image (successive projections) or a regular one turned at random, improved by a budgeted search
+  (:func:`_large_simplex`), since the search from five starts over all normals takes minutes there.
 
 Rules are the products of the groups' vertices, the first group varying slowest. Outside the
 polytope (outside the region) the barycentric weights are clipped at 0 and renormalised, so they stay
 a convex sum, as the sector weights saturate.
 
 Not done: Baranyi's tensor-product (TP) transformation (HOSVD of the sampled model, then a convex
-hull of its weighting functions), which can give fewer rules at a stated approximation error; and a
-descriptor form keeping ``M(q)`` on the left.
+hull of its weighting functions), which can give fewer rules at a stated approximation error (exact, the
+quadrotor's ranks 3 in roll, 5 in pitch, 3 in yaw and 2 in the yaw rate give 90 rules); and a descriptor form
+keeping ``M(q)`` on the left.
 """
 
 from __future__ import annotations
