@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import atomic_write_text
+from ._text import shorten
 from .design import DesignOptions
 from .design import design as run_design
 from .design.core._lmis import LMIS
@@ -190,7 +191,7 @@ def _c_section(d, folder: Path) -> tuple[list[str], dict]:
         b = {
             "casadi_us": None,
             **memory_report(d, sample_time=sample_time),
-            "note": f"timings: not measured ({' '.join(str(exc).split())[:200]})",
+            "note": f"timings: not measured ({shorten(exc, 200)})",
         }
     info["bench"] = b
     out += [
@@ -312,7 +313,7 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
                 designs[variant] = protected(designs[variant], plant, sc, paths=sc.paths, seed=seed)
         except (InfeasibleDesignError, SolverFailedError) as exc:
             designs[variant] = " ".join(str(exc).split())
-            log(f"[{name}]   variant {variant} failed: {designs[variant][:160]}")
+            log(f"[{name}]   variant {variant} failed: {shorten(designs[variant], 160)}")
     d = designs["conditioned"]
     if isinstance(d, str):
         raise InfeasibleDesignError(f"{name}: the conditioned design failed: {d}")

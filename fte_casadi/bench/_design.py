@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 
+from fte_casadi._text import shorten
 from fte_casadi.design._api import design
 from fte_casadi.errors import FteError
 
@@ -46,7 +47,7 @@ def bench_design(ts, *, sample_time: float | None = None, repeats: int = 3, repe
                 "solver_s": d.timings["solver_s"],
             }
         except FteError as exc:
-            out[solver] = {"error": " ".join(str(exc).split())[:200]}
+            out[solver] = {"error": shorten(exc, 200)}
     try:
         wall, old = _best(lambda: design_01(ts), repeats_01)
         out["design_0.1"] = {
@@ -54,7 +55,7 @@ def bench_design(ts, *, sample_time: float | None = None, repeats: int = 3, repe
             "certified": not any(v >= 0 for v in old["checks"]["lmi_max_eig"].values()),
         }
     except FteError as exc:
-        out["design_0.1"] = {"error": " ".join(str(exc).split())[:200]}
+        out["design_0.1"] = {"error": shorten(exc, 200)}
     if "wall_s" in out["CLARABEL"] and "wall_s" in out["design_0.1"]:
         out["speedup_vs_0.1"] = out["design_0.1"]["wall_s"] / out["CLARABEL"]["wall_s"]
     if len(designs) == 2:

@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from .._text import shorten
+
 __all__ = ["bench_growth"]  # public: docs/api.md
 
 #: (n, q): n states, q sin couplings (2^q rules); what ``fte bench`` runs by default
@@ -33,7 +35,11 @@ def bench_growth(members=MEMBERS, log=lambda s: None) -> list[dict]:
         try:
             row = json.loads(p.stdout.strip().splitlines()[-1])
         except (ValueError, IndexError):
-            row = {"n": n, "q": q, "error": (p.stderr.strip().splitlines() or ["no output"])[-1][:300]}
+            row = {
+                "n": n,
+                "q": q,
+                "error": shorten((p.stderr.strip().splitlines() or ["no output"])[-1], 300),
+            }
         row["baseline_s"] = BASELINE_S.get((n, q))
         rows.append(row)
     return rows
@@ -46,7 +52,7 @@ def growth_lines(rows: list[dict]) -> list[str]:
            "  states rules  at defaults  one design  peak RSS  certified  baseline (0.1)"]  # fmt: skip
     for r in rows:
         if "error" in r:
-            out.append(f"  {r['n']:6d} {2 ** r['q']:5d}  failed: {r['error'][:120]}")
+            out.append(f"  {r['n']:6d} {2 ** r['q']:5d}  failed: {shorten(r['error'], 120)}")
             continue
         issue = f"{r['baseline_s']:.2f} s" if r.get("baseline_s") else "-"
         out.append(f"  {r['n']:6d} {r['rules']:5d}  {r['wall_s']:9.2f} s  {r['one_design_s']:8.2f} s  "

@@ -18,6 +18,7 @@ import time
 def measure(n: int, q: int) -> dict:
     """The row of the chain ``(n, q)``: rules, wall time at the defaults (with the parameter search), the
     time of one design at the parameters found, and the peak resident memory of this process (MB)."""
+    from fte_casadi._text import shorten
     from fte_casadi.bench._plant_chain import chain
     from fte_casadi.design import design
     from fte_casadi.errors import FteError
@@ -34,7 +35,7 @@ def measure(n: int, q: int) -> dict:
         design(ts, sample_time=1e-3, sigma=d.params.sigma, gamma=d.params.gamma)
         out["one_design_s"] = time.perf_counter() - t1
     except FteError as exc:
-        out["error"] = " ".join(str(exc).split())[:300]
+        out["error"] = shorten(exc, 300)
     out["wall_s"] = time.perf_counter() - t0 - out.get("one_design_s", 0.0)
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return out

@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
+from .._text import shorten
 from ..errors import FteError, ParameterError
 from ._common import _check_paths, _check_seed, _guard, _ours, _outputs, _writable_target
 from ._targets import _design_or_plant, _need_plant, _plant_option
@@ -206,9 +207,10 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
         else "NOT better than the default on every fault metric (a trade-off: see the rows marked worse)"))  # fmt: skip
     reasons: dict[str, int] = {}
     for r in failed:
-        key = re.sub(r"-?\d+\.\d+(e[-+]?\d+)?|\d+e[-+]?\d+", "#", ":".join((r.reason or "").split(":")[:2]))[
-            :110
-        ]
+        key = shorten(
+            re.sub(r"-?\d+\.\d+(e[-+]?\d+)?|\d+e[-+]?\d+", "#", ":".join((r.reason or "").split(":")[:2])),
+            110,
+        )
         reasons[key] = reasons.get(key, 0) + 1
     for why, k in sorted(reasons.items(), key=lambda t: -t[1]):
         say(f"  failed trials: {k} x {why}")

@@ -14,6 +14,7 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from .._text import shorten
 from ..errors import FteError, InfeasibleDesignError
 from ..ts import TSModel
 from . import _diffusion as diffusion
@@ -164,7 +165,7 @@ def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOption
             "observer for it at the parameters tried."
             if d is not None
             else f" Even with the diffusion scaled by {tol.feasible:.3g} the whole design is not certified: "
-            f"{why[0][1][:300] if why else 'not certified'}."
+            f"{shorten(why[0][1], 300) if why else 'not certified'}."
         )
     return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.{fix}")
 
@@ -201,7 +202,7 @@ def _other_solver(ts, options: DesignOptions, exc: Exception, where: str, retrie
             "plant's units"
         ) from None
     d = _attempt(ts, options.replace(solver=other), retried=f"{solver} in {where}: {exc}")
-    d.status.insert(0, f"{solver} failed numerically in {where} ({' '.join(str(exc).split())[:200]}); "
+    d.status.insert(0, f"{solver} failed numerically in {where} ({shorten(exc, 200)}); "
                        f"designed with {other} instead")  # fmt: skip
     return d
 
@@ -270,7 +271,7 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                 try:
                     d = design(ts, base.replace(gamma=gt, sigma=float(sg)))
                 except FteError as exc:
-                    why = " ".join(str(exc).split())[:100]
+                    why = shorten(exc, 100)
                     if "(46)" in why and refused_46 is None:
                         refused_46 = dict(params, gamma=gt, sigma=float(sg), gamma1=g1)
                     continue

@@ -14,6 +14,7 @@ Every line is the outcome of a whole design (both steps and the certificate); no
 
 from __future__ import annotations
 
+from .._text import shorten
 from ..errors import FteError
 from ._options import DesignOptions
 from ._record import Design
@@ -62,7 +63,7 @@ def remedies(
         try:
             d2 = design_fn(ts, base.replace(diagnose=False, allow_uncertified=False, **change))
         except FteError as exc:
-            out.append(f"{what}: refused ({' '.join(str(exc).split())[:160]})")
+            out.append(f"{what}: refused ({shorten(exc, 160)})")
             continue
         t2 = _slowest(d2)
         if t2 is None:

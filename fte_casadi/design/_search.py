@@ -13,6 +13,7 @@ import dataclasses
 from collections.abc import Callable
 
 from .._rounding import nice_floor
+from .._text import shorten
 from ..errors import FteError
 from ._options import DesignOptions, gamma_size, round_gamma
 from ._record import Design
@@ -56,7 +57,7 @@ def refusals(refused: list) -> str:
             continue
         seen.add(kind)
         at = ", ".join(f"{k} = {v:g}" for k, v in change.items())
-        out.append(f"at {at}: {why[:700]}")
+        out.append(f"at {at}: {shorten(why, 700)}")
     return (" The values tried were refused for other reasons: " + "; ".join(out[:2]) + ".") if out else ""
 
 
@@ -109,8 +110,7 @@ def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, gene
     for change, why in trials():
         d = try_design(attempt, ts, options, refused, **change)
         if d is not None:
-            first = " ".join(str(exc).split())
-            first = first if len(first) <= 200 else first[:200].rsplit(" ", 1)[0] + " ..."
+            first = shorten(exc, 200)
             chosen = {k: {"value": v, "why": f"the generic default {params[k]:g} failed ({first}); {why}; "
                           f"{k} = {v:g} is the first value tried that gives a certified design"}
                       for k, v in change.items()}  # fmt: skip

@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import casadi as ca
 import numpy as np
 
+from .._text import shorten
 from ..errors import PlantError
 from ._finite import check_finite
 from ._record import Plant, _column, _units
@@ -56,14 +57,14 @@ def _linearity(
                 bad = [var_names[k] for k in range(var.numel()) if ca.depends_on(e, var[k])]
                 if auto:
                     raise PlantError(
-                        f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {str(e)[:120]} "
+                        f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {shorten(e, 120)} "
                         f"depends on {bad}. Inputs, unknown inputs and faults must enter affinely (their coefficients "
                         "may depend on the states, which gives premises of their own). Rewrite that term: e.g. take "
                         "the nonlinear function of the input (v = sin(u)) as the input and invert it in the controller, "
                         "or model the actuator as a state"
                     )
                 raise PlantError(
-                    f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {str(e)[:120]} "
+                    f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {shorten(e, 120)} "
                     f"depends on {bad}. This term is not covered by any premise: declare a premise "
                     "variable for it (b.premise(name, expr)) and write the equation with its symbol, "
                     "so that for fixed premises the plant is linear in states, inputs, unknown inputs and faults, "

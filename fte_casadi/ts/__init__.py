@@ -19,6 +19,7 @@ from ._model import Fidelity as Fidelity
 from ._model import LocalModel as LocalModel
 from ._model import Premise as Premise
 from ._model import TSModel as TSModel
+from ._reach import reach_notes
 from ._sector import sector_local_models
 
 
@@ -63,7 +64,7 @@ def structure(plant: Plant, *, seed: int = 0, vertices: str | None = None) -> TS
         vertices = None  # operating points: no premise to cover
         premises, models, premise_fn, membership_fn = linearised_local_models(plant)
     _finite_models(plant, models)
-    return TSModel(
+    ts = TSModel(
         plant,
         kind,
         premises,
@@ -77,6 +78,8 @@ def structure(plant: Plant, *, seed: int = 0, vertices: str | None = None) -> TS
         groups,
         vertices,
     )
+    unreached = reach_notes(ts)  # a mode at the origin no feedback of the model reaches: no design exists
+    return dataclasses.replace(ts, notes=ts.notes + unreached) if unreached else ts
 
 
 def derive(

@@ -15,16 +15,20 @@ exactly in the form the sector method needs, ``f = A(z) x + B(z) u + Bd(z) d + B
    a factor (``x1 * x2``, ``x1**3``) the factor is divided out and there is no singularity.
    Otherwise ``c_j`` has a removable singularity at ``xj = 0``, where its value is the partial
    derivative ``dh/dxj``. For a smooth term the quotient is replaced, where ``|xj| <``
-   :data:`TAYLOR_BAND`, by its Taylor expansion ``d1 + d2 xj/2 + d3 xj^2/6`` (exact at 0): the
-   quotient itself loses ``eps |h| / |xj|`` to cancellation near 0 (measured: ``(exp(x) - 1)/x``
+   :data:`TAYLOR_BAND` ``x s_j``, by its Taylor expansion ``d1 + d2 xj/2 + d3 xj^2/6`` (exact at 0):
+   the quotient itself loses ``eps |h| / |xj|`` to cancellation near 0 (measured: ``(exp(x) - 1)/x``
    is wrong by 1.0 at ``x = 1e-17`` with a fill at 0 only; with the band the coefficient of a
    unit-scale term is within 7e-13 of its exact value everywhere, of ``sin(100 x)`` within 8e-11,
-   and the product ``c_j xj`` always at round-off). A term with a kink (``fabs``, ``fmin``,
+   and the product ``c_j xj`` always at round-off). ``s_j`` is the state's scale on the region,
+   ``max(|lo_j|, |hi_j|)`` (:func:`state_scale`): both errors depend on ``xj`` relative to the
+   length over which ``h`` varies, so a band in the state's own size gives the same coefficient
+   whatever unit the state is written in (a gap in m or in mm), and the band of a state on [-1, 1]
+   is ``TAYLOR_BAND`` itself. A term with a kink (``fabs``, ``fmin``,
    ``if_else``...) may have a different slope on each side of 0: it keeps the exact quotient and
    is filled at ``xj = 0`` only.
 3. Every coefficient that is not constant is a premise candidate. Candidates that are affine
    functions of one another (``c = alpha + beta g(x)``, tested at 64 random points of the
-   region, then used symbolically) share one premise ``g``: the manipulator's ``sin(theta_l)``
+   region to 1e-9 of the coefficient's own size, then used symbolically) share one premise ``g``: the manipulator's ``sin(theta_l)``
    in drift and diffusion gives one premise and the paper's two rules.
 4. Normalisation and orientation. A premise is the coefficient of the first candidate of its
    group, in row order (drift before diffusion) and then column order, neither shifted nor
@@ -55,10 +59,11 @@ import numpy as np
 
 from ..errors import BoundsError, DerivationError
 from ..model import Plant
-from ._auto_checks import check_term, expr_text
+from ._auto_checks import TAYLOR_BAND, check_term, expr_text, state_scale
 from ._bounds import premise_bounds
+from ._cover import estimate_rules, plan_groups
 
-__all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYLOR_BAND"]
+__all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYLOR_BAND", "state_scale"]
 
 #: above this many premises (64 rules) derive warns; above MAX_PREMISES it refuses
 WARN_PREMISES = 6
@@ -67,8 +72,8 @@ MAX_PREMISES = 10
 SEARCHES = 200
 #: the orders of the states tried for the telescoping (all of them up to 6 states in shared terms)
 MAX_ORDERS = 720
-#: the quotient of a smooth term is replaced by its Taylor expansion where |x_j| < TAYLOR_BAND
-TAYLOR_BAND = 1e-4
+#: a constant offset within this x the sum of the sizes of the constants it adds up is round-off: 0
+ROUNDOFF_SUM = 16 * np.finfo(float).eps
 #: operations with a kink or a jump: such a term keeps its exact quotient (filled at 0 only)
 _NONSMOOTH = {getattr(ca, k) for k in ("OP_FABS", "OP_SIGN", "OP_FLOOR", "OP_CEIL", "OP_FMOD", "OP_FMIN",
               "OP_FMAX", "OP_IF_ELSE_ZERO", "OP_LT", "OP_LE", "OP_EQ", "OP_NE", "OP_NOT", "OP_AND", "OP_OR",
@@ -162,11 +167,14 @@ def _divide(h: ca.SX, xj: ca.SX) -> ca.SX | None:
     return None
 
 
-def _coefficient(h: ca.SX, x: ca.SX, j: int, smooth: bool, later=None) -> tuple[ca.SX, str]:
+def _coefficient(
+    h: ca.SX, x: ca.SX, j: int, smooth: bool, later=None, band: float = TAYLOR_BAND
+) -> tuple[ca.SX, str]:
     """``(c_j, text)``: ``[h(.., xj, 0..) - h(.., 0, 0..)] / xj``, its singularity at ``xj = 0`` filled.
 
     ``later``: the states telescoped after ``xj`` (set to 0 in both values); by default those after it
-    in the plant's order."""
+    in the plant's order. ``band``: where ``|xj| < band`` a smooth term's quotient is replaced by its
+    Taylor expansion (``TAYLOR_BAND`` x the state's scale)."""
     n = x.numel()
     xj = x[j]
     later = list(range(j + 1, n)) if later is None else list(later)
@@ -180,25 +188,28 @@ def _coefficient(h: ca.SX, x: ca.SX, j: int, smooth: bool, later=None) -> tuple[
         return q, expr_text(q)
     d1 = ca.jacobian(upto, xj)
     if not smooth:
-        return ca.if_else(xj == 0, ca.substitute(d1, xj, ca.DM(0.0)), guarded(q, xj, xj == 0)), expr_text(q)
+        return (
+            ca.if_else(xj == 0, ca.substitute(d1, xj, ca.DM(0.0)), guarded(q, xj, xj == 0, band)),
+            expr_text(q),
+        )
     d2 = ca.jacobian(d1, xj)
     d3 = ca.jacobian(d2, xj)
     t1, t2, t3 = (ca.substitute(v, xj, ca.DM(0.0)) for v in (d1, d2, d3))
     taylor = t1 + t2 * xj / 2 + t3 * xj**2 / 6
-    near = ca.fabs(xj) < TAYLOR_BAND
-    return ca.if_else(near, taylor, guarded(q, xj, near)), expr_text(q)
+    near = ca.fabs(xj) < band
+    return ca.if_else(near, taylor, guarded(q, xj, near, band)), expr_text(q)
 
 
-def guarded(q: ca.SX, xj: ca.SX, near: ca.SX) -> ca.SX:
-    """``q`` with ``xj`` moved to ``TAYLOR_BAND`` where ``near`` holds: the branch ``if_else`` discards.
+def guarded(q: ca.SX, xj: ca.SX, near: ca.SX, band: float = TAYLOR_BAND) -> ca.SX:
+    """``q`` with ``xj`` moved to ``band`` where ``near`` holds: the branch ``if_else`` discards.
 
     An ``SX`` ``if_else`` evaluates both branches (so does the C CasADi generates from it) and then
     keeps one; the quotient ``q = [h(xj) - h(0)] / xj`` evaluated at ``xj = 0`` is ``0/0`` there, a NaN
     that is thrown away but raises ``FE_INVALID`` (a trap, with floating-point exceptions enabled).
-    Evaluated at ``TAYLOR_BAND`` instead it is finite, and where the quotient is kept (``near`` false)
+    Evaluated at ``band`` instead it is finite, and where the quotient is kept (``near`` false)
     ``xj`` is itself: ``if_else`` adds ``0 + xj``, exact, so the numbers do not change.
     """
-    return ca.substitute(q, xj, ca.if_else(near, TAYLOR_BAND, xj))
+    return ca.substitute(q, xj, ca.if_else(near, band, xj))
 
 
 def _value(e: ca.SX) -> float:
@@ -222,7 +233,9 @@ class _Term:
 
 def _split(plant: Plant, kind: str) -> tuple[list[_Piece], list[_Term], np.ndarray]:
     """Coefficient pieces of the inputs of the drift or the diffusion, its terms in x (telescoped by
-    :func:`_state_pieces` along an order of the states), and its constant offset."""
+    :func:`_state_pieces` along an order of the states), and its constant offset (an entry within round-off
+    of the constant terms it sums, ``ROUNDOFF_SUM`` x their sizes, is 0: ``g - k i0^2 / (m x0^2)`` at the
+    operating point cancels to 0 in m and to -1.8e-12 in mm)."""
     x = plant.x
     if kind == "drift":
         rows = plant.drift_z
@@ -235,7 +248,7 @@ def _split(plant: Plant, kind: str) -> tuple[list[_Piece], list[_Term], np.ndarr
     others = (
         ca.vertcat(*[v for _, v, _ in vars_ if v.numel()]) if any(v.numel() for _, v, _ in vars_) else None
     )
-    pieces, terms, offset = [], [], np.zeros(plant.n)
+    pieces, terms, offset, size = [], [], np.zeros(plant.n), np.zeros(plant.n)
     kr = 0 if kind == "drift" else 1
     for i in range(plant.n):
         row = f"{kind} row {plant.state_names[i]!r}"
@@ -257,6 +270,7 @@ def _split(plant: Plant, kind: str) -> tuple[list[_Piece], list[_Term], np.ndarr
             h0 = ca.substitute(h, others, ca.DM.zeros(others.numel())) if others is not None else h
             if not ca.depends_on(h0, x):
                 offset[i] += k * _value(h0)
+                size[i] += abs(k * _value(h0))
                 continue
             z0 = _value(ca.substitute(h0, x, ca.DM.zeros(plant.n)))
             if not np.isfinite(z0):
@@ -266,8 +280,10 @@ def _split(plant: Plant, kind: str) -> tuple[list[_Piece], list[_Term], np.ndarr
                     "that the plant is finite at 0, or declare premises yourself (b.premise)"
                 )
             offset[i] += k * z0
+            size[i] += abs(k * z0)
             states = tuple(j for j in range(plant.n) if ca.depends_on(h0, x[j]))
             terms.append(_Term(kind, i, k, h0, _smooth(h0), states, row, term, (kr, i, ti, 1)))
+    offset[np.abs(offset) <= ROUNDOFF_SUM * size] = 0.0
     return pieces, terms, offset
 
 
@@ -284,7 +300,8 @@ def _state_pieces(plant: Plant, terms: list[_Term], order, cache: dict) -> list[
             later = tuple(sorted(k for k in t.states if pos[k] > pos[j]))
             key = (t_i, j, later)
             if key not in cache:
-                c, text = _coefficient(t.h0, x, j, t.smooth, later)
+                band = TAYLOR_BAND * state_scale(plant.region_lo[j], plant.region_hi[j])
+                c, text = _coefficient(t.h0, x, j, t.smooth, later, band)
                 cache[key] = (c, text) if ca.depends_on(c, x) else (ca.SX(_value(c)), "")
             c, text = cache[key]
             where = f"{t.where}: the coefficient of {plant.state_names[j]!r} in the term {t.text}"
@@ -300,8 +317,9 @@ def _order(plant: Plant, terms: list[_Term], inputs: list[_Piece], rng: np.rando
     so the plant's own order would decide the rules: ``(i_d, i_q, w)`` of a motor gives the premises
     ``i_d`` and ``i_q``, ``(w, i_d, i_q)`` the single premise ``w``. Every order of the states that
     share a term with another is tried (up to :data:`MAX_ORDERS`), the one with the fewest premises
-    kept (then the fewest rules of the grouped cover, then the first by state names), so that the same
-    plant gets the same premises whatever the order its states are written in."""
+    kept (then the fewest rules of the grouped cover before groups are merged, :func:`_estimate_rules`; then
+    the first by state names), so that the same plant gets the same premises whatever the order its states
+    are written in."""
     n = plant.n
     cache: dict = {}
     names = plant.state_names
@@ -313,27 +331,37 @@ def _order(plant: Plant, terms: list[_Term], inputs: list[_Piece], rng: np.rando
     perms = itertools.permutations(mixed) if math.factorial(len(mixed)) <= MAX_ORDERS else [tuple(mixed)]
     pts = _sample_points(plant, rng)
     best = None
+    # per coefficient (the same object in every order that has it), its values; per list of coefficients (many
+    # orders give the same list), its score
+    values: dict[int, np.ndarray] = {}
+    scores: dict[tuple, tuple] = {}
     for perm in perms:  # in the order of the state names: the first best is the same for any plant order
         order = tuple(perm) + tuple(rest)
         pieces = _state_pieces(plant, terms, order, cache)
         cand = [p for p in inputs + pieces if p.text]
-        reps, _, _ = _group(plant, [p.expr for p in cand], None, pts)
-        deps = [frozenset(j for j in range(n) if ca.depends_on(cand[r].expr, plant.x[j])) for r in reps]
-        score = (len(reps), _estimate_rules(deps))
+        key = tuple(id(p.expr) for p in cand)
+        if key not in scores:
+            for p in cand:
+                if id(p.expr) not in values:
+                    fn = ca.Function("c", [plant.x], [p.expr]).map(pts.shape[1])
+                    values[id(p.expr)] = np.array(fn(pts)).ravel()
+            reps, _, _ = _group(plant, [p.expr for p in cand], None, pts, [values[k] for k in key])
+            deps = [frozenset(j for j in range(n) if ca.depends_on(cand[r].expr, plant.x[j])) for r in reps]
+            scores[key] = (len(reps), _estimate_rules(deps))
+        score = scores[key]
         if best is None or score < best[0]:
             best = (score, order, pieces)
     return best[1], best[2]
 
 
 def _estimate_rules(deps: list[frozenset]) -> int:
-    """Rules of the grouped cover of premises with these state sets (a simplex per connected group)."""
-    groups: list[tuple[set, int]] = []
-    for d in deps:
-        merged = [g for g in groups if g[0] & d]
-        rest = [g for g in groups if not g[0] & d]
-        states = set(d).union(*[g[0] for g in merged])
-        groups = rest + [(states, 1 + sum(g[1] for g in merged))]
-    return int(np.prod([min(2**k, k + 1) for _, k in groups])) if groups else 1
+    """Rules of the grouped cover of premises with these state sets, at most: a group per set of states, a
+    simplex or a box each, before groups of nested states are merged (:func:`~fte_casadi.ts._cover.plan_groups`
+    merges them only above 64 rules, at the price of looser vertices: an order is not chosen for it). A
+    quadrotor's kinematics telescoped with the angles first gives premises of the angles alone
+    (``sin(phi) tan(theta)``; 108 rules before merging, 48 after), with a rate first premises of three states
+    (``cos(phi) tan(theta) r / theta``; 324 before, 32 after but 2.2 times the image's extent away)."""
+    return estimate_rules(plan_groups([tuple(sorted(d)) for d in deps], merge=False))
 
 
 def _sample_points(plant: Plant, rng: np.random.Generator, N: int = 64) -> np.ndarray:
@@ -345,15 +373,13 @@ def _sample_points(plant: Plant, rng: np.random.Generator, N: int = 64) -> np.nd
     return pts
 
 
-def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator | None, pts=None):
-    """A representative per candidate and ``(alpha, beta)`` with ``c = alpha + beta * rep``."""
+def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator | None, pts=None, vals=None):
+    """A representative per candidate and ``(alpha, beta)`` with ``c = alpha + beta * rep`` (``vals``: the
+    candidates' values at ``pts`` when already known)."""
     pts = _sample_points(plant, rng) if pts is None else pts
     N = pts.shape[1]
-    vals = (
-        np.array(ca.Function("cands", [plant.x], [ca.vertcat(*candidates)]).map(N)(pts))
-        if candidates
-        else None
-    )
+    if vals is None and candidates:
+        vals = np.array(ca.Function("cands", [plant.x], [ca.vertcat(*candidates)]).map(N)(pts))
     reps, rep_of, coef = [], [], []
     for k in range(len(candidates)):
         v = vals[k]
@@ -361,7 +387,7 @@ def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator | Non
         for r in reps:
             A = np.column_stack([np.ones(N), vals[r]])
             ab, *_ = np.linalg.lstsq(A, v, rcond=None)
-            if np.all(np.isfinite(ab)) and np.max(np.abs(A @ ab - v)) <= 1e-9 * (1.0 + np.max(np.abs(v))):
+            if np.all(np.isfinite(ab)) and np.max(np.abs(A @ ab - v)) <= 1e-9 * np.max(np.abs(v)):
                 found = (r, float(ab[0]), float(ab[1]))
                 break
         if found is None:
@@ -436,7 +462,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     for r in reps:
         members = [cand[k].where for k in range(len(cand)) if rep_of[k] == r]
         mn, mx, idx, gap = _bounds(plant, cand[r].expr, cand[r].text, members)
-        if mx - mn <= 1e-12 * (1.0 + abs(mx)):
+        if mx - mn <= 1e-12 * max(abs(mn), abs(mx)):  # relative: a coefficient in any unit
             value[r] = 0.5 * (mn + mx)
             continue
         sign[r] = -1.0 if _orient(plant, cand[r].expr, mn, mx) else 1.0

@@ -14,17 +14,29 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from .._text import shorten
 from ..errors import BoundsError, DerivationError
 from ..model import Plant
 from ._bounds import premise_bounds
 from ._fidelity import blended, sample_box
 
-__all__ = ["check_term", "check_exact", "expr_text", "EXACT_TOL"]
+__all__ = ["check_term", "check_exact", "expr_text", "EXACT_TOL", "TAYLOR_BAND", "state_scale"]
 
-#: an automatic sector model must match the plain equations to this, relative to max(1, |drift|)
+#: an automatic sector model must match the plain equations to this, relative to each row's largest value
 EXACT_TOL = 1e-9
-#: state values at which exactness is checked besides the random samples (the filled singularities)
-_NEAR_ZERO = (0.0, 1e-300, 1e-12, 1e-8, 1e-4 * (1 - 1e-9), 1e-4 * (1 + 1e-9), 1e-3)
+#: the automatic method replaces the quotient of a smooth term by its Taylor expansion where |x_j| < TAYLOR_BAND
+#: x the state's scale on the region (:func:`state_scale`; :mod:`._auto`)
+TAYLOR_BAND = 1e-4
+#: state values at which exactness is checked besides the random samples (the filled singularities and both
+#: sides of the Taylor band's edge), in units of each state's scale (0 and 1e-300 as they are)
+_NEAR_ZERO = (0.0, 1e-300, 1e-12, 1e-8, TAYLOR_BAND * (1 - 1e-9), TAYLOR_BAND * (1 + 1e-9), 1e-3)
+
+
+def state_scale(lo: float, hi: float) -> float:
+    """The size of a state on its region, ``max(|lo|, |hi|)``: what the automatic method's tolerances about
+    ``x_j = 0`` are relative to (1 for a state without bounds, or on the region [0, 0])."""
+    s = max(abs(lo), abs(hi)) if np.isfinite(lo) and np.isfinite(hi) else 1.0
+    return float(s) if s > 0 else 1.0
 
 
 def expr_text(e: ca.SX, limit: int = 160) -> str:
@@ -53,8 +65,7 @@ def expr_text(e: ca.SX, limit: int = 160) -> str:
                 memo[key] = ca.print_operator(v, args)
         return memo[key]
 
-    s = _strip(rec(e))
-    return s if len(s) <= limit else s[: limit - 3] + "..."
+    return shorten(_strip(rec(e)), limit)
 
 
 def _atomic(s: str) -> bool:
@@ -145,31 +156,55 @@ def check_term(h: ca.SX, plant: Plant, where: str) -> None:
             )
 
 
-def _worst(plant: Plant, ts, s: dict, scale: float):
-    """``(error, row text, x)`` of the largest error at the sample columns ``s``."""
+def _plain(plant: Plant, s: dict):
+    """The plain drift and diffusion at the sample columns ``s``."""
     N = s["x"].shape[1]
     tf = np.array(plant.drift_function().map(N)(s["x"], s["u"], s["d"], s["f"]))
     tg = np.array(plant.diffusion_function().map(N)(s["x"], s["u"], s["f"], s["d2"]))
+    return tf, tg
+
+
+def _plain_and_blended(plant: Plant, ts, s: dict, plain=None):
+    """The plain drift and diffusion at the sample columns ``s`` (``plain`` when already known), and the blended
+    T-S model's."""
+    tf, tg = _plain(plant, s) if plain is None else plain
     bf, bg = blended(ts, s["x"], s["u"], s["d"], s["f"], s["d2"])
-    ef, eg = np.abs(tf - bf), np.abs(tg - bg)
-    ef[~np.isfinite(ef)] = np.inf
-    eg[~np.isfinite(eg)] = np.inf
-    e, kind = (ef, "drift") if np.max(ef) >= np.max(eg) else (eg, "diffusion")
-    i, k = np.unravel_index(int(np.argmax(e)), e.shape)
-    finite = np.abs(tf[np.isfinite(tf)])
-    return (
-        float(e[i, k]),
-        f"{kind} row {plant.state_names[i]!r}",
-        s["x"][:, k],
-        float(np.max(finite, initial=scale)),
-    )
+    return tf, tg, bf, bg
+
+
+def _row_scales(tf: np.ndarray, tg: np.ndarray) -> np.ndarray:
+    """Per state, the largest finite |drift| or |diffusion| of its row over the samples: what that row's error
+    is measured against. A row is in its state's unit (per second, or per root second), so the test does
+    not change when a state is written in other units (a gap in m or in mm)."""
+    both = np.abs(np.hstack([tf, tg]))
+    both[~np.isfinite(both)] = 0.0
+    return np.max(both, axis=1, initial=0.0)
+
+
+def _worst(plant: Plant, x: np.ndarray, values, scales: np.ndarray):
+    """``(error over its row's scale, error, row text, x, row scale)`` of the largest such ratio at the sample
+    columns ``x``, ``values`` the plain and blended values there (:func:`_plain_and_blended`)."""
+    tf, tg, bf, bg = values
+    best = (0.0, 0.0, "", None, 0.0)
+    for kind, t, b in (("drift", tf, bf), ("diffusion", tg, bg)):
+        e = np.abs(t - b)
+        e[~np.isfinite(e)] = np.inf
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel = np.where(e == 0, 0.0, e / scales[:, None])
+        i, k = np.unravel_index(int(np.argmax(rel)), rel.shape)
+        if rel[i, k] > best[0]:
+            best = (float(rel[i, k]), float(e[i, k]), f"{kind} row {plant.state_names[i]!r}", x[:, k],
+                    float(scales[i]))  # fmt: skip
+    return best
 
 
 def check_exact(ts, seed: int = 0) -> None:
     """Refuse an automatic sector model that is not exact to round-off (see the module docstring).
 
-    The fidelity samples and trajectory are those of ``ts.fidelity`` (drawn again, with the same
-    seed, only to locate an error); the points near 0 are drawn here.
+    Each row's error is measured against that row's largest value over the fidelity samples (drift or
+    diffusion, :func:`_row_scales`): exact to :data:`EXACT_TOL` of it, in whatever units the state is written.
+    The fidelity samples and trajectory are those of ``ts.fidelity`` (drawn again, with the same seed); the
+    points near 0 (and about the edge of the Taylor band, in each state's scale) are drawn here.
     """
     plant = ts.plant
     fid = ts.fidelity
@@ -179,34 +214,39 @@ def check_exact(ts, seed: int = 0) -> None:
     near = {k: [] for k in base}
     lo, hi = plant.region_lo, plant.region_hi
     for j in range(plant.n):
+        sj = state_scale(lo[j], hi[j])
         for v in _NEAR_ZERO:
+            v = v if v <= 1e-300 else v * sj
             for sv in (v, -v) if v else (v,):
                 if np.isnan(lo[j]) or lo[j] <= sv <= hi[j]:
                     for k in base:
                         near[k].append(base[k].copy())
                     near["x"][-1][j] = sv
-    scale = max(
-        1.0, fid.drift_max_abs_error / fid.drift_max_rel_error if fid.drift_max_rel_error > 0 else 1.0
-    )
-    worst = (0.0, "", None)
+    plain = _plain(plant, s)
+    scales = _row_scales(*plain)
+    worst = (0.0, 0.0, "", None, 0.0)
+    if fid.max_abs_error > EXACT_TOL * float(np.min(scales, initial=0.0)):  # some row may fail: find it
+        worst = _worst(plant, s["x"], _plain_and_blended(plant, ts, s, plain), scales)
     if near["x"]:
-        worst = _worst(plant, ts, {k: np.concatenate(v, axis=1) for k, v in near.items()}, scale)[:3]
-    tol = EXACT_TOL * scale
-    if fid.max_abs_error > tol:  # locate it among the fidelity's samples
-        found = _worst(plant, ts, s, scale)[:3]
+        at = {k: np.concatenate(v, axis=1) for k, v in near.items()}
+        found = _worst(plant, at["x"], _plain_and_blended(plant, ts, at), scales)
         worst = found if found[0] > worst[0] else worst
+    # the trajectory's error is one number over all rows: against the largest row's scale
     traj = fid.trajectory_max_abs_error
-    if worst[0] <= tol and fid.max_abs_error <= tol and traj <= tol:
+    top = float(np.max(scales, initial=0.0))
+    if worst[0] <= EXACT_TOL and (traj == 0.0 or traj <= EXACT_TOL * top):
         return
-    if worst[0] > tol:
-        at = ", ".join(f"{nm} = {v:.6g}" for nm, v in zip(plant.state_names, worst[2]))
-        what = f"{worst[1]} differs from the plain equations by {worst[0]:.3g} at {at}"
+    if worst[0] > EXACT_TOL:
+        at = ", ".join(f"{nm} = {v:.6g}" for nm, v in zip(plant.state_names, worst[3]))
+        what = f"{worst[2]} differs from the plain equations by {worst[1]:.3g} at {at}"
+        scale = worst[4]
     else:
         what = f"it differs from the plain equations by {traj:.3g} along the fidelity trajectory"
+        scale = top
     premises = "; ".join(f"{p.name} = {p.expr} in [{p.min:.6g}, {p.max:.6g}]" for p in ts.premises) or "none"
     raise DerivationError(
-        f"the automatic sector model is not exact: {what} (allowed: {EXACT_TOL:g} x {scale:.3g}; premises: "
-        f"{premises}). A term with a jump, or whose coefficients grow without bound on the region, cannot be "
-        "written with bounded premises: rewrite it, narrow the region, declare premises yourself (b.premise), or "
-        "linearise at operating points (b.operating_points)"
+        f"the automatic sector model is not exact: {what} (allowed: {EXACT_TOL:g} x {scale:.3g}, the row's largest "
+        f"value over the region; premises: {premises}). A term with a jump, or whose coefficients grow without "
+        "bound on the region, cannot be written with bounded premises: rewrite it, narrow the region, declare "
+        "premises yourself (b.premise), or linearise at operating points (b.operating_points)"
     )

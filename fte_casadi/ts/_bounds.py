@@ -37,7 +37,10 @@ def _local_lipschitz(grads: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
         lo[ax], hi[ax] = slice(0, -1), slice(1, None)
         out[tuple(lo)] = np.maximum(out[tuple(lo)], g[tuple(hi)])
         out[tuple(hi)] = np.maximum(out[tuple(hi)], g[tuple(lo)])
-    return (2.0 * out.reshape(k, -1) + 1e-12).T
+    out = 2.0 * out.reshape(k, -1)
+    # a margin of 1e-12, never more than 1e-12 of the largest gradient in that direction: a premise of tiny values
+    # over states in large units (a gradient of 1e-15) keeps bounds as tight as in units where it is of order 1
+    return (out + 1e-12 * np.minimum(1.0, np.max(out, axis=1, keepdims=True))).T
 
 
 def _extremum(FG, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_SEARCHES):
@@ -46,7 +49,8 @@ def _extremum(FG, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_
     cell_lb = v - _local_lipschitz(grads, shape) @ hw
     order = np.argsort(v)
     best = v[order[0]]
-    tol = 1e-9 * (1.0 + abs(best))  # a cell must be able to beat the best value by more than round-off
+    # a cell must be able to beat the best value by more than round-off of the function's size (in any unit)
+    tol = 1e-9 * max(abs(best), float(np.max(np.abs(vals), initial=0.0)))
     cand = np.flatnonzero(cell_lb < best - tol)
     cand = cand[np.argsort(v[cand])]
     starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]  # noqa: C401

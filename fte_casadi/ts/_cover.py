@@ -20,15 +20,22 @@ extremes, which no configuration has). Here:
   the best value; not sampling alone). Its memberships are the barycentric coordinates, affine in
   ``z`` and in closed form: ``h = T^-1 [W (z - c); 1]``;
 - the box of the group's premises (today's product of sector weights) is the alternative; each group
-  takes the one with fewer vertices (a single premise: the sector, rule 1 at ``max``).
+  takes the one with fewer vertices (a single premise: the sector, rule 1 at ``max``);
+- where one group per set of states would give more than :data:`MERGE_ABOVE` rules, groups whose states are
+  nested are covered together (:func:`_groups`): a quadrotor's premises of roll alone join those of roll
+  and pitch, 48 rules instead of 108, each merged simplex looser around its image;
+- an image of :data:`LARGE_IMAGE` dimensions or more gets its simplex's normals from a simplex inside the
+  sampled image (successive projections) or a regular one turned at random, improved by a budgeted search
+  (:func:`_large_simplex`), since the search from five starts over all normals takes minutes there.
 
 Rules are the products of the groups' vertices, the first group varying slowest. Outside the
 polytope (outside the region) the barycentric weights are clipped at 0 and renormalised, so they stay
 a convex sum, as the sector weights saturate.
 
 Not done: Baranyi's tensor-product (TP) transformation (HOSVD of the sampled model, then a convex
-hull of its weighting functions), which can give fewer rules at a stated approximation error; and a
-descriptor form keeping ``M(q)`` on the left.
+hull of its weighting functions), which can give fewer rules at a stated approximation error (exact, the
+quadrotor's ranks 3 in roll, 5 in pitch, 3 in yaw and 2 in the yaw rate give 90 rules); and a descriptor form
+keeping ``M(q)`` on the left.
 """
 
 from __future__ import annotations
@@ -43,14 +50,21 @@ from scipy.optimize import minimize
 
 from ._bounds import certified_max
 
-__all__ = ["GroupCover", "cover_premises", "VERTEX_CHOICES"]
+__all__ = ["GroupCover", "cover_premises", "VERTEX_CHOICES", "MERGE_ABOVE", "estimate_rules", "plan_groups"]
 
 #: how the premises are covered: ``grouped`` (by the states they depend on, the fewer vertices per group),
 #: ``box`` (each premise its own sector: 2^p rules, the most vertices), ``fewest`` (one simplex over
 #: all premises: the fewest rules, the loosest)
 VERTEX_CHOICES = ("grouped", "box", "fewest")
+#: above this many rules the grouped cover covers groups of nested states together (:func:`_groups`)
+MERGE_ABOVE = 64
 #: random states of the region sampled for a group's image
 _IMAGE_SAMPLES = 4000
+#: an image of this many dimensions or more gets its simplex by :func:`_large_simplex` (seconds, not minutes)
+LARGE_IMAGE = 4
+#: random turns of a regular simplex tried, directions whose extreme points stand for the image, and the
+#: evaluations per normal entry that :func:`_large_simplex` spends
+LARGE_TURNS, LARGE_DIRECTIONS, LARGE_BUDGET = 32, 2000, 100
 #: relative size below which a direction of the image's spread is taken as absent (an affine relation)
 _RANK_TOL = 1e-9
 
@@ -109,7 +123,7 @@ class GroupCover:
         """Per column of the group's premise values ``Z`` (k, N): inside the polytope (to ``tol``)?"""
         if self.polytope == "box":
             mn, mx = self.vertices.min(axis=0)[:, None], self.vertices.max(axis=0)[:, None]
-            t = tol * (1.0 + np.maximum(np.abs(mn), np.abs(mx)))
+            t = tol * np.maximum(np.abs(mn), np.abs(mx))  # relative: premises in any unit
             return np.all((Z >= mn - t) & (Z <= mx + t), axis=0)
         Tinv, W, c = self._map
         h = Tinv @ np.vstack([W @ (Z - c[:, None]), np.ones(Z.shape[1])])
@@ -130,9 +144,26 @@ class GroupCover:
         }
 
 
-def _groups(states: list[tuple[int, ...]], how: str) -> list[list[int]]:
+def _vertex_estimate(k: int) -> int:
+    """Vertices of the cover of a group of ``k`` premises, at most: the fewer of the simplex's ``k + 1`` (its
+    image may span fewer dimensions) and the box's ``2^k``."""
+    return min(2**k, k + 1)
+
+
+def estimate_rules(groups: list[list[int]]) -> int:
+    """Rules of the cover of these groups of premises, at most (:func:`_vertex_estimate` per group)."""
+    return int(np.prod([_vertex_estimate(len(g)) for g in groups])) if groups else 1
+
+
+def _groups(states: list[tuple[int, ...]], how: str, merge: bool = True) -> list[list[int]]:
     """Premise indices per group: the premises that depend on the same states (``grouped``), one each
-    (``box``), all together (``fewest``); in the order of their first premise."""
+    (``box``), all together (``fewest``); in the order of their first premise.
+
+    ``grouped`` with more than :data:`MERGE_ABOVE` rules (:func:`estimate_rules`) then covers together
+    groups whose states are nested, one pair at a time until there are no more than that: the group on the
+    fewest states joins the group on the fewest states that contain its states (then the first by premise
+    order). A quadrotor's premises of roll alone (cos(phi), sin(phi)) join those of roll and pitch: their
+    rules multiply no more."""
     q = len(states)
     if how == "box":
         return [[k] for k in range(q)]
@@ -141,7 +172,25 @@ def _groups(states: list[tuple[int, ...]], how: str) -> list[list[int]]:
     by_states: dict[tuple[int, ...], list[int]] = {}
     for k, st in enumerate(states):
         by_states.setdefault(tuple(sorted(st)), []).append(k)
-    return sorted(by_states.values(), key=lambda g: g[0])
+    groups = sorted(by_states.values(), key=lambda g: g[0])
+    sets = [set(states[g[0]]) for g in groups]
+    while merge and estimate_rules(groups) > MERGE_ABOVE:
+        pairs = [(len(sets[a]), groups[a][0], len(sets[b]), groups[b][0], a, b)
+                 for a in range(len(groups)) for b in range(len(groups)) if a != b and sets[a] < sets[b]]  # fmt: skip
+        if not pairs:
+            break
+        *_, a, b = min(pairs)
+        groups[b] = sorted(groups[b] + groups[a])
+        del groups[a], sets[a]
+        order = sorted(range(len(groups)), key=lambda i: groups[i][0])
+        groups, sets = [groups[i] for i in order], [sets[i] for i in order]
+    return groups
+
+
+def plan_groups(states: list[tuple[int, ...]], how: str = "grouped", merge: bool = True) -> list[list[int]]:
+    """The groups :func:`cover_premises` makes of premises depending on ``states`` (per premise, the states);
+    with ``merge=False`` those before groups of nested states are merged."""
+    return _groups([tuple(st) for st in states], how, merge)
 
 
 def _image(z_fn: ca.Function, states, lo, hi, n: int, rng) -> np.ndarray:
@@ -205,12 +254,65 @@ def _small_simplex(Y: np.ndarray, rng) -> np.ndarray:
         V = _simplex_vertices(A, b)
         return 1e6 if V is None else _log_volume(V)
 
+    if r >= LARGE_IMAGE:
+        return _large_simplex(Y, rng)
     starts = [base] + [base @ np.linalg.qr(rng.normal(size=(r, r)))[0] for _ in range(4)]
     for A0 in starts:
         res = minimize(objective, A0.ravel(), method="Powell", options={"maxfev": 4000 * r, "xtol": 1e-4})
         if best is None or res.fun < best[0]:
             best = (res.fun, res.x)
     A = best[1].reshape(r + 1, r)
+    return A / np.linalg.norm(A, axis=1, keepdims=True)
+
+
+def _inscribed(Y: np.ndarray) -> list[int]:
+    """Columns of ``Y`` (r, N) spanning a large simplex inside its points: the point farthest from their mean,
+    then each time the point farthest from the affine span of those chosen (successive projections)."""
+    r = Y.shape[0]
+    idx = [int(np.argmax(np.sum((Y - Y.mean(axis=1, keepdims=True)) ** 2, axis=0)))]
+    for _ in range(r):
+        D = Y - Y[:, idx[:1]]
+        if len(idx) > 1:
+            Q = np.linalg.qr(Y[:, idx[1:]] - Y[:, idx[:1]])[0]
+            D = D - Q @ (Q.T @ D)
+        idx.append(int(np.argmax(np.sum(D**2, axis=0))))
+    return idx
+
+
+def _facet_normals(P: np.ndarray) -> np.ndarray | None:
+    """Outward unit normals (r + 1, r) of the facets of the simplex with vertices the columns of ``P`` (r, r + 1),
+    facet i opposite vertex i; None when the vertices are degenerate."""
+    r = P.shape[0]
+    try:  # barycentric coordinate i >= 0 is -A_i y <= ...
+        A = -np.linalg.inv(np.vstack([P, np.ones(r + 1)]))[:, :r]
+    except np.linalg.LinAlgError:
+        return None
+    return A / np.linalg.norm(A, axis=1, keepdims=True)
+
+
+def _large_simplex(Y: np.ndarray, rng) -> np.ndarray:
+    """Facet normals of a small simplex around ``Y`` (r, N) for an image of many dimensions, where a search over
+    all ``r (r + 1)`` normals' entries from several starts (:func:`_small_simplex`) takes minutes: the facets of
+    a large simplex inside the points (:func:`_inscribed`) pushed out to them, or of a regular simplex turned at
+    random, whichever is the smallest, then improved by the same search, from that start only, on the points
+    that are extreme in some direction (a few hundred) and with a budget of evaluations."""
+    r = Y.shape[0]
+    base = _regular_normals(r)
+    starts = [base @ np.linalg.qr(rng.normal(size=(r, r)))[0] for _ in range(LARGE_TURNS)]
+    inner = _facet_normals(Y[:, _inscribed(Y)])
+    starts = ([inner] if inner is not None else []) + [base] + starts
+    ext = Y[:, np.unique(np.argmax(rng.normal(size=(LARGE_DIRECTIONS, r)) @ Y, axis=1))]
+
+    def objective(a):
+        A = a.reshape(r + 1, r)
+        A = A / np.linalg.norm(A, axis=1, keepdims=True)
+        V = _simplex_vertices(A, np.max(A @ ext, axis=1))
+        return 1e6 if V is None else _log_volume(V)
+
+    A0 = min(starts, key=lambda A: objective(A.ravel()))
+    res = minimize(objective, A0.ravel(), method="Powell",
+                   options={"maxfev": LARGE_BUDGET * r * (r + 1), "xtol": 1e-4})  # fmt: skip
+    A = (res.x if res.fun < objective(A0.ravel()) else A0.ravel()).reshape(r + 1, r)
     return A / np.linalg.norm(A, axis=1, keepdims=True)
 
 

@@ -103,7 +103,7 @@ def fidelity(
         Z = np.array(ts.premise_fn.map(X.shape[1])(X)).reshape(len(ts.premises), -1)
         mn = np.array([p.min for p in ts.premises])[:, None]
         mx = np.array([p.max for p in ts.premises])[:, None]
-        tol = 1e-9 * (1.0 + np.maximum(np.abs(mn), np.abs(mx)))
+        tol = 1e-9 * np.maximum(np.abs(mn), np.abs(mx))  # relative: premises in any unit
         within = (Z >= mn - tol) & (Z <= mx + tol)  # (premises, points)
         for g in ts.groups:  # and within the polytope of each group
             if g.polytope != "box":

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..._rounding import nice_floor
+from ..._text import shorten
 from ...errors import CentringError, InfeasibleDesignError
 from ...errors import SolverFailedError as SolverFailedError
 from .._augment import (
@@ -717,7 +718,7 @@ class _Step5:
         if not self._take(res):
             numpy_res = self._numpy()
             if numpy_res is not None:
-                self.notes.append(f"step 5: {self.solver}'s feasibility solve gave no usable point ({res.status[:120]}); "
+                self.notes.append(f"step 5: {self.solver}'s feasibility solve gave no usable point ({shorten(res.status, 120)}); "
                                   f"phase 1 in numpy decided")  # fmt: skip
                 res = replace(numpy_res, seconds=res.seconds + numpy_res.seconds, warned=res.warned)
                 self._take(res)
@@ -728,7 +729,7 @@ class _Step5:
             res = replace(res, seconds=first.seconds + res.seconds, warned=first.warned + res.warned)
             self.notes.append(
                 f"step 5: {'SCS' if other == 'CLARABEL' else 'CLARABEL'} failed numerically on the feasibility solve "
-                f"({first.status[:120]}, also on rescaled data); {other}'s point ({res.status}) starts the centring"
+                f"({shorten(first.status, 120)}, also on rescaled data); {other}'s point ({res.status}) starts the centring"
             )
             self._take(res)
         return res

@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import cvxpy as cp
 import numpy as np
 
+from ..._text import shorten
 from ...errors import CentringError as CentringError
 from ._linalg import sym as _sym
 
@@ -450,7 +451,7 @@ class ConicProblem:
                 prob.solve(solver=solver, **(SOLVER_SETTINGS[solver] | (settings or {})))
                 status = str(prob.status)
             except cp.SolverError as exc:
-                status = f"solver_error ({' '.join(str(exc).split())[:120]})"
+                status = f"solver_error ({shorten(exc, 120)})"
         elapsed = time.perf_counter() - t0
         self.seconds += elapsed
         warned = tuple(sorted({str(wn.message).split(".")[0] for wn in caught}))
