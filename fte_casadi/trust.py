@@ -5,7 +5,8 @@ only when it is a built-in plant's name or when the user names the same plant (`
 scheduling map is rebuilt from that plant, or else replayed from the document's arithmetic tape
 (:mod:`fte_casadi.model._tape`), never deserialised. Then the design is re-certified at its own numbers
 (:func:`fte_casadi.design._recertify.recertify`) and, when the plant is at hand, checked against it: the
-fingerprint of its equations (``plant_hash``) and the local models of its T-S model.
+fingerprint of its equations (``plant_hash``) and the local models of its T-S model; its names are then the
+plant's.
 """
 
 from __future__ import annotations
@@ -94,8 +95,17 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
             f"{src} was designed for another plant: the plant's equations{named} differ from those the design was "
             f"made for ({why}). Design it again for this plant (`fte design PLANT -o FILE`)"
         )
-    sched, _ = scheduling_from_measurements(ts)
-    return dataclasses.replace(d, scheduling_ops=write_tape(sched))
+    sched, sources = scheduling_from_measurements(ts)
+    names = {
+        "states": list(plant.state_names),
+        "inputs": list(plant.input_names),
+        "outputs": list(plant.output_names),
+        "faults": list(plant.fault_names),
+        "state_units": list(plant.state_units),
+        "output_units": list(plant.output_units),
+        "scheduling_sources": sources,
+    }  # the plant's names, not the document's: names are data, and the plant is the one the user trusts
+    return dataclasses.replace(d, plant=plant.name, names=names, scheduling_ops=write_tape(sched))
 
 
 def _convex_memberships(d: Design) -> str:

@@ -44,6 +44,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .._labels import c_comment, c_string, xml_text
 from ..design._record import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
@@ -173,9 +174,9 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
         "fmiModelDescription",
         {
             "fmiVersion": "2.0",
-            "modelName": design.plant,
+            "modelName": xml_text(design.plant),
             "guid": guid,
-            "description": f"observer / fault estimator / tolerant controller of plant {design.plant} "
+            "description": f"observer / fault estimator / tolerant controller of plant {xml_text(design.plant)} "
             f"(design variant {design.variant}, {'certified' if design.certified else 'NOT CERTIFIED'}); "
             f"one fmi2DoStep = one sample, fixed step Ts = {sample_time!r}",
             "generationTool": f"{_TOOL} {_version()}",
@@ -207,7 +208,7 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
     if units:
         ud = ET.SubElement(root, "UnitDefinitions")
         for u in units:
-            ET.SubElement(ud, "Unit", {"name": u})
+            ET.SubElement(ud, "Unit", {"name": xml_text(u)})
     cats = ET.SubElement(root, "LogCategories")
     ET.SubElement(cats, "Category", {"name": "logStatusError", "description": "errors (always logged)"})
     ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stepSize": repr(float(sample_time))})
@@ -216,7 +217,7 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
         attrs = {
             "name": v.name,
             "valueReference": str(v.value_reference),
-            "description": v.description,
+            "description": xml_text(v.description),
             "causality": v.causality,
             "variability": "discrete",
         }
@@ -225,7 +226,7 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
         sv = ET.SubElement(mv, "ScalarVariable", attrs)
         real = {}
         if v.unit:
-            real["unit"] = v.unit
+            real["unit"] = xml_text(v.unit)
         if v.start is not None:
             real["start"] = repr(float(v.start))
         ET.SubElement(sv, "Real", real)
@@ -293,7 +294,7 @@ def check_fmu_target(design: Design, out_dir: str | os.PathLike) -> Path:
 
 
 def _c_strings(names) -> str:
-    return ",\n".join(f'  "{n}"' for n in names)
+    return ",\n".join(f'  "{c_string(n)}"' for n in names)
 
 
 def _c_reals(values) -> str:
@@ -403,7 +404,7 @@ def generate_fmu(
                 mid=mid,
                 name=name,
                 NAME=name.upper(),
-                plant=design.plant,
+                plant=c_comment(design.plant),
                 version=_version(),
                 guid=guid,
                 ny=p,

@@ -35,6 +35,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .._labels import c_comment, markdown
 from .._rounding import series_floor
 from ..design._record import Design
 from ..errors import CodegenError, ParameterError
@@ -62,14 +63,16 @@ def _version() -> str:
 
 def c_name(plant: str) -> str:
     """C identifier part for a plant name (``three-tank`` -> ``three_tank``; ``pendül`` -> ``pendul``: C99
-    identifiers are ASCII letters, digits and ``_``, so accents are dropped and other characters become ``_``)."""
+    identifiers are ASCII letters, digits and ``_``, so accents are dropped and other characters become ``_``,
+    never two in a row nor at either end: CasADi refuses a function name such as ``fte_a__casadi_step``)."""
     import unicodedata
 
     plain = unicodedata.normalize("NFKD", plant).encode("ascii", "ignore").decode()
     out = "".join(ch if (ch.isascii() and (ch.isalnum() or ch == "_")) else "_" for ch in plain)
-    if not out or out[0].isdigit():
-        out = "p_" + out
-    return out
+    out = re.sub(r"_+", "_", out).strip("_")
+    if not out:
+        return "p"
+    return "p_" + out if out[0].isdigit() else out
 
 
 def output_files(plant: str) -> list[str]:
@@ -288,9 +291,25 @@ def _wrapper(
     n, m, p, lf, nbar = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.nbar))
     names = design.names or {}
 
-    def joined(key, count, stem):
-        v = names.get(key) or [f"{stem}{k}" for k in range(count)]
-        return ", ".join(str(t) for t in v)
+    def labels(esc) -> dict:
+        """The texts that carry the plant's names and units, each name escaped by ``esc`` (a document's names
+        are data: escaped for C comments in the C, for Markdown in the README; fte_casadi._labels)."""
+
+        def joined(key, count, stem):
+            v = names.get(key) or [f"{stem}{k}" for k in range(count)]
+            return ", ".join(esc(t) for t in v)
+
+        return {
+            "plant": esc(design.plant),
+            "time_unit": esc(names.get("time_unit", "s")),
+            "y_names": joined("outputs", p, "y"),
+            "u_names": joined("inputs", m, "u"),
+            "x_names": joined("states", n, "x"),
+            "f_names": joined("faults", lf, "f"),
+            "y_range_text": _range_text(design, y_range, real, esc),
+            "saturation_text": _saturation_text(design, esc),
+            **_sliding_text(design, esc),
+        }
 
     NAME = name.upper()
     work_fields = ""
@@ -318,7 +337,6 @@ def _wrapper(
     sub = {
         "name": name,
         "NAME": NAME,
-        "plant": design.plant,
         "version": _version(),
         "variant": design.variant,
         "certified": certified,
@@ -333,16 +351,10 @@ def _wrapper(
         "exp_mask": "UINT64_C(0x7FF0000000000000)" if real == "double" else "UINT32_C(0x7F800000)",
         "ymin_values": _c_values(y_range["lo"], real),
         "ymax_values": _c_values(y_range["hi"], real),
-        "y_range_text": _range_text(design, y_range, real)[0],
         "y_margin_text": f"{Y_MARGIN:g}",
         "y_fault_margin_text": f"{Y_FAULT_MARGIN:g}",
         "sample_time_text": _fmt(sample_time),
         "ts_max_text": f"{ts_max:.6g}",
-        "time_unit": names.get("time_unit", "s"),
-        "y_names": joined("outputs", p, "y"),
-        "u_names": joined("inputs", m, "u"),
-        "x_names": joined("states", n, "x"),
-        "f_names": joined("faults", lf, "f"),
         "work_fields": work_fields,
         **gate,
         "work_init": work_init,
@@ -353,10 +365,8 @@ def _wrapper(
         "iw_arg": "s->iw" if sizes["SZ_IW"] else "0",
         "w_arg": "s->w" if sizes["SZ_W"] else "0",
         "sliding": "sgn(s)" if boundary_layer is None else f"sat(s / {_fmt(boundary_layer)})",
-        **_sliding_text(design),
         "affine": " + T abar_i" if affine else "",
         "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
-        "saturation_text": _saturation_text(design),
         "H_values": _c_values(np.asarray(design.H, dtype=float).ravel(), real),
         "xbar0_values": _c_values(design.xbar0, real),
         "x0_text": ", ".join(_fmt(v) for v in design.xbar0[:n]),
@@ -371,10 +381,11 @@ def _wrapper(
         files[4]: "this file",
     }
     sub["file_table"] = "\n".join(f"| `{k}` | {v} |" for k, v in table.items())
+    in_c, in_md = {**sub, **labels(c_comment)}, {**sub, **labels(markdown)}
     return {
-        files[0]: template.fill(template.TEMPLATES["header"], sub),
-        files[1]: template.fill(template.TEMPLATES["source"], sub),
-        files[4]: template.fill(template.TEMPLATES["readme"], sub),
+        files[0]: template.fill(template.TEMPLATES["header"], in_c),
+        files[1]: template.fill(template.TEMPLATES["source"], in_c),
+        files[4]: template.fill(template.TEMPLATES["readme"], in_md),
     }, mem
 
 
@@ -412,15 +423,15 @@ def _gate_texts(design: Design, NAME: str) -> dict:
     return out
 
 
-def _sliding_text(design: Design) -> dict:
+def _sliding_text(design: Design, esc=str) -> dict:
     """The sliding variables' count and gains: ``(delta + eps)`` per fault, and with Remark 5 first the
-    gains of the unknown inputs H does not decouple."""
+    gains of the unknown inputs H does not decouple (their names escaped by ``esc``)."""
     lf = int(design.dims.lf)
     r5 = design.remark5 or {}
     if not r5.get("used"):
         return {"ns": lf, "ns_text": "", "sliding_gain": "(delta + eps)"}
     k = len(r5["gain"])
-    names = ", ".join(r5.get("unknown_inputs", []))
+    names = ", ".join(esc(t) for t in r5.get("unknown_inputs", []))
     gains = ", ".join(f"{v:.6g}" for v in design.sliding_gain())
     return {
         "ns": lf + k,
@@ -429,20 +440,21 @@ def _sliding_text(design: Design) -> dict:
     }
 
 
-def _saturation_text(design: Design) -> str:
-    """One line saying how u is clipped (the step applies it, and feeds the observer the clipped u)."""
+def _saturation_text(design: Design, esc=str) -> str:
+    """One line saying how u is clipped (the step applies it, and feeds the observer the clipped u); the
+    inputs' names escaped by ``esc``."""
     if design.input_limits is None:
         return "none (u is not clipped)."
     names = (design.names or {}).get("inputs") or [f"u{k}" for k in range(int(design.dims.m))]
+
+    def bound(v: float) -> str:
+        return f"{v:.17g}".replace("inf", "infinity")  # the number only: a name may hold 'inf'
+
     parts = [
-        f"{nm} in [{lo:.17g}, {hi:.17g}]"
+        f"{esc(nm)} in [{bound(lo)}, {bound(hi)}]"
         for nm, (lo, hi) in zip(names, np.asarray(design.input_limits, float))
     ]
-    return (
-        "u is clipped to "
-        + ", ".join(parts).replace("inf", "infinity")
-        + "; the observer is fed the clipped u."
-    )
+    return "u is clipped to " + ", ".join(parts) + "; the observer is fed the clipped u."
 
 
 #: the margin the range check of y adds on each side of an output's range over the region, as a
@@ -541,16 +553,16 @@ def _every_value(fn: ca.Function) -> ca.Function:
     return ca.Function("every", [z, y], [ca.vertcat(*nodes)])
 
 
-def _range_text(design: Design, rng: dict, real: str) -> tuple[str, str]:
-    """The header's and the README's lines on the accepted range of y."""
+def _range_text(design: Design, rng: dict, real: str, esc=str) -> str:
+    """The line on the accepted range of y, the outputs' names escaped by ``esc``."""
     names = (design.names or {}).get("outputs") or [f"y{k}" for k in range(len(rng["lo"]))]
     parts = []
-    for k, nm in enumerate(names):
+    for k, nm in enumerate(map(esc, names)):
         if rng["known"][k]:
             parts.append(f"{nm} in [{rng['lo'][k]:.6g}, {rng['hi'][k]:.6g}]")
         else:
             parts.append(f"|{nm}| <= {rng['hi'][k]:.0e} (range unknown)")
-    return "; ".join(parts), ", ".join(parts)
+    return "; ".join(parts)
 
 
 def prepare_dir(out_dir: Path) -> None:

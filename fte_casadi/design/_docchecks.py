@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from .._labels import label_problem
 from ..errors import DesignFileError
 from ..ts._cover import VERTEX_CHOICES
 
@@ -185,7 +186,46 @@ def check_document(doc: dict, source: str) -> None:
     for k in ("plant", "plant_spec", "variant", "solver"):
         if k in doc and not isinstance(doc[k], str):
             raise _fail(source, k, f"must be a string; got {doc[k]!r}")
+    _labels(source, doc, d)
     if doc.get("vertices") is not None and doc["vertices"] not in VERTEX_CHOICES:
         raise _fail(
             source, "vertices", f"must be one of {', '.join(VERTEX_CHOICES)} or null; got {doc['vertices']!r}"
         )
+
+
+#: the lists of ``names`` and the size each has (from ``dims``); units may be empty strings
+_NAME_LISTS = {"states": "n", "inputs": "m", "outputs": "p", "faults": "lf", "unknown_inputs": "ld",
+               "state_units": "n", "input_units": "m", "output_units": "p"}  # fmt: skip
+
+
+def _label(source: str, key: str, v, empty: bool = False) -> None:
+    why = label_problem(v, empty=empty)
+    if why:
+        raise _fail(source, key, f"{why}: names and units are plain labels (printable text on one line, without "
+                    "'/*', '*/', '//', '??', a backslash or a backquote); a document is data, never code")  # fmt: skip
+
+
+def _labels(source: str, doc: dict, dims: dict) -> None:
+    """Every name a document carries that is written into the generated C, README, FMU or MAT file is a plain
+    label (:func:`fte_casadi._labels.label_problem`), and ``names``' lists have the lengths ``dims`` gives."""
+    _label(source, "plant", doc["plant"])
+    names = doc.get("names", {})
+    if not isinstance(names, dict):
+        raise _fail(source, "names", "must be a JSON object of lists of names")
+    for k, v in names.items():
+        if k in _NAME_LISTS:
+            want = dims[_NAME_LISTS[k]]
+            if not isinstance(v, list) or len(v) != want:
+                raise _fail(source, f"names.{k}", f"must be a list of {want} names (dims.{_NAME_LISTS[k]})")
+            for i, t in enumerate(v):
+                _label(source, f"names.{k}[{i}]", t, empty=k.endswith("_units"))
+        elif isinstance(v, str):
+            _label(source, f"names.{k}", v, empty=True)
+        elif isinstance(v, list):
+            for i, t in enumerate(v):
+                _label(source, f"names.{k}[{i}]", t, empty=True)
+        else:
+            raise _fail(source, f"names.{k}", "must be a name or a list of names")
+    r5 = doc.get("remark5") or {}
+    for i, t in enumerate(r5.get("unknown_inputs") or [] if isinstance(r5, dict) else []):
+        _label(source, f"remark5.unknown_inputs[{i}]", t)

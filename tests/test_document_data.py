@@ -1,0 +1,189 @@
+"""A design document is data, round 2: every number its step uses is checked on load (Kf, H, N, u_ref, the
+limits, the region, x0, ts_max), names cannot write C, and what a document or an option cannot mean is
+refused with exit 2 and a message naming it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from fte_casadi.cli import main
+from fte_casadi.design._record import Design
+
+ROOT = Path(__file__).resolve().parents[1]
+MANIP = ROOT / "generated" / "manipulator" / "design.json"
+
+
+def run(*args):
+    r = CliRunner().invoke(main, [str(a) for a in args])
+    return r.exit_code, " ".join(r.output.split())  # the messages are wrapped at 100 columns
+
+
+def write(tmp_path, doc, name="d.json") -> Path:
+    out = tmp_path / name
+    out.write_text(json.dumps(doc))
+    return out
+
+
+@pytest.fixture(scope="module")
+def manip() -> dict:
+    return json.loads(MANIP.read_text())
+
+
+# -- names are data ---------------------------------------------------------------------------------------
+
+INJECTION = "y1 */ static inline int f(void) { return 42; } /*"
+
+
+@pytest.mark.parametrize("plant", [None, "manipulator"])
+def test_a_name_that_would_write_c_is_refused_on_load(tmp_path, manip, plant):
+    names = {**manip["names"], "outputs": [INJECTION, "y2", "y3"]}
+    f = write(tmp_path, {**manip, "names": names})
+    code, out = run("codegen", f, "--out", tmp_path / "c", *(["--plant", plant] if plant else []), "--fmu")
+    assert code == 2, out
+    assert "'names.outputs[0]' holds a C comment" in out and "a document is data" in out, out
+    assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize(
+    "key, value, why",
+    [
+        ("plant", "x\ny", "holds a line break"),
+        ("names", {"states": ["a", "b", "c", "d\u202e"]}, "holds a control or format character (U+202E)"),
+        ("names", {"state_units": ["rad", "rad/s", "rad", "x" * 201]}, "is 201 characters long"),
+        ("names", {"faults": ["fa"]}, "must be a list of 2 names (dims.lf)"),
+        ("names", {"time_unit": "s */"}, "holds a C comment terminator"),
+        ("names", {"outputs": ["a??/", "b", "c"]}, "holds '??'"),
+    ],
+)
+def test_names_and_units_are_plain_labels(tmp_path, manip, key, value, why):
+    doc = {**manip, key: {**manip["names"], **value} if key == "names" else value}
+    code, out = run("codegen", write(tmp_path, doc), "--out", tmp_path / "c")
+    assert code == 2 and why in out, out
+
+
+def test_with_plant_the_names_are_the_plants(tmp_path, manip):
+    names = {
+        **manip["names"],
+        "outputs": ["bogus_a", "bogus_b", "bogus_c"],
+        "states": ["q1", "q2", "q3", "q4"],
+    }
+    f = write(tmp_path, {**manip, "names": names})
+    code, out = run("codegen", f, "--out", tmp_path / "c", "--plant", "manipulator")
+    assert code == 0, out
+    header = (tmp_path / "c" / "fte_manipulator.h").read_text()
+    assert "bogus" not in header and "q1" not in header
+    assert header == (MANIP.parent / "fte_manipulator.h").read_text()
+
+
+def test_the_builder_refuses_names_that_are_not_labels():
+    from fte_casadi import PlantBuilder
+    from fte_casadi.errors import PlantError
+
+    with pytest.raises(PlantError, match=r"plant name 'p \*/ int x; /\*' holds a C comment opener"):
+        PlantBuilder("p */ int x; /*")
+    b = PlantBuilder("p")
+    with pytest.raises(PlantError, match="state unit 'rad\\\\n' holds a line break"):
+        b.states("x1", units=["rad\n"])
+    with pytest.raises(PlantError, match="time unit 's`' holds a backquote"):
+        b.time_unit("s`")
+    with pytest.raises(PlantError, match="not a valid identifier"):
+        b.inputs("u */")
+
+
+def code_only(src: str) -> str:
+    """C source without its comments, string literals and character constants (each kept as an empty
+    ``""``/``''``): what a compiler reads as code."""
+    out, k, n = [], 0, len(src)
+    while k < n:
+        two = src[k : k + 2]
+        if two == "/*":
+            end = src.find("*/", k + 2)
+            assert end >= 0, "an unterminated comment"
+            k = end + 2
+            out.append(" ")
+        elif two == "//":
+            end = src.find("\n", k)
+            k = n if end < 0 else end
+        elif src[k] in "\"'":
+            q, k = src[k], k + 1
+            while src[k] != q:
+                assert src[k] != "\n", "a string literal runs past its line"
+                k += 2 if src[k] == "\\" else 1
+            k += 1
+            out.append(q + q)
+        else:
+            out.append(src[k])
+            k += 1
+    return "".join(out)
+
+
+def test_code_only_sees_through_comments_and_strings():
+    assert code_only('a /* b */ c // d\ne "f\\"g" \'h\'') == "a   c \ne \"\" ''"
+    with pytest.raises(AssertionError, match="unterminated"):
+        code_only("x /* y")
+
+
+@pytest.fixture(scope="module")
+def fmu_baseline(tmp_path_factory):
+    """The FMU's C sources of the manipulator's design under the plant name 'Zq9' and neutral names, comments
+    and strings removed, the plant's C name replaced by '@'."""
+    import zipfile
+
+    from fte_casadi.codegen._fmu import generate_fmu
+
+    d = Design.load(MANIP)
+    import dataclasses
+
+    base = dataclasses.replace(d, plant="Zq9")
+    path = generate_fmu(base, tmp_path_factory.mktemp("base"))
+    with zipfile.ZipFile(path) as z:
+        return d, {Path(n).name.replace("Zq9", "@"): code_only(z.read(n).decode()).replace("Zq9", "@").replace(
+            "ZQ9", "@") for n in z.namelist() if n.startswith("sources/")}  # fmt: skip
+
+
+@pytest.mark.slow
+def test_random_names_compile_and_inject_nothing(fmu_baseline, tmp_path_factory):
+    """Names with C, XML and Markdown metacharacters, given in code (not through a document's checks): the
+    generated C, its header and the FMU compile under the strict flags, and with comments and string literals
+    removed the C is the C of neutral names: no name is code."""
+    import dataclasses
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    from fte_casadi.codegen._fmu import generate_fmu
+    from fte_casadi.codegen._generate import c_name
+
+    d, base = fmu_baseline
+    meta = st.sampled_from(["*/", "/*", "//", "\\", "\n", "\r\n", '"', "'", "<", ">", "&", "]]>", "?", "??/", "#",
+                            "`", "%s", "\x00", "\x1b", "\u202e", "\u2028", "é", "θ", "${name}", "$$", "{", "}",
+                            ";", INJECTION, "#include <stdio.h>", "*", "/", " "])  # fmt: skip
+    label = st.lists(st.one_of(meta, st.text(max_size=4)), min_size=1, max_size=5).map("".join)
+
+    @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(
+        plant=label, states=st.lists(label, min_size=4, max_size=4), inputs=st.lists(label, min_size=1, max_size=1),
+        outputs=st.lists(label, min_size=3, max_size=3), faults=st.lists(label, min_size=2, max_size=2),
+        units=st.lists(label, min_size=4, max_size=4), time_unit=label,
+    )  # fmt: skip
+    def check(plant, states, inputs, outputs, faults, units, time_unit):
+        names = {"states": states, "inputs": inputs, "outputs": outputs, "faults": faults, "state_units": units,
+                 "output_units": units[:3], "input_units": units[:1], "time_unit": time_unit}  # fmt: skip
+        plant = "Zq9" + plant
+        cn = c_name(plant)
+        path = generate_fmu(dataclasses.replace(d, plant=plant, names=names), tmp_path_factory.mktemp("f"))
+        with zipfile.ZipFile(path) as z:  # generate_fmu compiled every source under the strict flags
+            ET.fromstring(z.read("modelDescription.xml"))
+            got = {Path(n).name.replace(cn, "@"): code_only(z.read(n).decode()).replace(cn, "@").replace(
+                cn.upper(), "@") for n in z.namelist() if n.startswith("sources/")}  # fmt: skip
+            readme = z.read("documentation/README.md").decode()
+        assert got == base
+        assert all("`" not in t and "\n" not in t for t in outputs if t in readme)
+
+    check()
