@@ -7,14 +7,19 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from fte_casadi.cli import main
+from fte_casadi.design._augment import augment
+from fte_casadi.design._identities import identity_failures
 from fte_casadi.design._record import Design
+from fte_casadi.trust import check_loaded
 
 ROOT = Path(__file__).resolve().parents[1]
 MANIP = ROOT / "generated" / "manipulator" / "design.json"
+TANK = ROOT / "generated" / "three_tank" / "design.json"
 
 
 def run(*args):
@@ -28,9 +33,127 @@ def write(tmp_path, doc, name="d.json") -> Path:
     return out
 
 
+def scaled(v, c):
+    return (np.asarray(v, float) * c).tolist()
+
+
+def with_H(doc: dict, c: float) -> dict:
+    """``doc`` with H scaled by ``c`` and T, R, L2, Ls (and N) rebuilt to match: every identity the certificate
+    checks holds, but T Bd_i = 0 does not."""
+    d = Design.from_dict(doc)
+    aug = augment(d.local_models, d.C, d.Df)
+    H = np.asarray(d.H) * c
+    T = np.eye(aug.nbar) - H @ aug.Cbar
+    R = [T @ aug.Abar[i] - np.asarray(d.L1[i]) @ aug.Cbar for i in range(aug.r)]
+    N = aug.Js.T @ T.T @ np.asarray(d.Pbar) @ np.linalg.pinv(aug.Cbar)
+    return {**doc, "H": H.tolist(), "T": T.tolist(), "R": [M.tolist() for M in R],
+            "L2": [(M @ H).tolist() for M in R], "Ls": (T @ aug.Js).tolist(), "N": N.tolist()}  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def manip() -> dict:
     return json.loads(MANIP.read_text())
+
+
+def test_the_committed_documents_satisfy_every_identity():
+    for f in (MANIP, TANK):
+        assert identity_failures(Design.load(f)) == []
+
+
+@pytest.mark.parametrize(
+    "edit, named",
+    [
+        (lambda d: {**d, "Kf": scaled(d["Kf"], -1)}, "Kf is not -pinv(B_1) Bf_1"),
+        (lambda d: {**d, "Kf": scaled(d["Kf"], 10)}, "Kf is not -pinv(B_1) Bf_1"),
+        (lambda d: with_H(d, 1.01), "T Bd_1 is not 0"),
+        (lambda d: with_H(d, 1.01), "H is not the unknown-input gain (17)"),
+        (lambda d: {**d, "N": scaled(d["N"], 3)}, "N is not J1^T T^T Pbar Cbar^+"),
+        (lambda d: {**d, "checks": {**d["checks"], "ts_max": 1.0}}, "checks.ts_max is 1 but the observer"),
+    ],
+)
+def test_a_number_the_step_uses_is_checked_on_load(tmp_path, manip, edit, named):
+    f = write(tmp_path, edit(manip))
+    code, out = run("codegen", f, "--out", tmp_path / "c", "--plant", "manipulator")
+    assert code == 2, out
+    assert named in out and "not certified at its own numbers" in out, out
+    assert not (tmp_path / "c").exists()
+
+
+def test_the_decoupling_of_a_tampered_H_is_measured(manip):
+    d = Design.from_dict(with_H(manip, 1.01))
+    why = [w for w in identity_failures(d) if "T Bd_1" in w][0]
+    top = float(why.split("= ")[1].split(" ")[0])
+    assert 1e-4 < top < 1.0  # the issue measured 0.005 against 1e-16 for the untouched design
+    aug = augment(d.local_models, d.C, d.Df)
+    good = Design.from_dict(manip)
+    assert np.max(np.abs(np.asarray(good.T) @ aug.Bdbar[0])) < 1e-12
+
+
+def test_a_dropped_kf_rules_is_refused(tmp_path):
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    import plant_kf_rules
+
+    from fte_casadi.design import design
+    from fte_casadi.ts import structure
+
+    d = design(structure(plant_kf_rules.plant()), sample_time=1e-3)
+    assert d.Kf_rules is not None and identity_failures(d) == []
+    doc = d.to_dict()
+    del doc["Kf_rules"]
+    assert any("no Kf_rules" in w for w in identity_failures(Design.from_dict(doc)))
+    doc = d.to_dict()
+    doc["Kf_rules"][1] = scaled(doc["Kf_rules"][1], 2)
+    assert any("Kf_rules[1] is not -pinv(B_2) Bf_2" in w for w in identity_failures(Design.from_dict(doc)))
+
+
+@pytest.mark.parametrize(
+    "src, edit, named",
+    [
+        (MANIP, lambda d: {**d, "u_ref": [0.7]}, "its u_ref is [0.7], not the plant's reference"),
+        (
+            TANK,
+            lambda d: {**d, "u_ref": scaled(d["u_ref"], 1.01)},
+            "not the input holding the plant at x_ref",
+        ),
+        (
+            MANIP,
+            lambda d: {**d, "input_limits": [[-1e6, 1e6]]},
+            "its input_limits are [[-1000000. 1000000.]], the plant's none",
+        ),  # fmt: skip
+        (TANK, lambda d: {**d, "input_limits": None}, "its input_limits are none, the plant's [[ 0. 100.]"),
+        (TANK, lambda d: {**d, "input_limits": [[-1e6, 1e6], [0, 100]]}, "its input_limits are"),
+        (
+            MANIP,
+            lambda d: {**d, "x0": [9.0, 0, 0, 0]},
+            "its x0 = [9.0, 0.0, 0.0, 0.0] lies outside the plant's "
+            "region (theta_m = 9 not in [-6.28319, 6.28319])",
+        ),  # fmt: skip
+        (
+            MANIP,
+            lambda d: {**d, "checks": {**d["checks"], "region": {"lo": [-60] * 4, "hi": [60] * 4}}},
+            "its checks.region is",
+        ),  # fmt: skip
+    ],
+)
+def test_numbers_are_checked_against_the_plant(tmp_path, src, edit, named):
+    plant = "manipulator" if src == MANIP else "three-tank"
+    for drop_hash in (False, True):  # a document without plant_hash is caught as well
+        doc = edit(json.loads(src.read_text()))
+        if drop_hash:
+            doc = {k: v for k, v in doc.items() if k != "plant_hash"}
+        code, out = run("codegen", write(tmp_path, doc), "--out", tmp_path / "c", "--plant", plant)
+        assert code == 2, out
+        assert named in out and f"does not match its plant ({plant})" in out, out
+
+
+def test_a_document_without_plant_hash_says_so(tmp_path, manip):
+    doc = {k: v for k, v in manip.items() if k != "plant_hash"}
+    t = check_loaded(Design.from_dict(doc, "d.json"))
+    assert any("has no plant_hash" in n and "compared through its T-S model" in n for n in t.notes)
+    t = check_loaded(Design.from_dict({**doc, "plant_spec": "mine.py:plant"}, "d.json"))
+    assert any("unchecked against any plant" in n for n in t.notes)
 
 
 # -- names are data ---------------------------------------------------------------------------------------
