@@ -4,7 +4,8 @@ Every file fte writes goes through :func:`atomic_write`: the content is written 
 in the target's folder, flushed to disk, and renamed over the target (``os.replace``, atomic on
 POSIX and Windows). A kill, a Ctrl-C or a full disk at any moment leaves the previous file or the
 complete new one, never a partial one; an interrupted write removes its temporary file (a SIGKILL
-can leave one behind, named ``.NAME.*.tmp``).
+can leave one behind, named ``.NAME.*.tmp``). After a Ctrl-C of the ``fte`` command nothing more is put in
+place (:func:`fte_casadi._interrupt.check`), even where the ``KeyboardInterrupt`` was swallowed.
 
 :func:`replace_dir` does the same for a folder written as a set (``fte tune``'s output).
 """
@@ -18,6 +19,8 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
+
+from ._interrupt import check as _not_interrupted
 
 __all__ = ["atomic_write", "atomic_write_text", "replace_dir", "file_mode"]
 
@@ -77,6 +80,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -
             fh.flush()
             os.fsync(fh.fileno())
         os.chmod(tmp, mode)
+        _not_interrupted()  # after a Ctrl-C nothing is put in place, whoever swallowed its KeyboardInterrupt
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -119,6 +123,7 @@ def replace_dir(new: str | os.PathLike, target: str | os.PathLike) -> Path:
     ``target`` missing and both folders beside it. ``new`` and ``target`` must share a parent folder.
     """
     new, target = Path(new), Path(target)
+    _not_interrupted()
     if not target.exists():
         os.rename(new, target)
     elif _exchange(new, target):

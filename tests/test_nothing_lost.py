@@ -342,3 +342,85 @@ def test_tune_refuses_a_directory_with_other_files(tmp_path):
     assert r.exit_code == 2 and "notes.txt" in _said(r) and "as a whole" in _said(r)
     assert (out / "notes.txt").read_text() == "mine"
     assert sorted(f.name for f in tmp_path.iterdir()) == ["t"]
+
+
+# -- Ctrl-C always wins ---------------------------------------------------------------------
+@pytest.mark.parametrize("then", ["goes on", "fails"])
+def test_a_swallowed_ctrl_c_still_ends_with_130_and_writes_nothing(tmp_path, monkeypatch, then):
+    """CasADi returns None from a call a Ctrl-C interrupted (the design then goes on, or fails later with an
+    error of its own): the command still ends with 130, and the document is not written."""
+    import fte_casadi.cli._design as cli_design
+    from fte_casadi.design._record import Design
+
+    def swallowing(*a, **k):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # the handler runs at the next bytecode
+        except KeyboardInterrupt:
+            pass  # what CasADi and a retrying library do with it
+        d = Design.load(ROOT / "generated" / "manipulator" / "design.json") if then == "goes on" else None
+        return d, None, None
+
+    monkeypatch.setattr(cli_design, "_make_design", swallowing)
+    target = tmp_path / "d.json"
+    r = CliRunner().invoke(main, ["design", "manipulator", "-o", str(target)])
+    assert r.exit_code == 130, r.output
+    assert "interrupted; nothing was written" in _said(r) and "internal error" not in r.output
+    assert os.listdir(tmp_path) == []
+
+
+def test_scs_catching_sigint_itself_is_a_ctrl_c():
+    """SCS installs its own SIGINT handler while it solves and reports 'interrupted' as a failure (the design
+    would then try the other solver): fte's SCS raises it as KeyboardInterrupt and records it."""
+    import cvxpy as cp
+
+    from fte_casadi import _interrupt
+    from fte_casadi.design.core._sdp import cvxpy_solver
+
+    n = 150
+    X = cp.Variable((n, n), PSD=True)
+    A = np.random.default_rng(0).normal(size=(n, n))
+    prob = cp.Problem(cp.Minimize(cp.trace((A + A.T) @ X)), [cp.trace(X) == 1])
+    timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    with _interrupt.handling():
+        timer.start()
+        with pytest.raises(KeyboardInterrupt) as caught:
+            prob.solve(solver=cvxpy_solver("SCS"), max_iters=10**7, eps_abs=1e-15, eps_rel=1e-15)
+        assert _interrupt.pending()
+    assert any(
+        f.name == "solve_via_data" for f in caught.traceback
+    )  # from SCS's status, not Python's handler
+    assert not _interrupt.pending()  # outside the command nothing is recorded
+
+
+def test_ctrl_c_while_the_modules_load_is_one_line():
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.Popen([sys.executable, "-c", "import fte_casadi.cli"], cwd=ROOT, env=env,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    time.sleep(0.3)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    assert err.decode().strip() == "fte: interrupted while loading; nothing was written"
+
+
+@pytest.mark.slow
+def test_sigint_at_any_moment_of_fte_design_ends_with_130(tmp_path):
+    """SIGINT while the modules load, while the T-S model is derived and while the LMIs are solved: always
+    status 130, one paragraph, and the document written only if the interrupt came after it was complete."""
+    target = tmp_path / "d.json"
+    for delay in (0.5, 2.5, 3.5, 4.5):
+        target.unlink(missing_ok=True)
+        p = _fte("design", "manipulator", "-o", str(target))
+        time.sleep(delay)
+        alive = p.poll() is None
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=120)
+        err = " ".join(err.decode().split())
+        if not alive:  # the design was done before the signal (a fast machine)
+            continue
+        assert p.returncode in (130, -signal.SIGINT), (delay, p.returncode, err)
+        assert "Traceback" not in err and "internal error" not in err, err
+        if p.returncode == 130:
+            assert "interrupted" in err
+            assert target.exists() == ("written before the interrupt" in err), err

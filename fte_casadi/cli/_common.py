@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .. import _interrupt
 from ..errors import FteError, InfeasibleDesignError, ParameterError, SolverFailedError
 
 EXIT_BAD_INPUT = 2
@@ -82,9 +83,10 @@ def _outputs(*targets) -> None:
 
 def _interrupted() -> str:
     """What was written before a Ctrl-C, from the snapshot :func:`_outputs` took, and what to do next."""
-    ctx = click.get_current_context()
+    ctx = click.get_current_context(silent=True)
+    meta = ctx.meta if ctx is not None else {}
     written, removed = [], []
-    for path, before in ctx.meta.get("fte.outputs", {}).items():
+    for path, before in meta.get("fte.outputs", {}).items():
         after = _stat_tree(path)
         written += sorted(f for f, v in after.items() if before.get(f) != v)
         removed += sorted(f for f in before if f not in after)
@@ -98,38 +100,47 @@ def _interrupted() -> str:
         msg = "interrupted; " + "; ".join(parts) + "; nothing else was written"
     else:
         msg = "interrupted; nothing was written (earlier files are as they were)"
-    note = ctx.meta.get("fte.on_interrupt")
+    note = meta.get("fte.on_interrupt")
     return msg + (f"; {note()}" if note else "")
 
 
 def _guard(fn):
     """Run a command; on a known error print one paragraph and exit non-zero (130 after a Ctrl-C,
-    saying exactly which files were written)."""
+    saying exactly which files were written). A Ctrl-C wins over anything else: the command's result, or an
+    error that a swallowed ``KeyboardInterrupt`` caused (CasADi's, a solver's), ends with 130 too."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         debug = click.get_current_context().find_root().params.get("debug", False)
         try:
-            return fn(*args, **kwargs)
-        except (InfeasibleDesignError, SolverFailedError) as exc:
-            if debug:
-                raise
-            _fail(str(exc), EXIT_FAILED)
-        except FteError as exc:
-            if debug:
-                raise
-            _fail(str(exc), EXIT_BAD_INPUT)
+            rv = fn(*args, **kwargs)
         except BrokenPipeError:  # output piped into `head` and the like
             sys.stderr.close()
             sys.exit(0)
         except KeyboardInterrupt:
             _fail(_interrupted(), 130)
+        except (InfeasibleDesignError, SolverFailedError) as exc:
+            if _interrupt.pending():
+                _fail(_interrupted(), 130)
+            if debug:
+                raise
+            _fail(str(exc), EXIT_FAILED)
+        except FteError as exc:
+            if _interrupt.pending():
+                _fail(_interrupted(), 130)
+            if debug:
+                raise
+            _fail(str(exc), EXIT_BAD_INPUT)
         except MemoryError:
+            if _interrupt.pending():
+                _fail(_interrupted(), 130)
             if debug:
                 raise
             _fail("out of memory: the run asks for more than this machine has; use fewer --paths (or a cluster "
                   "with --scheduler), or leave out --save")  # fmt: skip
         except Exception as exc:  # noqa: BLE001 - the last line of defence: no traceback for users
+            if _interrupt.pending():  # CasADi turns an interrupt into an error of its own
+                _fail(_interrupted(), 130)
             if debug:
                 raise
             _fail(
@@ -137,6 +148,9 @@ def _guard(fn):
                 "input; run again with `fte --debug ...` to see where, and report it",
                 3,
             )
+        if _interrupt.pending():  # the interrupt was swallowed on the way: it still wins
+            _fail(_interrupted(), 130)
+        return rv
 
     return wrapper
 
