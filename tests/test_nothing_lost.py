@@ -424,3 +424,89 @@ def test_sigint_at_any_moment_of_fte_design_ends_with_130(tmp_path):
         if p.returncode == 130:
             assert "interrupted" in err
             assert target.exists() == ("written before the interrupt" in err), err
+
+
+# -- fte codegen: its files as one set ----------------------------------------------------------
+MANIP = ROOT / "generated" / "manipulator" / "design.json"
+
+
+def test_codegen_replaces_its_files_as_one_set_and_keeps_the_rest(tmp_path, monkeypatch):
+    from fte_casadi.codegen import generate_c
+    from fte_casadi.design._record import Design
+
+    d = Design.load(MANIP)
+    out = tmp_path / "c"
+    generate_c(d, out, sample_time=2e-3)
+    (out / "main.c").write_text("int main(void) { return 0; }\n")
+    (out / "lib").mkdir()
+    (out / "lib" / "x.txt").write_text("mine")
+    before = _files(out)
+    inode = (out / "main.c").stat().st_ino
+    real_open, opened = open, []
+
+    def failing(path, *a, **k):  # the third new file fails to be written (a full disk)
+        if str(path).startswith(str(tmp_path / ".c.new-")):
+            opened.append(path)
+            if len(opened) == 3:
+                raise OSError(28, "No space left on device")
+        return real_open(path, *a, **k)
+
+    monkeypatch.setattr("builtins.open", failing)
+    with pytest.raises(Exception, match="No space left on device"):
+        generate_c(d, out)
+    monkeypatch.undo()
+    assert _files(out) == before and sorted(p.name for p in tmp_path.iterdir()) == ["c"]  # no mix, no debris
+    files = generate_c(d, out)
+    assert [f.name for f in files] == ["fte_manipulator.h", "fte_manipulator.c", "fte_manipulator_casadi.h",
+                                       "fte_manipulator_casadi.c", "README.md"]  # fmt: skip
+    assert (out / "main.c").stat().st_ino == inode and (out / "lib" / "x.txt").read_text() == "mine"
+    assert _files(out) != before and sorted(p.name for p in tmp_path.iterdir()) == ["c"]
+
+
+def test_a_mix_of_two_sets_does_not_compile(tmp_path):
+    """Even without -Werror: each .c file checks the set's number of the headers it includes."""
+    from fte_casadi.codegen import _build as build
+    from fte_casadi.codegen import generate_c
+    from fte_casadi.design._record import Design
+
+    if build.find_compiler() is None:
+        pytest.skip("no C compiler")
+    d = Design.load(MANIP)
+    generate_c(d, tmp_path / "a")
+    generate_c(d, tmp_path / "b", sample_time=2e-3)
+    for name in ("fte_manipulator_casadi.c", "fte_manipulator.h"):
+        mixed = tmp_path / f"mix-{name}"
+        mixed.mkdir()
+        for f in (tmp_path / "a").glob("fte_*"):
+            (mixed / f.name).write_bytes(((tmp_path / "b") if f.name == name else (tmp_path / "a")).joinpath(
+                f.name).read_bytes())  # fmt: skip
+        r = subprocess.run([build.find_compiler(), "-std=c99", "-c", *map(str, mixed.glob("*.c"))], cwd=mixed,
+                           capture_output=True, text=True)  # fmt: skip
+        assert r.returncode != 0 and "of another run of fte codegen" in r.stderr, r.stderr
+
+
+def test_codegen_into_the_current_directory_is_refused(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(main, ["codegen", str(MANIP), "--out", "."])
+    assert r.exit_code == 2 and "replaces its output directory as one set" in _said(r), r.output
+    assert os.listdir(tmp_path) == []
+
+
+def test_the_printed_compile_line_builds_from_anywhere(tmp_path):
+    """A directory with a space: the line quotes it and names it with -I for the header."""
+    from fte_casadi.codegen import _build as build
+
+    if build.find_compiler() is None:
+        pytest.skip("no C compiler")
+    out = tmp_path / "my c"
+    r = CliRunner().invoke(main, ["codegen", str(MANIP), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    line = [x for x in r.stdout.splitlines() if x.startswith("compile with: ")][0][len("compile with: ") :]
+    assert f"-I'{out}'" in line
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    (work / "your_main.c").write_text('#include "fte_manipulator.h"\nint main(void) {\n  fte_manipulator_state s;\n'
+                                      "  return fte_manipulator_init(&s, 0);\n}\n")  # fmt: skip
+    r = subprocess.run(line + " -o prog", shell=True, cwd=work, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert subprocess.run([str(work / "prog")]).returncode == 0
