@@ -315,3 +315,112 @@ def test_random_names_compile_and_inject_nothing(fmu_baseline, tmp_path_factory)
         assert all("`" not in t and "\n" not in t for t in outputs if t in readme)
 
     check()
+
+
+# -- options honoured or refused --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "extra, named",
+    [
+        (["--gamma", "2"], "--explore searches gamma and sigma itself: --gamma cannot be given"),
+        (["--sigma", "0.1", "--gamma", "2"], "--gamma and --sigma cannot be given"),
+        (["--allow-uncertified"], "--explore writes only a certified design"),
+    ],
+)
+def test_explore_refuses_what_it_cannot_honour(tmp_path, extra, named):
+    code, out = run("design", "manipulator", "--explore", "--out", tmp_path / "f", *extra)
+    assert code == 2 and named in out, out
+    assert not (tmp_path / "f").exists()
+
+
+@pytest.mark.slow
+def test_explore_takes_the_options_of_a_design(tmp_path, monkeypatch):
+    """One options record for a design and for --explore: kappa, alpha, the sample time and the plant as it was
+    named reach the frontier's designs and its -o document (which then loads with the suggested --plant)."""
+    import importlib
+
+    design_pkg = importlib.import_module(
+        "fte_casadi.design"
+    )  # the package (fte_casadi.design is the function)
+    real = design_pkg.explore
+    seen = []
+
+    def one_sigma(ts, options, **kw):  # the frontier at one sigma: the CLI's options are what is tested
+        seen.append(options)
+        return real(ts, options, sigmas=[0.1866], budget=None, progress=kw.get("progress"))
+
+    monkeypatch.setattr(design_pkg, "explore", one_sigma)
+    spec = f"{ROOT / 'examples' / 'pendulum_plain.py'}:pendulum"
+    doc = tmp_path / "best.json"
+    code, out = run("design", spec, "--explore", "--out", tmp_path / "f", "-o", doc, "--kappa", "5000",
+                    "--sample-time", "0.002", "--gamma1", "0.1")  # fmt: skip
+    assert code == 0, out
+    (o,) = seen
+    assert (o.kappa, o.sample_time, o.gamma1, o.plant_spec) == (5000.0, 0.002, 0.1, spec)
+    d = Design.load(doc)
+    assert d.plant_spec == spec and d.params.kappa == 5000.0 and d.observer.sample_time == 0.002
+    code, out = run("codegen", doc, "--out", tmp_path / "c", "--plant", d.plant_spec)
+    assert code == 0, out
+
+
+@pytest.mark.parametrize(
+    "extra, named",
+    [
+        (["--release", "0.7"], "--release is the hysteresis of --accommodate's gate"),
+        (["--false-alarm-rate", "1", "--no-detection"], "--false-alarm-rate sets the detection thresholds"),
+        (["--measurement-noise="], "--measurement-noise is empty"),
+        (
+            ["--measurement-noise", "0.1"],
+            "--measurement-noise has 1 entries; the plant has 2 outputs (h1, h2)",
+        ),
+        (
+            ["--measurement-noise", "1e308,0"],
+            "1e+308 for output h1 exceeds the whole range the generated C "
+            "accepts for it ([14, 26], width 12)",
+        ),  # fmt: skip
+        (
+            ["--false-alarm-rate", "1e300"],
+            "--false-alarm-rate 1e+300 asks for at least one false alarm per sample",
+        ),
+        (
+            ["--accommodate", "--save-design", "X.npz", "--save", "X.npz"],
+            "--save and --save-design name the same file",
+        ),  # fmt: skip
+    ],
+)
+def test_simulate_refuses_options_that_mean_nothing_before_the_work(tmp_path, monkeypatch, extra, named):
+    import importlib
+
+    sim = importlib.import_module("fte_casadi.sim")
+    monkeypatch.setattr(sim, "simulate", lambda *a, **k: pytest.fail("the Monte Carlo ran"))
+    monkeypatch.chdir(tmp_path)
+    code, out = run("simulate", TANK, "--paths", "1", "--quiet", *extra)
+    assert code == 2 and named in out, out
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_result_that_is_not_finite_is_refused(tmp_path, monkeypatch):
+    import importlib
+
+    sim = importlib.import_module("fte_casadi.sim")
+    real = sim.simulate
+
+    def overflowed(*a, **k):
+        res = real(*a, **k)
+        res.metrics["state_rms_error"][1] = float("nan")
+        return res
+
+    monkeypatch.setattr(sim, "simulate", overflowed)
+    code, out = run("simulate", TANK, "--paths", "1", "--quiet", "--json", "--no-detection")
+    assert code == 2 and "the run's results are not finite (state_rms_error[1])" in out, out
+    assert "NaN" not in out
+
+
+@pytest.mark.parametrize("value", [1e308, 1e160])
+def test_a_parameter_whose_square_overflows_is_refused(tmp_path, manip, value):
+    doc = {**manip, "params": {**manip["params"], "gamma": value}}
+    code, out = run("codegen", write(tmp_path, doc), "--out", tmp_path / "c")
+    assert code == 2 and "'params.gamma' must be a finite number > 0 and <= 1e+100" in out, out
+    code, out = run("design", "manipulator", "--gamma", str(value))
+    assert code == 2 and "--gamma must be at most 1e+100" in out, out

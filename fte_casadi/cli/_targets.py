@@ -38,25 +38,36 @@ def _absolute_spec(plant_spec: str) -> str:
     return plant_spec
 
 
+def _design_options(
+    plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=()
+):  # fmt: skip
+    """The options record of a design of ``plant_spec`` on the command line (one record for a design and for
+    ``--explore``): the plant as it was named (made absolute), the plant's scenario step as its sample time and
+    the scenario's start as its initial state, unless given."""
+    from ..design import DesignOptions
+
+    options = DesignOptions(variant=variant, solver=solver, allow_uncertified=allow_uncertified,
+                            accept_assumptions=tuple(accept), plant_spec=_absolute_spec(plant_spec), **params)  # fmt: skip
+    sc = _scenario(plant_spec)
+    if options.sample_time is None and sc is not None:
+        options = options.replace(sample_time=float(sc.dt))
+    if sc is not None and sc.x0 is not None:  # the simulation's nominal start, for the C's init_from_y
+        options = options.replace(initial_state=sc.x0)
+    return options
+
+
 def _make_design(
     plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
     vertices: str | None = None, full: bool = False,
 ):  # fmt: skip
     """The design of ``plant_spec`` (the plant's scenario step as its sample time, unless given); with ``full``,
     ``(design, T-S model, options)``."""
-    from ..design import DesignOptions
     from ..design import design as run_design
     from ..plants._loader import load_plant
     from ..ts import derive as derive_ts
 
-    options = DesignOptions(variant=variant, solver=solver, allow_uncertified=allow_uncertified,
-                            accept_assumptions=tuple(accept), plant_spec=_absolute_spec(plant_spec), **params)  # fmt: skip
+    options = _design_options(plant_spec, variant, solver, params, allow_uncertified, accept)
     ts = derive_ts(load_plant(plant_spec), vertices=vertices)
-    sc = _scenario(plant_spec)
-    if options.sample_time is None and sc is not None:
-        options = options.replace(sample_time=float(sc.dt))
-    if sc is not None and sc.x0 is not None:  # the simulation's nominal start, for the C's init_from_y
-        options = options.replace(initial_state=sc.x0)
     d = run_design(ts, options)
     return (d, ts, options) if full else d
 

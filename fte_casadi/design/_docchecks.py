@@ -23,17 +23,37 @@ def _fail(source: str, key: str, what: str) -> DesignFileError:
     return DesignFileError(f"{source}: {key!r} {what}; {_REMAKE}")
 
 
-def _number(source: str, key: str, v, *, low=None, strict=False, integer=False, optional=False):
-    """A finite JSON number (int or float, not bool), optionally >= / > ``low``."""
+#: the largest design parameter (gamma, sigma, delta, ...) a document or an option may give: the certificate
+#: squares the parameters and multiplies them by the design's matrices, and the step multiplies the sliding gain
+#: by its state, so a larger one overflows a double (gamma = 1e160 gave gamma**2 = inf)
+PARAM_MAX = 1e100
+
+
+def param_problem(value) -> str:
+    """What makes ``value`` no design parameter ('' when it is one): a finite number, positive, at most
+    :data:`PARAM_MAX`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return f"must be a finite number; got {value!r}"
+    if value > PARAM_MAX:
+        return (f"must be at most {PARAM_MAX:g} (the certificate squares it: a larger one overflows a double); "
+                f"got {value!r}")  # fmt: skip
+    return ""
+
+
+def _number(source: str, key: str, v, *, low=None, strict=False, integer=False, optional=False, high=None):
+    """A finite JSON number (int or float, not bool), optionally >= / > ``low`` and <= ``high``."""
     if v is None and optional:
         return None
     kind = "an integer" if integer else "a finite number"
     bound = "" if low is None else f" {'>' if strict else '>='} {low:g}"
+    bound += "" if high is None else f"{' and' if bound else ''} <= {high:g}"
     ok = not isinstance(v, bool) and isinstance(v, int if integer else (int, float))
     if ok and not integer:
         ok = math.isfinite(v)
     if ok and low is not None:
         ok = v > low if strict else v >= low
+    if ok and high is not None:
+        ok = v <= high
     if not ok:
         raise _fail(source, key, f"must be {kind}{bound}; got {v!r}")
     return v
@@ -107,17 +127,17 @@ def check_document(doc: dict, source: str) -> None:
     n, m, p, ld, lf, r, nbar = (d[k] for k in _DIMS)
     params = doc["params"]
     for k, (low, strict) in _PARAMS.items():
-        _number(source, f"params.{k}", params.get(k), low=low, strict=strict)
+        _number(source, f"params.{k}", params.get(k), low=low, strict=strict, high=PARAM_MAX)
     for k, (low, strict) in _OPTIONAL_PARAMS.items():
         if k in params:
-            _number(source, f"params.{k}", params[k], low=low, strict=strict, optional=True)
+            _number(source, f"params.{k}", params[k], low=low, strict=strict, optional=True, high=PARAM_MAX)
     observer = doc.get("observer") or {}
     if not isinstance(observer, dict):
         raise _fail(source, "observer", "must be a JSON object")
     for k, (low, strict) in _OBSERVER.items():
         if k in observer:
             _number(source, f"observer.{k}", observer[k], low=low, strict=strict, optional=True)
-    _number(source, "theta", doc["theta"], low=0)
+    _number(source, "theta", doc["theta"], low=0, high=PARAM_MAX)
     r5 = doc.get("remark5") or {}
     if not isinstance(r5, dict):
         raise _fail(source, "remark5", "must be a JSON object")
