@@ -424,3 +424,56 @@ def test_a_parameter_whose_square_overflows_is_refused(tmp_path, manip, value):
     assert code == 2 and "'params.gamma' must be a finite number > 0 and <= 1e+100" in out, out
     code, out = run("design", "manipulator", "--gamma", str(value))
     assert code == 2 and "--gamma must be at most 1e+100" in out, out
+
+
+# -- the smaller ways to lose work or read garbage ---------------------------------------------------------
+
+
+def test_a_key_twice_is_refused(tmp_path):
+    text = MANIP.read_text()
+    f = tmp_path / "d.json"
+    f.write_text(text.rstrip().rstrip("}") + ', "plant": "other"}')
+    code, out = run("codegen", f, "--out", tmp_path / "c")
+    assert code == 2 and "holds the key 'plant' twice in one JSON object" in out, out
+
+
+def test_what_is_no_design_document_is_named(tmp_path):
+    folder = tmp_path / "d.json"
+    folder.mkdir()
+    from fte_casadi.errors import DesignFileError
+
+    with pytest.raises(DesignFileError, match="is a directory; give the design document itself"):
+        Design.load(folder)
+    for target in (folder, tmp_path):
+        code, out = run("simulate", target, "--paths", "1")
+        assert code == 2 and f"{target} is a directory; give a design document" in out, out
+    mat = tmp_path / "d.mat"
+    mat.write_bytes(b"MATLAB 5.0 MAT-file, written by scipy" + bytes(200))
+    code, out = run("codegen", mat, "--out", tmp_path / "c")
+    assert code == 2 and "is a MAT file" in out and "give the .json one" in out, out
+    big = tmp_path / "big.json"
+    with open(big, "wb") as fh:  # a sparse file: 65 MB that take no disk and must not be read
+        fh.truncate(65 * 2**20)
+    code, out = run("codegen", big, "--out", tmp_path / "c")
+    assert code == 2 and "is 65 MB, more than the 64 MB a design document fte reads may be" in out, out
+
+
+def test_an_output_in_a_missing_folder_is_refused_before_the_work(tmp_path, monkeypatch):
+    import fte_casadi.cli._design as cli_design
+
+    monkeypatch.setattr(cli_design, "_make_design", lambda *a, **k: pytest.fail("designed"))
+    code, out = run("design", "manipulator", "-o", tmp_path / "no" / "d.json")
+    assert code == 2 and f"the directory {tmp_path / 'no'} does not exist (checked before any work)" in out, (
+        out
+    )
+
+
+def test_design_of_a_plant_instead_of_its_model_says_so():
+    from fte_casadi import design
+    from fte_casadi.errors import ParameterError
+    from fte_casadi.plants import manipulator
+
+    with pytest.raises(
+        ParameterError, match=r"design\(\) takes the T-S model of a plant, not the plant itself"
+    ):
+        design(manipulator())

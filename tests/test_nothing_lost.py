@@ -510,3 +510,19 @@ def test_the_printed_compile_line_builds_from_anywhere(tmp_path):
     r = subprocess.run(line + " -o prog", shell=True, cwd=work, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert subprocess.run([str(work / "prog")]).returncode == 0
+
+
+@pytest.mark.slow
+def test_a_refused_resume_of_a_finished_run_leaves_no_partial_folder(tmp_path):
+    """--resume of a finished run with another --seed is refused; the copy of its trials made for the run is
+    removed, so that the next run is not taken for an interrupted one."""
+    out = tmp_path / "t"
+    r = _tune(out, "--trials", "2")
+    assert r.exit_code == 0, r.output
+    earlier = _files(out)
+    r = _tune(out, "--trials", "3", "--resume", "--seed", "3")
+    assert r.exit_code == 2 and "differs from this one in seed (it was run with 2)" in _said(r), _said(r)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["t"] and _files(out) == earlier
+    from fte_casadi.cli._tune import _tune_target
+
+    _tune_target(str(out), resume=False)  # a fresh run is not refused as continuing an interrupted one

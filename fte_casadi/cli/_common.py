@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 import textwrap
 from pathlib import Path
@@ -52,6 +53,13 @@ def _writable_target(path: str, option: str, what: str) -> None:
     p = Path(path)
     if p.is_dir():
         raise ParameterError(f"{option} {path} is a directory; give a file name such as {p / what}")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise ParameterError(f"{option} {path}: the directory {folder} does not exist (checked before any work); "
+                             "create it first, or give a file in an existing directory")  # fmt: skip
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ParameterError(f"{option} {path}: the directory {folder} is not writable (checked before any work); "
+                             "give a file in a writable directory")  # fmt: skip
     if p.exists() and not _ours(p):
         raise ParameterError(
             f"{option} {path} exists and was not written by fte (it is not a {what.split('.')[0]} document): it is "

@@ -85,6 +85,9 @@ def _design_or_plant(
     from ..trust import check_loaded
 
     p = Path(target)
+    if p.is_dir():
+        raise ParameterError(f"{target} is a directory; give a design document (the JSON file `fte design PLANT -o "
+                             "FILE.json` writes) or a plant (a built-in name, FILE.py:FUNCTION or module:function)")  # fmt: skip
     if target.endswith(".json") or p.is_file():
         trusted = check_loaded(Design.load(p), plant, allow_uncertified)
         for note in trusted.notes:

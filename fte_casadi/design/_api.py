@@ -16,6 +16,7 @@ from threadpoolctl import threadpool_limits
 
 from ..errors import FteError, InfeasibleDesignError, ParameterError
 from ..ts import TSModel
+from ..ts._model import as_model
 from . import _diffusion as diffusion
 from . import _pipeline as pipeline
 from . import _separability as separability
@@ -78,7 +79,7 @@ def design(ts: TSModel, options: DesignOptions | None = None, **changes) -> Desi
     (True, True)
     """
     options = DesignOptions(**changes) if options is None else options.replace(**changes)
-    return _attempt(ts, options)
+    return _attempt(as_model(ts, "design()"), options)
 
 
 def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) -> Design:
@@ -234,6 +235,7 @@ def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int
     from ._augment import augment
     from ._uio import uio_gain
 
+    ts = as_model(ts, "explore()")
     options = DesignOptions(**changes) if options is None else options.replace(**changes)
     given = [k for k in ("gamma", "sigma") if getattr(options, k) is not None]
     if given:

@@ -6,7 +6,10 @@ the key, e.g. ``'theta' must be a finite number >= 0; got -1``.
 
 from __future__ import annotations
 
+import json
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 
@@ -17,6 +20,71 @@ from ..ts._cover import VERTEX_CHOICES
 __all__ = []  # public: docs/api.md
 
 _REMAKE = "make it again with `fte design PLANT -o FILE`"
+
+#: the largest file read as a design document: fte's are kilobytes to a few megabytes (a 24-state design of
+#: 4 rules, or 64 rules of 6 states: under 1 MB); reading JSON takes about 5 times its size in memory
+MAX_DOCUMENT_BYTES = 64 * 2**20
+
+
+def _reject_constant(name: str):
+    raise DesignFileError(f"the design document holds {name}; every number must be finite")
+
+
+def _one_value_per_key(pairs: list) -> dict:
+    seen: set[str] = set()
+    for key, _ in pairs:
+        if key in seen:
+            raise DesignFileError(
+                f"the design document holds the key {key!r} twice in one JSON object (which of the two would be "
+                "used is a guess: a document is data with one value per key); make it again with `fte design`"
+            )
+        seen.add(key)
+    return dict(pairs)
+
+
+def read_document(path: str | os.PathLike) -> dict:
+    """The JSON of the design document at ``path``, or :class:`DesignFileError` saying what it is instead: a
+    directory, a missing file, a file too large to be a design document (before it is read), a MAT file, not
+    text, not JSON (truncated or corrupt), nested too deeply, a key twice in one object, or a NaN/Infinity."""
+    p = Path(path)
+    name = f"design file {str(p)!r}"
+    if p.is_dir():
+        raise DesignFileError(f"{name} is a directory; give the design document itself (the JSON file "
+                              f"`fte design PLANT -o FILE.json` writes)")  # fmt: skip
+    if not p.is_file():
+        raise DesignFileError(f"{name} does not exist; make one with `fte design PLANT -o {p}`")
+    size = p.stat().st_size
+    if size > MAX_DOCUMENT_BYTES:
+        raise DesignFileError(
+            f"{name} is {size / 2**20:.0f} MB, more than the {MAX_DOCUMENT_BYTES / 2**20:.0f} MB a design "
+            "document fte reads may be (fte's are a few MB at most): it is not read. Make it again with `fte design`"
+        )
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise DesignFileError(f"{name} cannot be read: {exc.strerror or exc}") from None
+    if data.startswith(b"MATLAB 5.0 MAT-file") or p.suffix.lower() == ".mat":
+        raise DesignFileError(f"{name} is a MAT file (`fte design -o FILE.mat` writes one for MATLAB); fte reads "
+                              "a design document as JSON: give the .json one (`fte design PLANT -o FILE.json`)")  # fmt: skip
+    try:
+        return json.loads(
+            data.decode("utf-8"), parse_constant=_reject_constant, object_pairs_hook=_one_value_per_key
+        )
+    except DesignFileError as exc:
+        raise DesignFileError(f"{name}: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise DesignFileError(
+            f"{name} is not valid JSON (truncated or corrupt: {exc.msg} at line {exc.lineno}); "
+            "make it again with `fte design`"
+        ) from None
+    except UnicodeDecodeError:
+        raise DesignFileError(f"{name} is not a text file, so no design document (fte writes them as JSON); give "
+                              "the JSON document `fte design PLANT -o FILE.json` writes") from None  # fmt: skip
+    except RecursionError:
+        raise DesignFileError(
+            f"{name} nests its JSON too deeply to be a design document (fte writes matrices as "
+            "lists of rows, three levels deep); make it again with `fte design`"
+        ) from None
 
 
 def _fail(source: str, key: str, what: str) -> DesignFileError:
