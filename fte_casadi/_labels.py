@@ -3,7 +3,8 @@
 A label is a name or a unit of a plant (its name, its signals' names and units, its time unit): a line of
 printable text that a reader sees as it is. It is checked where it comes in, when a plant is built and when a
 design document is loaded (:func:`label_problem`, one validator for both), and escaped again wherever it is
-written (:func:`c_comment`, :func:`c_string`, :func:`markdown`, :func:`xml_text`), so that no name, however
+written (:func:`c_comment`, :func:`c_string`, :func:`markdown`, :func:`xml_text`, :func:`plain` for the MAT
+file), so that no name, however
 it came in, can end a comment, open a string or add a line: the generated C holds no text of a document outside
 its comments and string literals.
 """
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import unicodedata
 
-__all__ = ["label_problem", "c_comment", "c_string", "markdown", "xml_text", "MAX_LABEL"]
+__all__ = ["label_problem", "c_comment", "c_string", "markdown", "xml_text", "plain", "MAX_LABEL"]
 
 #: the longest label (characters): a name or a unit, not a paragraph
 MAX_LABEL = 200
@@ -100,6 +101,12 @@ def markdown(text) -> str:
     return "".join(
         _escape(ch) if ch in "`\\<>|" or unicodedata.category(ch) in _NOT_TEXT else ch for ch in str(text)
     )
+
+
+def plain(text) -> str:
+    """``text`` with every character that is not plain printable text (a control, a line break, a format
+    character such as a right-to-left override) written as ``<U+XXXX>``: one line, as it reads."""
+    return "".join(_escape(ch) if unicodedata.category(ch) in _NOT_TEXT else ch for ch in str(text))
 
 
 def xml_text(text) -> str:

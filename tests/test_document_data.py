@@ -477,3 +477,17 @@ def test_design_of_a_plant_instead_of_its_model_says_so():
         ParameterError, match=r"design\(\) takes the T-S model of a plant, not the plant itself"
     ):
         design(manipulator())
+
+
+def test_names_in_the_mat_file_are_one_line_each(tmp_path):
+    """A design given names in code (no document's checks on the way) writes them to MAT as plain text."""
+    import dataclasses
+
+    from scipy.io import loadmat
+
+    d = Design.load(MANIP)
+    names = {**d.names, "outputs": ["a\nb", "c\x00", "d\u202e"]}
+    dataclasses.replace(d, plant="p\r\nq", names=names).save_mat(tmp_path / "d.mat")
+    m = loadmat(tmp_path / "d.mat", simplify_cells=True)
+    assert m["plant"] == "p<U+000D><U+000A>q"
+    assert list(m["names"]["outputs"]) == ["a<U+000A>b", "c<U+0000>", "d<U+202E>"]
