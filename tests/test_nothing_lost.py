@@ -395,9 +395,11 @@ def test_scs_catching_sigint_itself_is_a_ctrl_c():
 
 def test_ctrl_c_while_the_modules_load_is_one_line():
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    p = subprocess.Popen([sys.executable, "-c", "import fte_casadi.cli"], cwd=ROOT, env=env,
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
-    time.sleep(0.3)
+    code = "import sys; sys.stderr.write('go\\n'); sys.stderr.flush(); import fte_casadi.cli"
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)  # fmt: skip
+    assert p.stderr.readline() == b"go\n"  # Python is up; fte_casadi's modules load now (about 2 s)
+    time.sleep(0.2)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err
