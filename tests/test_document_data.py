@@ -258,7 +258,7 @@ def test_code_only_sees_through_comments_and_strings():
 @pytest.fixture(scope="module")
 def fmu_baseline(tmp_path_factory):
     """The FMU's C sources of the manipulator's design under the plant name 'Zq9' and neutral names, comments
-    and strings removed, the plant's C name replaced by '@'."""
+    and strings removed, the plant's C name replaced by '@'; and its README."""
     import zipfile
 
     from fte_casadi.codegen._fmu import generate_fmu
@@ -269,8 +269,9 @@ def fmu_baseline(tmp_path_factory):
     base = dataclasses.replace(d, plant="Zq9")
     path = generate_fmu(base, tmp_path_factory.mktemp("base"))
     with zipfile.ZipFile(path) as z:
-        return d, {Path(n).name.replace("Zq9", "@"): code_only(z.read(n).decode()).replace("Zq9", "@").replace(
+        code = {Path(n).name.replace("Zq9", "@"): code_only(z.read(n).decode()).replace("Zq9", "@").replace(
             "ZQ9", "@") for n in z.namelist() if n.startswith("sources/")}  # fmt: skip
+        return d, code, z.read("documentation/README.md").decode()
 
 
 @pytest.mark.slow
@@ -282,19 +283,21 @@ def test_random_names_compile_and_inject_nothing(fmu_baseline, tmp_path_factory)
     import xml.etree.ElementTree as ET
     import zipfile
 
-    from hypothesis import HealthCheck, given, settings
+    from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import strategies as st
 
     from fte_casadi.codegen._fmu import generate_fmu
     from fte_casadi.codegen._generate import c_name
 
-    d, base = fmu_baseline
+    d, base, base_readme = fmu_baseline
     meta = st.sampled_from(["*/", "/*", "//", "\\", "\n", "\r\n", '"', "'", "<", ">", "&", "]]>", "?", "??/", "#",
                             "`", "%s", "\x00", "\x1b", "\u202e", "\u2028", "é", "θ", "${name}", "$$", "{", "}",
                             ";", INJECTION, "#include <stdio.h>", "*", "/", " "])  # fmt: skip
     label = st.lists(st.one_of(meta, st.text(max_size=4)), min_size=1, max_size=5).map("".join)
 
-    @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+    # no shrinking: an example compiles for a second, and a failure prints the example found
+    @settings(max_examples=12, deadline=None, phases=(Phase.explicit, Phase.reuse, Phase.generate),
+              suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
     @given(
         plant=label, states=st.lists(label, min_size=4, max_size=4), inputs=st.lists(label, min_size=1, max_size=1),
         outputs=st.lists(label, min_size=3, max_size=3), faults=st.lists(label, min_size=2, max_size=2),
@@ -312,7 +315,8 @@ def test_random_names_compile_and_inject_nothing(fmu_baseline, tmp_path_factory)
                 cn.upper(), "@") for n in z.namelist() if n.startswith("sources/")}  # fmt: skip
             readme = z.read("documentation/README.md").decode()
         assert got == base
-        assert all("`" not in t and "\n" not in t for t in outputs if t in readme)
+        for mark in ("\n", "`", r"\|", r"<(?!U\+[0-9A-F]{4,6}>)"):  # no line, code span, table cell or HTML
+            assert len(re.findall(mark, readme)) == len(re.findall(mark, base_readme)), mark
 
     check()
 
