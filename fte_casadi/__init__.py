@@ -6,6 +6,8 @@ drives a Monte Carlo simulation (:func:`simulate`, :func:`metrics`) and becomes 
 (:func:`generate_c`) through one CasADi Function (:func:`step_function`).
 """
 
+# first: a Ctrl-C while the modules below load ends `fte` with status 130 and one line, not a traceback
+from . import _interrupt as _interrupt  # noqa: F401
 from .codegen import generate_c as generate_c
 from .design import Design as Design
 from .design import design as design

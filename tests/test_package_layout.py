@@ -94,7 +94,18 @@ def test_no_import_circles():
 #: the steps of the path of the data, lowest first (docs/layout.md): a module imports its own step's
 #: modules and those of lower steps only
 LAYERS = (
-    {"errors", "_rounding", "_text", "_toolchain", "verdicts", "interop", "_resources", "_atomic"},
+    {
+        "errors",
+        "_rounding",
+        "_text",
+        "_toolchain",
+        "verdicts",
+        "interop",
+        "_resources",
+        "_atomic",
+        "_labels",
+        "_interrupt",
+    },
     {"model"},
     {"ts"},
     {"design"},

@@ -7,6 +7,7 @@ import textwrap
 from pathlib import Path
 
 import click
+import numpy as np
 
 from ..errors import ParameterError
 from ._common import _check_paths, _check_seed, _guard, _outputs, _positive, _writable_target
@@ -28,19 +29,60 @@ def _fmt_list(v) -> str:
     return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
 
 
-def _with_noise(scenario, noise: str | None):
-    """The scenario with ``--measurement-noise`` (comma-separated standard deviations) when given."""
-    if not noise:
-        return scenario
-    import dataclasses
-
+def _noise_option(noise: str | None) -> list[float] | None:
+    """``--measurement-noise`` as standard deviations (None: not given), each a finite number >= 0."""
+    if noise is None:
+        return None
+    if not noise.strip():
+        raise ParameterError("--measurement-noise is empty: give one standard deviation per output, comma-separated "
+                             "(e.g. 0.01,0,0.02), or leave the option out")  # fmt: skip
     try:
         stds = [float(v) for v in noise.split(",")]
     except ValueError:
         raise ParameterError(
             f"--measurement-noise {noise!r}: give one standard deviation per output, comma-separated (e.g. 0.01,0,0.02)"
         ) from None
+    for v in stds:
+        _positive("measurement-noise", v, allow_zero=True)
+    return stds
+
+
+def _with_noise(scenario, stds: list[float] | None, d):
+    """The scenario with ``--measurement-noise`` when given: one standard deviation per output of ``d``, each at
+    most the width of the range the generated C accepts for that output (a larger one is no measurement, and the
+    run's estimates would overflow)."""
+    if stds is None:
+        return scenario
+    import dataclasses
+
+    from ..codegen._generate import output_range
+
+    p = int(d.dims.p)
+    names = list((d.names or {}).get("outputs") or [f"y{k + 1}" for k in range(p)])
+    if len(stds) != p:
+        raise ParameterError(f"--measurement-noise has {len(stds)} entries; the plant has {p} outputs "
+                             f"({', '.join(names)}): give one standard deviation per output")  # fmt: skip
+    rng = output_range(d)
+    for k, v in enumerate(stds):
+        width = float(rng["hi"][k] - rng["lo"][k])
+        if v > width:
+            raise ParameterError(
+                f"--measurement-noise: {v:g} for output {names[k]} exceeds the whole range the generated C accepts "
+                f"for it ([{rng['lo'][k]:.6g}, {rng['hi'][k]:.6g}], width {width:.6g}): noise that large is no "
+                "measurement, and the run's estimates would overflow; give at most that"
+            )
     return dataclasses.replace(scenario, measurement_noise=tuple(stds))
+
+
+def _nonfinite(m, path: str = "") -> list[str]:
+    """The keys of a metrics document that hold a NaN or an infinity (a result is never a non-finite number)."""
+    if isinstance(m, dict):
+        return [p for k, v in m.items() for p in _nonfinite(v, f"{path}.{k}" if path else str(k))]
+    if isinstance(m, (list, tuple)):
+        return [p for k, v in enumerate(m) for p in _nonfinite(v, f"{path}[{k}]")]
+    if isinstance(m, float) and not np.isfinite(m):
+        return [path]
+    return []
 
 
 def _summary(plant: str, m: dict) -> str:
@@ -133,9 +175,9 @@ def _why(d, m: dict) -> list[str]:
 @click.option("--accommodate", is_flag=True,
               help="Compensate a fault in the control only while it is detected and isolated (thresholds calibrated "
                    "on fault-free paths at --false-alarm-rate); the C and FMU of --save-design's document do the same.")  # fmt: skip
-@click.option("--release", "release", type=float, default=0.5, show_default=True,
+@click.option("--release", "release", type=float,
               help="With --accommodate: a compensated fault stays compensated until |fhat| / threshold falls below "
-                   "this ratio (hysteresis); 1: the memoryless gate.")  # fmt: skip
+                   "this ratio (hysteresis; default 0.5); 1: the memoryless gate.")  # fmt: skip
 @click.option(
     "--save-design",
     "save_design",
@@ -166,24 +208,42 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     _check_seed(seed)
     if dt is not None:
         _positive("dt", dt)
+    _positive("false-alarm-rate", fa_rate)
+    stds = _noise_option(noise)
+    if release is not None and not accommodate:
+        raise ParameterError("--release is the hysteresis of --accommodate's gate: give --accommodate, or leave "
+                             "--release out")  # fmt: skip
+    release = 0.5 if release is None else release
+    if not (0 < release <= 1):
+        raise ParameterError(f"--release must be in (0, 1] (1: no hysteresis); got {release}")
+    if fa_rate is not None and no_detect and not accommodate:
+        raise ParameterError("--false-alarm-rate sets the detection thresholds, and --no-detection asks for none: "
+                             "give one of them")  # fmt: skip
+    if save_design and not accommodate:
+        raise ParameterError(
+            "--save-design writes the design with its accommodation thresholds: give --accommodate"
+        )
+    if save and save_design and Path(save).resolve() == Path(save_design).resolve():
+        raise ParameterError(f"--save and --save-design name the same file {save}: the result would replace the "
+                             "design; give two file names")  # fmt: skip
     if save:
         _writable_target(save, "--save", "result.npz")
+    if save_design:
+        _writable_target(save_design, "--save-design", "design.json")
     _outputs(save, plots, save_design)
     d, spec = _design_or_plant(
         target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
     )
     spec = _need_plant(d, spec, "simulate")
     plant = load_plant(spec)
-    scenario = _with_noise(load_scenario(spec), noise)
-    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
-    if not (0 < release <= 1):
-        raise ParameterError(f"--release must be in (0, 1] (1: no hysteresis); got {release}")
-    if save_design and not accommodate:
+    scenario = _with_noise(load_scenario(spec), stds, d)
+    step = float(dt if dt is not None else scenario.dt)
+    if fa_rate is not None and not fa_rate * step < 1:
         raise ParameterError(
-            "--save-design writes the design with its accommodation thresholds: give --accommodate"
+            f"--false-alarm-rate {fa_rate:g} asks for at least one false alarm per sample (the step is {step:g}): a "
+            f"rate is alarms per unit of the plant's time, below 1 / step = {1 / step:g}; the default is one per hour"
         )
-    if save_design:
-        _writable_target(save_design, "--save-design", "design.json")
+    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
     if accommodate:
         from ..sim._accommodate import accommodated
 
@@ -205,6 +265,13 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
                   record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
                   false_alarm_rate=fa_rate)  # fmt: skip
     m = res.metrics
+    bad = _nonfinite(m)
+    if bad:  # a non-finite number is never printed as a result
+        raise ParameterError(
+            f"the run's results are not finite ({', '.join(bad[:6])}{' ...' if len(bad) > 6 else ''}): the closed "
+            "loop overflowed with these settings. Lower the noise or the fault sizes, or check "
+            "the design"
+        )
     if save:
         save_result(res, save)
     figs = []

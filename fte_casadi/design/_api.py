@@ -15,8 +15,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .._text import shorten
-from ..errors import FteError, InfeasibleDesignError
+from ..errors import FteError, InfeasibleDesignError, ParameterError
 from ..ts import TSModel
+from ..ts._model import as_model
 from . import _diffusion as diffusion
 from . import _pipeline as pipeline
 from . import _separability as separability
@@ -79,7 +80,7 @@ def design(ts: TSModel, options: DesignOptions | None = None, **changes) -> Desi
     (True, True)
     """
     options = DesignOptions(**changes) if options is None else options.replace(**changes)
-    return _attempt(ts, options)
+    return _attempt(as_model(ts, "design()"), options)
 
 
 def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) -> Design:
@@ -211,12 +212,18 @@ def _other_solver(ts, options: DesignOptions, exc: Exception, where: str, retrie
 LADDER = (1.05, 1.25, 1.6, 2.5, 4.0, 6.3, 10.0)
 
 
-def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas=None, count: int = 12,
-            sample_time: float | None = None, progress=None, budget: float | None = 60.0,
-            ) -> tuple[list[FrontierPoint], dict]:  # fmt: skip
+def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int = 12, progress=None,
+            budget: float | None = 60.0, **changes) -> tuple[list[FrontierPoint], dict]:  # fmt: skip
     """The feasible frontier: for each sigma, the smallest gamma for which (45) is feasible, and the
     smallest gamma of :data:`LADDER` x that value for which the whole design (both steps and the
     certificate) is certified: step 5 needs some room above the frontier of (45).
+
+    ``options`` is the :class:`~fte_casadi.design._options.DesignOptions` of a design (keyword arguments are its
+    fields and change it, as for :func:`design`): every design along the frontier is made with it (variant,
+    solver, gamma1, delta, epsilon, alpha, kappa, bound_weight, sample_time, initial_state, accepted assumptions,
+    Remark 5, plant_spec), gamma and sigma excepted, which the frontier searches: giving either is refused, as is
+    ``allow_uncertified`` (the frontier counts certified designs only), with
+    :class:`~fte_casadi.errors.ParameterError`.
 
     ``sigmas`` default: ``count`` values spaced in log scale from ``min(sigma / 30, 1e-3 sigma_sup)``
     (``sigma`` the plant's default) to just below ``sigma_sup``, the largest sigma any gamma allows. Returns the
@@ -228,10 +235,26 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
     from ._augment import augment
     from ._uio import uio_gain
 
+    ts = as_model(ts, "explore()")
+    options = DesignOptions(**changes) if options is None else options.replace(**changes)
+    given = [k for k in ("gamma", "sigma") if getattr(options, k) is not None]
+    if given:
+        raise ParameterError(
+            f"the frontier searches gamma and sigma itself; {' and '.join(given)} cannot be given to it (design at "
+            "them without exploring, or leave them out)"
+        )
+    if options.allow_uncertified:
+        raise ParameterError(
+            "the frontier counts certified designs only, and its best design is certified: allow_uncertified "
+            "(--allow-uncertified) means nothing to it"
+        )
+    solver, gamma1 = options.solver, options.gamma1
     t0 = time.perf_counter()
     status: list[str] = []
     params = _params(
-        ts, {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": None, "epsilon": None}, status
+        ts,
+        {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": options.delta, "epsilon": options.epsilon},
+        status,
     )
     aug = augment(ts.local_models, ts.C, ts.Df)
     g1 = params["gamma1"]
@@ -244,7 +267,7 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
             )
         sigmas = np.geomspace(min(params["sigma"] / 30, sup * 1e-3), sup * 0.98, count)
     gs = gamma_size(ts)
-    base = DesignOptions(diagnose=False, solver=solver, gamma1=g1, sample_time=sample_time)
+    base = options.replace(diagnose=False, gamma1=g1)
     points, best, skipped, refused_46 = [], None, 0, None
     # the largest sigma first ((46) asks for a large one, (45) for a small one), within 70 % of the budget: the
     # rest is left for the diagnosis of a frontier without a certified design

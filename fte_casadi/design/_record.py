@@ -452,26 +452,12 @@ class Design:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Design:
-        """Read a design document, refusing a missing, truncated or corrupt file with a clear message."""
+        """Read a design document, refusing a missing, truncated or corrupt file with a clear message
+        (:func:`~fte_casadi.design._docchecks.read_document`)."""
+        from ._docchecks import read_document
+
         p = Path(path)
-        if not p.is_file():
-            raise DesignFileError(
-                f"design file {str(p)!r} does not exist; make one with `fte design PLANT -o {p}`"
-            )
-        try:
-            doc = json.loads(p.read_text(), parse_constant=_reject_constant)
-        except json.JSONDecodeError as exc:
-            raise DesignFileError(
-                f"design file {str(p)!r} is not valid JSON (truncated or corrupt: {exc.msg} at line {exc.lineno}); "
-                "make it again with `fte design`"
-            ) from None
-        except UnicodeDecodeError:
-            raise DesignFileError(f"design file {str(p)!r} is not a text file") from None
-        except RecursionError:
-            raise DesignFileError(
-                f"design file {str(p)!r} nests its JSON too deeply to be a design document (fte writes matrices as "
-                "lists of rows, three levels deep); make it again with `fte design`"
-            ) from None
+        doc = read_document(p)
         return cls.from_dict(doc, source=f"design file {str(p)!r}")
 
 
@@ -590,10 +576,6 @@ def _first_nonfinite(obj, path: str = "") -> str | None:
     elif isinstance(obj, float) and not math.isfinite(obj):
         return path
     return None
-
-
-def _reject_constant(name: str):
-    raise DesignFileError(f"the design document holds {name}; every number must be finite")
 
 
 def _finite(source: str, key: str, value) -> np.ndarray:
