@@ -267,8 +267,9 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     m = res.metrics
     bad = _nonfinite(m)
     if bad:  # a non-finite number is never printed as a result
+        first = bad[:6]  # the first keys (a list, not a message's text)
         raise ParameterError(
-            f"the run's results are not finite ({', '.join(bad[:6])}{' ...' if len(bad) > 6 else ''}): the closed "
+            f"the run's results are not finite ({', '.join(first)}{' ...' if len(bad) > 6 else ''}): the closed "
             "loop overflowed with these settings. Lower the noise or the fault sizes, or check "
             "the design"
         )
