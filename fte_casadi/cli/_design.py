@@ -9,9 +9,14 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from ..errors import ParameterError
+from ..errors import InfeasibleDesignError, ParameterError
 from ._common import _guard, _outputs, _positive, _writable_target
 from ._targets import _VERTICES, _design_options, _make_design, _scenario
+
+
+def _gamma_min_text(g) -> str:
+    """The frontier's gamma_min: '-' where no gamma makes (45) feasible, 'any' without unknown inputs (0)."""
+    return "-" if g is None else ("any" if g == 0 else format(g, ".4g"))
 
 
 def _check_params(**kw) -> dict:
@@ -60,7 +65,7 @@ def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, outpu
     )
     for pt in points:
         click.echo(
-            f"{pt.sigma:10.4g} {'-' if pt.gamma_min is None else format(pt.gamma_min, '.4g'):>15} "
+            f"{pt.sigma:10.4g} {_gamma_min_text(pt.gamma_min):>15} "
             f"{'-' if pt.gamma_tried is None else format(pt.gamma_tried, 'g'):>15} "
             f"{'-' if pt.alpha is None else format(pt.alpha, '.3g'):>9} "
             f"{'-' if pt.max_abs_L1 is None else format(pt.max_abs_L1, '.3g'):>9} "
@@ -72,9 +77,11 @@ def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, outpu
     if info["skipped"]:
         click.echo(f"{info['skipped']} of the sigmas were not tried: the time budget (60 s) ran out")
     best = info["best"]
-    if best is None:
-        click.echo("no certified design found" + (f": {info['cause']}" if info["cause"] else ""))
-        return
+    if best is None:  # no certified design exists on the frontier: exit 1, as a refused design
+        raise InfeasibleDesignError(
+            "--explore found no certified design" + (f": {info['cause']}" if info["cause"] else "")
+            + " (the frontier above lists what each sigma gave)"
+        )
     click.echo(
         f"best certified design found (the fastest observer): sigma = {best.params.sigma:.4g}, gamma = "
         f"{best.params.gamma:g}, decay rate {best.observer.alpha:.4g}"

@@ -288,9 +288,12 @@ def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int
                 FrontierPoint(float(sg), None, None, False, None, None, "(45) infeasible for every gamma")
             )
         else:
-            point, why = None, ""
+            point, why, tried = None, "", set()
             for f in LADDER:  # the smallest gamma on the ladder whose whole design is certified
                 gt = round_gamma(max(f * gmin, 1.01 * g1), gs)
+                if gt in tried:  # without unknown inputs gamma bounds nothing: one design tells
+                    continue
+                tried.add(gt)
                 try:
                     d = design(ts, base.replace(gamma=gt, sigma=float(sg)))
                 except FteError as exc:
@@ -311,8 +314,9 @@ def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int
                     if best is None or d.observer.alpha > best.observer.alpha:
                         best = d
                     break
-            points.append(point or FrontierPoint(float(sg), gmin, None, False, None, None, f"no gamma up to "
-                                                 f"{LADDER[-1]:g} x {gmin:.3g} certifies: {why}"))  # fmt: skip
+            what = (f"no gamma up to {LADDER[-1]:g} x {gmin:.3g} certifies" if gmin > 0 else
+                    "no design certifies (gamma bounds no unknown input here)")  # fmt: skip
+            points.append(point or FrontierPoint(float(sg), gmin, None, False, None, None, f"{what}: {why}"))
         if progress is not None:
             progress(k + 1, len(sigmas))
     points.sort(key=lambda pt: pt.sigma)

@@ -65,6 +65,6 @@ def other_cover(attempt, ts, options) -> str:
                 f"vertices no state of the region reaches (up to {far.max():.2g} of the image's extent away), and "
                 f"(45)-(46) must hold there too; covered with --vertices {choice} ({other.r} rules) the whole design "
                 "is certified (checked): design with `fte design PLANT --vertices "
-                f"{choice}` (or derive(plant, vertices='{choice}'))"
+                f"{choice}{options.flags()}` (or derive(plant, vertices='{choice}'))"
             )
     return ""

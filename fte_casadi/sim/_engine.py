@@ -336,8 +336,11 @@ class Prepared:
         w = ca.SX.sym("w", lay.nw)
         sh = ca.SX.sym("sh", nsh)
         c = self.cols
-        wd = ca.vertcat(w[0], w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]],
-                        w[1 + ld :] * sh[c["vstd"][0] : c["vstd"][1]])  # fmt: skip
+        # an empty slice of an SX column can come out 1x0: a plant without unknown inputs (or without measurement
+        # noise) gets an explicit 0x1 block
+        d_part = w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]] if ld else ca.SX(0, 1)
+        v_part = w[1 + ld :] * sh[c["vstd"][0] : c["vstd"][1]] if lay.nv else ca.SX(0, 1)
+        wd = ca.vertcat(w[0], d_part, v_part)
         nxt, rec = sample(S[: lay.ns], wd, sh[: 4 * lf])
         mon_next, inc, pm = self.monitor.fn(rec, S[lay.ns :], sh[c["mask"][0] : c["thr"][1]])
         # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)

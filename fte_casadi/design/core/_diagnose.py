@@ -232,7 +232,13 @@ def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple
     in minutes and millimetres, or one whose rates are 1e3/s, is solved in numbers of order one. A heavy problem
     (many rules) is bisected on phase 1's decisions in numpy (:func:`_edge`) where the conic solve is slow (SCS)
     or fails: on the 64-rule chain's sigma_max, SCS took 56 s, the bisection 11.6 s and Clarabel 2.3 s
-    (measured), so Clarabel's answer is kept where it has one."""
+    (measured), so Clarabel's answer is kept where it has one.
+
+    A plant without unknown inputs has no d block in (45): gamma bounds nothing there, and the answer is 0 (any
+    gamma) where (45) is feasible at ``sigma`` (:func:`sigma_max`), None where it is not."""
+    if aug.ld == 0:
+        smax, status = sigma_max(aug, None, gamma1, solver)
+        return (0.0 if smax is not None and sigma < smax else None), status
     numpy = _heavy(aug, gamma1)
     if numpy and solver == "SCS" and (found := _numpy_gamma_min(aug, sigma, gamma1)) is not None:
         return found
