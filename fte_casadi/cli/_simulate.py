@@ -71,6 +71,15 @@ def _summary(plant: str, m: dict) -> str:
             f"{_num(e.get('false_alarm_rate_ftc_run'))}{_ival(e.get('false_alarm_rate_ftc_run_interval'))} outside its "
             "windows in the faulty run"
         )
+    for s in m.get("detectability") or []:
+        for c in s["curves"]:
+            mdf = c["min_detectable_fault"]
+            lines.append(
+                f"  smallest {c['fault']} detected on {100 * s['target']:g} % of {s['paths']} paths within "
+                f"{_num(c['delay'])} ({s.get('label')}): "
+                + (f"{mdf:.3g} (factor {c['min_detectable_factor']:.3g} of the scenario's)" if mdf is not None
+                   else f"n/a ({c['why']})")
+            )  # fmt: skip
     if m.get("measurement_noise") is not None:
         lines.append(f"  measurement noise (std per output): {_fmt_list(m['measurement_noise'])}")
     lines.append(f"  samples outside the plant's region: {100 * m['outside_region']:.2g} %")
@@ -110,6 +119,24 @@ def _window_lines(m: dict) -> list[str]:
             + detected
         )
     return out
+
+
+def _detectability(
+    d, plant, scenario, m: dict, paths: int, seed: int, dt, rate, cal_paths, fast_math
+) -> dict:
+    """``m`` with the detection probability against each fault's size (``fte simulate --detectability``): with the
+    scenario's measurement noise and without it."""
+    from ..sim._detectability import attach, detectability
+
+    kw = dict(paths=max(64, int(paths)), seed=seed, dt=dt, false_alarm_rate=rate, calibration_paths=cal_paths,
+              exact=not fast_math)  # fmt: skip
+    sets = [detectability(d, plant, scenario, **kw)]
+    if scenario.measurement_noise is not None:
+        sets.append(detectability(d, plant, scenario, scales={"measurement_noise_scale": 0.0}, **kw))
+    for s in sets:
+        s["label"] = "without measurement noise" if s["measurement_noise"] is None or not any(
+            s["measurement_noise"]) else "with measurement noise"  # fmt: skip
+    return attach(m, sets)
 
 
 def _warnings(m: dict, inputs, faults=(), outputs=(), units=()) -> list[str]:
@@ -155,6 +182,9 @@ def _why(d, m: dict) -> list[str]:
 @click.option("--calibration-paths", "cal_paths", type=int,
               help="Fault-free paths the detection thresholds are calibrated on (default: enough for the false-alarm "
                    "rate asked, within a budget of path-steps).")  # fmt: skip
+@click.option("--detectability", "detect_curve", is_flag=True,
+              help="Also measure the smallest fault the design detects: per fault the detection probability against "
+                   "its size (each fault alone, at least 64 paths), with and without the measurement noise.")  # fmt: skip
 @click.option("--accommodate", is_flag=True,
               help="Compensate a fault in the control only while it is detected and isolated (thresholds calibrated "
                    "on fault-free paths at --false-alarm-rate); the C and FMU of --save-design's document do the same.")  # fmt: skip
@@ -178,8 +208,8 @@ def _why(d, m: dict) -> list[str]:
 @_plant_option
 @_allow_option
 @_guard
-def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, cal_paths, accommodate, release,
-             save_design, no_detect, as_json, quiet, plant_opt, allow_uncertified):  # fmt: skip
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, cal_paths, detect_curve,
+             accommodate, release, save_design, no_detect, as_json, quiet, plant_opt, allow_uncertified):  # fmt: skip
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .._resources import check_paths_memory
@@ -233,6 +263,10 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
                   record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
                   false_alarm_rate=fa_rate, calibration_paths=cal_paths)  # fmt: skip
     m = res.metrics
+    if detect_curve and not no_detect:
+        m = _detectability(
+            d, plant, scenario, m, paths or scenario.paths, seed, dt, fa_rate, cal_paths, fast_math
+        )
     if save:
         save_result(res, save)
     figs = []

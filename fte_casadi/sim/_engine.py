@@ -400,6 +400,19 @@ class Prepared:
         out.sqdt = math.sqrt(self.dt) * scales["noise_scale"]
         return out
 
+    def with_fault_factors(self, factors) -> Prepared:
+        """The same compiled engine with each fault's magnitude multiplied by its own factor (one per fault, in
+        the plant's order; on top of ``fault_scale``): e.g. one fault alone at a size, the others absent."""
+        import copy
+
+        out = copy.copy(self)
+        out.SH = self.SH.copy()
+        lf = self.plant.lf
+        f = np.asarray(factors, dtype=float)
+        for r in range(3):  # bias/drift, loss, stuck deviation; not the latch
+            out.SH[:, r * lf : (r + 1) * lf] *= f[None, :]
+        return out
+
     def initial_states(self, paths: np.ndarray, seed: int) -> np.ndarray:
         """(len(paths), ns + nmon): x0 plus its noise (drawn from (seed, path)), observer initialised per
         scenario, the monitor's start."""
