@@ -90,7 +90,8 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``,
     ``false-alarm rate``, ``standing alarm``, ``saturated``, ``poor estimate``, ``slow observer``, ``not
     settled``, ``missed``, ``outside region``. A ratio is worse than none only when its interval over the
-    paths lies above 1 (where the document gives one); a ratio above 1 whose interval holds 1 is a tie."""
+    paths lies above 1 (where the document gives one); a ratio above 1 whose interval holds 1 is a tie. A poor
+    estimate likewise needs its interval at or above :data:`POOR_ESTIMATE`."""
     out = []
 
     def add(verdict, where, value, text):
@@ -131,8 +132,8 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
                         f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
                         f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
                         f"whole are not worse (ftc_true_ratio {r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
-        err = w.get("fault_rel_rms_error")
-        if err is not None and err >= POOR_ESTIMATE:
+        err, err_iv = w.get("fault_rel_rms_error"), w.get("fault_rel_rms_error_interval")
+        if err is not None and err >= POOR_ESTIMATE and (err_iv is None or err_iv[0] >= POOR_ESTIMATE):
             add("poor estimate", where, err,
                 f"in {where} the fault estimate misses {100 * min(err, 9.99):.0f} % of the fault (relative RMS error "
                 f"{err:.3g} over the window): this design does not estimate this fault in this scenario")  # fmt: skip

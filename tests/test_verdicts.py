@@ -140,3 +140,12 @@ def test_a_standing_alarm_is_said_and_is_no_detection():
          "ftc_true_ratio": 0.7, "missed_detections": 0, "standing_alarm_paths": 7, "input_saturation": [0.0]}  # fmt: skip
     (v,) = verdicts.verdicts({"paths": 20, "windows": [w]}, ["u"], ["fa", "fs"])
     assert v["verdict"] == "standing alarm" and v["value"] == 7 and "7 of 20 paths" in v["text"]
+
+
+def test_a_poor_estimate_needs_its_interval_at_or_above_the_limit():
+    w = {"fault": "fa", "start": 0.0, "stop": 2.0, "fault_rel_rms_error": 0.52, "settling_time": 0.2,
+         "ftc_true_ratio": 0.5, "input_saturation": [0.0]}  # fmt: skip
+    poor = {**w, "fault_rel_rms_error_interval": [0.505, 0.54]}
+    tie = {**w, "fault_rel_rms_error_interval": [0.47, 0.57]}
+    assert [v["verdict"] for v in verdicts.verdicts({"paths": 9, "windows": [poor]})] == ["poor estimate"]
+    assert verdicts.verdicts({"paths": 9, "windows": [tie]}) == []
