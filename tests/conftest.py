@@ -18,6 +18,9 @@ import scipy.linalg as sla
 os.environ.setdefault(
     "FTE_CACHE_DIR", os.path.join(os.environ.get("TMPDIR", "/tmp"), "fte_casadi_test_cache")
 )
+# the detection thresholds' calibration within a small budget of path-steps (the default, 2e7 per pass, is for
+# a run's own promise; the tests of the promise ask for their paths explicitly: tests/test_detection_promise.py)
+os.environ.setdefault("FTE_CALIBRATION_BUDGET", "2e5")
 
 import matplotlib  # noqa: E402
 
