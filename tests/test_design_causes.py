@@ -14,10 +14,10 @@ from plant_fjoint import fjoint, fjoint_calm
 from plant_twin_fans import fans_alike, fans_one_fault
 
 from fte_casadi.design import DesignOptions, design
-from fte_casadi.design._diffusion import scaled_model
 from fte_casadi.design._remedy import remedies
 from fte_casadi.design.core import _barrier as barrier
 from fte_casadi.design.core import _sdp as sdp
+from fte_casadi.design.diagnose import scaled_model
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.sim import Bias, Scenario
 from fte_casadi.ts import derive

@@ -278,3 +278,70 @@ def test_one_public_init_per_subpackage():
     bad = [str(p.relative_to(ROOT)) for p in ROOT.rglob("*.py")
            if not p.stem.startswith("_") and (p.parent != ROOT or p.stem not in public_top)]  # fmt: skip
     assert bad == [], bad
+
+
+# -- a cause is a record, read by field (docs/layout.md; errors.Refusal) ---------------------------------------------
+#: names a message's text goes by in the package's code (the text of an exception, a reason, a status line)
+_TEXT_NAMES = {"why", "msg", "message", "text", "reason", "stop", "status", "note", "detail", "advice", "statement",
+               "err", "exc", "error"}  # fmt: skip
+#: what is done to a text to read it, besides ``in``
+_READS = {"startswith", "endswith", "split", "rsplit", "partition", "rpartition", "find", "index", "count"}
+
+
+def _is_text(node) -> bool:
+    """Does ``node`` read as the text of a message: ``str(...)``, a name of :data:`_TEXT_NAMES` (also as an
+    attribute, indexed, inside ``a or b``, or read with ``.get("why")``)?"""
+    if isinstance(node, ast.Call):
+        f = node.func
+        if isinstance(f, ast.Name) and f.id == "str":
+            return True
+        return (isinstance(f, ast.Attribute) and f.attr == "get" and bool(node.args)
+                and isinstance(node.args[0], ast.Constant) and node.args[0].value in _TEXT_NAMES)  # fmt: skip
+    if isinstance(node, ast.BoolOp):
+        return any(_is_text(v) for v in node.values)
+    if isinstance(node, ast.Subscript):
+        return _is_text(node.value)
+    if isinstance(node, ast.Attribute):
+        return node.attr in _TEXT_NAMES
+    return isinstance(node, ast.Name) and node.id in _TEXT_NAMES
+
+
+def _reads_a_message(node) -> bool:
+    """``"..." in why``, ``"alpha" not in str(exc)``, ``why.startswith("phase 1")``, ``str(err).split(" No ...")``:
+    a decision (or a cut) made on the text of a message. ``" ".join(str(exc).split())`` (whitespace) is not."""
+    if isinstance(node, ast.Compare):
+        lefts = [node.left, *node.comparators]
+        return any(isinstance(op, (ast.In, ast.NotIn)) and isinstance(left, (ast.Constant, ast.JoinedStr))
+                   and _is_text(right) for op, left, right in zip(node.ops, lefts, node.comparators))  # fmt: skip
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in _READS:
+        return _is_text(node.func.value) and bool(node.args)
+    return False
+
+
+#: text read on purpose, with the reason: a documented format, or another library's words
+TEXT_READ = {
+    "design/_record.py": "a document's `nonfinite` entries are 'NaN: why', a documented format read back; and "
+    "their keys are dotted paths",
+    "design/core/_sdp.py": "the first sentence of cvxpy's warnings, quoted in the solve's notes",
+    "cli/_tune.py": "fte tune counts the failed trials by the first clauses of their reasons, numbers masked: a "
+    "display of tune.json's reasons, no decision",
+}
+
+
+def test_no_branch_reads_the_text_of_a_message():
+    """Code decides on a refusal's record (``exc.refusal.kind``, ``.lmi``, ``.bounded``, ``.found``), a status
+    constant or a number, never on the words of a message: rewording one changes no behaviour."""
+    found = _where(_reads_a_message)
+    assert [p for p in found if p.split(":")[0] not in TEXT_READ] == []
+    assert _modules_of(found) == set(TEXT_READ)  # an exemption whose reason is gone is dropped
+
+
+def test_the_check_sees_the_message_reads_it_is_for():
+    for src in ('"alpha" not in str(exc)', '"(46)" in why', 'st.status.startswith("phase 1")',
+                'str(err).split(" No value tried")[0]', '"lowered" in (d.observer.why or "")',
+                'why = "sample time" in best.observer.get("why")', 'stop.startswith("stiff")',
+                '"time budget" in str(exc)', 'msg.partition(":")'):  # fmt: skip
+        assert any(_reads_a_message(n) for n in ast.walk(ast.parse(src))), src
+    for src in ('" ".join(str(exc).split())', '"kappa" in resolved.params', 'k in names', 'str(exc).rstrip(".")',
+                'res.status not in SOLVED', 'f"{why}: {msg}"', 'exc.refusal.kind in ASKED'):  # fmt: skip
+        assert not any(_reads_a_message(n) for n in ast.walk(ast.parse(src))), src

@@ -267,11 +267,11 @@ def _memory(c_src: str, real: str, nxbar: int, sizes: dict, latches: int = 0) ->
 
 
 def _fmt(v: float, real: str = "double") -> str:
-    text = repr(float(v))
+    literal = repr(float(v))
     if real == "float":
-        text += "" if ("." in text or "e" in text) else ".0"
-        return text + "f"
-    return text
+        literal += "" if ("." in literal or "e" in literal) else ".0"
+        return literal + "f"
+    return literal
 
 
 def _c_values(values, real: str = "double") -> str:

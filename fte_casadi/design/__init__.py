@@ -6,10 +6,10 @@ from ._augment import Augmented as Augmented
 from ._augment import augment as augment
 from ._limits import explain_metrics as explain_metrics
 from ._options import DesignOptions as DesignOptions
+from ._parts import Dims as Dims
+from ._parts import Observer as Observer
+from ._parts import Params as Params
 from ._record import Design as Design
-from ._records import Dims as Dims
-from ._records import Observer as Observer
-from ._records import Params as Params
 from ._uio import AssumptionCheck as AssumptionCheck
 from ._uio import check_assumptions as check_assumptions
 from ._uio import enforce as enforce

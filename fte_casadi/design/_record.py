@@ -26,7 +26,7 @@ import numpy as np
 from .._atomic import atomic_write_text
 from ..errors import DesignFileError
 from ..ts._model import LocalModel
-from ._records import Dims, Observer, Params, _Record
+from ._parts import Dims, Observer, Params, _Record
 
 __all__ = ["Design", "Dims", "Params", "Observer"]  # public: docs/api.md
 
@@ -72,8 +72,8 @@ def _arr(x) -> np.ndarray:
 class Design:
     """A certified (or honestly uncertified) observer/controller design for one plant.
 
-    ``params``, ``dims`` and ``observer`` are typed frozen records (:class:`~fte_casadi.design._records.Params`,
-    :class:`~fte_casadi.design._records.Dims`, :class:`~fte_casadi.design._records.Observer`), read by attribute:
+    ``params``, ``dims`` and ``observer`` are typed frozen records (:class:`~fte_casadi.design._parts.Params`,
+    :class:`~fte_casadi.design._parts.Dims`, :class:`~fte_casadi.design._parts.Observer`), read by attribute:
     ``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``; a plain dict given for one (for example in
     ``dataclasses.replace(d, params={...})``) becomes the record. ``checks`` stays a dict (its key set is open; see the records' module).
     """
