@@ -28,7 +28,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .design._record import Design
+from .design import Design
 from .errors import ParameterError
 
 __all__ = ["step_function", "saturate", "STEP_INPUTS", "STEP_OUTPUTS"]

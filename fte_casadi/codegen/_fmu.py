@@ -45,7 +45,7 @@ import casadi as ca
 import numpy as np
 
 from .._labels import c_comment, c_string, xml_text
-from ..design._record import Design
+from ..design import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import _build as build

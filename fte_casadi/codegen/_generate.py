@@ -39,7 +39,7 @@ import numpy as np
 from .._atomic import write_set
 from .._labels import c_comment, markdown
 from .._rounding import series_floor
-from ..design._record import Design
+from ..design import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import _template as template

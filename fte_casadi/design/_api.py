@@ -20,12 +20,12 @@ from ..errors import FteError, InfeasibleDesignError, ParameterError, Refused
 from ..ts import TSModel, as_model
 from . import _pipeline as pipeline
 from . import diagnose
-from ._options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
+from ._options import SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
 from ._record import Design
 from .core import _conditioned as conditioned
 from .core._diagnose import FrontierPoint, gamma_min, sigma_max
 
-__all__ = ["design", "explore", "DesignOptions", "GENERIC_DEFAULTS"]
+__all__ = ["design", "explore"]
 
 
 def _one_blas_thread(fn):

@@ -18,7 +18,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import AssumptionError, FteError, InfeasibleDesignError, Refusal, Refused
-from ..model._fingerprint import plant_fingerprint
+from ..model import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
 from ._augment import Augmented, augment
 from ._options import DesignOptions, Resolved
@@ -269,7 +269,7 @@ def finish(
     L2 = [Ri @ H for Ri in R]
     Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
     Kf, Kf_rules = _fault_gains(ts, status)
-    u_ref, x_ref = _u_reference(ts, K, status)
+    u_ref, x_ref = u_reference(ts, K, status)
     sched, sources = scheduling_from_measurements(ts)
     plant = ts.plant
     total = time.perf_counter() - t0
@@ -357,7 +357,9 @@ def finish(
     return dataclasses.replace(d, checks=checks, certified=not bad, bounds=bounds, status=status)
 
 
-def _u_reference(ts: TSModel, K, status: list):
+def u_reference(ts: TSModel, K, status: list):
+    """``(u_ref, x_ref)``: the input that holds ``x_ref`` (the plant's ``u_ref`` where it gives one), its lines in
+    ``status``."""
     plant = ts.plant
     if plant.u_ref is not None:
         return np.asarray(plant.u_ref, dtype=float).ravel(), None
@@ -435,7 +437,7 @@ def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known)
         return None
     scratch: list = []
     Kf, Kf_rules = _fault_gains(ts, scratch) if gains is None else gains
-    u_ref = _u_reference(ts, K, scratch)[0] if u_ref is None else u_ref
+    u_ref = u_reference(ts, K, scratch)[0] if u_ref is None else u_ref
     return SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
                            local_models=ts.local_models, K=K, **known)  # fmt: skip
 

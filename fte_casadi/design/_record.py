@@ -25,7 +25,7 @@ import numpy as np
 
 from .._atomic import atomic_write_text
 from ..errors import DesignFileError
-from ..ts._model import LocalModel
+from ..ts import LocalModel
 from ._parts import Dims, Observer, Params, _Record
 
 __all__ = ["Design", "Dims", "Params", "Observer"]  # public: docs/api.md
@@ -159,7 +159,7 @@ class Design:
             # same program; a document's (self.loaded set) is never deserialised
             import casadi as ca
 
-            from ..model._tape import write_tape
+            from ..model import write_tape
 
             fn = self.scheduling
             if isinstance(fn, str) and fn:
@@ -236,7 +236,7 @@ class Design:
         """The CasADi Function ``(y, xhat) -> h``, replayed from :attr:`scheduling_ops` (data, never a
         deserialised Function). A document older than ``scheduling_ops`` needs its plant:
         :func:`fte_casadi.trust.with_plant` rebuilds the map from it."""
-        from ..model._tape import read_tape
+        from ..model import read_tape
 
         if self.scheduling_ops is None:
             raise DesignFileError(
