@@ -105,6 +105,7 @@ LAYERS = (
         "_atomic",
         "_labels",
         "_interrupt",
+        "_version",
     },
     {"model"},
     {"ts"},

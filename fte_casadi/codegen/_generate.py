@@ -39,6 +39,7 @@ import numpy as np
 from .._atomic import write_set
 from .._labels import c_comment, markdown
 from .._rounding import series_floor
+from .._version import VERSION
 from ..design import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
@@ -59,12 +60,8 @@ _FORBIDDEN = ("stdio.h", "printf", "fopen", "malloc", "calloc", "realloc", "free
 
 
 def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("fte_casadi")
-    except Exception:  # noqa: BLE001 - metadata missing in a source checkout
-        return "0"
+    """The package's version (:data:`fte_casadi._version.VERSION`), as the generated files say it."""
+    return VERSION
 
 
 def c_name(plant: str) -> str:

@@ -257,7 +257,7 @@ class Design:
         poles are ``eig(A_i + B_i K_j)`` and ``eig(R_i)`` (the observer error decouples). With
         ``sample_time``: the loop as the generated C runs it, the plant by zero-order hold and the observer
         by the explicit Euler step of docs/method.md. Needs python-control (``fte_casadi[control]``).
-        The former keyword ``dt`` still works, with a ``DeprecationWarning``.
+        The former keyword ``dt`` was removed in 0.2.0: giving it is a ``TypeError``.
         """
         from ..interop import closed_loop_ss
 

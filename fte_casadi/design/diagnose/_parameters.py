@@ -90,7 +90,7 @@ def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, gene
     """Parameters the tool finds itself: when sigma and/or gamma came from the generic defaults (neither the
     user nor the plant set them) and the design fails at them, the feasibility bounds say where to look:
     sigma below the largest sigma (45) allows, else gamma above the smallest one it allows (rounded to two
-    digits in the size of the outputs and unknown inputs, :func:`~.options.gamma_size`). The first value
+    digits in the size of the outputs and unknown inputs, :func:`~.._options.gamma_size`). The first value
     tried that gives a certified design is taken, and the document's ``params_chosen`` says what was chosen
     and why. None when nothing was generic or nothing tried works. ``lmi``: the LMI that failed, "45" or "46"."""
     if not generic:

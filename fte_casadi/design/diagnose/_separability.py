@@ -8,7 +8,7 @@ fault out of ``Bf``, ``Gf`` and ``Df`` in turn and decides the design's feasibil
 (:func:`~._diffusion.feasible`: step 3, then step 5 at alpha = 0, phase 1 in numpy where the conic solver
 fails), so a fault is named only where (45)-(46) are feasible without it: a fact about the LMIs, with the
 smallest singular value of assumption (2)'s column-normalised test with and without the fault
-(:func:`~._limits.separation`) as the measure of how weakly it is told apart.
+(:func:`~.._limits.separation`) as the measure of how weakly it is told apart.
 """
 
 from __future__ import annotations
@@ -89,7 +89,7 @@ def blocking(ts, params: dict, solver: str) -> list[Blocking]:
     """The faults of ``ts`` without which the design's LMIs are feasible at ``params`` (each decided by
     :func:`~._diffusion.feasible`); empty with fewer than two faults (without its only fault there is no
     observer to design), when the LMIs are feasible with every fault (the refusal has another cause), when
-    the outputs tell the faults apart well (separation >= :data:`~._limits.WEAK_SEPARATION`) or when no
+    the outputs tell the faults apart well (separation >= :data:`~.._limits.WEAK_SEPARATION`) or when no
     single fault is the cause."""
     names = list(ts.plant.fault_names)
     models, C, Df = list(ts.local_models), np.asarray(ts.C, float), np.asarray(ts.Df, float)
