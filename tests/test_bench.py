@@ -117,8 +117,7 @@ def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeyp
 
     import fte_casadi.bench
     from fte_casadi._report import _c_section
-    from fte_casadi.codegen import find_compiler
-    from fte_casadi.codegen._generate import memory_report
+    from fte_casadi.codegen import find_compiler, memory_report
     from fte_casadi.errors import MissingDependencyError
 
     if find_compiler() is None:

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fte_casadi.design._record import Design
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.design import Design
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import simulate
 
 pytestmark = pytest.mark.slow

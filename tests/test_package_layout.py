@@ -403,3 +403,35 @@ def test_the_check_sees_the_message_reads_it_is_for():
     for src in ('" ".join(str(exc).split())', '"kappa" in resolved.params', 'k in names', 'str(exc).rstrip(".")',
                 'res.status not in SOLVED', 'f"{why}: {msg}"', 'exc.refusal.kind in ASKED'):  # fmt: skip
         assert not any(_reads_a_message(n) for n in ast.walk(ast.parse(src))), src
+
+
+def _room_imports_of_face_names(path: pathlib.Path) -> list[str]:
+    """``from fte_casadi.x._y import A`` in ``path`` where every name is the same object on ``fte_casadi.x``'s
+    face: a private module imported where the face serves."""
+    import importlib
+
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not (isinstance(node, ast.ImportFrom) and node.module and not node.level):
+            continue
+        parts = node.module.split(".")
+        private = next((k for k, c in enumerate(parts) if c.startswith("_")), None)
+        if parts[0] != "fte_casadi" or private is None or private < 2:
+            continue
+        face, room = importlib.import_module(".".join(parts[:private])), importlib.import_module(node.module)
+        names = [a.name for a in node.names]
+        if all(not n.startswith("_") and getattr(face, n, None) is getattr(room, n) for n in names):
+            out.append(f"{path.name}:{node.lineno}: {node.module} {names}")
+    return out
+
+
+def test_the_tests_use_the_faces_where_they_can(tmp_path):
+    """A test imports a subpackage's private module only for an internal it tests (a name not on the face, or the
+    module itself to patch it)."""
+    tests = pathlib.Path(__file__).resolve().parent
+    assert [w for p in sorted(tests.glob("*.py")) for w in _room_imports_of_face_names(p)] == []
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "from fte_casadi.design._record import Design\nfrom fte_casadi.design._record import _arr\n"
+    )
+    assert _room_imports_of_face_names(probe) == ["probe.py:1: fte_casadi.design._record ['Design']"]
