@@ -26,6 +26,7 @@ from ._uio import check_assumptions as check_assumptions
 from ._uio import enforce as enforce
 from ._uio import invariant_zeros as invariant_zeros
 from ._uio import uio_gain as uio_gain
+from .core._certify import failures as failures
 from .core._conditioned import KAPPA as KAPPA
 from .core._diagnose import sigma_max as sigma_max
 

@@ -127,7 +127,7 @@ def evaluate(task: dict) -> dict:
     """
     import dataclasses
 
-    from ..design import KAPPA, Design
+    from ..design import KAPPA, Design, failures
     from ..design import design as run_design
     from ..sim import Scenario, protected, simulate
 
@@ -157,7 +157,7 @@ def evaluate(task: dict) -> dict:
         if not d.certified:
             return {
                 "state": "fail",
-                "reason": "not certified: " + "; ".join(s for s in d.status if "CERTIF" in s),
+                "reason": "not certified: " + "; ".join(failures(d.checks)),
             }
         if (
             task.get("design") is None
