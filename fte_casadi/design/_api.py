@@ -229,7 +229,8 @@ def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int
         if sup is None:
             raise InfeasibleDesignError(
                 f"LMI (45) is infeasible for every gamma and sigma with gamma1 = {g1:g}: the loop cannot be made to "
-                "dominate the plant's diffusion with this output; check W_i and C"
+                "dominate the plant's diffusion with this output; check W_i and C",
+                lmi="45",
             )
         sigmas = np.geomspace(min(params["sigma"] / 30, sup * 1e-3), sup * 0.98, count)
     gs = gamma_size(ts)

@@ -181,10 +181,13 @@ def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
         s5.notes.insert(0, f"step 5: kappa = {kappa:g}: (46) is infeasible with cond(Pbar) <= {base:g} (the bound "
                            f"binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
         return s5
-    refusal = exc.refusal
-    raise InfeasibleDesignError(dataclasses.replace(
-        refusal, statement=f"{refusal.statement.rstrip('.')}; and with cond(Pbar) <= {KAPPA_LADDER[-1]:g} too (the bound "
-        "is not what binds)", bounded=False, numbers=dict(refusal.numbers, kappa=KAPPA_LADDER[-1]))) from None  # fmt: skip
+    r = exc.refusal
+    statement = f"{r.statement.rstrip('.')}; and with cond(Pbar) <= {KAPPA_LADDER[-1]:g} too (the bound is not what binds)"
+    raise InfeasibleDesignError(
+        dataclasses.replace(
+            r, statement=statement, bounded=False, numbers=dict(r.numbers, kappa=KAPPA_LADDER[-1])
+        )
+    ) from None
 
 
 def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3):

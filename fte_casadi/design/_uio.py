@@ -315,8 +315,9 @@ def check_assumptions(
 
     first = check_decoupling(aug)
     k, q = remark5.Bdu.shape[1], remark5.D.shape[1]
+    ranks = _decoupling_ranks(first.numbers["rank_CBd"], first.numbers["rank_Bd"])
     first = dataclasses.replace(first, holds=True, message=(
-        f"assumption (1) {'fails' if not first.holds else 'holds'}: {_decoupling_ranks(first.numbers['rank_CBd'], first.numbers['rank_Bd'])}; "
+        f"assumption (1) {'fails' if not first.holds else 'holds'}: {ranks}; "
         f"{remark5.why + '; ' if remark5.why else ''}Remark 5's fallback is used: H decouples {q} direction(s) of d "
         f"and the sliding term attenuates the {k} it cannot ([Bdbar_u J1] in place of J1)"),
         numbers=dict(first.numbers, remark5=True, decoupled=q, attenuated=k))  # fmt: skip
