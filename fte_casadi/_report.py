@@ -24,10 +24,9 @@ from ._atomic import atomic_write_text
 from ._text import shorten
 from .design import DesignOptions
 from .design import design as run_design
-from .design.core._lmis import LMIS
+from .design.core import LMIS
 from .errors import InfeasibleDesignError, SolverFailedError
-from .plants import BUILTIN, SCENARIOS
-from .plants._paper import PRINTED
+from .plants import BUILTIN, PRINTED, SCENARIOS
 from .sim import protected
 from .ts import derive
 
@@ -152,9 +151,15 @@ def _design_rows(designs: dict, printed: dict | None) -> list[str]:
 
 def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .bench import bench_c_step
-    from .codegen import compile_shared, find_compiler, generate_c
-    from .codegen._ctypes_step import CStep, closed_loop_compare
-    from .codegen._generate import default_sample_time, memory_report
+    from .codegen import (
+        CStep,
+        closed_loop_compare,
+        compile_shared,
+        default_sample_time,
+        find_compiler,
+        generate_c,
+        memory_report,
+    )
     from .errors import CodegenError, MissingDependencyError
     from .plants import SCENARIOS
 

@@ -18,9 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .design._identities import identity_failures
-from .design._recertify import recertify
-from .design._record import Design
+from .design import Design, identity_failures, recertify
 from .errors import DesignFileError
 from .model import Plant
 
@@ -42,8 +40,7 @@ def plant_for(d: Design, given: str | None) -> tuple[Plant | None, str | None]:
     """The plant to check ``d`` against: the one the user named (``given``), else the document's when it is
     a built-in name, else None (a document's ``file.py:function`` or ``module:function`` is not imported on
     the document's word)."""
-    from .plants import BUILTIN
-    from .plants._loader import load_plant
+    from .plants import BUILTIN, load_plant
 
     if given is not None:
         return load_plant(given), given
@@ -77,8 +74,7 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
     Raises :class:`DesignFileError` naming what changed when the plant's equations are not those the design
     was made for (its fingerprint, or, for a document without one, its T-S model).
     """
-    from .model._fingerprint import PARTS, changed_parts
-    from .model._tape import write_tape
+    from .model import PARTS, changed_parts, write_tape
     from .ts import scheduling_from_measurements, structure
 
     src = d.loaded.get("source", "the design")
@@ -120,7 +116,7 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
 def _numbers_differ(d: Design, plant: Plant, ts) -> str:
     """Which number the step uses beside the T-S model differs from the plant's ('' if none): the input limits,
     the region (the generated C's accepted range of y), the reference input and the initial state."""
-    from .design._pipeline import _u_reference
+    from .design import u_reference
 
     limits = None if plant.input_limits is None else np.asarray(plant.input_limits, float)
     mine = None if d.input_limits is None else np.asarray(d.input_limits, float)
@@ -134,7 +130,7 @@ def _numbers_differ(d: Design, plant: Plant, ts) -> str:
         return (
             f"its checks.region is {region}, the plant's {want} (the region sets the C's accepted range of y)"
         )
-    u_ref, x_ref = _u_reference(ts, [np.asarray(K, float) for K in d.K], [])
+    u_ref, x_ref = u_reference(ts, [np.asarray(K, float) for K in d.K], [])
     if (x_ref is None) != (d.x_ref is None) or (
         x_ref is not None and not np.allclose(d.x_ref, x_ref, rtol=1e-12)
     ):

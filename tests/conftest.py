@@ -26,8 +26,10 @@ import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
 
-from fte_casadi.design import design  # noqa: E402
-from fte_casadi.design._record import Design  # noqa: E402
+from fte_casadi.design import (
+    Design,  # noqa: E402
+    design,  # noqa: E402
+)
 from fte_casadi.plants import manipulator, three_tank  # noqa: E402
 from fte_casadi.ts import derive, scheduling_from_measurements  # noqa: E402
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from fte_casadi.codegen._generate import BUILTIN_DIRS, c_name, generate_c
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"
 CC = shutil.which("cc") or shutil.which("gcc")

@@ -13,11 +13,10 @@ from plant_chain_far import chainfar
 from plant_fjoint import fjoint, fjoint_calm
 from plant_twin_fans import fans_alike, fans_one_fault
 
-from fte_casadi.design import DesignOptions, design
-from fte_casadi.design._diffusion import scaled_model
-from fte_casadi.design._remedy import remedies
+from fte_casadi.design import DesignOptions, design, remedies
 from fte_casadi.design.core import _barrier as barrier
 from fte_casadi.design.core import _sdp as sdp
+from fte_casadi.design.diagnose import scaled_model
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.sim import Bias, Scenario
 from fte_casadi.ts import derive
@@ -207,7 +206,7 @@ def test_a_heavy_bound_asked_of_scs_is_bisected_by_phase_1_and_agrees_with_clara
     """The 64-rule chain's sigma_max with SCS: phase 1's bisection in numpy, not a conic solve of 13 000 rows
     of PSD cones (minutes); within 10 % of Clarabel's conic bound, and the design's own step 3 agrees with
     it: feasible a little below, infeasible a little above."""
-    from fte_casadi.design._augment import augment
+    from fte_casadi.design import augment
     from fte_casadi.design.core import _conditioned as conditioned
     from fte_casadi.design.core import _diagnose
 

@@ -13,9 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from fte_casadi.cli import main
-from fte_casadi.design._augment import augment
-from fte_casadi.design._identities import identity_failures
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design, augment, identity_failures
 from fte_casadi.trust import check_loaded
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -261,7 +259,7 @@ def fmu_baseline(tmp_path_factory):
     and strings removed, the plant's C name replaced by '@'; and its README."""
     import zipfile
 
-    from fte_casadi.codegen._fmu import generate_fmu
+    from fte_casadi.codegen import generate_fmu
 
     d = Design.load(MANIP)
     import dataclasses
@@ -286,7 +284,7 @@ def test_random_names_compile_and_inject_nothing(fmu_baseline, tmp_path_factory)
     from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import strategies as st
 
-    from fte_casadi.codegen._fmu import generate_fmu
+    from fte_casadi.codegen import generate_fmu
     from fte_casadi.codegen._generate import c_name
 
     d, base, base_readme = fmu_baseline

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from fte_casadi.design._record import Design
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.design import Design
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import simulate
 
 pytestmark = pytest.mark.slow

@@ -350,7 +350,7 @@ def test_a_swallowed_ctrl_c_still_ends_with_130_and_writes_nothing(tmp_path, mon
     """CasADi returns None from a call a Ctrl-C interrupted (the design then goes on, or fails later with an
     error of its own): the command still ends with 130, and the document is not written."""
     import fte_casadi.cli._design as cli_design
-    from fte_casadi.design._record import Design
+    from fte_casadi.design import Design
 
     def swallowing(*a, **k):
         try:
@@ -434,7 +434,7 @@ MANIP = ROOT / "generated" / "manipulator" / "design.json"
 
 def test_codegen_replaces_its_files_as_one_set_and_keeps_the_rest(tmp_path, monkeypatch):
     from fte_casadi.codegen import generate_c
-    from fte_casadi.design._record import Design
+    from fte_casadi.design import Design
 
     d = Design.load(MANIP)
     out = tmp_path / "c"
@@ -469,7 +469,7 @@ def test_a_mix_of_two_sets_does_not_compile(tmp_path):
     """Even without -Werror: each .c file checks the set's number of the headers it includes."""
     from fte_casadi.codegen import _build as build
     from fte_casadi.codegen import generate_c
-    from fte_casadi.design._record import Design
+    from fte_casadi.design import Design
 
     if build.find_compiler() is None:
         pytest.skip("no C compiler")

@@ -15,10 +15,10 @@ import time
 import casadi as ca
 import numpy as np
 
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.errors import SimulationError
+from fte_casadi.sim import UniformNoise
 from fte_casadi.sim._engine import SCALES, Prepared, closed_loop_sample, plant_schedule, resolve_dt, simulate
-from fte_casadi.sim._scenario import UniformNoise
 
 from ._anatomy import libm_share, op_counts, peak_flops
 from ._handloop import bench_fast

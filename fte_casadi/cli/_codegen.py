@@ -31,8 +31,7 @@ def codegen(
     target, out_dir, sample_time, sample_time_alias, real, boundary_layer, fmu, plant_opt, allow_uncertified
 ):
     """Generate the embedded C of the observer/controller step."""
-    from ..codegen import default_sample_time, generate_c
-    from ..codegen._fmu import check_fmu_target, generate_c_and_fmu
+    from ..codegen import check_fmu_target, default_sample_time, generate_c, generate_c_and_fmu
     from ..plants import SCENARIOS
 
     if sample_time is not None and sample_time_alias is not None:

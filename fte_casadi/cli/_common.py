@@ -31,10 +31,10 @@ def _ours(path: Path) -> bool:
     """True when ``path`` holds something fte wrote: a design document (JSON or MAT) or a saved result (.npz)."""
     import zipfile
 
-    from ..design._record import REQUIRED_KEYS
+    from ..design import REQUIRED_KEYS
 
     if path.suffix.lower() == ".mat":
-        from ..design._matfile import is_fte_mat
+        from ..design import is_fte_mat
 
         return is_fte_mat(path)
     try:

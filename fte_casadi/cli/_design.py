@@ -22,7 +22,7 @@ def _gamma_min_text(g) -> str:
 def _check_params(**kw) -> dict:
     """The options given, each positive (alpha, d_bound, bound_weight: >= 0) and at most
     :data:`~fte_casadi.design._docchecks.PARAM_MAX`, before any work."""
-    from ..design._docchecks import param_problem
+    from ..design import param_problem
 
     out = {}
     for k, v in kw.items():
@@ -49,7 +49,7 @@ def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, outpu
     """The feasible frontier of ``plant_spec`` with the options of a design (``options``: every option of
     ``fte design`` but gamma, sigma and --allow-uncertified, which :func:`~fte_casadi.design.explore` refuses)."""
     from ..design import explore
-    from ..plants._loader import load_plant
+    from ..plants import load_plant
     from ..plot import frontier_figure
     from ..ts import derive as derive_ts
 
@@ -204,7 +204,7 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     _outputs(output)
     d, ts, options = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices,
                                   full=True, always_compensate=always_compensate or variant == "paper")  # fmt: skip
-    from ..design._summary import design_summary
+    from ..design import design_summary
 
     click.echo(design_summary(d))
     from ..verdicts import design_warnings
@@ -214,7 +214,7 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     for w in warnings:
         click.echo(textwrap.fill("fte: warning: " + w, width=100), err=True)
     if warnings and d.certified:
-        from ..design._remedy import remedies
+        from ..design import remedies
 
         for line in remedies(ts, options, d, scenario):
             click.echo(textwrap.fill("fte: tried " + line, width=100), err=True)

@@ -55,7 +55,7 @@ def _with_noise(scenario, stds: list[float] | None, d):
         return scenario
     import dataclasses
 
-    from ..codegen._generate import output_range
+    from ..codegen import output_range
 
     p = int(d.dims.p)
     names = list((d.names or {}).get("outputs") or [f"y{k + 1}" for k in range(p)])
@@ -191,7 +191,7 @@ def _warnings(m: dict, inputs, faults=(), outputs=(), units=()) -> list[str]:
 def _why(d, m: dict) -> list[str]:
     """The structural cause behind a window where tolerant control is worse than none, or behind false
     alarms (:func:`fte_casadi.design._limits.explain_metrics`)."""
-    from ..design._limits import explain_metrics
+    from ..design import explain_metrics
 
     return ["why (the plant's structure, at this design; `fte tune` searches for a design that does better): " + s
             for s in explain_metrics(d, m)]  # fmt: skip
@@ -255,7 +255,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .._resources import check_paths_memory
-    from ..plants._loader import load_plant, load_scenario
+    from ..plants import load_plant, load_scenario
     from ..sim import save_result
     from ..sim import simulate as run_sim
 
@@ -302,7 +302,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
         )
     check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
     if accommodate:
-        from ..sim._accommodate import accommodated
+        from ..sim import accommodated
 
         d = accommodated(
             d,
@@ -396,7 +396,7 @@ def sweep(
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
     from .._atomic import atomic_write_text
     from .._resources import check_paths_memory
-    from ..plants._loader import load_plant, load_scenario
+    from ..plants import load_plant, load_scenario
     from ..sim._sweep import parse_vary, to_csv, to_json
     from ..sim._sweep import sweep as run_sweep
 

@@ -22,7 +22,7 @@ _VERTICES = click.option(
 def _scenario(plant_spec: str):
     """The plant's scenario, or None when it has none."""
     from ..errors import PlantLoadError
-    from ..plants._loader import load_scenario
+    from ..plants import load_scenario
 
     try:
         return load_scenario(plant_spec)
@@ -64,7 +64,7 @@ def _make_design(
     fault's compensation where they cross-talk (:func:`fte_casadi.sim.protected`; not with ``always_compensate``,
     the paper's policy); with ``full``, ``(design, T-S model, options)``."""
     from ..design import design as run_design
-    from ..plants._loader import load_plant
+    from ..plants import load_plant
     from ..ts import derive as derive_ts
 
     options = _design_options(plant_spec, variant, solver, params, allow_uncertified, accept)
@@ -89,7 +89,7 @@ def _design_or_plant(
     against its plant when that is a built-in one or named with ``plant`` (--plant), never running code it
     names. Returns ``(design, plant spec or None)``: the spec of the plant it may be simulated on.
     """
-    from ..design._record import Design
+    from ..design import Design
     from ..trust import check_loaded
 
     p = Path(target)

@@ -41,7 +41,7 @@ def _is_optuna_db(path: Path) -> bool:
 
 def _tune_folder(folder: Path, option: str) -> None:
     """Refuse, before any work, a folder holding anything fte tune did not write: it is replaced as a whole."""
-    from ..tune._output import is_tune_record
+    from ..tune import is_tune_record
 
     if folder.exists() and not folder.is_dir():
         raise ParameterError(f"{option} {folder} is a file; give a directory (fte tune writes tuned.json and more "
@@ -150,10 +150,9 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
     import shutil
 
     from ..errors import MissingDependencyError
-    from ..plants._loader import load_plant, load_scenario
-    from ..tune._output import comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
-    from ..tune._search import RULES
-    from ..tune._search import tune as run_tune
+    from ..plants import load_plant, load_scenario
+    from ..tune import RULES, comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
+    from ..tune import tune as run_tune
 
     if trials < 2:
         raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from ..design._record import Design
+from ..design import Design
 from ..errors import CodegenError
 from ..step import step_function
 from ._generate import c_name

@@ -45,7 +45,7 @@ import casadi as ca
 import numpy as np
 
 from .._labels import c_comment, c_string, xml_text
-from ..design._record import Design
+from ..design import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import _build as build
@@ -361,8 +361,8 @@ def generate_fmu(
         of that name is replaced only when fte wrote it (:func:`is_fte_fmu`).
     sample_time, real, boundary_layer
         As for :func:`~fte_casadi.codegen._generate.generate_c`; ``sample_time`` is the FMU's fixed
-        communication step (default: the design's sample time). The former keyword ``ts`` still
-        works, with a ``DeprecationWarning``.
+        communication step (default: the design's sample time). The former keyword ``ts`` was removed
+        in 0.2.0: giving it is a ``TypeError``.
 
     Returns
     -------

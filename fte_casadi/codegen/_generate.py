@@ -39,7 +39,8 @@ import numpy as np
 from .._atomic import write_set
 from .._labels import c_comment, markdown
 from .._rounding import series_floor
-from ..design._record import Design
+from .._version import VERSION
+from ..design import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import _template as template
@@ -59,12 +60,8 @@ _FORBIDDEN = ("stdio.h", "printf", "fopen", "malloc", "calloc", "realloc", "free
 
 
 def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("fte_casadi")
-    except Exception:  # noqa: BLE001 - metadata missing in a source checkout
-        return "0"
+    """The package's version (:data:`fte_casadi._version.VERSION`), as the generated files say it."""
+    return VERSION
 
 
 def c_name(plant: str) -> str:
@@ -267,11 +264,11 @@ def _memory(c_src: str, real: str, nxbar: int, sizes: dict, latches: int = 0) ->
 
 
 def _fmt(v: float, real: str = "double") -> str:
-    text = repr(float(v))
+    literal = repr(float(v))
     if real == "float":
-        text += "" if ("." in text or "e" in text) else ".0"
-        return text + "f"
-    return text
+        literal += "" if ("." in literal or "e" in literal) else ".0"
+        return literal + "f"
+    return literal
 
 
 def _c_values(values, real: str = "double") -> str:

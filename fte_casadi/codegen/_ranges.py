@@ -8,7 +8,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..design._record import Design
+from ..design import Design
 
 __all__ = []  # internal: fte_casadi.codegen._generate writes them into the C
 

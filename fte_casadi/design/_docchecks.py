@@ -15,7 +15,7 @@ import numpy as np
 
 from .._labels import label_problem
 from ..errors import DesignFileError
-from ..ts._cover import VERTEX_CHOICES
+from ..ts import VERTEX_CHOICES
 
 __all__ = []  # public: docs/api.md
 

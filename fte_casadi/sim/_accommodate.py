@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..design._record import Design
+from ..design import Design
 from ..errors import ParameterError, SimulationError
 from ._engine import calibrate_detection
 
@@ -90,7 +90,7 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
 
 
 def _crosstalk(design: Design):
-    from ..design._isolation import crosstalk
+    from ..design import crosstalk
 
     return crosstalk(design.R, design.T, int(design.dims.n), int(design.dims.lf))
 

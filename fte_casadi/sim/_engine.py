@@ -37,7 +37,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .._rounding import series_floor
-from ..design._record import Design
+from ..design import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
 from ..step import step_function

@@ -15,9 +15,9 @@ import math
 
 import numpy as np
 
-from ..errors import FteError
-from ._augment import Augmented
-from .core import _conditioned as conditioned
+from ...errors import FteError
+from .._augment import Augmented
+from ..core import _conditioned as conditioned
 
 __all__ = ["tolerance"]
 
