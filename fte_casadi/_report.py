@@ -378,10 +378,8 @@ def _saturation_sentence(m: dict, m_free: dict) -> str:
 
 def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> tuple[list[str], dict]:
     from .plot import detectability_figure, write_figures
+    from .sim import attach, calibrate_detection, save_result, simulate
     from .sim import metrics as sim_metrics
-    from .sim import save_result, simulate
-    from .sim._detectability import attach
-    from .sim._engine import calibrate_detection
 
     printed = PRINTED.get(name)  # None for a plant that is not the paper's (the quadruple tank)
     plant = BUILTIN[name]()

@@ -97,7 +97,9 @@ def test_a_64_rule_chain_designs_at_its_defaults_within_one_and_a_half_designs_o
     assert d0.certified and "sigma" in d0.params_chosen
     count.update(newton=0, conic=[])
     t0 = time.perf_counter()
-    d1 = design(ts, sigma=d0.params.sigma)  # one design at the sigma it ended with (gamma is minimised, as always)
+    d1 = design(
+        ts, sigma=d0.params.sigma
+    )  # one design at the sigma it ended with (gamma is minimised, as always)
     t_one = time.perf_counter() - t0
     assert d1.certified
     print(f"64-rule chain: defaults {t_defaults:.1f} s, one design {t_one:.1f} s; Newton steps "

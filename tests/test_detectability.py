@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from fte_casadi.design._record import Design
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.design import Design
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import detectability
 from fte_casadi.sim._detectability import TARGET, _minimum, attach
 

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fte_casadi.design._record import Design
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.design import Design
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import simulate
 from fte_casadi.sim._calibrate import block_samples
 from fte_casadi.sim._detect import N_EMPIRICAL, calibration_paths

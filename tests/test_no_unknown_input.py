@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from fte_casadi import PlantBuilder
-from fte_casadi.design import DesignOptions, design, explore
-from fte_casadi.design._augment import augment
+from fte_casadi.design import DesignOptions, augment, design, explore
 from fte_casadi.design.core._diagnose import gamma_min, sigma_max
 from fte_casadi.sim import Bias, LossOfEffectiveness, Scenario, simulate
 from fte_casadi.ts import derive

@@ -79,7 +79,8 @@ def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, outpu
     best = info["best"]
     if best is None:  # no certified design exists on the frontier: exit 1, as a refused design
         raise InfeasibleDesignError(
-            "--explore found no certified design" + (f": {info['cause']}" if info["cause"] else "")
+            "--explore found no certified design"
+            + (f": {info['cause']}" if info["cause"] else "")
             + " (the frontier above lists what each sigma gave)"
         )
     click.echo(

@@ -87,5 +87,7 @@ def other_cover(attempt, ts, options) -> OtherCover | None:
         if other.r > max(MAX_OTHER_RULES, ts.r) or other.r > MAX_OTHER_FACTOR * ts.r:
             continue  # a design too large to run as a diagnosis
         if _certified(attempt, other, options) is not None:
-            return OtherCover(unreached, ts.r, ts.vertices, float(far.max()), choice, other.r, options.flags())
+            return OtherCover(
+                unreached, ts.r, ts.vertices, float(far.max()), choice, other.r, options.flags()
+            )
     return None
