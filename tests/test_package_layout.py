@@ -106,6 +106,7 @@ LAYERS = (
         "_labels",
         "_interrupt",
         "_version",
+        "_keywords",
     },
     {"model"},
     {"ts"},

@@ -113,6 +113,15 @@ def _trial_count(db: Path) -> int:
         return 0
 
 
+def _tune_options(trials, seed, rule, paths, scheduler, given, progress, storage, resume):
+    """The one place ``fte tune``'s flags become the search's :class:`~fte_casadi.tune.TuneOptions` (``progress``
+    and ``storage``: the bar's update and the run's optuna database in DIR.partial)."""
+    from ..tune import TuneOptions
+
+    return TuneOptions(trials=trials, seed=seed, rule=rule, paths=paths, scheduler=scheduler, base_is_given=given,
+                       progress=progress, storage=storage, resume=resume)  # fmt: skip
+
+
 @click.command()
 @click.argument("target", metavar="PLANT|DESIGN.json")
 @click.option(
@@ -190,9 +199,8 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
               delay=1.0) as bar:  # fmt: skip
         storage, copied = _tune_work(out, work, resume)
         try:
-            result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths,
-                              scheduler=scheduler, base_is_given=given, progress=progress, storage=storage,
-                              resume=resume)  # fmt: skip
+            opts = _tune_options(trials, seed, rule, paths, scheduler, given, progress, storage, resume)
+            result = run_tune(d, plant, scenario, options=opts)
         except BaseException:
             # a refused --resume of a finished run (another --seed, target or --paths) leaves no copy of its
             # trials behind, which the next run would take for an interrupted one
