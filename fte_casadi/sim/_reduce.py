@@ -371,6 +371,25 @@ def _peak_at(mcol, tag: str, j: int, size: float) -> dict | None:
     return {"t": float(mcol[f"tp{tag}{j}"][k]), "value": float(mcol[f"sp{tag}{j}"][k]) / size}
 
 
+@dataclass(frozen=True)
+class _Columns:
+    """What :func:`finalize` reads: the per-path sums ``col``, monitor states ``mcol`` and per-sample sums ``pcol``
+    by name, the number of paths ``P``, the sample times, the masks, the monitor and ``meta``."""
+
+    col: dict
+    mcol: dict
+    pcol: dict
+    P: int
+    t: np.ndarray
+    mo: Monitor
+    mk: Masks
+    meta: dict
+
+    def n_rows(self, kind: str, j: int = 0) -> float:
+        """The samples of mask row ``kind`` (of fault or window ``j``)."""
+        return float(np.sum(self.mk.M[self.mk.row(kind, j)]))
+
+
 def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo: Monitor, mk: Masks,
              meta: dict) -> dict:  # fmt: skip
     """The metrics document from per-path sums ``acc`` (paths, len(names)), per-path monitor states ``mon``
@@ -380,34 +399,76 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
     none), ``detection`` (the document's ``detection`` entries, thresholds and the asked rate, to complete),
     ``tau`` (the observer's slowest time constant, or None). The intervals (:mod:`._intervals`) are seeded
     by ``seed`` and depend on the set of paths only."""
-    from ._intervals import clopper_pearson, rate_intervals, ratio_intervals
+    from ._intervals import ratio_intervals
 
-    col = {nm: acc[:, k] for k, nm in enumerate(mo.names)}
-    mcol = {nm: mon[:, k] for k, nm in enumerate(mo.mon_names)}
-    pcol = {nm: pm[:, k] for k, nm in enumerate(mo.pm_names)}
-    P = acc.shape[0]
+    c = _Columns({nm: acc[:, k] for k, nm in enumerate(mo.names)}, {nm: mon[:, k] for k, nm in enumerate(mo.mon_names)},
+                 {nm: pm[:, k] for k, nm in enumerate(mo.pm_names)}, acc.shape[0], t, mo, mk, meta)  # fmt: skip
+    col, P, lf = c.col, c.P, mk.lf
     seed = int(meta["seed"])
     dt = float(meta["dt"])
-    tau = meta.get("tau")
     nsamp = mk.M.shape[1]
-    n_after = float(np.sum(mk.M[mk.row("after")]))
+    n_after = c.n_rows("after")
     n = sum(1 for nm in mo.names if nm.startswith("sx"))
-    lf = mk.lf
     srms = [
         math.fsum(math.sqrt(v / n_after) for v in col[f"sx{j}"]) / P if n_after else None for j in range(n)
     ]
-    n_in = [float(np.sum(mk.M[mk.row("fault", j)])) for j in range(lf)]
-    n_out = [float(np.sum(mk.M[mk.row("outside", j)])) for j in range(lf)]
+    n_out = [c.n_rows("outside", j) for j in range(lf)]
+    peaks = _false_alarms(c, n_out)
+    windows, pairs = [], []
+    for w in range(len(mk.windows)):
+        entry, more = _window(c, w)
+        windows.append(entry)
+        pairs += more
+    has_window = any(w["fault_rel_rms_error"] is not None for w in windows)
+    globals_ = [(col[f"ef{j}"], col[f"ff{j}"]) for j in range(lf)]
+    globals_ += [(col["a"], col["b"]), (col["ac"], col["bc"])]
+    iv = ratio_intervals(seed, pairs + globals_) if P else [None] * (len(pairs) + len(globals_))
+    g = iv[_window_intervals(windows, iv) :]
+    rel_all = [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(lf)]
+    true_all, comp_all = _ratio(_fsum(col["a"]), _fsum(col["b"])), _ratio(_fsum(col["ac"]), _fsum(col["bc"]))
+    return {
+        "paths": int(meta["paths"]),
+        "dt": dt,
+        "T": float(meta["T"]),
+        "seed": seed,
+        "observer_time_constant": meta.get("tau"),
+        "transient": float(mk.transient),
+        "settle_after": float(mk.settle_after),
+        "state_rms_error": srms,
+        "fault_rel_rms_error": rel_all,
+        "fault_rel_rms_error_interval": [g[j] if rel_all[j] is not None else None for j in range(lf)],
+        "fault_rel_rms_error_settled": [
+            _ratio(_fsum(col[f"efs{j}"]), _fsum(col[f"ffs{j}"])) for j in range(lf)
+        ],
+        **peaks,
+        "ftc_true_ratio": true_all if has_window else None,
+        "ftc_true_ratio_interval": g[lf] if has_window and true_all is not None else None,
+        "ftc_compensated_ratio": comp_all if has_window else None,
+        "ftc_compensated_ratio_interval": g[lf + 1] if has_window and comp_all is not None else None,
+        "intervals": {"confidence": 0.95, "bootstrap_replicates": REPLICATES, "over": "paths"},
+        "detection": _detection(c, n_after * dt, n_out),
+        "windows": windows,
+        "outside_region": _fsum(col["outreg"]) / (P * nsamp),
+        "input_saturation": [_fsum(col[f"sat{i}"]) / (P * nsamp) for i in range(int(meta["m"]))],
+        "wall_s": float(meta.get("wall_s", 0.0)),
+    }
+
+
+def _false_alarms(c: _Columns, n_out: list[float]) -> dict:
+    """Per fault: the false-alarm peaks (outside its windows, in the start-up, after a window, raw: the largest),
+    where they were reached, and the relative RMS outside its windows (the document's ``false_alarm_*``)."""
+    col, mcol, mk, P = c.col, c.mcol, c.mk, c.P
     fa_rms, fa_peak, fa_raw, fa_start, fa_lag, fa_at, fa_raw_at = [], [], [], [], [], [], []
-    for j in range(lf):
+    for j in range(mk.lf):
         ff = _fsum(col[f"ff{j}"])
+        n_in = c.n_rows("fault", j)
         fa_rms.append(
-            _ratio(_fsum(col[f"oa{j}"]) / n_out[j], ff / n_in[j]) if n_out[j] and n_in[j] and ff else None
+            _ratio(_fsum(col[f"oa{j}"]) / n_out[j], ff / n_in) if n_out[j] and n_in and ff else None
         )
         size = float(np.max(mcol[f"pkf{j}"])) if P else 0.0
         parts = {}
         for tag, row_ in (("o", "outside"), ("s", "startup_outside"), ("l", "lag_outside")):
-            has = float(np.sum(mk.M[mk.row(row_, j)])) > 0
+            has = c.n_rows(row_, j) > 0
             parts[tag] = float(np.max(mcol[f"pk{tag}{j}"])) / size if has and size > 0 else None
         fa_peak.append(parts["o"])
         fa_start.append(parts["s"])
@@ -417,90 +478,113 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
         fa_at.append(_peak_at(mcol, "o", j, size) if parts["o"] is not None else None)
         top = max(known)[1] if known else None
         fa_raw_at.append(_peak_at(mcol, top, j, size) if top is not None else None)
-    windows, pairs = [], []
-    for w, (name, a, b) in enumerate(mk.windows):
-        j = mk.fault_of_window[w]
-        keep = mk.M[mk.row("window", w)] > 0
-        nw = float(np.sum(keep))
-        err = pcol[f"pme{j}"][keep] / P
-        size = float(np.max(pcol[f"pmf{j}"][keep])) / P if nw else 0.0
-        settle = settling_time(err, size, t[keep], a)
-        tail = release_mask(t, mk, w)
-        release = settling_time(pcol[f"pme{j}"][tail] / P, size, t[tail], b) if tail.any() else None
-        p_out = sum(1 for nm in mo.names if nm.startswith(f"at{w}_"))
-        det = mcol[f"det{w}"]
-        standing = mcol[f"stw{w}"] != 0
-        hit = (det >= 0) & ~standing
-        thr = float(meta["thresholds"][j])
-        detect = math.isfinite(thr)
-        allowed = min(TAU_MULTIPLE * tau, b - a) if tau is not None and math.isfinite(tau) else b - a
-        within = hit & (det - a <= allowed + 1e-9 * max(abs(b), 1.0))
-        why = []
-        rel = _ratio(_fsum(col[f"ew{w}"]), _fsum(col[f"fw{w}"]))
-        if nw == 0:
-            why.append("the window holds no sample")
-        elif rel is None:
-            why.append("the fault is zero throughout the window: no relative error and no FTC ratio")
-        if rel is not None and settle is None:
-            why.append(
-                f"the mean fault-estimation error does not settle within {SETTLE_TOL:g} of the fault's size by the "
-                "window's end"
-            )
-        if rel is not None and release is None:
-            why.append("no release time: the window ends at the horizon or at the next fault window" if not tail.any()
-                       else f"the mean estimate does not fall back within {SETTLE_TOL:g} of the fault's size before the "
-                       "next fault window or the horizon")  # fmt: skip
-        at_ = [col[f"at{w}_{k}"] for k in range(p_out)]
-        bt_ = [col[f"bt{w}_{k}"] for k in range(p_out)]
-        true_ratio = (
-            _ratio(sum(_fsum(v) for v in at_), sum(_fsum(v) for v in bt_)) if rel is not None else None
+    return {
+        "false_alarm_peak": fa_peak,
+        "false_alarm_peak_raw": fa_raw,
+        "false_alarm_peak_startup": fa_start,
+        "false_alarm_peak_after_window": fa_lag,
+        "false_alarm_peak_at": fa_at,
+        "false_alarm_peak_raw_at": fa_raw_at,
+        "false_alarm_rel_rms": fa_rms,
+    }
+
+
+def _window(c: _Columns, w: int) -> tuple[dict, list]:
+    """Window ``w``'s entry of the document (its intervals filled later, :func:`_window_intervals`), and the
+    per-path numerators and denominators of its ratios, bootstrapped together."""
+    from ._intervals import clopper_pearson
+
+    col, mcol, pcol, P, mk, t = c.col, c.mcol, c.pcol, c.P, c.mk, c.t
+    name, a, b = mk.windows[w]
+    j = mk.fault_of_window[w]
+    keep = mk.M[mk.row("window", w)] > 0
+    nw = float(np.sum(keep))
+    err = pcol[f"pme{j}"][keep] / P
+    size = float(np.max(pcol[f"pmf{j}"][keep])) / P if nw else 0.0
+    settle = settling_time(err, size, t[keep], a)
+    tail = release_mask(t, mk, w)
+    release = settling_time(pcol[f"pme{j}"][tail] / P, size, t[tail], b) if tail.any() else None
+    p_out = sum(1 for nm in c.mo.names if nm.startswith(f"at{w}_"))
+    det = mcol[f"det{w}"]
+    standing = mcol[f"stw{w}"] != 0
+    hit = (det >= 0) & ~standing
+    detect = math.isfinite(float(c.meta["thresholds"][j]))
+    tau = c.meta.get("tau")
+    allowed = min(TAU_MULTIPLE * tau, b - a) if tau is not None and math.isfinite(tau) else b - a
+    within = hit & (det - a <= allowed + 1e-9 * max(abs(b), 1.0))
+    rel = _ratio(_fsum(col[f"ew{w}"]), _fsum(col[f"fw{w}"]))
+    at_ = [col[f"at{w}_{k}"] for k in range(p_out)]
+    bt_ = [col[f"bt{w}_{k}"] for k in range(p_out)]
+    true_ratio = _ratio(sum(_fsum(v) for v in at_), sum(_fsum(v) for v in bt_)) if rel is not None else None
+    why = _window_why(nw, rel, settle, release, tail.any(), true_ratio, detect and hit.sum() == 0)
+    # the per-path numerators and denominators of the window's ratios, bootstrapped together
+    pairs = [(col[f"ew{w}"], col[f"fw{w}"]), (np.sum(at_, axis=0), np.sum(bt_, axis=0))]
+    pairs += [(at_[k], bt_[k]) for k in range(p_out)] + [(col[f"acw{w}"], col[f"bcw{w}"])]
+    entry = {
+        "fault": name, "start": a, "stop": b,
+        "fault_rel_rms_error": rel,
+        "fault_rel_rms_error_settled": _ratio(_fsum(col[f"ews{w}"]), _fsum(col[f"fws{w}"])),
+        "settling_time": settle,
+        "release_time": release,
+        "fault_peak": float(np.max(mcol[f"pkf{j}"])) if nw else None,
+        "ftc_true_ratio": true_ratio,
+        "ftc_true_ratio_per_output": [
+            _ratio(_fsum(col[f"at{w}_{k}"]), _fsum(col[f"bt{w}_{k}"])) if rel is not None else None
+            for k in range(p_out)
+        ],
+        "ftc_true_rms_per_output": {
+            run: [math.sqrt(_fsum(col[f"{cc}{w}_{k}"]) / (P * nw)) if nw else None for k in range(p_out)]
+            for run, cc in (("ftc", "at"), ("no_ftc", "bt"))
+        },
+        "ftc_compensated_ratio": _ratio(_fsum(col[f"acw{w}"]), _fsum(col[f"bcw{w}"])) if rel is not None else None,
+        "crosstalk_peak": [
+            None if q == j or not float(np.max(mcol[f"pkf{q}"])) else
+            float(np.max(mcol[f"xt{w}_{q}"])) / float(np.max(mcol[f"pkf{q}"]))
+            for q in range(mk.lf)
+        ],
+        "detection_delay": (math.fsum(float(v) - a for v in det[hit]) / int(hit.sum())) if hit.any() else None,
+        "detection_delay_max": float(np.max(det[hit]) - a) if hit.any() else None,
+        "missed_detections": int(P - standing.sum() - hit.sum()) if detect else None,
+        "standing_alarm_paths": int(standing.sum()) if detect else None,
+        "detection_probability": float(hit.sum()) / P if detect and P else None,
+        "detection_probability_interval": clopper_pearson(int(hit.sum()), P) if detect else None,
+        "detection_delay_allowed": float(allowed),
+        "detection_probability_within": float(within.sum()) / P if detect and P else None,
+        "input_saturation": [(_fsum(col[f"satw{w}_{i}"]) / (P * nw)) if nw else 0.0
+                             for i in range(int(c.meta["m"]))],
+        "why": "; ".join(why) or None,
+    }  # fmt: skip
+    return entry, pairs
+
+
+def _window_why(nw: float, rel, settle, release, has_tail: bool, true_ratio, undetected: bool) -> list[str]:
+    """Why a window's figures are undefined (null), in words."""
+    why = []
+    if nw == 0:
+        why.append("the window holds no sample")
+    elif rel is None:
+        why.append("the fault is zero throughout the window: no relative error and no FTC ratio")
+    if rel is not None and settle is None:
+        why.append(
+            f"the mean fault-estimation error does not settle within {SETTLE_TOL:g} of the fault's size by the "
+            "window's end"
         )
-        if rel is not None and true_ratio is None:
-            why.append("the fault leaves the true outputs unchanged without tolerant control: no FTC ratio")
-        if detect and hit.sum() == 0:
-            why.append(
-                "no detection delay: the alarm rose in the window on no path where it was off at its onset"
-            )
-        # the per-path numerators and denominators of the window's ratios, bootstrapped together below
-        pairs += [(col[f"ew{w}"], col[f"fw{w}"]), (np.sum(at_, axis=0), np.sum(bt_, axis=0))]
-        pairs += [(at_[k], bt_[k]) for k in range(p_out)] + [(col[f"acw{w}"], col[f"bcw{w}"])]
-        windows.append({
-            "fault": name, "start": a, "stop": b,
-            "fault_rel_rms_error": rel,
-            "fault_rel_rms_error_settled": _ratio(_fsum(col[f"ews{w}"]), _fsum(col[f"fws{w}"])),
-            "settling_time": settle,
-            "release_time": release,
-            "fault_peak": float(np.max(mcol[f"pkf{j}"])) if nw else None,
-            "ftc_true_ratio": true_ratio,
-            "ftc_true_ratio_per_output": [
-                _ratio(_fsum(col[f"at{w}_{k}"]), _fsum(col[f"bt{w}_{k}"])) if rel is not None else None
-                for k in range(p_out)
-            ],
-            "ftc_true_rms_per_output": {
-                run: [math.sqrt(_fsum(col[f"{c}{w}_{k}"]) / (P * nw)) if nw else None for k in range(p_out)]
-                for run, c in (("ftc", "at"), ("no_ftc", "bt"))
-            },
-            "ftc_compensated_ratio": _ratio(_fsum(col[f"acw{w}"]), _fsum(col[f"bcw{w}"])) if rel is not None else None,
-            "crosstalk_peak": [
-                None if q == j or not float(np.max(mcol[f"pkf{q}"])) else
-                float(np.max(mcol[f"xt{w}_{q}"])) / float(np.max(mcol[f"pkf{q}"]))
-                for q in range(lf)
-            ],
-            "detection_delay": (math.fsum(float(v) - a for v in det[hit]) / int(hit.sum())) if hit.any() else None,
-            "detection_delay_max": float(np.max(det[hit]) - a) if hit.any() else None,
-            "missed_detections": int(P - standing.sum() - hit.sum()) if detect else None,
-            "standing_alarm_paths": int(standing.sum()) if detect else None,
-            "detection_probability": float(hit.sum()) / P if detect and P else None,
-            "detection_probability_interval": clopper_pearson(int(hit.sum()), P) if detect else None,
-            "detection_delay_allowed": float(allowed),
-            "detection_probability_within": float(within.sum()) / P if detect and P else None,
-            "input_saturation": [(_fsum(col[f"satw{w}_{i}"]) / (P * nw)) if nw else 0.0 for i in range(int(meta["m"]))],
-            "why": "; ".join(why) or None,
-        })  # fmt: skip
-    has_window = any(w["fault_rel_rms_error"] is not None for w in windows)
-    globals_ = [(col[f"ef{j}"], col[f"ff{j}"]) for j in range(lf)]
-    globals_ += [(col["a"], col["b"]), (col["ac"], col["bc"])]
-    iv = ratio_intervals(seed, pairs + globals_) if P else [None] * (len(pairs) + len(globals_))
+    if rel is not None and release is None:
+        why.append("no release time: the window ends at the horizon or at the next fault window" if not has_tail
+                   else f"the mean estimate does not fall back within {SETTLE_TOL:g} of the fault's size before the "
+                   "next fault window or the horizon")  # fmt: skip
+    if rel is not None and true_ratio is None:
+        why.append("the fault leaves the true outputs unchanged without tolerant control: no FTC ratio")
+    if undetected:
+        why.append(
+            "no detection delay: the alarm rose in the window on no path where it was off at its onset"
+        )
+    return why
+
+
+def _window_intervals(windows: list[dict], iv: list) -> int:
+    """Fill each window's intervals from ``iv`` (in the order of :func:`_window`'s pairs); return how many
+    were the windows'."""
     k = 0
     for w in windows:
         p_out = len(w["ftc_true_ratio_per_output"])
@@ -514,13 +598,19 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
             iv[k + 2 + p_out] if w["ftc_compensated_ratio"] is not None else None
         )
         k += 3 + p_out
-    rel_all = [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(lf)]
-    g = iv[k:]
+    return k
+
+
+def _detection(c: _Columns, t_after: float, n_out: list[float]) -> list[dict]:
+    """The document's ``detection`` entries completed with the false-alarm rates and counts this run measured
+    (fault-free run after the transient, FTC run outside the fault's windows) and their intervals."""
+    from ._intervals import rate_intervals
+
+    col, P, meta = c.col, c.P, c.meta
+    seed, dt = int(meta["seed"]), float(meta["dt"])
     detection = []
-    t_after = n_after * dt
-    entries = meta.get("detection") or []
     counts, exposures, which = [], [], []
-    for j, entry in enumerate(entries):
+    for j, entry in enumerate(meta.get("detection") or []):
         entry = dict(entry)
         if math.isfinite(float(meta["thresholds"][j])):
             entry["false_alarm_rate"] = _fsum(col[f"rf{j}"]) / (P * t_after) if t_after else None
@@ -530,53 +620,14 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
             )
             entry["false_alarm_count_ftc_run"] = int(round(_fsum(col[f"ro{j}"])))
             if t_after:
-                (
-                    counts.append(col[f"rf{j}"]),
-                    exposures.append(t_after),
-                    which.append((j, "false_alarm_rate_measured_interval")),
-                )
+                counts.append(col[f"rf{j}"])
+                exposures.append(t_after)
+                which.append((j, "false_alarm_rate_measured_interval"))
             if n_out[j]:
-                (
-                    counts.append(col[f"ro{j}"]),
-                    exposures.append(n_out[j] * dt),
-                    which.append((j, "false_alarm_rate_ftc_run_interval")),
-                )
+                counts.append(col[f"ro{j}"])
+                exposures.append(n_out[j] * dt)
+                which.append((j, "false_alarm_rate_ftc_run_interval"))
         detection.append(entry)
     for (j, key), v in zip(which, rate_intervals(seed, counts, exposures) if counts and P else []):
         detection[j][key] = v
-    return {
-        "paths": int(meta["paths"]),
-        "dt": dt,
-        "T": float(meta["T"]),
-        "seed": seed,
-        "observer_time_constant": tau,
-        "transient": float(mk.transient),
-        "settle_after": float(mk.settle_after),
-        "state_rms_error": srms,
-        "fault_rel_rms_error": rel_all,
-        "fault_rel_rms_error_interval": [g[j] if rel_all[j] is not None else None for j in range(lf)],
-        "fault_rel_rms_error_settled": [
-            _ratio(_fsum(col[f"efs{j}"]), _fsum(col[f"ffs{j}"])) for j in range(lf)
-        ],
-        "false_alarm_peak": fa_peak,
-        "false_alarm_peak_raw": fa_raw,
-        "false_alarm_peak_startup": fa_start,
-        "false_alarm_peak_after_window": fa_lag,
-        "false_alarm_peak_at": fa_at,
-        "false_alarm_peak_raw_at": fa_raw_at,
-        "false_alarm_rel_rms": fa_rms,
-        "ftc_true_ratio": _ratio(_fsum(col["a"]), _fsum(col["b"])) if has_window else None,
-        "ftc_true_ratio_interval": g[lf]
-        if has_window and _ratio(_fsum(col["a"]), _fsum(col["b"])) is not None
-        else None,
-        "ftc_compensated_ratio": _ratio(_fsum(col["ac"]), _fsum(col["bc"])) if has_window else None,
-        "ftc_compensated_ratio_interval": g[lf + 1]
-        if has_window and _ratio(_fsum(col["ac"]), _fsum(col["bc"])) is not None
-        else None,
-        "intervals": {"confidence": 0.95, "bootstrap_replicates": REPLICATES, "over": "paths"},
-        "detection": detection,
-        "windows": windows,
-        "outside_region": _fsum(col["outreg"]) / (P * nsamp),
-        "input_saturation": [_fsum(col[f"sat{i}"]) / (P * nsamp) for i in range(int(meta["m"]))],
-        "wall_s": float(meta.get("wall_s", 0.0)),
-    }
+    return detection
