@@ -183,151 +183,184 @@ class Monitor:
         return np.array([-1.0 if nm.startswith("det") else 0.0 for nm in self.mon_names])
 
 
-def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None) -> Monitor:
-    """The summands, monitor updates and per-sample maxima of one sample (see :class:`Monitor`).
+class _Terms:
+    """The monitor's outputs as they are written: the summands (``out``, named ``names``), and the monitor state's
+    next values ``nxt`` from its symbols ``slot``."""
 
-    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc]``."""
-    n, lf, m = lay.n, lay.lf, lay.m
-    C = ca.DM(np.asarray(C, dtype=float))
-    rec = ca.SX.sym("rec", lay.nrec)
-    nm = mk.M.shape[0]
-    sh = ca.SX.sym("sh", nm + 1 + lf)
-    msk, t, thr = sh[:nm], sh[nm], sh[nm + 1 :]
+    def __init__(self, mon_names: list[str]):
+        self.out: list = []
+        self.names: list[str] = []
+        self.mon = ca.SX.sym("mon", len(mon_names))
+        self.slot = {nm_: self.mon[k] for k, nm_ in enumerate(mon_names)}
+        self.nxt: dict = {}
 
-    def run(r):
-        parts, k = {}, r * lay.run_rec
-        for name, size in lay.sizes.items():
-            parts[name] = rec[k : k + size]
-            k += size
-        return parts
+    def add(self, name: str, e) -> None:
+        self.out.append(e)
+        self.names.append(name)
 
-    free, noftc, ftc = run(0), run(1), run(2)
-    fhat = ftc["xbarhat"][n + lf :]
-    fhat_free = free["xbarhat"][n + lf :]
-    xhat = ftc["xbarhat"][:n]
-    row = mk.row
-    after = msk[row("after")]
-    dC_ftc = ca.mtimes(C, ftc["x"] - free["x"])
-    dC_no = ca.mtimes(C, noftc["x"] - free["x"])
-    dyc_ftc = ca.sumsqr(ftc["yc"] - free["y"])
-    dy_no = ca.sumsqr(noftc["y"] - free["y"])
-    out, names = [], []
-
-    def add(name, e):
-        out.append(e)
-        names.append(name)
-
-    mon_names = (
-        [f"{k}{j}" for k in ("pko", "tpo", "spo", "pks", "tps", "sps", "pkl", "tpl", "spl", "pkf", "alf", "alc")
-         for j in range(lf)]
-        + [f"{k}{w}" for k in ("det", "stw") for w in range(mk.nw)]
-        + [f"xt{w}_{j}" for w in range(mk.nw) for j in range(lf)]
-    )  # fmt: skip
-    mon = ca.SX.sym("mon", len(mon_names))
-    slot = {nm_: mon[k] for k, nm_ in enumerate(mon_names)}
-    nxt: dict = {}
-
-    def peak(tag, j, mask_row):
+    def peak(self, tag: str, j: int, mask_row, fhat, t) -> None:
         """The running peak of |fhat_j| (FTC run) under a mask, with its time and signed value."""
+        slot, nxt = self.slot, self.nxt
         a = mask_row * ca.fabs(fhat[j])
         new = a > slot[f"pk{tag}{j}"]
         nxt[f"pk{tag}{j}"] = ca.fmax(slot[f"pk{tag}{j}"], a)
         nxt[f"tp{tag}{j}"] = ca.if_else(new, t, slot[f"tp{tag}{j}"])
         nxt[f"sp{tag}{j}"] = ca.if_else(new, fhat[j], slot[f"sp{tag}{j}"])
 
+
+def _monitor_names(lf: int, nw: int) -> list[str]:
+    """The monitor state's entries (see :class:`Monitor`)."""
+    return (
+        [f"{k}{j}" for k in ("pko", "tpo", "spo", "pks", "tps", "sps", "pkl", "tpl", "spl", "pkf", "alf", "alc")
+         for j in range(lf)]
+        + [f"{k}{w}" for k in ("det", "stw") for w in range(nw)]
+        + [f"xt{w}_{j}" for w in range(nw) for j in range(lf)]
+    )  # fmt: skip
+
+
+def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None) -> Monitor:
+    """The summands, monitor updates and per-sample maxima of one sample (see :class:`Monitor`).
+
+    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc]``."""
+    n, lf = lay.n, lay.lf
+    C = ca.DM(np.asarray(C, dtype=float))
+    rec = ca.SX.sym("rec", lay.nrec)
+    nm = mk.M.shape[0]
+    sh = ca.SX.sym("sh", nm + 1 + lf)
+    msk, t, thr = sh[:nm], sh[nm], sh[nm + 1 :]
+    free, noftc, ftc = (_run_parts(lay, rec, r) for r in range(3))
+    fhat = ftc["xbarhat"][n + lf :]
+    row = mk.row
+    after = msk[row("after")]
+    dC = (ca.mtimes(C, ftc["x"] - free["x"]), ca.mtimes(C, noftc["x"] - free["x"]))
+    dy = (ca.sumsqr(ftc["yc"] - free["y"]), ca.sumsqr(noftc["y"] - free["y"]))
+    mon_names = _monitor_names(lf, mk.nw)
+    s = _Terms(mon_names)
+    xhat = ftc["xbarhat"][:n]
     for j in range(n):
-        add(f"sx{j}", after * (ftc["x"][j] - xhat[j]) ** 2)
+        s.add(f"sx{j}", after * (ftc["x"][j] - xhat[j]) ** 2)
     for j in range(lf):
-        e2 = (fhat[j] - ftc["f"][j]) ** 2
-        f2 = ftc["f"][j] ** 2
-        w_j, ws_j, o_j = msk[row("fault", j)], msk[row("fault_settled", j)], msk[row("outside", j)]
-        add(f"ef{j}", w_j * e2)
-        add(f"ff{j}", w_j * f2)
-        add(f"efs{j}", ws_j * e2)
-        add(f"ffs{j}", ws_j * f2)
-        add(f"oa{j}", o_j * fhat[j] ** 2)
-        # alarms with hysteresis, off until the transient: raised at |fhat| >= thr, cleared below HYSTERESIS thr
-        al_free, al_ftc = slot[f"alf{j}"], slot[f"alc{j}"]
-        a_free, a_ftc = ca.fabs(fhat_free[j]), ca.fabs(fhat[j])
-        add(f"rf{j}", after * (al_free == 0) * (a_free >= thr[j]))
-        add(f"ro{j}", o_j * (al_ftc == 0) * (a_ftc >= thr[j]))
-        peak("o", j, o_j)
-        peak("s", j, msk[row("startup_outside", j)])
-        peak("l", j, msk[row("lag_outside", j)])
-        nxt[f"pkf{j}"] = ca.fmax(slot[f"pkf{j}"], w_j * ca.fabs(ftc["f"][j]))
-        for key, al, a in ((f"alf{j}", al_free, a_free), (f"alc{j}", al_ftc, a_ftc)):
-            nxt[key] = after * ca.if_else(al != 0, a >= HYSTERESIS * thr[j], a >= thr[j])
-    add("a", msk[row("union")] * ca.sumsqr(dC_ftc))
-    add("b", msk[row("union")] * ca.sumsqr(dC_no))
-    add("ac", msk[row("union")] * dyc_ftc)
-    add("bc", msk[row("union")] * dy_no)
-    p = C.size1()
+        _fault_terms(s, j, mk, msk, t, thr, fhat, free["xbarhat"][n + lf :], ftc["f"])
+    s.add("a", msk[row("union")] * ca.sumsqr(dC[0]))
+    s.add("b", msk[row("union")] * ca.sumsqr(dC[1]))
+    s.add("ac", msk[row("union")] * dy[0])
+    s.add("bc", msk[row("union")] * dy[1])
     for w in range(mk.nw):
-        j = mk.fault_of_window[w]
-        m_w, m_ws = msk[row("window", w)], msk[row("window_settled", w)]
-        e2 = (fhat[j] - ftc["f"][j]) ** 2
-        f2 = ftc["f"][j] ** 2
-        add(f"ew{w}", m_w * e2)
-        add(f"fw{w}", m_w * f2)
-        add(f"ews{w}", m_ws * e2)
-        add(f"fws{w}", m_ws * f2)
-        for k in range(p):
-            add(f"at{w}_{k}", m_w * dC_ftc[k] ** 2)
-            add(f"bt{w}_{k}", m_w * dC_no[k] ** 2)
-        add(f"acw{w}", m_w * dyc_ftc)
-        add(f"bcw{w}", m_w * dy_no)
-        # a standing alarm: the FTC run's alarm already on at the window's onset (a false alarm, not a detection);
-        # a detection: the alarm rises in the window on a path where it was off at the onset
-        al = slot[f"alc{j}"]
-        standing = ca.if_else(msk[row("onset", w)], al != 0, slot[f"stw{w}"])
-        nxt[f"stw{w}"] = standing
-        rise = (
-            (slot[f"det{w}"] < 0) * m_w * after * (al == 0) * (ca.fabs(fhat[j]) >= thr[j]) * (standing == 0)
-        )
-        nxt[f"det{w}"] = ca.if_else(rise, t, slot[f"det{w}"])
+        _window_terms(s, w, mk, msk, t, thr, fhat, ftc["f"], dC, dy, C.size1())
     for w in range(mk.nw):  # cross-talk: the peak of every fault's estimate in each window
         m_w = msk[row("window", w)]
         for j in range(lf):
-            nxt[f"xt{w}_{j}"] = ca.fmax(slot[f"xt{w}_{j}"], m_w * ca.fabs(fhat[j]))
-    mon_next = [nxt[k] for k in mon_names]
-    lim = None if limits is None else np.asarray(limits, dtype=float)
-    for i in range(m):
-        at = ca.SX(0.0)
-        if lim is not None:
-            u = ftc["u"][i]
-            if np.isfinite(lim[i, 0]):
-                at = at + (u <= float(lim[i, 0]))
-            if np.isfinite(lim[i, 1]):
-                at = at + (u >= float(lim[i, 1]))
-        add(f"sat{i}", at)
-        for w in range(mk.nw):
-            add(f"satw{w}_{i}", msk[row("window", w)] * at)
-    outside = ca.SX(0.0)
-    if region is not None:
-        lo, hi = (np.asarray(v, dtype=float) for v in region)
-        for r in (free, noftc, ftc):
-            for j in range(n):
-                if np.isfinite(lo[j]):
-                    outside = outside + (r["x"][j] < float(lo[j]))
-                if np.isfinite(hi[j]):
-                    outside = outside + (r["x"][j] > float(hi[j]))
-    add("outreg", outside > 0)
+            s.nxt[f"xt{w}_{j}"] = ca.fmax(s.slot[f"xt{w}_{j}"], m_w * ca.fabs(fhat[j]))
+    mon_next = [s.nxt[k] for k in mon_names]
+    _saturation_terms(s, ftc["u"], limits, lay.m, mk, msk)
+    s.add("outreg", _outside_region(region, (free, noftc, ftc), n) > 0)
     pm, pm_names = [], []
     for j in range(lf):
         pm += [ca.fabs(fhat[j] - ftc["f"][j]), ca.fabs(ftc["f"][j])]
         pm_names += [f"pme{j}", f"pmf{j}"]
     fn = ca.Function(
         "fte_monitor",
-        [rec, mon, sh],
+        [rec, s.mon, sh],
         [
             ca.vertcat(*mon_next) if mon_next else ca.SX(0, 1),
-            ca.vertcat(*out),
+            ca.vertcat(*s.out),
             ca.vertcat(*pm) if pm else ca.SX(0, 1),
         ],
         ["rec", "mon", "sh"],
         ["mon_next", "incr", "pm"],
     )
-    return Monitor(fn, names, mon_names, pm_names)
+    return Monitor(fn, s.names, mon_names, pm_names)
+
+
+def _run_parts(lay, rec, r: int) -> dict:
+    """Run ``r``'s signals in one sample's record, by name."""
+    parts, k = {}, r * lay.run_rec
+    for name, size in lay.sizes.items():
+        parts[name] = rec[k : k + size]
+        k += size
+    return parts
+
+
+def _fault_terms(s: _Terms, j: int, mk: Masks, msk, t, thr, fhat, fhat_free, f) -> None:
+    """Fault j's summands (errors in and outside its windows, the alarms raised) and monitor updates (its peaks
+    outside its windows, its size in them, the alarms with hysteresis)."""
+    row, slot, nxt = mk.row, s.slot, s.nxt
+    after = msk[row("after")]
+    e2 = (fhat[j] - f[j]) ** 2
+    f2 = f[j] ** 2
+    w_j, ws_j, o_j = msk[row("fault", j)], msk[row("fault_settled", j)], msk[row("outside", j)]
+    s.add(f"ef{j}", w_j * e2)
+    s.add(f"ff{j}", w_j * f2)
+    s.add(f"efs{j}", ws_j * e2)
+    s.add(f"ffs{j}", ws_j * f2)
+    s.add(f"oa{j}", o_j * fhat[j] ** 2)
+    # alarms with hysteresis, off until the transient: raised at |fhat| >= thr, cleared below HYSTERESIS thr
+    al_free, al_ftc = slot[f"alf{j}"], slot[f"alc{j}"]
+    a_free, a_ftc = ca.fabs(fhat_free[j]), ca.fabs(fhat[j])
+    s.add(f"rf{j}", after * (al_free == 0) * (a_free >= thr[j]))
+    s.add(f"ro{j}", o_j * (al_ftc == 0) * (a_ftc >= thr[j]))
+    s.peak("o", j, o_j, fhat, t)
+    s.peak("s", j, msk[row("startup_outside", j)], fhat, t)
+    s.peak("l", j, msk[row("lag_outside", j)], fhat, t)
+    nxt[f"pkf{j}"] = ca.fmax(slot[f"pkf{j}"], w_j * ca.fabs(f[j]))
+    for key, al, a in ((f"alf{j}", al_free, a_free), (f"alc{j}", al_ftc, a_ftc)):
+        nxt[key] = after * ca.if_else(al != 0, a >= HYSTERESIS * thr[j], a >= thr[j])
+
+
+def _window_terms(s: _Terms, w: int, mk: Masks, msk, t, thr, fhat, f, dC: tuple, dy: tuple, p: int) -> None:
+    """Window w's summands (its fault's error, the true and compensated outputs of the FTC and no-FTC runs) and
+    monitor updates (a standing alarm at its onset, the first detection in it)."""
+    row, slot, nxt = mk.row, s.slot, s.nxt
+    j = mk.fault_of_window[w]
+    m_w, m_ws = msk[row("window", w)], msk[row("window_settled", w)]
+    e2 = (fhat[j] - f[j]) ** 2
+    f2 = f[j] ** 2
+    s.add(f"ew{w}", m_w * e2)
+    s.add(f"fw{w}", m_w * f2)
+    s.add(f"ews{w}", m_ws * e2)
+    s.add(f"fws{w}", m_ws * f2)
+    for k in range(p):
+        s.add(f"at{w}_{k}", m_w * dC[0][k] ** 2)
+        s.add(f"bt{w}_{k}", m_w * dC[1][k] ** 2)
+    s.add(f"acw{w}", m_w * dy[0])
+    s.add(f"bcw{w}", m_w * dy[1])
+    # a standing alarm: the FTC run's alarm already on at the window's onset (a false alarm, not a detection);
+    # a detection: the alarm rises in the window on a path where it was off at the onset
+    al = slot[f"alc{j}"]
+    standing = ca.if_else(msk[row("onset", w)], al != 0, slot[f"stw{w}"])
+    nxt[f"stw{w}"] = standing
+    after = msk[row("after")]
+    rise = (slot[f"det{w}"] < 0) * m_w * after * (al == 0) * (ca.fabs(fhat[j]) >= thr[j]) * (standing == 0)
+    nxt[f"det{w}"] = ca.if_else(rise, t, slot[f"det{w}"])
+
+
+def _saturation_terms(s: _Terms, u, limits, m: int, mk: Masks, msk) -> None:
+    """Per input: at a limit (FTC run), over the horizon and in each window."""
+    lim = None if limits is None else np.asarray(limits, dtype=float)
+    for i in range(m):
+        at = ca.SX(0.0)
+        if lim is not None:
+            if np.isfinite(lim[i, 0]):
+                at = at + (u[i] <= float(lim[i, 0]))
+            if np.isfinite(lim[i, 1]):
+                at = at + (u[i] >= float(lim[i, 1]))
+        s.add(f"sat{i}", at)
+        for w in range(mk.nw):
+            s.add(f"satw{w}_{i}", msk[mk.row("window", w)] * at)
+
+
+def _outside_region(region, runs: tuple, n: int):
+    """How many of the states of the three runs lie outside the plant's region (0: none)."""
+    outside = ca.SX(0.0)
+    if region is not None:
+        lo, hi = (np.asarray(v, dtype=float) for v in region)
+        for r in runs:
+            for j in range(n):
+                if np.isfinite(lo[j]):
+                    outside = outside + (r["x"][j] < float(lo[j]))
+                if np.isfinite(hi[j]):
+                    outside = outside + (r["x"][j] > float(hi[j]))
+    return outside
 
 
 def _fsum(col) -> float:
