@@ -584,30 +584,13 @@ def _run_chunks(prep: Prepared, plant: Plant, paths: int, seed: int, path0: int,
     return acc, div, mon, pm, rec
 
 
-def simulate(
-    design: Design,
-    plant: Plant,
-    scenario: Scenario,
-    *,
-    paths: int,
-    seed: int,
-    dt: float | None = None,
-    progress: bool = True,
-    record_paths: int | None = None,
-    record_all: bool = False,
-    record_every: int | None = None,
-    threads: int | None = None,
-    chunk: int | None = None,
-    scheduler: str | distributed.Client | None = None,
-    scales: dict | None = None,
-    prepared: Prepared | None = None,
-    exact: bool = True,
-    detect: bool = True,
-    false_alarm_rate: float | None = None,
-    calibration_paths: int | None = None,
-    calibration=None,
-    options: SimulateOptions | None = None,
-) -> SimulationResult:
+def simulate(design: Design, plant: Plant, scenario: Scenario, *, paths: int, seed: int, dt: float | None = None,
+             progress: bool = True, record_paths: int | None = None, record_all: bool = False,
+             record_every: int | None = None, threads: int | None = None, chunk: int | None = None,
+             scheduler: str | distributed.Client | None = None, scales: dict | None = None,
+             prepared: Prepared | None = None, exact: bool = True, detect: bool = True,
+             false_alarm_rate: float | None = None, calibration_paths: int | None = None, calibration=None,
+             options: SimulateOptions | None = None) -> SimulationResult:  # fmt: skip
     """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
 
     Parameters
