@@ -447,8 +447,6 @@ LONG_FUNCTIONS = {
     # numerical and symbolic kernels, read as the formulas they implement (SPEC.md, the paper's steps)
     "step.py:step_function": "the discrete step, the single source of truth of SPEC.md: one CasADi graph read "
     "top to bottom against the spec, its sample's operations in order",
-    "ts/_auto.py:premise_form": "the automatic sector method: one pass from the plain equations to the rewritten "
-    "plant, the premises' bounds, orientation and the matrices filled in one loop",
     # code emitters: the text they write, in the order it is written
     "codegen/_generate.py:_wrapper": "emits the C wrapper of the step line by line, in the order of the file",
     "sim/_vector.py:emit": "emits the lane engine's C kernel line by line, in the order of the file",
