@@ -444,9 +444,9 @@ LONG = 80
 #: the functions allowed over :data:`LONG` lines, each with its reason; the list may only shrink (an entry whose
 #: function got short enough, or went away, is dropped: the test says so)
 LONG_FUNCTIONS = {
-    # numerical and symbolic kernels, read as the formulas they implement (SPEC.md, the paper's steps)
-    "step.py:step_function": "the discrete step, the single source of truth of SPEC.md: one CasADi graph read "
-    "top to bottom against the spec, its sample's operations in order",
+    # numerical kernels, read as the formulas they implement (docs/method.md)
+    "step.py:step_function": "the discrete step, the single source of truth of the simulation and the C: one CasADi graph read "
+    "top to bottom against docs/method.md, its sample's operations in order",
     # code emitters: the text they write, in the order it is written
     "codegen/_generate.py:_wrapper": "emits the C wrapper of the step line by line, in the order of the file",
     "sim/_vector.py:emit": "emits the lane engine's C kernel line by line, in the order of the file",
