@@ -453,7 +453,6 @@ LONG_FUNCTIONS = {
     "sim/_vector.py:_driver": "emits the lane engine's C driver loop line by line, in the order of the file",
     # the benchmarks (bench/): each one measurement, timed in the order it is reported, and the baselines kept as
     # they were written (docs/benchmarks.md)
-    "bench/_mc.py:bench": "the Monte Carlo benchmark: the engines timed and compared in the order of its report",
     "bench/_perpath.py:simulate_per_path": "the per-path engine, the baseline and test oracle, kept as written",
     "bench/_cstep.py:bench_c_step": "the C step's benchmark: build, run and time in the order of its report",
     "bench/_handloop.py:bench_fast": "the hand-written loop's benchmark, timed in the order of its report",
