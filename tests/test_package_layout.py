@@ -454,7 +454,6 @@ LONG_FUNCTIONS = {
     # the benchmarks (bench/): each one measurement, timed in the order it is reported, and the baselines kept as
     # they were written (docs/benchmarks.md)
     "bench/_perpath.py:simulate_per_path": "the per-path engine, the baseline and test oracle, kept as written",
-    "bench/_cstep.py:bench_c_step": "the C step's benchmark: build, run and time in the order of its report",
     "bench/_handloop.py:bench_fast": "the hand-written loop's benchmark, timed in the order of its report",
     # design/ is being rewritten on another branch (#41 item 2, the LMI registry that poses): split there
     "design/_api.py:explore": "design/ is rewritten on another branch now; split with it",
