@@ -445,16 +445,14 @@ LONG = 80
 #: function got short enough, or went away, is dropped: the test says so)
 LONG_FUNCTIONS = {
     # numerical kernels, read as the formulas they implement (docs/method.md)
-    "step.py:step_function": "the discrete step, the single source of truth of the simulation and the C: one CasADi graph read "
-    "top to bottom against docs/method.md, its sample's operations in order",
+    "step.py:step_function": "the discrete step, the single source of truth of the simulation and the C: one "
+    "CasADi graph read top to bottom against docs/method.md, its sample's operations in order",
     # code emitters: the text they write, in the order it is written
     "codegen/_generate.py:_wrapper": "emits the C wrapper of the step line by line, in the order of the file",
     "sim/_vector.py:emit": "emits the lane engine's C kernel line by line, in the order of the file",
     "sim/_vector.py:_driver": "emits the lane engine's C driver loop line by line, in the order of the file",
-    # the benchmarks (bench/): each one measurement, timed in the order it is reported, and the baselines kept as
-    # they were written (docs/benchmarks.md)
+    # the benchmarks' baselines, kept as they were written (docs/benchmarks.md)
     "bench/_perpath.py:simulate_per_path": "the per-path engine, the baseline and test oracle, kept as written",
-    "bench/_handloop.py:bench_fast": "the hand-written loop's benchmark, timed in the order of its report",
     # design/ is being rewritten on another branch (#41 item 2, the LMI registry that poses): split there
     "design/_api.py:explore": "design/ is rewritten on another branch now; split with it",
     "design/_pipeline.py:finish": "design/ is rewritten on another branch now; split with it",
