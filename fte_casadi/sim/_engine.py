@@ -265,6 +265,18 @@ def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
     return out
 
 
+def _shared_columns(lf: int, nm: int, ld: int, nv: int) -> dict[str, tuple[int, int]]:
+    """The columns of the shared inputs: the fault coefficients (4 lf), the masks (nm), the time, the detection
+    thresholds (lf), the deterministic unknown input (ld), the measurement noise's deviations (nv)."""
+    cols = {"fp": (0, 4 * lf)}
+    cols["mask"] = (4 * lf, 4 * lf + nm)
+    cols["t"] = (cols["mask"][1], cols["mask"][1] + 1)
+    cols["thr"] = (cols["t"][1], cols["t"][1] + lf)
+    cols["d"] = (cols["thr"][1], cols["thr"][1] + ld)
+    cols["vstd"] = (cols["d"][1], cols["d"][1] + nv)
+    return cols
+
+
 class Prepared:
     """Everything a run needs that does not depend on the paths: built once per (design, scenario, dt),
     the same in-process and on a cluster worker (which rebuilds it from the documents).
@@ -308,24 +320,25 @@ class Prepared:
         vstd = np.zeros((lay.nv, nsamp))
         if noise:  # v = vstd * N(0, 1)
             vstd[:] = scenario.measurement_noise.deviations(self.t, scales["measurement_noise_scale"])
-        nm = self.masks.M.shape[0]
-        self.cols = {"fp": (0, 4 * lf)}
-        self.cols["mask"] = (4 * lf, 4 * lf + nm)
-        self.cols["t"] = (self.cols["mask"][1], self.cols["mask"][1] + 1)
-        self.cols["thr"] = (self.cols["t"][1], self.cols["t"][1] + lf)
-        self.cols["d"] = (self.cols["thr"][1], self.cols["thr"][1] + ld)
-        self.cols["vstd"] = (self.cols["d"][1], self.cols["d"][1] + lay.nv)
+        self.cols = _shared_columns(lf, self.masks.M.shape[0], ld, lay.nv)
         self.SH = np.ascontiguousarray(
             np.vstack([FP, self.masks.M, self.t[None, :], np.repeat(thr[:, None], nsamp, 1), ddet, vstd]).T
         )
         region = (np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float))
         self.monitor = monitor(lay, self.masks, np.asarray(plant.C, float), design.input_limits, region)
         self.names = self.monitor.names
-        nsh = self.SH.shape[1]
+        F = self.engine_function = self._engine_function(sample, ld, lf)
+        xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
+        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv)
+        self.notes = (self.engine.note,) if self.engine.note else ()
+
+    def _engine_function(self, sample: ca.Function, ld: int, lf: int) -> ca.Function:
+        """``(state + monitor, w, sh) -> (next, rec, incr, pm)``: the closed loop's sample followed by the monitor,
+        the unknown input and the measurement noise completed from the shared inputs ``sh``."""
+        lay, c = self.lay, self.cols
         S = ca.SX.sym("state", lay.ns + self.monitor.nmon)
         w = ca.SX.sym("w", lay.nw)
-        sh = ca.SX.sym("sh", nsh)
-        c = self.cols
+        sh = ca.SX.sym("sh", self.SH.shape[1])
         # an empty slice of an SX column can come out 1x0: a plant without unknown inputs (or without measurement
         # noise) gets an explicit 0x1 block
         d_part = w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]] if ld else ca.SX(0, 1)
@@ -334,13 +347,9 @@ class Prepared:
         nxt, rec = sample(S[: lay.ns], wd, sh[: 4 * lf])
         mon_next, inc, pm = self.monitor.fn(rec, S[lay.ns :], sh[c["mask"][0] : c["thr"][1]])
         # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)
-        F = ca.Function(
+        return ca.Function(
             "fte_cl", [S, w, sh], [ca.vertcat(nxt, mon_next), rec, inc, pm], {"cse": True}
         ).expand()
-        self.engine_function = F
-        xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
-        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv)
-        self.notes = (self.engine.note,) if self.engine.note else ()
 
     def calibration_engine(self):
         """The compiled fault-free loop that calibrates the detection thresholds (:mod:`._calibrate`), built
