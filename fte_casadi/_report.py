@@ -377,18 +377,43 @@ def _saturation_sentence(m: dict, m_free: dict) -> str:
 
 
 def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> tuple[list[str], dict]:
-    from .plot import detectability_figure, write_figures
-    from .sim import attach, calibrate_detection, save_result, simulate
-    from .sim import metrics as sim_metrics
-
+    """The report's section of one plant (derive, design, Monte Carlo, detectability, C) and its summary."""
     printed = PRINTED.get(name)  # None for a plant that is not the paper's (the quadruple tank)
     plant = BUILTIN[name]()
     t0 = time.perf_counter()
     log(f"[{name}] derive T-S model")
     ts = derive(plant)
     sec = [f"## {name}", ""] + _derive_section(ts, printed)
+    designs = _designs(name, ts, plant, seed, log, printed is not None)
+    d = designs["conditioned"]
+    if isinstance(d, str):
+        raise InfeasibleDesignError(f"{name}: the conditioned design failed: {d}")
+    d.save(out / f"{name}-design.json")
+    if not isinstance(designs.get("paper", ""), str):
+        designs["paper"].save(out / f"{name}-design-paper.json")
+    sec += _design_lines(d, designs, printed)
+    msec, m, figs = _monte_carlo_section(name, d, plant, out, seed, paths, log, printed is not None)
+    sec += msec
+    log(f"[{name}] generate, compile and check the embedded C")
+    cdir = out / "c" / name.replace("-", "_")
+    csec, cinfo = _c_section(d, cdir)
+    sec += ["### Embedded C", ""] + csec + [""]
+    summary = {
+        "metrics": m,
+        "figures": [str(f) for f in figs],
+        "c": {k: v for k, v in cinfo.items() if k != "bench"},
+        "c_bench": cinfo.get("bench"),
+        "seconds": time.perf_counter() - t0,
+        "designs": {k: (v if isinstance(v, str) else v.checks) for k, v in designs.items()},
+    }
+    return sec, summary
+
+
+def _designs(name: str, ts, plant, seed: int, log, paper: bool) -> dict:
+    """The conditioned design (protected, as fte design writes it) and, for the paper's plants, the paper's
+    variant at Section 6's parameters; a variant that fails is its message."""
     designs: dict = {}
-    for variant in ("conditioned", "paper") if printed is not None else ("conditioned",):
+    for variant in ("conditioned", "paper") if paper else ("conditioned",):
         log(f"[{name}] design, variant {variant}")
         try:
             given = SECTION_6_PARAMS.get(name, {}) if variant == "paper" else {}
@@ -400,14 +425,12 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         except (InfeasibleDesignError, SolverFailedError) as exc:
             designs[variant] = " ".join(str(exc).split())
             log(f"[{name}]   variant {variant} failed: {shorten(designs[variant], 160)}")
-    d = designs["conditioned"]
-    if isinstance(d, str):
-        raise InfeasibleDesignError(f"{name}: the conditioned design failed: {d}")
-    dpath = out / f"{name}-design.json"
-    d.save(dpath)
-    if not isinstance(designs.get("paper", ""), str):
-        designs["paper"].save(out / f"{name}-design-paper.json")
-    sec += ["### Unknown-input gain H (17)", "", _mat(d.H, 7)]
+    return designs
+
+
+def _design_lines(d, designs: dict, printed) -> list[str]:
+    """H (against the printed one), the designs' table, the gains and the design's notes."""
+    sec = ["### Unknown-input gain H (17)", "", _mat(d.H, 7)]
     if printed is not None:
         sec.append(
             f"largest difference to the printed H: {float(np.max(np.abs(d.H - np.asarray(printed['H'])))):.2g}"
@@ -429,6 +452,16 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         notes += [f"paper variant: {s}" for s in designs["paper"].status]
     if notes:
         sec += ["Notes from the design:", ""] + [f"- {s}" for s in notes] + [""]
+    return sec
+
+
+def _monte_carlo_section(name: str, d, plant, out: Path, seed: int, paths: int | None, log,
+                         paper: bool) -> tuple[list[str], dict, list]:  # fmt: skip
+    """The Monte Carlo of the conditioned design (thresholds calibrated first), its detectability and, with input
+    limits, the run without them: the lines, the metrics and the figures."""
+    from .plot import detectability_figure, write_figures
+    from .sim import attach, calibrate_detection, save_result, simulate
+    from .sim import metrics as sim_metrics
 
     sc = SCENARIOS[name]()
     npaths = max(paths or 0, sc.paths)
@@ -443,9 +476,26 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
     sets, noise = _detectability_sets(d, plant, sc, res, cal, seed)
     m = attach(m, sets)
     save_result(res, out / f"{name}-simulation.npz")
-    sub = "figures" if printed is not None else f"figures/{name}"  # the paper's figure numbers, or a folder
+    sub = "figures" if paper else f"figures/{name}"  # the paper's figure numbers, or a folder
     figs = write_figures(res, out / sub)
-    sec += [
+    sec = _metrics_table(m, plant) + _windows_section(m, plant)
+    fig = detectability_figure(sets, name, out / sub, name=f"{name.replace('-', '_')}_detectability.png")
+    sec += _detectability_section(sets, noise, plant) + [f"![detectability]({sub}/{fig.name})", ""]
+    figs = [*figs, fig]
+    if d.input_limits is not None:
+        log(f"[{name}] simulate again without input limits, to say what saturation does")
+        free = simulate(dataclasses.replace(d, input_limits=None), plant, sc, paths=npaths, seed=seed,
+                        progress=False, detect=False)  # fmt: skip
+        sec += _saturation_section(m, free.metrics, d, plant)
+    for f in figs:
+        sec.append(f"![{f.stem}]({sub}/{f.name})")
+    sec.append("")
+    return sec, m, figs
+
+
+def _metrics_table(m: dict, plant) -> list[str]:
+    """The Monte Carlo's headline metrics as a table."""
+    return [
         "### Monte Carlo (conditioned design, nonlinear plant)",
         "",
         f"{m['paths']} paths, T = {m['T']:g} s, dt = {m['dt']:g} s, seed {m['seed']}, {m['wall_s']:.2f} s wall.",
@@ -461,38 +511,6 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         f"{', '.join(_g(v) for v in m['input_saturation'])} |",
         "",
     ]
-    sec += _windows_section(m, plant)
-    fig = detectability_figure(sets, name, out / sub, name=f"{name.replace('-', '_')}_detectability.png")
-    sec += _detectability_section(sets, noise, plant) + [f"![detectability]({sub}/{fig.name})", ""]
-    figs = [*figs, fig]
-    if d.input_limits is not None:
-        log(f"[{name}] simulate again without input limits, to say what saturation does")
-        free = simulate(
-            dataclasses.replace(d, input_limits=None),
-            plant,
-            sc,
-            paths=npaths,
-            seed=seed,
-            progress=False,
-            detect=False,
-        )
-        sec += _saturation_section(m, free.metrics, d, plant)
-    for f in figs:
-        sec.append(f"![{f.stem}]({sub}/{f.name})")
-    sec.append("")
-    log(f"[{name}] generate, compile and check the embedded C")
-    cdir = out / "c" / name.replace("-", "_")
-    csec, cinfo = _c_section(d, cdir)
-    sec += ["### Embedded C", ""] + csec + [""]
-    summary = {
-        "metrics": m,
-        "figures": [str(f) for f in figs],
-        "c": {k: v for k, v in cinfo.items() if k != "bench"},
-        "c_bench": cinfo.get("bench"),
-        "seconds": time.perf_counter() - t0,
-        "designs": {k: (v if isinstance(v, str) else v.checks) for k, v in designs.items()},
-    }
-    return sec, summary
 
 
 def reproduce(

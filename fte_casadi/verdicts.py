@@ -104,71 +104,81 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
                 f"(>= {FALSE_ALARM:g}): false alarms, e.g. cross-talk from another fault")  # fmt: skip
     _rate_verdicts(m, add)
     for w in m.get("windows", []):
-        where = _where(w)
-        r = w.get("ftc_true_ratio")
-        if _above(r, w.get("ftc_true_ratio_interval"), WORSE_THAN_NONE):
-            per = w.get("ftc_true_ratio_per_output") or []
-            worst = ", ".join(
-                f"{outputs[k] if k < len(outputs) else k}: {v:.4g}"
-                for k, v in enumerate(per)
-                if v is not None
-            )
-            add("worse than none", where, r,
-                f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {r:.4g} > "
-                f"{WORSE_THAN_NONE:g}{_iv(w.get('ftc_true_ratio_interval'))}; per output {worst})"
-                f"{_crosstalk(w, faults)}")  # fmt: skip
-        elif r is not None:
-            rms = w.get("ftc_true_rms_per_output") or {}
-            ivs = w.get("ftc_true_ratio_per_output_interval") or []
-            for k, v in enumerate(w.get("ftc_true_ratio_per_output") or []):
-                if _above(v, ivs[k] if k < len(ivs) else None, WORSE_THAN_NONE):
-                    name = outputs[k] if k < len(outputs) else f"output {k}"
-                    size = ""
-                    if rms.get("ftc") and rms.get("no_ftc"):
-                        unit = f" {units[k]}" if k < len(units) and units[k] else ""
-                        size = (f": RMS deviation from the fault-free run {rms['ftc'][k]:.3g}{unit} with it against "
-                                f"{rms['no_ftc'][k]:.3g}{unit} without")  # fmt: skip
-                    add("worse than none on an output", f"{where}, {name}", v,
-                        f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
-                        f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
-                        f"whole are not worse (ftc_true_ratio {r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
-        err, err_iv = w.get("fault_rel_rms_error"), w.get("fault_rel_rms_error_interval")
-        if err is not None and err >= POOR_ESTIMATE and (err_iv is None or err_iv[0] >= POOR_ESTIMATE):
-            add("poor estimate", where, err,
-                f"in {where} the fault estimate misses {100 * min(err, 9.99):.0f} % of the fault (relative RMS error "
-                f"{err:.3g} over the window): this design does not estimate this fault in this scenario")  # fmt: skip
-        tau = m.get("observer_time_constant")
-        span = float(w["stop"]) - float(w["start"])
-        if tau is not None and SLOW_OBSERVER * tau > span:
-            add("slow observer", where, tau,
-                f"the observer's slowest time constant {tau:.3g} is too slow for {where}: {SLOW_OBSERVER:g} time "
-                f"constants ({SLOW_OBSERVER * tau:.3g}) are longer than the window ({span:.3g})")  # fmt: skip
-        if w.get("fault_rel_rms_error") is not None and w.get("settling_time") is None:
-            add("not settled", where, None,
-                f"in {where} the fault estimate does not settle: its mean error over the paths is not within 10 % of "
-                "the fault's peak by the window's end")  # fmt: skip
-        miss = w.get("missed_detections")
-        if miss:
-            add("missed", where, miss,
-                f"in {where} the fault is not detected on {miss} of {m.get('paths')} paths (the alarm off at its "
-                "onset and never raised in it)")  # fmt: skip
-        standing = w.get("standing_alarm_paths")
-        if standing:
-            add("standing alarm", where, standing,
-                f"in {where} the alarm of {w['fault']} was already on at the onset on {standing} of {m.get('paths')} "
-                "paths: a false alarm the fault found raised, counted as neither a detection nor a miss")  # fmt: skip
-        for i, frac in enumerate(w.get("input_saturation", [])):
-            if frac > SATURATED:
-                name = inputs[i] if i < len(inputs) else str(i)
-                add("saturated", where, frac,
-                    f"input {name} is at a limit for {100 * frac:.0f} % of {where}: the tolerance is that of a "
-                    "saturated actuator")  # fmt: skip
+        _tolerance_verdicts(w, add, faults, outputs, units)
+        _window_verdicts(m, w, add, inputs)
     frac = m.get("outside_region")
     if frac is not None and frac > OUTSIDE_REGION:
         add("outside region", "run", frac,
             f"{100 * frac:.1f} % of the samples leave the plant's region, where the T-S model (and the design's "
             "certificate) is not exact")  # fmt: skip
     return out
+
+
+def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
+    """Window ``w``'s tolerant control worse than none: on the true outputs as a whole, else on one of them."""
+    where = _where(w)
+    r = w.get("ftc_true_ratio")
+    if _above(r, w.get("ftc_true_ratio_interval"), WORSE_THAN_NONE):
+        per = w.get("ftc_true_ratio_per_output") or []
+        worst = ", ".join(
+            f"{outputs[k] if k < len(outputs) else k}: {v:.4g}" for k, v in enumerate(per) if v is not None
+        )
+        add("worse than none", where, r,
+            f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {r:.4g} > "
+            f"{WORSE_THAN_NONE:g}{_iv(w.get('ftc_true_ratio_interval'))}; per output {worst})"
+            f"{_crosstalk(w, faults)}")  # fmt: skip
+    elif r is not None:
+        rms = w.get("ftc_true_rms_per_output") or {}
+        ivs = w.get("ftc_true_ratio_per_output_interval") or []
+        for k, v in enumerate(w.get("ftc_true_ratio_per_output") or []):
+            if _above(v, ivs[k] if k < len(ivs) else None, WORSE_THAN_NONE):
+                name = outputs[k] if k < len(outputs) else f"output {k}"
+                size = ""
+                if rms.get("ftc") and rms.get("no_ftc"):
+                    unit = f" {units[k]}" if k < len(units) and units[k] else ""
+                    size = (f": RMS deviation from the fault-free run {rms['ftc'][k]:.3g}{unit} with it against "
+                            f"{rms['no_ftc'][k]:.3g}{unit} without")  # fmt: skip
+                add("worse than none on an output", f"{where}, {name}", v,
+                    f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
+                    f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
+                    f"whole are not worse (ftc_true_ratio {r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
+
+
+def _window_verdicts(m: dict, w: dict, add, inputs) -> None:
+    """Window ``w``'s estimate (poor, too slow an observer, not settled), detection (missed, a standing alarm)
+    and inputs (saturated)."""
+    where = _where(w)
+    err, err_iv = w.get("fault_rel_rms_error"), w.get("fault_rel_rms_error_interval")
+    if err is not None and err >= POOR_ESTIMATE and (err_iv is None or err_iv[0] >= POOR_ESTIMATE):
+        add("poor estimate", where, err,
+            f"in {where} the fault estimate misses {100 * min(err, 9.99):.0f} % of the fault (relative RMS error "
+            f"{err:.3g} over the window): this design does not estimate this fault in this scenario")  # fmt: skip
+    tau = m.get("observer_time_constant")
+    span = float(w["stop"]) - float(w["start"])
+    if tau is not None and SLOW_OBSERVER * tau > span:
+        add("slow observer", where, tau,
+            f"the observer's slowest time constant {tau:.3g} is too slow for {where}: {SLOW_OBSERVER:g} time "
+            f"constants ({SLOW_OBSERVER * tau:.3g}) are longer than the window ({span:.3g})")  # fmt: skip
+    if w.get("fault_rel_rms_error") is not None and w.get("settling_time") is None:
+        add("not settled", where, None,
+            f"in {where} the fault estimate does not settle: its mean error over the paths is not within 10 % of "
+            "the fault's peak by the window's end")  # fmt: skip
+    miss = w.get("missed_detections")
+    if miss:
+        add("missed", where, miss,
+            f"in {where} the fault is not detected on {miss} of {m.get('paths')} paths (the alarm off at its "
+            "onset and never raised in it)")  # fmt: skip
+    standing = w.get("standing_alarm_paths")
+    if standing:
+        add("standing alarm", where, standing,
+            f"in {where} the alarm of {w['fault']} was already on at the onset on {standing} of {m.get('paths')} "
+            "paths: a false alarm the fault found raised, counted as neither a detection nor a miss")  # fmt: skip
+    for i, frac in enumerate(w.get("input_saturation", [])):
+        if frac > SATURATED:
+            name = inputs[i] if i < len(inputs) else str(i)
+            add("saturated", where, frac,
+                f"input {name} is at a limit for {100 * frac:.0f} % of {where}: the tolerance is that of a "
+                "saturated actuator")  # fmt: skip
 
 
 def design_warnings(checks: dict, alpha, scenario) -> list[str]:

@@ -184,6 +184,42 @@ def _object_sizes(folder: Path, cc: str) -> dict | None:
     return out
 
 
+def _casadi_call_s(fn, z: np.ndarray, y0: np.ndarray) -> float:
+    """Seconds per call of the step Function from Python with numpy arrays, as the simulator would per sample
+    (best of three runs of 2000 calls)."""
+    calls = 2000
+    best = np.inf
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for _k in range(calls):
+            fn(z, y0)
+        best = min(best, (time.perf_counter() - t0) / calls)
+    return best
+
+
+def _hand_sources(design: Design, folder: Path, sample_time: float, real: str, name: str) -> Path:
+    """``folder/hand``: the hand-written step (:func:`hand_written_c`), its header, and CasADi's C of the
+    scheduling function it calls."""
+    hand = folder / "hand"
+    hand.mkdir()
+    (hand / "hand.h").write_text(
+        f'#include "fte_{name}.h"\nvoid hand_step(fte_real *z, const fte_real *y, fte_real *u, fte_real *xb, fte_real *yc);\n'
+    )
+    (hand / "hand.c").write_text(hand_written_c(design, sample_time))
+    sched = design.scheduling_function()
+    sched = ca.Function(
+        "hand_sched", [sched.sx_in(0), sched.sx_in(1)], sched.call([sched.sx_in(0), sched.sx_in(1)])
+    )
+    gen = ca.CodeGenerator(
+        "hand_sched.c",
+        {"prefix": "hand_cs", "casadi_real": real, "casadi_int": "int", "with_header": False},
+    )
+    gen.add(sched)
+    gen.generate(str(hand) + os.sep)
+    (hand / "hand_sched.c").write_text(_void_unused((hand / "hand_sched.c").read_text()))
+    return hand
+
+
 def bench_c_step(
     design: Design,
     *,
@@ -200,20 +236,11 @@ def bench_c_step(
     y0 = np.asarray(design.C) @ (
         np.full(design.dims.n, 0.1) if design.x_ref is None else np.asarray(design.x_ref)
     )
-    z = np.zeros(design.nbar)
-    # CasADi from Python: the Function called with numpy arrays, as the simulator would per sample
-    calls = 2000
-    best = np.inf
-    for _ in range(3):
-        t0 = time.perf_counter()
-        for _k in range(calls):
-            fn(z, y0)
-        best = min(best, (time.perf_counter() - t0) / calls)
     result = {
         "plant": design.plant,
         "ts": sample_time,  # the bench document's key (kept)
         "real": real,
-        "casadi_us": best * 1e6,
+        "casadi_us": _casadi_call_s(fn, np.zeros(design.nbar), y0) * 1e6,
         **memory_report(design, sample_time=sample_time, real=real),
     }
     if cc is None:
@@ -224,23 +251,7 @@ def bench_c_step(
         folder = Path(tmp)
         generate_c(design, folder, sample_time=sample_time, real=real)
         result["objects"] = _object_sizes(folder, cc)
-        hand = folder / "hand"
-        hand.mkdir()
-        (hand / "hand.h").write_text(
-            f'#include "fte_{name}.h"\nvoid hand_step(fte_real *z, const fte_real *y, fte_real *u, fte_real *xb, fte_real *yc);\n'
-        )
-        (hand / "hand.c").write_text(hand_written_c(design, sample_time))
-        sched = design.scheduling_function()
-        sched = ca.Function(
-            "hand_sched", [sched.sx_in(0), sched.sx_in(1)], sched.call([sched.sx_in(0), sched.sx_in(1)])
-        )
-        gen = ca.CodeGenerator(
-            "hand_sched.c",
-            {"prefix": "hand_cs", "casadi_real": real, "casadi_int": "int", "with_header": False},
-        )
-        gen.add(sched)
-        gen.generate(str(hand) + os.sep)
-        (hand / "hand_sched.c").write_text(_void_unused((hand / "hand_sched.c").read_text()))
+        hand = _hand_sources(design, folder, sample_time, real, name)
         main = hand / "timing_main.c"
         main.write_text(
             _TIMING_MAIN.format(

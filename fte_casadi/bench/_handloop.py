@@ -236,23 +236,14 @@ def bench_fast(prep, paths: int = 64, seed: int = 0, repeats: int = 15, blocks=(
             diff[v] = float(np.max(np.abs(run_hand(hands[v, b])[0] - S1f) / scale))
     tf, te = min(t_fast), min(t_exact)
     return {
-        "paths": paths,
-        "threads": 1,
-        "samples": nsamp,
-        "repeats": int(repeats),
-        "fast_ns_per_path_step": tf,
-        "exact_ns_per_path_step": te,
-        "hand_ns_per_path_step": best["hand"][1],
-        "hand_block": best["hand"][0],
-        "hand_flags": " ".join(HAND_FLAGS),
+        "paths": paths, "threads": 1, "samples": nsamp, "repeats": int(repeats),
+        "fast_ns_per_path_step": tf, "exact_ns_per_path_step": te,
+        "hand_ns_per_path_step": best["hand"][1], "hand_block": best["hand"][0], "hand_flags": " ".join(HAND_FLAGS),
         "hand_fast_math_ns_per_path_step": best["hand_fast_math"][1],
         "hand_fast_math_block": best["hand_fast_math"][0],
-        "ratio_fast_vs_hand": best["hand"][1] / tf,
-        "ratio_exact_vs_hand": best["hand"][1] / te,
+        "ratio_fast_vs_hand": best["hand"][1] / tf, "ratio_exact_vs_hand": best["hand"][1] / te,
         "ratio_fast_vs_hand_fast_math": best["hand_fast_math"][1] / tf,
         "hand_ns_by_variant_and_block": {f"{v}_{b}": min(t) for (v, b), t in t_hand.items()},
-        "hand_path_loop_vectorised": vectorised,
-        "hand_max_rel_diff_final_state": diff,
-        "fast_ns_all_repeats": t_fast,
-        "exact_ns_all_repeats": t_exact,
-    }
+        "hand_path_loop_vectorised": vectorised, "hand_max_rel_diff_final_state": diff,
+        "fast_ns_all_repeats": t_fast, "exact_ns_all_repeats": t_exact,
+    }  # fmt: skip

@@ -73,6 +73,76 @@ def baseline_functions(design: Design, plant, scenario, dt: float):
     return fn, a, b, s0, D, FP, lay
 
 
+def _timed(fn):
+    t0 = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t0, out
+
+
+def _timed_engines(design: Design, plant, scen, kw: dict, repeats: int) -> dict:
+    """Wall times of whole ``simulate`` calls: the vectorised engine (exact and fast mode) and the per-path engine,
+    once first (compilation), then ``repeats`` times interleaved, so that they see the same load on a shared
+    machine."""
+    vkw = dict(kw, detect=False)  # the engine alone: the per-path baseline calibrates no detection thresholds
+    first_vec, _ = _timed(lambda: simulate(design, plant, scen, **vkw))
+    first_pp, _ = _timed(lambda: simulate_per_path(design, plant, scen, **kw))
+    first_fast, _ = _timed(lambda: simulate(design, plant, scen, exact=False, **vkw))
+    vec_walls, pp_walls, fast_walls = [], [], []
+    for _ in range(max(1, int(repeats))):
+        vec_walls.append(_timed(lambda: simulate(design, plant, scen, **vkw))[0])
+        pp_walls.append(_timed(lambda: simulate_per_path(design, plant, scen, **kw))[0])
+        fast_walls.append(_timed(lambda: simulate(design, plant, scen, exact=False, **vkw))[0])
+    return {"vec": vec_walls, "pp": pp_walls, "fast": fast_walls, "first": (first_vec, first_pp, first_fast)}
+
+
+def _sdeint_baseline(fn, a, b, s0, D, FP, lay, n: int, dt: float, nsteps: int, baseline_paths: int,
+                     rng) -> tuple[float, float]:  # fmt: skip
+    """(a) sdeint's itoEuler on the same closed-loop SDE: its wall time for ``baseline_paths`` paths, and the
+    largest difference of the states from the engine's core run on the noise of its last path."""
+    try:
+        import sdeint
+    except ImportError:
+        raise SimulationError(
+            "the Monte Carlo benchmark compares against sdeint, which is not installed: "
+            "pip install 'fte_casadi[bench]' (or the [test] extra)"
+        ) from None
+
+    tspan = np.arange(nsteps + 1) * dt
+    t0 = time.perf_counter()
+    for _ in range(baseline_paths):
+        dW = np.sqrt(dt) * rng.standard_normal((nsteps, 1))
+        sde = sdeint.itoEuler(a, b, s0, tspan, dW=dW)
+    sde_wall = time.perf_counter() - t0
+
+    # the engine's core on the same noise as the last sdeint path
+    def fill(W, k0):
+        L = W.shape[1]
+        W[:] = 0.0
+        k1 = min(k0 + L, nsteps)
+        W[0, : k1 - k0, 0] = dW[k0:k1, 0]
+        W[0, : k1 - k0, 1:] = D[:, k0:k1].T
+
+    rec, _ = monte_carlo(fn, s0[None, :], FP, nsteps, 1, fill, dt=dt)
+    diff = max(
+        float(np.max(np.abs(rec[0, :, r * lay.run_rec : r * lay.run_rec + n]
+                            - sde[:, r * lay.run_state : r * lay.run_state + n])))
+        for r in range(3)
+    )  # fmt: skip
+    return sde_wall, diff
+
+
+def _python_loop_baseline(fn, s0, D, FP, dt: float, nsteps: int, baseline_paths: int, rng) -> float:
+    """(b) a plain Python loop calling the sample Function once per step: its wall time for ``baseline_paths``
+    paths."""
+    t0 = time.perf_counter()
+    for _ in range(baseline_paths):
+        s = s0.copy()
+        dW = np.sqrt(dt) * rng.standard_normal(nsteps)
+        for k in range(nsteps):
+            s = np.asarray(fn(s, np.concatenate([[dW[k]], D[:, k]]), FP[:, k])[0]).ravel()
+    return time.perf_counter() - t0
+
+
 def bench(
     design: Design | None = None,
     plant=None,
@@ -100,23 +170,10 @@ def bench(
         scen = scen.until(float(horizon))
     dt, nsteps, _ = resolve_dt(design, scen, None)
     kw = dict(paths=paths, seed=seed, progress=False, threads=threads)
-    vkw = dict(kw, detect=False)  # the engine alone: the per-path baseline calibrates no detection thresholds
-
-    def timed(fn):
-        t0 = time.perf_counter()
-        out = fn()
-        return time.perf_counter() - t0, out
-
-    first_vec, _ = timed(lambda: simulate(design, plant, scen, **vkw))
-    first_pp, _ = timed(lambda: simulate_per_path(design, plant, scen, **kw))
-    first_fast, _ = timed(lambda: simulate(design, plant, scen, exact=False, **vkw))
-    # interleaved, best of `repeats` each: the engines see the same load on a shared machine
-    vec_walls, pp_walls, fast_walls = [], [], []
-    for _ in range(max(1, int(repeats))):
-        vec_walls.append(timed(lambda: simulate(design, plant, scen, **vkw))[0])
-        pp_walls.append(timed(lambda: simulate_per_path(design, plant, scen, **kw))[0])
-        fast_walls.append(timed(lambda: simulate(design, plant, scen, exact=False, **vkw))[0])
-    vec_wall, pp_wall, fast_wall = min(vec_walls), min(pp_walls), min(fast_walls)
+    t = _timed_engines(design, plant, scen, kw, repeats)
+    vec_wall, pp_wall, fast_wall = min(t["vec"]), min(t["pp"]), min(t["fast"])
+    vec_walls, pp_walls, fast_walls = t["vec"], t["pp"], t["fast"]
+    first_vec, first_pp, first_fast = t["first"]
     prep = Prepared(design, plant, scen, dt, nsteps, dict(SCALES))
     ops = op_counts(prep.engine_function, plant.ld)
     flops = ops["flops"]
@@ -127,98 +184,36 @@ def bench(
     engine_rate = vec_rate
     fn, a, b, s0, D, FP, lay = baseline_functions(design, plant, scen, dt)
     rng = np.random.default_rng(seed)
-    tspan = np.arange(nsteps + 1) * dt
-
-    # (a) sdeint's itoEuler on the same closed-loop SDE
-    try:
-        import sdeint
-    except ImportError:
-        raise SimulationError(
-            "the Monte Carlo benchmark compares against sdeint, which is not installed: "
-            "pip install 'fte_casadi[bench]' (or the [test] extra)"
-        ) from None
-
-    t0 = time.perf_counter()
-    for _ in range(baseline_paths):
-        dW = np.sqrt(dt) * rng.standard_normal((nsteps, 1))
-        sde = sdeint.itoEuler(a, b, s0, tspan, dW=dW)
-    sde_wall = time.perf_counter() - t0
-
-    # the engine's core on the same noise as the last sdeint path
-    def fill(W, k0):
-        L = W.shape[1]
-        W[:] = 0.0
-        k1 = min(k0 + L, nsteps)
-        W[0, : k1 - k0, 0] = dW[k0:k1, 0]
-        W[0, : k1 - k0, 1:] = D[:, k0:k1].T
-
-    rec, _ = monte_carlo(fn, s0[None, :], FP, nsteps, 1, fill, dt=dt)
-    diff = max(
-        float(
-            np.max(
-                np.abs(
-                    rec[0, :, r * lay.run_rec : r * lay.run_rec + plant.n]
-                    - sde[:, r * lay.run_state : r * lay.run_state + plant.n]
-                )
-            )
-        )
-        for r in range(3)
-    )
+    sde_wall, diff = _sdeint_baseline(fn, a, b, s0, D, FP, lay, plant.n, dt, nsteps, baseline_paths, rng)
     sde_rate = baseline_paths * nsteps / sde_wall
-
-    # (b) a plain Python loop calling the sample Function once per step
-    t0 = time.perf_counter()
-    for _ in range(baseline_paths):
-        s = s0.copy()
-        dW = np.sqrt(dt) * rng.standard_normal(nsteps)
-        for k in range(nsteps):
-            s = np.asarray(fn(s, np.concatenate([[dW[k]], D[:, k]]), FP[:, k])[0]).ravel()
-    loop_wall = time.perf_counter() - t0
+    loop_wall = _python_loop_baseline(fn, s0, D, FP, dt, nsteps, baseline_paths, rng)
     loop_rate = baseline_paths * nsteps / loop_wall
 
     return {
         "scenario": f"{plant.name}, T = {scen.T:g}, dt = {dt:g}, three runs per path",
         "engine": {
-            "paths": paths,
-            "steps": nsteps,
-            "wall_s": vec_wall,
-            "wall_s_all_repeats": vec_walls,
-            "first_call_wall_s": first_vec,
-            "path_steps_per_s": vec_rate,
-            "threads": threads or min(8, os.cpu_count() or 1),
-            "flops_per_path_step": flops,
-            "operations_per_path_step": ops,
-            "fraction_of_peak": vec_rate * flops / peak["flops_per_s"],
-            "peak_assumed": peak,
-            "one_thread": anatomy,
+            "paths": paths, "steps": nsteps, "wall_s": vec_wall, "wall_s_all_repeats": vec_walls,
+            "first_call_wall_s": first_vec, "path_steps_per_s": vec_rate,
+            "threads": threads or min(8, os.cpu_count() or 1), "flops_per_path_step": flops,
+            "operations_per_path_step": ops, "fraction_of_peak": vec_rate * flops / peak["flops_per_s"],
+            "peak_assumed": peak, "one_thread": anatomy,
         },
         "per_path_engine": {
-            "paths": paths,
-            "wall_s": pp_wall,
-            "wall_s_all_repeats": pp_walls,
-            "first_call_wall_s": first_pp,
+            "paths": paths, "wall_s": pp_wall, "wall_s_all_repeats": pp_walls, "first_call_wall_s": first_pp,
             "path_steps_per_s": paths * nsteps / pp_wall,
         },
         "speedup_vs_per_path": pp_wall / vec_wall,
         "fast_mode": {
-            "paths": paths,
-            "wall_s": fast_wall,
-            "wall_s_all_repeats": fast_walls,
-            "first_call_wall_s": first_fast,
-            "path_steps_per_s": paths * nsteps / fast_wall,
-            "speedup_vs_exact": vec_wall / fast_wall,
+            "paths": paths, "wall_s": fast_wall, "wall_s_all_repeats": fast_walls, "first_call_wall_s": first_fast,
+            "path_steps_per_s": paths * nsteps / fast_wall, "speedup_vs_exact": vec_wall / fast_wall,
             "one_thread_vs_hand_loop": hand,
         },
         "sdeint_itoEuler": {
-            "paths": baseline_paths,
-            "wall_s": sde_wall,
-            "path_steps_per_s": sde_rate,
+            "paths": baseline_paths, "wall_s": sde_wall, "path_steps_per_s": sde_rate,
             "scaled_wall_s_for_engine_paths": paths * nsteps / sde_rate,
         },
         "python_loop": {
-            "paths": baseline_paths,
-            "wall_s": loop_wall,
-            "path_steps_per_s": loop_rate,
+            "paths": baseline_paths, "wall_s": loop_wall, "path_steps_per_s": loop_rate,
             "scaled_wall_s_for_engine_paths": paths * nsteps / loop_rate,
         },
         "speedup_vs_sdeint": engine_rate / sde_rate,
@@ -226,4 +221,4 @@ def bench(
         "speedup_vs_python_loop": engine_rate / loop_rate,
         "sample_instructions": int(fn.n_instructions()),
         "casadi": ca.__version__,
-    }
+    }  # fmt: skip

@@ -163,15 +163,13 @@ def _window_lines(m: dict) -> list[str]:
     return out
 
 
-def _detectability(
-    d, plant, scenario, m: dict, paths: int, seed: int, dt, rate, cal_paths, fast_math
-) -> dict:
+def _detectability(d, plant, scenario, m: dict, paths: int, seed: int, opts) -> dict:
     """``m`` with the detection probability against each fault's size (``fte simulate --detectability``): with the
-    scenario's measurement noise and without it."""
+    scenario's measurement noise and without it (at the run's step, false-alarm rate, calibration and mode)."""
     from ..sim._detectability import attach, detectability
 
-    kw = dict(paths=max(64, int(paths)), seed=seed, dt=dt, false_alarm_rate=rate, calibration_paths=cal_paths,
-              exact=not fast_math)  # fmt: skip
+    kw = dict(paths=max(64, int(paths)), seed=seed, dt=opts.dt, false_alarm_rate=opts.false_alarm_rate,
+              calibration_paths=opts.calibration_paths, exact=opts.exact)  # fmt: skip
     sets = [detectability(d, plant, scenario, **kw)]
     if scenario.measurement_noise is not None:
         sets.append(detectability(d, plant, scenario, scales={"measurement_noise_scale": 0.0}, **kw))
@@ -259,6 +257,54 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     from ..sim import save_result
     from ..sim import simulate as run_sim
 
+    stds, release = _check_simulate_flags(paths, seed, dt, fa_rate, noise, release, accommodate, no_detect, save,
+                                          save_design, plots)  # fmt: skip
+    d, spec = _design_or_plant(
+        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
+    )
+    spec = _need_plant(d, spec, "simulate")
+    plant = load_plant(spec)
+    scenario = _with_noise(load_scenario(spec), stds, d)
+    _check_rate_flags(scenario, dt, fa_rate, cal_paths)
+    opts = _simulate_options(dt, quiet, save, scheduler, fast_math, no_detect, fa_rate, cal_paths)
+    npaths = paths or scenario.paths
+    check_paths_memory(d, scenario, npaths, opts.dt, opts.record_all)
+    if accommodate:
+        d = _accommodated(d, plant, scenario, npaths, seed, opts, release, save_design)
+    res = run_sim(d, plant, scenario, paths=npaths, seed=seed, options=opts)
+    m = res.metrics
+    _refuse_nonfinite(m)
+    if detect_curve and opts.detect:
+        m = _detectability(d, plant, scenario, m, npaths, seed, opts)
+    if save:
+        save_result(res, save)
+    figs = []
+    if plots:
+        from ..plot import write_figures
+
+        figs = write_figures(res, plots)
+    _say_simulation(d, plant, res, m, as_json)
+    if save:
+        click.echo(f"per-path arrays of all {res.paths} paths written to {save}", err=True)
+    if figs:
+        click.echo(
+            f"{len(figs)} figures written to {plots} (over the first {res.recorded_paths} paths)", err=True
+        )
+
+
+def _simulate_options(dt, quiet, save, scheduler, fast_math, no_detect, fa_rate, cal_paths):
+    """The one place ``fte simulate``'s flags become the run's :class:`~fte_casadi.sim.SimulateOptions`."""
+    from ..sim import SimulateOptions
+
+    return SimulateOptions(dt=dt, progress=not quiet, record_all=bool(save), scheduler=scheduler,
+                           exact=not fast_math, detect=not no_detect, false_alarm_rate=fa_rate,
+                           calibration_paths=cal_paths)  # fmt: skip
+
+
+def _check_simulate_flags(paths, seed, dt, fa_rate, noise, release, accommodate, no_detect, save, save_design,
+                          plots):  # fmt: skip
+    """Refuse, before any work, flags that do not go together or are out of range; return the measurement
+    noise's standard deviations (None: not given) and the gate's release ratio (default 0.5)."""
     _check_paths(paths)
     _check_seed(seed)
     if dt is not None:
@@ -286,12 +332,11 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     if save_design:
         _writable_target(save_design, "--save-design", "design.json")
     _outputs(save, plots, save_design)
-    d, spec = _design_or_plant(
-        target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
-    )
-    spec = _need_plant(d, spec, "simulate")
-    plant = load_plant(spec)
-    scenario = _with_noise(load_scenario(spec), stds, d)
+    return stds, release
+
+
+def _check_rate_flags(scenario, dt, fa_rate, cal_paths) -> None:
+    """Refuse ``--calibration-paths`` below 2 and a ``--false-alarm-rate`` of a false alarm per sample or more."""
     if cal_paths is not None and cal_paths < 2:
         raise ParameterError(f"--calibration-paths must be at least 2; got {cal_paths}")
     step = float(dt if dt is not None else scenario.dt)
@@ -300,48 +345,36 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
             f"--false-alarm-rate {fa_rate:g} asks for at least one false alarm per sample (the step is {step:g}): a "
             f"rate is alarms per unit of the plant's time, below 1 / step = {1 / step:g}; the default is one per hour"
         )
-    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
-    if accommodate:
-        from ..sim import accommodated
 
-        d = accommodated(
-            d,
-            plant,
-            scenario,
-            paths=paths or scenario.paths,
-            seed=seed,
-            false_alarm_rate=fa_rate,
-            dt=dt,
-            release=release,
-            calibration_paths=cal_paths,
-        )
-        click.echo(f"note: {d.status[-1]}", err=True)
-        if save_design:
-            d.save(save_design)
-            click.echo(f"design with accommodation written to {save_design}", err=True)
-    res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
-                  record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
-                  false_alarm_rate=fa_rate, calibration_paths=cal_paths)  # fmt: skip
-    m = res.metrics
+
+def _accommodated(d, plant, scenario, paths: int, seed: int, opts, release: float, save_design):
+    """``--accommodate``: the design with its gate, thresholds calibrated at the run's false-alarm rate; written to
+    ``--save-design`` when given."""
+    from ..sim import accommodated
+
+    d = accommodated(d, plant, scenario, paths=paths, seed=seed, false_alarm_rate=opts.false_alarm_rate,
+                     dt=opts.dt, release=release, calibration_paths=opts.calibration_paths)  # fmt: skip
+    click.echo(f"note: {d.status[-1]}", err=True)
+    if save_design:
+        d.save(save_design)
+        click.echo(f"design with accommodation written to {save_design}", err=True)
+    return d
+
+
+def _refuse_nonfinite(m: dict) -> None:
+    """A non-finite number is never printed as a result."""
     bad = _nonfinite(m)
-    if bad:  # a non-finite number is never printed as a result
+    if bad:
         first = bad[:6]  # the first keys (a list, not a message's text)
         raise ParameterError(
             f"the run's results are not finite ({', '.join(first)}{' ...' if len(bad) > 6 else ''}): the closed "
             "loop overflowed with these settings. Lower the noise or the fault sizes, or check "
             "the design"
         )
-    if detect_curve and not no_detect:
-        m = _detectability(
-            d, plant, scenario, m, paths or scenario.paths, seed, dt, fa_rate, cal_paths, fast_math
-        )
-    if save:
-        save_result(res, save)
-    figs = []
-    if plots:
-        from ..plot import write_figures
 
-        figs = write_figures(res, plots)
+
+def _say_simulation(d, plant, res, m: dict, as_json: bool) -> None:
+    """The metrics (in words, or the document with ``--json``), the notes, the change of step and the warnings."""
     warn = _warnings(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names),
                      list(plant.output_units))  # fmt: skip
     warn += _why(d, m)
@@ -362,12 +395,6 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
             click.echo(f"  note: {note}")
     for w in warn:
         click.echo(textwrap.fill("fte: " + w, width=100), err=True)
-    if save:
-        click.echo(f"per-path arrays of all {res.paths} paths written to {save}", err=True)
-    if figs:
-        click.echo(
-            f"{len(figs)} figures written to {plots} (over the first {res.recorded_paths} paths)", err=True
-        )
 
 
 @click.command()

@@ -113,6 +113,15 @@ def _trial_count(db: Path) -> int:
         return 0
 
 
+def _tune_options(trials, seed, rule, paths, scheduler, given, progress, storage, resume):
+    """The one place ``fte tune``'s flags become the search's :class:`~fte_casadi.tune.TuneOptions` (``progress``
+    and ``storage``: the bar's update and the run's optuna database in DIR.partial)."""
+    from ..tune import TuneOptions
+
+    return TuneOptions(trials=trials, seed=seed, rule=rule, paths=paths, scheduler=scheduler, base_is_given=given,
+                       progress=progress, storage=storage, resume=resume)  # fmt: skip
+
+
 @click.command()
 @click.argument("target", metavar="PLANT|DESIGN.json")
 @click.option(
@@ -149,23 +158,11 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
     the Pareto front, and the chosen design in DIR/tuned.json (see docs/tune.md for the rule)."""
     import shutil
 
-    from ..errors import MissingDependencyError
     from ..plants import load_plant, load_scenario
-    from ..tune import RULES, comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
+    from ..tune import front_documents, write_outputs
     from ..tune import tune as run_tune
 
-    if trials < 2:
-        raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "
-                             f"got {trials}")  # fmt: skip
-    _check_seed(seed)
-    if rule not in RULES:
-        raise ParameterError(f"unknown --objective {rule!r}: choose one of {', '.join(RULES)} (docs/tune.md says "
-                             "what each picks)")  # fmt: skip
-    _check_paths(paths)
-    try:
-        import optuna  # noqa: F401
-    except ImportError:
-        raise MissingDependencyError("fte tune needs optuna: pip install 'fte_casadi[tune]'") from None
+    _check_tune_flags(trials, seed, rule, paths)
     out, work = _tune_target(out_dir, resume)
     _outputs(out, work)
     given = target.endswith(".json") or Path(target).is_file()
@@ -190,9 +187,8 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
               delay=1.0) as bar:  # fmt: skip
         storage, copied = _tune_work(out, work, resume)
         try:
-            result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths,
-                              scheduler=scheduler, base_is_given=given, progress=progress, storage=storage,
-                              resume=resume)  # fmt: skip
+            opts = _tune_options(trials, seed, rule, paths, scheduler, given, progress, storage, resume)
+            result = run_tune(d, plant, scenario, options=opts)
         except BaseException:
             # a refused --resume of a finished run (another --seed, target or --paths) leaves no copy of its
             # trials behind, which the next run would take for an interrupted one
@@ -207,6 +203,35 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
     except FteError as exc:
         raise ParameterError(f"{exc}; the trials are kept in {work / 'optuna.db'}: run the same command with "
                              "--resume to write them") from None  # fmt: skip
+    _say_tune(result, plant, seed, rule, files, as_json)
+    if as_json:
+        click.echo(json.dumps(front_documents(result, out_dir), indent=1))
+
+
+def _check_tune_flags(trials, seed, rule, paths) -> None:
+    """Refuse, before any work, out-of-range flags and a missing optuna."""
+    from ..errors import MissingDependencyError
+    from ..tune import RULES
+
+    if trials < 2:
+        raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "
+                             f"got {trials}")  # fmt: skip
+    _check_seed(seed)
+    if rule not in RULES:
+        raise ParameterError(f"unknown --objective {rule!r}: choose one of {', '.join(RULES)} (docs/tune.md says "
+                             "what each picks)")  # fmt: skip
+    _check_paths(paths)
+    try:
+        import optuna  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError("fte tune needs optuna: pip install 'fte_casadi[tune]'") from None
+
+
+def _say_tune(result, plant, seed: int, rule: str, files: dict, as_json: bool) -> None:
+    """The front, the default against the chosen design, the failed trials by reason, the limits and the files
+    written (on stderr with --json)."""
+    from ..tune import comparison, dominates, fmt_rows, front_table
+
     say = functools.partial(click.echo, err=as_json)
     failed = [r for r in result.records if r.state != "ok"]
     say(f"{plant.name}: {len(result.records)} trials ({len(failed)} failed: not designed or not certified), "
@@ -234,5 +259,3 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
         click.echo(textwrap.fill("fte: " + line, width=100), err=True)
     say(f"wrote {files['tuned']} (the chosen design), {files['record']}, {files['figure']} and the front's designs in "
         f"{files['designs']}")  # fmt: skip
-    if as_json:
-        click.echo(json.dumps(front_documents(result, out_dir), indent=1))

@@ -85,6 +85,46 @@ def triangular_memberships(v: ca.SX, centres: np.ndarray) -> list[ca.SX]:
 
 
 def validate(b: PlantBuilder) -> Plant:
+    """The frozen :class:`Plant` of ``b``, every declaration checked (one check per concept, in this order: what
+    must be declared, what each expression may depend on and how, the outputs, the region, the premises, the
+    initial and reference states, finite numbers, the input limits and operating points)."""
+    (x, u, d, f, d2, z), drift, diff, y = _declared(b)
+    n, m = x.numel(), u.numel()
+    _check_dependence(b, (x, u, d, f, d2, z), drift, diff, y)
+    xn = list(b._xn)
+    C, Df, yn, yu = _output_map(b, x, f, y)
+    lo, hi = _region(b, xn, n)
+    method, ops, sched, z_expr = _premises(b, x, xn, lo, hi)
+    x0, uref, xref = _references(b, n, m)
+    zn = list(b._zn) if len(b._zn) == z_expr.numel() else [f"z{k + 1}" for k in range(z_expr.numel())]
+    check_finite(
+        params=b._params, C=C, Df=Df, state_names=xn, output_names=yn, fault_names=list(b._fn),
+        x=x, u=u, d=d, f=f, d2=d2, lo=lo, hi=hi, x0=x0, u_nominal=np.zeros(m) if uref is None else uref,
+        rows={"premise": (z_expr, zn),  # first: a premise's coefficient shows in every row using it
+              "drift row": (ca.substitute(drift, z, z_expr) if z.numel() else drift, xn),
+              "diffusion row": (ca.substitute(diff, z, z_expr) if z.numel() else diff, xn)},
+    )  # fmt: skip
+    ulim = _input_limits(b, m, uref)
+    uop = b._uop
+    if uop is not None and (uop.shape != (m,) or not np.all(np.isfinite(uop))):
+        raise PlantError(
+            f"operating_point(u=...) must hold {m} finite numbers (one per input {list(b._un)}); got {uop.tolist()}"
+        )
+    opu = _operating_inputs(b, (x, u, d, f, z), drift, ops) if method == "linearisation" else None
+    return Plant(
+        name=b._name, state_names=tuple(xn), state_units=b._xu, input_names=b._un, unknown_input_names=b._dn,
+        fault_names=tuple(b._fn), fault_kinds=tuple(b._fk), output_names=tuple(yn), output_units=yu,
+        diffusion_input_names=b._d2n, x=x, u=u, d=d, f=f, d2=d2, z=z, z_names=tuple(b._zn), z_exprs=z_expr,
+        z_texts=tuple(b._zt) if method == "sector" else tuple(b._zn), drift_z=drift, diffusion_z=diff, C=C, Df=Df,
+        region_lo=lo, region_hi=hi, x0=x0, method=method, u_ref=uref, x_ref=xref, operating_points=ops,
+        operating_inputs=opu, scheduling_state=sched, params=dict(b._params), time_unit=b._time_unit,
+        design_defaults=dict(b._design), input_limits=ulim, u_operating=uop,
+    )  # fmt: skip
+
+
+def _declared(b: PlantBuilder) -> tuple[tuple, ca.SX, ca.SX, ca.SX]:
+    """The symbols ``(x, u, d, f, d2, z)``, the drift, diffusion and output columns; refuses a plant without
+    states, inputs, faults, drift or outputs."""
     if not b._x:
         raise PlantError("the plant has no states: call b.states('x1', ...) first")
     if not b._u:
@@ -93,17 +133,21 @@ def validate(b: PlantBuilder) -> Plant:
         raise PlantError(
             "the plant has no faults: declare at least one with b.faults(..., kind='actuator'|'sensor')"
         )
-    x, u, d, f, d2, z = (_vec(b._x), _vec(b._u), _vec(b._d), _vec(b._f), _vec(b._d2), _vec(b._z))
-    n = x.numel()
+    syms = (_vec(b._x), _vec(b._u), _vec(b._d), _vec(b._f), _vec(b._d2), _vec(b._z))
+    n = syms[0].numel()
     if b._drift is None:
         raise PlantError("the plant has no drift: call b.drift([...]) with one expression per state")
     drift = _column("drift", b._drift, n)
     diff = _column("diffusion", b._diff if b._diff is not None else [0.0] * n, n)
     if b._y is None:
         raise PlantError("the plant has no outputs: call b.outputs([...])")
-    y = _column("outputs", b._y, None)
-    p = y.shape[0]
+    return syms, drift, diff, _column("outputs", b._y, None)
 
+
+def _check_dependence(b: PlantBuilder, syms: tuple, drift: ca.SX, diff: ca.SX, y: ca.SX) -> None:
+    """Refuse an expression of a symbol it may not use, and an input, unknown input or fault (or, for the sector
+    method, a state) entering the drift or diffusion other than affinely."""
+    x, u, d, f, d2, z = syms
     _free_check(
         "drift", drift, ca.vertcat(x, u, d, f, z), "states, inputs, unknown inputs, faults or premises"
     )
@@ -114,7 +158,6 @@ def validate(b: PlantBuilder) -> Plant:
         "states, inputs, faults, diffusion unknown inputs or premises",
     )
     _free_check("outputs", y, ca.vertcat(x, f), "states or faults (y = C x + Df f)")
-
     xn = list(b._xn)
     auto = b._ops is None and not b._z
     if auto:
@@ -133,7 +176,11 @@ def validate(b: PlantBuilder) -> Plant:
     _linearity("drift", b._xn, drift, v, vn, auto)
     _linearity("diffusion", b._xn, diff, w, wn, auto)
 
-    # outputs: y = C x + Df f exactly
+
+def _output_map(b: PlantBuilder, x: ca.SX, f: ca.SX, y: ca.SX) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
+    """``(C, Df, output names, output units)`` of outputs that are exactly ``y = C x + Df f``; every sensor
+    fault in some output."""
+    n, p = x.numel(), y.shape[0]
     yn = b._yn or tuple(f"y{k + 1}" for k in range(p))
     if len(yn) != p:
         raise PlantError(f"output names: expected {p} entries instead of {len(yn)}")
@@ -152,22 +199,22 @@ def validate(b: PlantBuilder) -> Plant:
             "outputs must be y = C x + Df f with no constant offset; subtract it from the measurement"
         )
     C, Df = np.array(Cs, dtype=float), np.array(Dfs, dtype=float)
-    kinds = tuple(b._fk)
-    for k, kind in enumerate(kinds):
+    for k, kind in enumerate(b._fk):
         if kind == "sensor" and not np.any(Df[:, k]):
             raise PlantError(
                 f"sensor fault {b._fn[k]!r} does not appear in any output; add it to an output expression"
             )
-
     yu = b._yu
     if yu is None:
         yu = []
         for k in range(p):
             nz = np.flatnonzero(C[k])
             yu.append(b._xu[nz[0]] if len(nz) == 1 else "")
-    yu = _units("output", yu, p)
+    return C, Df, yn, _units("output", yu, p)
 
-    # region
+
+def _region(b: PlantBuilder, xn: list[str], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The region's bounds per state (NaN where none is given), each a finite pair, lower below upper."""
     lo, hi = np.full(n, np.nan), np.full(n, np.nan)
     for key, bounds in b._region.items():
         if key not in xn:
@@ -184,11 +231,16 @@ def validate(b: PlantBuilder) -> Plant:
             raise PlantError(f"region: lower bound of {key!r} must be below its upper bound; got ({a}, {c})")
         k = xn.index(key)
         lo[k], hi[k] = a, c
+    return lo, hi
 
+
+def _premises(b: PlantBuilder, x: ca.SX, xn: list[str], lo: np.ndarray, hi: np.ndarray) -> tuple:
+    """``(method, operating points, scheduling state, premise column)``: the sector method's declared premises, or
+    the linearisation's triangular memberships (its scheduling state bounded by the operating points where the
+    region leaves it open: ``lo``, ``hi`` completed in place). A premise of a state without bounds is refused."""
     z_exprs = list(b._ze)
     method = "sector"
-    ops = opu = None
-    sched = None
+    ops = sched = None
     if b._ops is not None:
         method = "linearisation"
         ops, sched = b._ops, b._sched
@@ -198,17 +250,21 @@ def validate(b: PlantBuilder) -> Plant:
     z_expr = _vec(z_exprs)
     for k, e in enumerate(z_exprs):
         _free_check(f"premise {b._zn[k]!r}", e, x, "states (premises must be functions of the states)")
-        for j in range(n):
+        for j in range(x.numel()):
             if ca.depends_on(e, x[j]) and np.isnan(lo[j]):
                 raise PlantError(
                     f"premise {b._zn[k]!r} depends on state {xn[j]!r}, which has no bounds: its range would be "
                     f"unbounded. Give bounds with b.region({xn[j]}=(lower, upper))"
                 )
+    return method, ops, sched, z_expr
 
+
+def _references(b: PlantBuilder, n: int, m: int) -> tuple:
+    """``(x0, u_ref, x_ref)``: the initial state (default zeros) and the reference input or state (default: the
+    zero input), each of the right size and finite."""
     x0 = np.zeros(n) if b._x0 is None else b._x0
     if x0.shape != (n,) or not np.all(np.isfinite(x0)):
         raise PlantError(f"initial state must hold {n} finite numbers; got {np.asarray(x0).tolist()}")
-    m = u.numel()
     uref, xref = b._uref, b._xref
     if uref is None and xref is None:
         uref = np.zeros(m)
@@ -216,78 +272,29 @@ def validate(b: PlantBuilder) -> Plant:
         raise PlantError(f"reference input must hold {m} finite numbers; got {uref.tolist()}")
     if xref is not None and (xref.shape != (n,) or not np.all(np.isfinite(xref))):
         raise PlantError(f"reference state must hold {n} finite numbers; got {xref.tolist()}")
+    return x0, uref, xref
 
-    zn = list(b._zn) if len(b._zn) == z_expr.numel() else [f"z{k + 1}" for k in range(z_expr.numel())]
-    check_finite(
-        params=b._params, C=C, Df=Df, state_names=xn, output_names=yn, fault_names=list(b._fn),
-        x=x, u=u, d=d, f=f, d2=d2, lo=lo, hi=hi, x0=x0, u_nominal=np.zeros(m) if uref is None else uref,
-        rows={"premise": (z_expr, zn),  # first: a premise's coefficient shows in every row using it
-              "drift row": (ca.substitute(drift, z, z_expr) if z.numel() else drift, xn),
-              "diffusion row": (ca.substitute(diff, z, z_expr) if z.numel() else diff, xn)},
-    )  # fmt: skip
-    ulim = _input_limits(b, m, uref)
-    uop = b._uop
-    if uop is not None and (uop.shape != (m,) or not np.all(np.isfinite(uop))):
-        raise PlantError(
-            f"operating_point(u=...) must hold {m} finite numbers (one per input {list(b._un)}); got {uop.tolist()}"
-        )
 
-    if method == "linearisation":
-        r = ops.shape[0]
-        if b._opu is not None:
-            opu = b._opu
-            if opu.shape != (r, m):
-                raise PlantError(f"operating-point inputs must be {r} x {m}; got {opu.shape}")
-        else:
-            opu = np.zeros((r, m))
-            fz = ca.Function(
-                "fz", [x, u, z], [ca.substitute(drift, ca.vertcat(d, f), ca.DM.zeros(d.numel() + f.numel()))]
-            )
-            for k in range(r):
-                zk = np.eye(r)[k]
-                f0 = np.array(fz(ops[k], np.zeros(m), zk)).ravel()
-                Bk = np.column_stack([np.array(fz(ops[k], np.eye(m)[j], zk)).ravel() - f0 for j in range(m)])
-                opu[k] = np.linalg.lstsq(Bk, -f0, rcond=None)[0]
-
-    return Plant(
-        name=b._name,
-        state_names=tuple(xn),
-        state_units=b._xu,
-        input_names=b._un,
-        unknown_input_names=b._dn,
-        fault_names=tuple(b._fn),
-        fault_kinds=kinds,
-        output_names=tuple(yn),
-        output_units=yu,
-        diffusion_input_names=b._d2n,
-        x=x,
-        u=u,
-        d=d,
-        f=f,
-        d2=d2,
-        z=z,
-        z_names=tuple(b._zn),
-        z_exprs=z_expr,
-        z_texts=tuple(b._zt) if method == "sector" else tuple(b._zn),
-        drift_z=drift,
-        diffusion_z=diff,
-        C=C,
-        Df=Df,
-        region_lo=lo,
-        region_hi=hi,
-        x0=x0,
-        method=method,
-        u_ref=uref,
-        x_ref=xref,
-        operating_points=ops,
-        operating_inputs=opu,
-        scheduling_state=sched,
-        params=dict(b._params),
-        time_unit=b._time_unit,
-        design_defaults=dict(b._design),
-        input_limits=ulim,
-        u_operating=uop,
+def _operating_inputs(b: PlantBuilder, syms: tuple, drift: ca.SX, ops: np.ndarray) -> np.ndarray:
+    """The inputs at the linearisation's operating points: the given ones (r x m), else per point the
+    least-squares input that makes the fault- and disturbance-free drift zero."""
+    x, u, d, f, z = syms
+    r, m = ops.shape[0], u.numel()
+    if b._opu is not None:
+        opu = b._opu
+        if opu.shape != (r, m):
+            raise PlantError(f"operating-point inputs must be {r} x {m}; got {opu.shape}")
+        return opu
+    opu = np.zeros((r, m))
+    fz = ca.Function(
+        "fz", [x, u, z], [ca.substitute(drift, ca.vertcat(d, f), ca.DM.zeros(d.numel() + f.numel()))]
     )
+    for k in range(r):
+        zk = np.eye(r)[k]
+        f0 = np.array(fz(ops[k], np.zeros(m), zk)).ravel()
+        Bk = np.column_stack([np.array(fz(ops[k], np.eye(m)[j], zk)).ravel() - f0 for j in range(m)])
+        opu[k] = np.linalg.lstsq(Bk, -f0, rcond=None)[0]
+    return opu
 
 
 def _input_limits(b: PlantBuilder, m: int, uref) -> np.ndarray | None:

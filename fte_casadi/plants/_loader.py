@@ -82,47 +82,64 @@ def load_plant(spec: str) -> Plant:
         raise PlantLoadError(f"{func!r} in {spec!r} is not a function name; write FILE.py:FUNCTION")
     path = None
     if target.endswith(".py") or "/" in target or "\\" in target:
-        p = Path(target)
-        if not p.is_file():
-            raise PlantLoadError(
-                f"plant file {target!r} does not exist; check the path (relative to {Path.cwd()})"
-            )
-        path = str(p)
-        name = f"fte_user_plant_{abs(hash(str(p.resolve())))}"
-        try:
-            source = p.read_text()
-            compile(source, str(p), "exec")
-        except SyntaxError as exc:
-            raise PlantLoadError(
-                f"plant file {target!r} has a syntax error at line {exc.lineno}: {exc.msg}; fix the file"
-            ) from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise PlantLoadError(f"plant file {target!r} cannot be read: {exc}") from None
-        mspec = importlib.util.spec_from_file_location(name, p)
-        module = importlib.util.module_from_spec(mspec)
-        sys.modules[name] = module  # before executing it: dataclasses in the file look it up
-        try:
-            with _plant_folder(path):
-                mspec.loader.exec_module(module)
-        except Exception as exc:  # noqa: BLE001 - user code may raise anything; report it
-            sys.modules.pop(name, None)
-            raise PlantLoadError(
-                f"importing plant file {target!r} raised {type(exc).__name__}: {exc}{_last_frame(exc, path)}; fix the file"
-            ) from None
+        path = str(Path(target))
+        module = _file_module(target)
     else:
-        try:
-            module = importlib.import_module(target)
-        except ImportError as exc:
-            raise PlantLoadError(
-                f"cannot import module {target!r}: {exc}; is it installed or on PYTHONPATH?"
-            ) from None
-        except Exception as exc:  # noqa: BLE001
-            raise PlantLoadError(f"importing module {target!r} raised {type(exc).__name__}: {exc}") from None
+        module = _installed_module(target)
     fn = getattr(module, func, None)
     if fn is None or not callable(fn):
         avail = [k for k, v in vars(module).items() if callable(v) and not k.startswith("_")]
         shown = ", ".join(avail[:10]) + (f" and {len(avail) - 10} more" if len(avail) > 10 else "")
         raise PlantLoadError(f"{target!r} has no function {func!r}; callables there: {shown or 'none'}")
+    return _called(fn, spec, path)
+
+
+def _file_module(target: str):
+    """The module of plant file ``target``, run in its folder; a missing, unreadable or failing file is refused."""
+    p = Path(target)
+    if not p.is_file():
+        raise PlantLoadError(
+            f"plant file {target!r} does not exist; check the path (relative to {Path.cwd()})"
+        )
+    path = str(p)
+    name = f"fte_user_plant_{abs(hash(str(p.resolve())))}"
+    try:
+        source = p.read_text()
+        compile(source, str(p), "exec")
+    except SyntaxError as exc:
+        raise PlantLoadError(
+            f"plant file {target!r} has a syntax error at line {exc.lineno}: {exc.msg}; fix the file"
+        ) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise PlantLoadError(f"plant file {target!r} cannot be read: {exc}") from None
+    mspec = importlib.util.spec_from_file_location(name, p)
+    module = importlib.util.module_from_spec(mspec)
+    sys.modules[name] = module  # before executing it: dataclasses in the file look it up
+    try:
+        with _plant_folder(path):
+            mspec.loader.exec_module(module)
+    except Exception as exc:  # noqa: BLE001 - user code may raise anything; report it
+        sys.modules.pop(name, None)
+        raise PlantLoadError(
+            f"importing plant file {target!r} raised {type(exc).__name__}: {exc}{_last_frame(exc, path)}; fix the file"
+        ) from None
+    return module
+
+
+def _installed_module(target: str):
+    """The module ``target`` (package.module), imported; a failure is a :class:`PlantLoadError`."""
+    try:
+        return importlib.import_module(target)
+    except ImportError as exc:
+        raise PlantLoadError(
+            f"cannot import module {target!r}: {exc}; is it installed or on PYTHONPATH?"
+        ) from None
+    except Exception as exc:  # noqa: BLE001
+        raise PlantLoadError(f"importing module {target!r} raised {type(exc).__name__}: {exc}") from None
+
+
+def _called(fn, spec: str, path: str | None) -> Plant:
+    """The plant function's result (run in the plant file's folder, when from a file), a :class:`Plant`."""
     try:
         with _plant_folder(path):
             plant = fn()

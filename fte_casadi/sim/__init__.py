@@ -32,6 +32,7 @@ from ._noise import GaussianNoise as GaussianNoise
 from ._noise import MeasurementNoise as MeasurementNoise
 from ._noise import UnknownInput as UnknownInput
 from ._noise import UnknownInputTerms as UnknownInputTerms
+from ._options import SimulateOptions as SimulateOptions
 from ._result import RunData as RunData
 from ._result import SimulationResult as SimulationResult
 from ._result import load_result as load_result

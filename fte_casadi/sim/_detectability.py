@@ -56,6 +56,85 @@ def _point(metrics: dict, fault: str) -> tuple[float, int, float | None, float |
     return hits, n, size, delay
 
 
+class _Probe:
+    """The runs of :func:`detectability`: the scenario with one fault alone at ``2^k`` times its size (the other
+    faults absent), each run once and kept in ``seen`` by ``(fault, factor)``."""
+
+    def __init__(self, design, plant, scenario, sc, prep, cal, paths, seed, dt, threads, exact):
+        self.design, self.plant, self.scenario, self.sc, self.prep, self.cal = (
+            design,
+            plant,
+            scenario,
+            sc,
+            prep,
+            cal,
+        )
+        self.paths, self.seed, self.dt, self.threads, self.exact = paths, seed, dt, threads, exact
+        self.names = list(plant.fault_names)
+        self.seen: dict[tuple[str, float], dict] = {}
+
+    def allowed(self, fault: str, factor: float) -> bool:
+        """Does every window of ``fault`` accept ``factor`` (a loss is at most 100 %)?"""
+        try:
+            for fp in self.scenario.faults:
+                if fp.fault == fault:
+                    fp.check_scale(factor)
+        except ParameterError:
+            return False
+        return True
+
+    def run(self, k: float, fault: str) -> dict:
+        """The metrics of the scenario with ``fault`` alone, at 2^k times its size (the other faults absent)."""
+        factor = float(2.0**k)
+        if (fault, factor) not in self.seen:
+            f = [factor if nm == fault else 0.0 for nm in self.names]
+            res = simulate(self.design, self.plant, self.scenario, paths=self.paths, seed=self.seed, dt=self.dt,
+                           progress=False, record_paths=0, threads=self.threads, scales=self.sc,
+                           prepared=self.prep.with_fault_factors(f), exact=bool(self.exact),
+                           calibration=self.cal)  # fmt: skip
+            self.seen[(fault, factor)] = res.metrics
+        return self.seen[(fault, factor)]
+
+    def prob(self, k: float, fault: str) -> float:
+        hits, n, _, _ = _point(self.run(k, fault), fault)
+        return hits / n if n else math.nan
+
+
+def _bracket(probe: _Probe, fault: str, threshold) -> tuple:
+    """``(lo, hi)``: exponents k of the fault's factor ``2^k`` with the detection probability below and at or above
+    :data:`TARGET` (None where the range of factors ends first), walked from the factor at which the fault's size
+    is its threshold."""
+    k_max = HIGHEST  # the largest power of two the fault accepts (a loss is at most 100 %)
+    while k_max > 0 and not probe.allowed(fault, 2.0**k_max):
+        k_max -= 1
+    _, _, size, _ = _point(probe.run(0.0, fault), fault)
+    # first guess: the factor at which the fault's size is its threshold (the estimate follows the fault)
+    guess = math.log2(threshold / size) if threshold and size else 0.0
+    k = float(min(max(round(guess), -LOWEST), k_max))
+    if probe.prob(k, fault) >= TARGET:
+        while k > -LOWEST and probe.prob(max(k - STEP, -LOWEST), fault) >= TARGET:
+            k = max(k - STEP, -LOWEST)
+        return (max(k - STEP, -LOWEST), k) if k > -LOWEST else (None, k)
+    while k < k_max and probe.prob(min(k + STEP, k_max), fault) < TARGET:
+        k = min(k + STEP, k_max)
+    return (k, min(k + STEP, k_max)) if k < k_max else (k, None)
+
+
+def _curve(seen: dict, fault: str) -> dict:
+    """The fault's points (in increasing factor): the detection probability and its interval against the size,
+    the delay, and the minimum detectable fault."""
+    ks = sorted(f for nm, f in seen if nm == fault)
+    pts = [(f, *_point(seen[(fault, f)], fault)) for f in ks]
+    factor = [p[0] for p in pts]
+    probability = [p[1] / p[2] if p[2] else None for p in pts]
+    interval = [clopper_pearson(int(round(p[1])), p[2]) if p[2] else None for p in pts]
+    size = [p[3] for p in pts]
+    delay = next((p[4] for p in pts if p[4] is not None), None)
+    mdf, mfac, why = _minimum(factor, probability, size)
+    return {"fault": fault, "delay": delay, "factor": factor, "size": size, "probability": probability,
+            "interval": interval, "min_detectable_fault": mdf, "min_detectable_factor": mfac, "why": why}  # fmt: skip
+
+
 def detectability(design, plant, scenario, *, paths: int = 64, seed: int = 0, dt: float | None = None,
                   scales: dict | None = None, false_alarm_rate: float | None = None,
                   calibration_paths: int | None = None, threads: int | None = None, prepared: Prepared | None = None,
@@ -83,71 +162,17 @@ def detectability(design, plant, scenario, *, paths: int = 64, seed: int = 0, dt
     cal = calibration or calibrate_detection(design, plant, scenario, paths=paths, seed=seed,
                                              false_alarm_rate=false_alarm_rate, threads=threads, prepared=prep,
                                              calibration_paths=calibration_paths)  # fmt: skip
-    names = list(plant.fault_names)
-    faults = [nm for nm in names if any(fp.fault == nm for fp in scenario.faults)]
-    seen: dict[tuple[str, float], dict] = {}
-
-    def allowed(fault: str, factor: float) -> bool:
-        try:
-            for fp in scenario.faults:
-                if fp.fault == fault:
-                    fp.check_scale(factor)
-        except ParameterError:
-            return False
-        return True
-
-    def run(k: float, fault: str) -> dict:
-        """The scenario with ``fault`` alone, at 2^k times its size (the other faults absent)."""
-        factor = float(2.0**k)
-        if (fault, factor) not in seen:
-            f = [factor if nm == fault else 0.0 for nm in names]
-            res = simulate(design, plant, scenario, paths=paths, seed=seed, dt=dt, progress=False, record_paths=0,
-                           threads=threads, scales=sc, prepared=prep.with_fault_factors(f), exact=bool(exact),
-                           calibration=cal)  # fmt: skip
-            seen[(fault, factor)] = res.metrics
-        return seen[(fault, factor)]
-
-    def prob(k: float, fault: str) -> float:
-        hits, n, _, _ = _point(run(k, fault), fault)
-        return hits / n if n else math.nan
-
+    probe = _Probe(design, plant, scenario, sc, prep, cal, paths, seed, dt, threads, exact)
+    faults = [nm for nm in plant.fault_names if any(fp.fault == nm for fp in scenario.faults)]
     thr = {e["fault"]: e.get("threshold") for e in cal.entries}
-    brackets = {}
-    for fault in faults:
-        k_max = HIGHEST  # the largest power of two the fault accepts (a loss is at most 100 %)
-        while k_max > 0 and not allowed(fault, 2.0**k_max):
-            k_max -= 1
-        _, _, size, _ = _point(run(0.0, fault), fault)
-        # first guess: the factor at which the fault's size is its threshold (the estimate follows the fault)
-        guess = math.log2(thr[fault] / size) if thr.get(fault) and size else 0.0
-        k = float(min(max(round(guess), -LOWEST), k_max))
-        if prob(k, fault) >= TARGET:
-            while k > -LOWEST and prob(max(k - STEP, -LOWEST), fault) >= TARGET:
-                k = max(k - STEP, -LOWEST)
-            brackets[fault] = (max(k - STEP, -LOWEST), k) if k > -LOWEST else (None, k)
-        else:
-            while k < k_max and prob(min(k + STEP, k_max), fault) < TARGET:
-                k = min(k + STEP, k_max)
-            brackets[fault] = (k, min(k + STEP, k_max)) if k < k_max else (k, None)
+    brackets = {fault: _bracket(probe, fault, thr.get(fault)) for fault in faults}
     for _ in range(REFINE):
         for fault, (lo, hi) in brackets.items():
             if lo is None or hi is None:
                 continue
             mid = 0.5 * (lo + hi)
-            brackets[fault] = (mid, hi) if prob(mid, fault) < TARGET else (lo, mid)
-    curves = []
-    for fault in faults:
-        ks = sorted(f for nm, f in seen if nm == fault)
-        pts = [(f, *_point(seen[(fault, f)], fault)) for f in ks]
-        factor = [p[0] for p in pts]
-        probability = [p[1] / p[2] if p[2] else None for p in pts]
-        interval = [clopper_pearson(int(round(p[1])), p[2]) if p[2] else None for p in pts]
-        size = [p[3] for p in pts]
-        delay = next((p[4] for p in pts if p[4] is not None), None)
-        mdf, mfac, why = _minimum(factor, probability, size)
-        curves.append({"fault": fault, "delay": delay, "factor": factor, "size": size, "probability": probability,
-                       "interval": interval, "min_detectable_fault": mdf, "min_detectable_factor": mfac,
-                       "why": why})  # fmt: skip
+            brackets[fault] = (mid, hi) if probe.prob(mid, fault) < TARGET else (lo, mid)
+    curves = [_curve(probe.seen, fault) for fault in faults]
     return {
         "paths": int(paths),
         "seed": int(seed),

@@ -30,12 +30,13 @@ import math
 import os
 import sys
 import time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import casadi as ca
 import numpy as np
 from tqdm import tqdm
 
+from .._keywords import with_keywords
 from .._rounding import series_floor
 from ..design import Design
 from ..errors import ParameterError, SimulationError
@@ -43,6 +44,8 @@ from ..model import Plant
 from ..step import step_function
 from ._cluster import plant_from_bytes, run_on_cluster
 from ._detect import default_rate
+from ._options import SCALES as SCALES
+from ._options import SimulateOptions, check_scales
 from ._reduce import allowances, finalize, masks, monitor
 from ._result import RUNS, RunData, SimulationResult
 from ._scenario import FaultSchedule, Scenario, fault_schedule
@@ -56,8 +59,6 @@ __all__ = ["simulate"]  # public: docs/api.md
 
 #: at most about this many recorded samples per example path
 _RECORD_PER_PATH = 20_001
-#: the factors a sweep may vary, and their defaults
-SCALES = {"fault_scale": 1.0, "noise_scale": 1.0, "d_scale": 1.0, "measurement_noise_scale": 1.0}
 
 
 class PathLayout:
@@ -159,10 +160,7 @@ def closed_loop_sample(
 
 
 def _check_settings(design: Design, plant: Plant, paths, seed, dt):
-    if not isinstance(paths, (int, np.integer)) or isinstance(paths, bool) or paths < 1:
-        raise ParameterError(f"paths must be a positive integer; got {paths!r}")
-    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-        raise ParameterError(f"seed must be a non-negative integer; got {seed!r}")
+    _check_counts(paths, seed)
     if dt is not None and not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
         raise SimulationError(f"time step dt must be a positive number; got {dt!r}")
     dims = design.dims
@@ -256,17 +254,7 @@ def step_change(design: Design, scenario: Scenario, dt: float, given: float | No
 
 def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
     """The factors with their defaults, validated (against ``scenario``'s faults when given)."""
-    out = dict(SCALES)
-    for k, v in (scales or {}).items():
-        if k not in SCALES:
-            raise ParameterError(f"unknown factor {k!r}; the factors are {sorted(SCALES)}")
-        try:
-            fv = float(v)
-        except (TypeError, ValueError):
-            raise ParameterError(f"{k} must be a number; got {v!r}") from None
-        if not (math.isfinite(fv) and fv >= 0):
-            raise ParameterError(f"{k} must be a non-negative finite number; got {v!r}")
-        out[k] = fv
+    out = check_scales(scales)
     if scenario is not None and scenario.measurement_noise is None and out["measurement_noise_scale"] != 1.0:
         raise ParameterError(
             f"measurement_noise_scale = {out['measurement_noise_scale']:g}: scenario {scenario.name!r} has no measurement "
@@ -275,6 +263,18 @@ def _scales(scales: dict | None, scenario: Scenario | None = None) -> dict:
     for fp in scenario.faults if scenario is not None else ():
         fp.check_scale(out["fault_scale"])
     return out
+
+
+def _shared_columns(lf: int, nm: int, ld: int, nv: int) -> dict[str, tuple[int, int]]:
+    """The columns of the shared inputs: the fault coefficients (4 lf), the masks (nm), the time, the detection
+    thresholds (lf), the deterministic unknown input (ld), the measurement noise's deviations (nv)."""
+    cols = {"fp": (0, 4 * lf)}
+    cols["mask"] = (4 * lf, 4 * lf + nm)
+    cols["t"] = (cols["mask"][1], cols["mask"][1] + 1)
+    cols["thr"] = (cols["t"][1], cols["t"][1] + lf)
+    cols["d"] = (cols["thr"][1], cols["thr"][1] + ld)
+    cols["vstd"] = (cols["d"][1], cols["d"][1] + nv)
+    return cols
 
 
 class Prepared:
@@ -320,24 +320,25 @@ class Prepared:
         vstd = np.zeros((lay.nv, nsamp))
         if noise:  # v = vstd * N(0, 1)
             vstd[:] = scenario.measurement_noise.deviations(self.t, scales["measurement_noise_scale"])
-        nm = self.masks.M.shape[0]
-        self.cols = {"fp": (0, 4 * lf)}
-        self.cols["mask"] = (4 * lf, 4 * lf + nm)
-        self.cols["t"] = (self.cols["mask"][1], self.cols["mask"][1] + 1)
-        self.cols["thr"] = (self.cols["t"][1], self.cols["t"][1] + lf)
-        self.cols["d"] = (self.cols["thr"][1], self.cols["thr"][1] + ld)
-        self.cols["vstd"] = (self.cols["d"][1], self.cols["d"][1] + lay.nv)
+        self.cols = _shared_columns(lf, self.masks.M.shape[0], ld, lay.nv)
         self.SH = np.ascontiguousarray(
             np.vstack([FP, self.masks.M, self.t[None, :], np.repeat(thr[:, None], nsamp, 1), ddet, vstd]).T
         )
         region = (np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float))
         self.monitor = monitor(lay, self.masks, np.asarray(plant.C, float), design.input_limits, region)
         self.names = self.monitor.names
-        nsh = self.SH.shape[1]
+        F = self.engine_function = self._engine_function(sample, ld, lf)
+        xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
+        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv)
+        self.notes = (self.engine.note,) if self.engine.note else ()
+
+    def _engine_function(self, sample: ca.Function, ld: int, lf: int) -> ca.Function:
+        """``(state + monitor, w, sh) -> (next, rec, incr, pm)``: the closed loop's sample followed by the monitor,
+        the unknown input and the measurement noise completed from the shared inputs ``sh``."""
+        lay, c = self.lay, self.cols
         S = ca.SX.sym("state", lay.ns + self.monitor.nmon)
         w = ca.SX.sym("w", lay.nw)
-        sh = ca.SX.sym("sh", nsh)
-        c = self.cols
+        sh = ca.SX.sym("sh", self.SH.shape[1])
         # an empty slice of an SX column can come out 1x0: a plant without unknown inputs (or without measurement
         # noise) gets an explicit 0x1 block
         d_part = w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]] if ld else ca.SX(0, 1)
@@ -346,13 +347,9 @@ class Prepared:
         nxt, rec = sample(S[: lay.ns], wd, sh[: 4 * lf])
         mon_next, inc, pm = self.monitor.fn(rec, S[lay.ns :], sh[c["mask"][0] : c["thr"][1]])
         # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)
-        F = ca.Function(
+        return ca.Function(
             "fte_cl", [S, w, sh], [ca.vertcat(nxt, mon_next), rec, inc, pm], {"cse": True}
         ).expand()
-        self.engine_function = F
-        xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
-        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv)
-        self.notes = (self.engine.note,) if self.engine.note else ()
 
     def calibration_engine(self):
         """The compiled fault-free loop that calibrates the detection thresholds (:mod:`._calibrate`), built
@@ -596,29 +593,13 @@ def _run_chunks(prep: Prepared, plant: Plant, paths: int, seed: int, path0: int,
     return acc, div, mon, pm, rec
 
 
-def simulate(
-    design: Design,
-    plant: Plant,
-    scenario: Scenario,
-    *,
-    paths: int,
-    seed: int,
-    dt: float | None = None,
-    progress: bool = True,
-    record_paths: int | None = None,
-    record_all: bool = False,
-    record_every: int | None = None,
-    threads: int | None = None,
-    chunk: int | None = None,
-    scheduler: str | distributed.Client | None = None,
-    scales: dict | None = None,
-    prepared: Prepared | None = None,
-    exact: bool = True,
-    detect: bool = True,
-    false_alarm_rate: float | None = None,
-    calibration_paths: int | None = None,
-    calibration=None,
-) -> SimulationResult:
+def simulate(design: Design, plant: Plant, scenario: Scenario, *, paths: int, seed: int, dt: float | None = None,
+             progress: bool = True, record_paths: int | None = None, record_all: bool = False,
+             record_every: int | None = None, threads: int | None = None, chunk: int | None = None,
+             scheduler: str | distributed.Client | None = None, scales: dict | None = None,
+             prepared: Prepared | None = None, exact: bool = True, detect: bool = True,
+             false_alarm_rate: float | None = None, calibration_paths: int | None = None, calibration=None,
+             options: SimulateOptions | None = None) -> SimulationResult:  # fmt: skip
     """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
 
     Parameters
@@ -629,45 +610,13 @@ def simulate(
         Number of Brownian paths.
     seed : int
         Seed of the counter-based generator (:mod:`._rng`): path i's noise depends on (seed, i) only.
-    dt : float, optional
-        Euler-Maruyama step and controller sample time; default the scenario's, lowered to a round
-        value below ``ts_max / 2`` when the design cannot run at it (said in ``notes``). An explicit
-        ``dt`` above the design's ``checks["ts_max"]`` is refused.
-    progress : bool
-        A progress bar on stderr when the run lasts more than about a second.
-    record_paths, record_all
-        Full trajectories are kept for the first ``record_paths`` paths (default: the scenario's
-        path count, the paper's figures), or for all with ``record_all`` (memory grows with paths).
-    record_every : int, optional
-        Keep every k-th sample of the recorded paths (default: at most ~2e4 samples per path).
-    threads : int, optional
-        Threads running chunks of ``chunk`` paths (default: the CPU count, at most 8).
-    chunk : int, optional
-        Paths per call of the compiled engine (default: about four chunks per thread, or per thread
-        of the cluster, whole lane vectors, at most :data:`CHUNK`). The metrics do not depend on it.
-    scheduler : str or distributed.Client, optional
-        Address of a dask.distributed scheduler (or a client of one): the chunks run on its workers
-        (:mod:`._cluster`).
-    scales : dict, optional
-        ``fault_scale``, ``noise_scale``, ``d_scale`` (default 1): multiply every fault's magnitude,
-        the diffusion, the unknown input.
-    exact : bool
-        True (default): IEEE semantics, every operation rounded as in CasADi's own C (bit-equal to
-        the per-path engine). False: the fast mode (docs/simulation.md): the same engine compiled
-        with fused multiply-adds and glibc's vector math library; equal to the exact mode within
-        the documented tolerance, still the same numbers for any chunk size, thread count or
-        cluster. The metrics document records the mode (``exact``).
-
-    detect : bool
-        True (default): detection thresholds per fault, calibrated on independent fault-free paths
-        (:mod:`._detect`) before the run, and the run's detection delays and false-alarm rates. False: none
-        (the document's ``detection`` is empty and the delays null).
-    false_alarm_rate : float, optional
-        False alarms per unit of the plant's time the thresholds are set for (default: one per hour of
-        operation, in the plant's time unit; :func:`._detect.default_rate`).
-    calibration_paths : int, optional
-        Fault-free paths the thresholds are calibrated on (default: enough for the rate asked, within a
-        budget; :func:`._detect.calibration_paths`).
+    options : SimulateOptions, optional
+        How the run goes: ``dt``, ``progress``, ``record_paths``, ``record_all``, ``record_every``, ``threads``,
+        ``chunk``, ``scheduler``, ``scales``, ``exact``, ``detect``, ``false_alarm_rate``, ``calibration_paths``
+        (:class:`~fte_casadi.sim.SimulateOptions` says what each does and its default). Each is also a keyword
+        argument of this function; a keyword given with a value other than its default changes the record's.
+    prepared : Prepared, optional
+        The compiled engine of this (design, scenario, step, factors), built before (in the mode of ``exact``).
     calibration : Calibration, optional
         Thresholds calibrated before (:func:`calibrate_detection`, for the same fault-free behaviour: the
         same design, scenario, step and factors other than ``fault_scale``): used instead of calibrating.
@@ -678,106 +627,134 @@ def simulate(
         With ``metrics`` (the metrics document over all paths, streamed) and the recorded paths.
     """
     t_wall = time.perf_counter()
-    _check_settings(design, plant, paths, seed, dt)
+    _check_counts(paths, seed)
+    o = with_keywords(SimulateOptions, options, dict(
+        dt=dt, progress=progress, record_paths=record_paths, record_all=record_all, record_every=record_every,
+        threads=threads, chunk=chunk, scheduler=scheduler, scales=scales, exact=exact, detect=detect,
+        false_alarm_rate=false_alarm_rate, calibration_paths=calibration_paths))  # fmt: skip
+    _check_settings(design, plant, paths, seed, o.dt)
     check_scenario(plant, scenario)
-    paths, seed = int(paths), int(seed)
-    if chunk is not None and (not isinstance(chunk, int) or isinstance(chunk, bool) or chunk < 1):
-        raise ParameterError(f"chunk must be a positive integer; got {chunk!r}")
-    if not isinstance(exact, (bool, np.bool_)):
-        raise ParameterError(f"exact must be True or False; got {exact!r}")
-    exact = bool(exact)
+    paths, seed, exact = int(paths), int(seed), bool(o.exact)
     if prepared is not None and prepared.exact != exact:
         raise ParameterError(
             f"the prepared engine was built with exact={prepared.exact}, the run asks for exact={exact}; "
             "prepare the engine in the mode of the run"
         )
-    sc = _scales(scales, scenario)
-    given_dt = dt
-    dt, nsteps, notes = resolve_dt(design, scenario, dt)
-    nsamp = nsteps + 1
-    if record_every is None:
-        record_every = max(1, math.ceil(nsamp / _RECORD_PER_PATH))
-    if not isinstance(record_every, int) or record_every < 1:
-        raise ParameterError(f"record_every must be a positive integer; got {record_every!r}")
-    nrec_paths = (
-        paths if record_all else min(paths, scenario.paths if record_paths is None else int(record_paths))
-    )
-    if nrec_paths and record_every > 1:
-        notes.append(f"trajectories recorded every {record_every} samples (dt {record_every * dt:g}), at most "
-                     f"{_RECORD_PER_PATH} per path; the metrics use every sample; record_every=1 keeps all")  # fmt: skip
+    sc = _scales(o.scales, scenario)
+    dt, nsteps, notes = resolve_dt(design, scenario, o.dt)
+    every, nrec_paths = _record_plan(o, scenario, paths, nsteps + 1, dt, notes)
     prep = prepared or Prepared(design, plant, scenario, dt, nsteps, sc, exact=exact)
-    notes += list(prep.notes)
+    notes += _run_notes(prep, exact)
+    rate = default_rate(plant.time_unit) if o.false_alarm_rate is None else float(o.false_alarm_rate)
+    ran = _calibrated_run(design, plant, scenario, prep, o, paths, seed, rate, calibration, every, dt, nsteps)
+    _diverged(ran.div, plant, scenario, dt, 0)
+    rec = ran.rec
+    if nrec_paths and rec is None:
+        _, _, rec, _, _ = run_paths(ran.prep, 0, nrec_paths, seed, every)
+    wall = time.perf_counter() - t_wall
+    meta = {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed, "wall_s": wall, "m": plant.m,
+            "thresholds": [float(v) for v in ran.thresholds], "detection": ran.detection,
+            "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None}  # fmt: skip
+    doc = finalize(ran.acc, ran.mon, ran.pm, prep.t, prep.monitor, prep.masks, meta)
+    mn = scenario.measurement_noise
+    doc["measurement_noise"] = None if mn is None else mn.reported(sc["measurement_noise_scale"])
+    doc["dt_change"] = step_change(design, scenario, dt, o.dt)
+    doc["exact"] = exact
+    if rec is None:
+        rec = np.zeros((0, nsteps // every + 1, prep.lay.nrec))
+    return SimulationResult(
+        plant=plant.name, t=np.arange(rec.shape[1]) * every * dt, dt=dt, T=float(scenario.T), seed=seed,
+        paths=paths, record_every=every, scenario=scenario, design=design, names=result_names(plant), wall_s=wall,
+        compiled=True, notes=tuple(notes), metrics=doc, scales=sc,
+        region=(np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float)),
+        **prep.lay.split_record(rec),
+    )  # fmt: skip
+
+
+def _check_counts(paths, seed) -> None:
+    """Refuse a number of paths that is not a positive integer, a seed that is not a non-negative one."""
+    if not isinstance(paths, (int, np.integer)) or isinstance(paths, bool) or paths < 1:
+        raise ParameterError(f"paths must be a positive integer; got {paths!r}")
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ParameterError(f"seed must be a non-negative integer; got {seed!r}")
+
+
+def _record_plan(o: SimulateOptions, scenario: Scenario, paths: int, nsamp: int, dt: float,
+                 notes: list) -> tuple[int, int]:  # fmt: skip
+    """``(record_every, recorded paths)``: every k-th sample of the first paths is kept (all paths with
+    ``record_all``), at most :data:`_RECORD_PER_PATH` per path unless asked; appends the note saying so."""
+    every = max(1, math.ceil(nsamp / _RECORD_PER_PATH)) if o.record_every is None else o.record_every
+    if not isinstance(every, int) or every < 1:
+        raise ParameterError(f"record_every must be a positive integer; got {every!r}")
+    nrec_paths = (
+        paths
+        if o.record_all
+        else min(paths, scenario.paths if o.record_paths is None else int(o.record_paths))
+    )
+    if nrec_paths and every > 1:
+        notes.append(f"trajectories recorded every {every} samples (dt {every * dt:g}), at most "
+                     f"{_RECORD_PER_PATH} per path; the metrics use every sample; record_every=1 keeps all")  # fmt: skip
+    return every, nrec_paths
+
+
+def _run_notes(prep: Prepared, exact: bool) -> list[str]:
+    """What the run says about its engine: the compiler's notes, a capped allowance, the fast mode."""
+    notes = list(prep.notes)
     if prep.allowances.capped:
         notes.append(prep.allowances.why)
     if not exact:
         notes.append("fast mode: fused multiply-adds and a vector math library; equal to the exact mode within "
                      "the tolerance of docs/simulation.md, not bit for bit")  # fmt: skip
-    rate = default_rate(plant.time_unit) if false_alarm_rate is None else float(false_alarm_rate)
-    if detect and not (math.isfinite(rate) and rate > 0):
+    return notes
+
+
+class _Ran(NamedTuple):
+    """What the paths of a run gave (:func:`_run_chunks`), with the engine and thresholds they ran at."""
+
+    prep: Prepared
+    thresholds: np.ndarray
+    detection: list
+    acc: np.ndarray
+    div: np.ndarray
+    mon: np.ndarray
+    pm: np.ndarray
+    rec: np.ndarray | None
+
+
+def _calibrated_run(design: Design, plant: Plant, scenario: Scenario, prep: Prepared, o: SimulateOptions,
+                    paths: int, seed: int, rate: float, calibration, every: int, dt: float, nsteps: int) -> _Ran:  # fmt: skip
+    """The detection thresholds (``calibration``, or calibrated on fault-free paths ``paths, paths + 1, ...`` of
+    the same seed, after the run's own), then the run's paths at them, under one progress bar."""
+    if o.detect and not (math.isfinite(rate) and rate > 0):
         raise ParameterError(
-            f"false_alarm_rate must be a positive number of alarms per time unit; got {false_alarm_rate!r}"
+            f"false_alarm_rate must be a positive number of alarms per time unit; got {o.false_alarm_rate!r}"
         )
-    # all paths recorded (--save) in-process: the chunks record as they run; else the examples run again below
-    every_all = record_every if (record_all and scheduler is None) else 0
+    # all paths recorded (--save) in-process: the chunks record as they run; else the examples run again after
+    every_all = every if (o.record_all and o.scheduler is None) else 0
     ncal = 0
-    if detect and plant.lf and calibration is None:
+    if o.detect and plant.lf and calibration is None:
         from ._calibrate import block_samples
         from ._detect import calibration_paths as n_for
 
         ncal = n_for(
-            rate, block_samples(prep.allowances.tau, nsteps * dt, dt) * dt, nsteps, given=calibration_paths
+            rate, block_samples(prep.allowances.tau, nsteps * dt, dt) * dt, nsteps, given=o.calibration_paths
         )
-    bar = tqdm(total=paths + 2 * ncal, disable=not progress, delay=1.0, file=sys.stderr, unit=" paths",
+    bar = tqdm(total=paths + 2 * ncal, disable=not o.progress, delay=1.0, file=sys.stderr, unit=" paths",
                desc=f"simulate {plant.name}")  # fmt: skip
     try:
         cal = calibration
-        if ncal:  # fault-free runs of other paths (paths P, P + 1, ... of the same seed, after the run's own)
+        if ncal:
             cal = calibrate_detection(design, plant, scenario, paths=paths, seed=seed, false_alarm_rate=rate,
-                                      threads=threads, prepared=prep, bar=bar, chunk=chunk, scheduler=scheduler,
-                                      calibration_paths=calibration_paths)  # fmt: skip
-        thresholds = cal.thresholds if (detect and cal is not None) else np.full(plant.lf, np.inf)
-        detection = [dict(e) for e in cal.entries] if (detect and cal is not None) else []
-        prep_run = prep.with_thresholds(thresholds, cal.segments if (detect and cal is not None) else ())
-        acc, div, mon, pm, rec = _run_chunks(
-            prep_run, plant, paths, seed, 0, chunk, threads, scheduler, every_all, bar
-        )
+                                      threads=o.threads, prepared=prep, bar=bar, chunk=o.chunk,
+                                      scheduler=o.scheduler, calibration_paths=o.calibration_paths)  # fmt: skip
+        use = o.detect and cal is not None
+        thresholds = cal.thresholds if use else np.full(plant.lf, np.inf)
+        detection = [dict(e) for e in cal.entries] if use else []
+        prep_run = prep.with_thresholds(thresholds, cal.segments if use else ())
+        out = _run_chunks(prep_run, plant, paths, seed, 0, o.chunk, o.threads, o.scheduler, every_all, bar)
     finally:
         bar.close()
-    _diverged(div, plant, scenario, dt, 0)
-    if nrec_paths and rec is None:
-        _, _, rec, _, _ = run_paths(prep_run, 0, nrec_paths, seed, record_every)
-    wall = time.perf_counter() - t_wall
-    meta = {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed, "wall_s": wall, "m": plant.m,
-            "thresholds": [float(v) for v in thresholds], "detection": detection,
-            "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None}  # fmt: skip
-    doc = finalize(acc, mon, pm, prep.t, prep.monitor, prep.masks, meta)
-    mn = scenario.measurement_noise
-    doc["measurement_noise"] = None if mn is None else mn.reported(sc["measurement_noise_scale"])
-    doc["dt_change"] = step_change(design, scenario, dt, given_dt)
-    doc["exact"] = exact
-    names = result_names(plant)
-    if rec is None:
-        rec = np.zeros((0, (nsamp - 1) // record_every + 1, prep.lay.nrec))
-    runs = prep.lay.split_record(rec)
-    return SimulationResult(
-        plant=plant.name,
-        t=np.arange(rec.shape[1]) * record_every * dt,
-        dt=dt,
-        T=float(scenario.T),
-        seed=seed,
-        paths=paths,
-        record_every=record_every,
-        scenario=scenario,
-        design=design,
-        names=names,
-        wall_s=wall,
-        compiled=True,
-        notes=tuple(notes),
-        metrics=doc,
-        scales=sc,
-        region=(np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float)),
-        **runs,
-    )
+    return _Ran(prep_run, thresholds, detection, *out)
 
 
 def _diverged(div: np.ndarray, plant: Plant, scenario: Scenario, dt: float, path0: int) -> None:

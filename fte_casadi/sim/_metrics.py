@@ -8,6 +8,7 @@ sample was recorded (``record_all=True, record_every=1``).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -87,33 +88,113 @@ def _release(t, sc, fp, err, size) -> float | None:
     return settling_time(err[tail], size, t[tail], fp.stop) if tail.any() else None
 
 
+@dataclass(frozen=True)
+class _Run:
+    """What :func:`metrics_from_arrays` reads from a result: the recorded runs, the sample times and step, the
+    allowances and windows, the detection thresholds at each sample, and the differences of the outputs."""
+
+    result: SimulationResult
+    t: np.ndarray
+    dt: float
+    allow: object
+    wins: list
+    after: np.ndarray
+    thr: list
+    detect: list
+    det_doc: list
+    e: np.ndarray
+    dC_ftc: np.ndarray
+    dC_no: np.ndarray
+
+    @property
+    def P(self) -> int:
+        return self.result.ftc.x.shape[0]
+
+    @property
+    def n_after(self) -> int:
+        return int(self.after.sum())
+
+
+def _sq(v: np.ndarray) -> np.ndarray:
+    """Per path: the sum of squares over the other axes."""
+    return np.sum(v**2, axis=tuple(range(1, v.ndim)))
+
+
 def metrics_from_arrays(result: SimulationResult) -> dict:
     """The metrics document (docs/interface.md) recomputed from the recorded arrays (the reference).
 
     The detection thresholds are the run's own (``result.metrics["detection"]``); without them, none."""
+    from ._reduce import _window_intervals
+
     t = result.t
-    dt = float(result.dt) * int(result.record_every)
-    sc = result.scenario
-    allow = allowances(result.design, sc)
-    wins = fault_windows(result)
+    allow = allowances(result.design, result.scenario)
     free, no, ftc = result.free, result.no_ftc, result.ftc
     C = np.asarray(result.design.C, dtype=float)
-    P = ftc.x.shape[0]
     lf = ftc.f.shape[2]
-    after = t >= allow.transient
     det_doc = list((result.metrics or {}).get("detection") or [])
     thr = [threshold_at(det_doc[j] if j < len(det_doc) else None, t) for j in range(lf)]
-    detect = [bool(np.isfinite(thr[j]).any()) for j in range(lf)]
-    seed = int(result.seed)
-    e = ftc.fhat - ftc.f
-    n_after = int(after.sum())
-    srms = [float(v) for v in np.sqrt(np.mean((ftc.x[:, after] - ftc.xhat[:, after]) ** 2, axis=1)).mean(axis=0)] if n_after else [None] * ftc.n  # fmt: skip
-    rel, rel_s, fa_rms, fa_peak, detection = [], [], [], [], []
+    c = _Run(result, t, float(result.dt) * int(result.record_every), allow, fault_windows(result), t >= allow.transient,
+             thr, [bool(np.isfinite(thr[j]).any()) for j in range(lf)], det_doc, ftc.fhat - ftc.f,
+             (ftc.x - free.x) @ C.T, (no.x - free.x) @ C.T)  # fmt: skip
+    after, wins, P = c.after, c.wins, c.P
+    srms = [float(v) for v in np.sqrt(np.mean((ftc.x[:, after] - ftc.xhat[:, after]) ** 2, axis=1)).mean(axis=0)] if c.n_after else [None] * ftc.n  # fmt: skip
+    faults = _per_fault(c)
+    rel = faults["fault_rel_rms_error"]
+    union = _mask(t, [w for ws in wins for w in ws])
+    windows, pairs = [], []
+    peaks = [
+        float(np.max(np.abs(ftc.f[:, _mask(t, wins[q]), q]))) if _mask(t, wins[q]).any() else 0.0
+        for q in range(lf)
+    ]
+    for fp in result.scenario.faults:
+        entry, more = _window_from_arrays(c, fp, peaks)
+        windows.append(entry)
+        pairs += more
+    e, dC_ftc, dC_no = c.e, c.dC_ftc, c.dC_no
+    glob = [(_sq(e[:, _mask(t, wins[j]), j]), _sq(ftc.f[:, _mask(t, wins[j]), j])) for j in range(lf)]
+    glob += [(_sq(dC_ftc[:, union]), _sq(dC_no[:, union])), (_sq(ftc.yc[:, union] - free.y[:, union]),
+             _sq(no.y[:, union] - free.y[:, union]))]  # fmt: skip
+    iv = ratio_intervals(int(result.seed), pairs + glob)
+    g = iv[_window_intervals(windows, iv) :]
+    has = any(r is not None for r in rel)
+    true_all = _rms_ratio(dC_ftc[:, union], dC_no[:, union]) if has else None
+    comp_all = (
+        _rms_ratio(ftc.yc[:, union] - free.y[:, union], no.y[:, union] - free.y[:, union]) if has else None
+    )
+    return {
+        "paths": int(P),
+        "dt": float(result.dt),
+        "T": float(result.T),
+        "seed": int(result.seed),
+        "observer_time_constant": allow.tau if math.isfinite(allow.tau) else None,
+        "transient": float(allow.transient),
+        "settle_after": float(allow.settle_after),
+        "state_rms_error": srms,
+        "fault_rel_rms_error": rel,
+        "fault_rel_rms_error_interval": [g[j] if rel[j] is not None else None for j in range(lf)],
+        **{k: v for k, v in faults.items() if k not in ("fault_rel_rms_error", "detection")},
+        "ftc_true_ratio": true_all,
+        "ftc_true_ratio_interval": g[lf] if true_all is not None else None,
+        "ftc_compensated_ratio": comp_all,
+        "ftc_compensated_ratio_interval": g[lf + 1] if comp_all is not None else None,
+        "detection": faults["detection"],
+        "windows": windows,
+        "outside_region": float(_outside_region(result).mean()),
+        "input_saturation": input_saturation(ftc.u, result.design.input_limits),
+        "wall_s": float(result.wall_s),
+    }
+
+
+def _per_fault(c: _Run) -> dict:
+    """Per fault: the relative errors (whole windows, settled part), the false-alarm peaks (and where they were
+    reached) and relative RMS, in the document's order, and the ``detection`` entries completed."""
+    t, ftc, allow, e = c.t, c.result.ftc, c.allow, c.e
+    rel, rel_s, fa_rms, fa_peak = [], [], [], []
     fa_start, fa_lag, fa_raw, fa_at, fa_raw_at = [], [], [], [], []
-    counts, exposures, which, on_ftc = [], [], [], []
-    for j in range(lf):
-        w, ws = _mask(t, wins[j]), _mask(t, wins[j], SETTLE_FRACTION)
-        out = outside_mask(t, wins[j], allow.transient, allow.settle_after)
+    for j in range(ftc.f.shape[2]):
+        wins = c.wins[j]
+        w, ws = _mask(t, wins), _mask(t, wins, SETTLE_FRACTION)
+        out = outside_mask(t, wins, allow.transient, allow.settle_after)
         rel.append(_rms_ratio(e[:, w, j], ftc.f[:, w, j]))
         rel_s.append(_rms_ratio(e[:, ws, j], ftc.f[:, ws, j]))
         f_rms = float(np.sqrt(np.mean(ftc.f[:, w, j] ** 2))) if w.any() else 0.0
@@ -122,7 +203,7 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         )
         f_peak = float(np.max(np.abs(ftc.f[:, w, j]))) if w.any() else 0.0
         parts = {}
-        for tag, m_ in zip("osl", (out, *allowance_masks(t, wins[j], allow.transient, allow.settle_after))):
+        for tag, m_ in zip("osl", (out, *allowance_masks(t, wins, allow.transient, allow.settle_after))):
             if m_.any() and f_peak:
                 a_ = np.abs(ftc.fhat[:, m_, j])
                 q, k = np.unravel_index(int(np.argmax(a_)), a_.shape)
@@ -137,130 +218,8 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         top = max(parts.values(), key=lambda v: v[0]) if parts else None
         fa_raw.append(top[0] if top else None)
         fa_raw_at.append(top[1] if top else None)
-        _, on = alarms(ftc.fhat[:, :, j], thr[j], after) if detect[j] else (None, None)
-        on_ftc.append(on)
-        if j < len(det_doc):
-            entry = dict(det_doc[j])
-            if detect[j]:
-                raised_free, _ = alarms(free.fhat[:, :, j], thr[j], after)
-                raised_ftc, _ = alarms(ftc.fhat[:, :, j], thr[j], after)
-                entry["false_alarm_rate"] = (
-                    float(raised_free[:, after].sum()) / (P * n_after * dt) if n_after else None
-                )
-                entry["false_alarm_count"] = int(raised_free[:, after].sum())
-                entry["false_alarm_rate_ftc_run"] = (float(raised_ftc[:, out].sum()) / (P * int(out.sum()) * dt)
-                                                     if out.any() else None)  # fmt: skip
-                entry["false_alarm_count_ftc_run"] = int(raised_ftc[:, out].sum())
-                if n_after:
-                    counts.append(raised_free[:, after].sum(axis=1)), exposures.append(n_after * dt)
-                    which.append((len(detection), "false_alarm_rate_measured_interval"))
-                if out.any():
-                    counts.append(raised_ftc[:, out].sum(axis=1)), exposures.append(int(out.sum()) * dt)
-                    which.append((len(detection), "false_alarm_rate_ftc_run_interval"))
-            detection.append(entry)
-    for (k, key), v in zip(which, rate_intervals(seed, counts, exposures) if counts else []):
-        detection[k][key] = v
-    union = _mask(t, [w for ws in wins for w in ws])
-    dC_ftc = (ftc.x - free.x) @ C.T
-    dC_no = (no.x - free.x) @ C.T
-    has = any(r is not None for r in rel)
-    windows, pairs = [], []
-    peaks = [
-        float(np.max(np.abs(ftc.f[:, _mask(t, wins[q]), q]))) if _mask(t, wins[q]).any() else 0.0
-        for q in range(lf)
-    ]
-    for fp in sc.faults:
-        j = list(result.names["faults"]).index(fp.fault)
-        w = _mask(t, [(fp.start, fp.stop)])
-        ws = _mask(t, [(fp.start, fp.stop)], SETTLE_FRACTION)
-        r = _rms_ratio(e[:, w, j], ftc.f[:, w, j])
-        size = float(np.max(np.mean(np.abs(ftc.f[:, w, j]), axis=0))) if w.any() else 0.0
-        err = np.mean(np.abs(e[:, w, j]), axis=0) if w.any() else np.zeros(0)
-        hit_t, standing = [], 0
-        if detect[j]:
-            raised, on = alarms(ftc.fhat[:, :, j], thr[j], after)
-            k0 = np.flatnonzero(t >= fp.start)
-            for q in range(P):
-                if len(k0) and k0[0] > 0 and on[q, k0[0] - 1]:
-                    standing += 1  # the alarm on at the onset: a standing false alarm, not a detection
-                    continue
-                k = np.flatnonzero(w & raised[q])
-                if len(k):
-                    hit_t.append(float(t[k[0]]) - fp.start)
-        tau = allow.tau
-        allowed = min(3.0 * tau, fp.stop - fp.start) if math.isfinite(tau) else fp.stop - fp.start
-        windows.append({
-            "fault": fp.fault, "start": float(fp.start), "stop": float(fp.stop),
-            "fault_rel_rms_error": r,
-            "fault_rel_rms_error_settled": _rms_ratio(e[:, ws, j], ftc.f[:, ws, j]),
-            "settling_time": settling_time(err, size, t[w], fp.start),
-            "release_time": _release(t, sc, fp, np.mean(np.abs(e[:, :, j]), axis=0), size),
-            "ftc_true_ratio": _rms_ratio(dC_ftc[:, w], dC_no[:, w]) if r is not None else None,
-            "ftc_true_ratio_per_output": [_rms_ratio(dC_ftc[:, w, k], dC_no[:, w, k]) if r is not None else None
-                                          for k in range(C.shape[0])],  # fmt: skip
-            "ftc_true_rms_per_output": {
-                "ftc": [float(np.sqrt(np.mean(dC_ftc[:, w, k] ** 2))) if w.any() else None for k in range(C.shape[0])],
-                "no_ftc": [float(np.sqrt(np.mean(dC_no[:, w, k] ** 2))) if w.any() else None for k in range(C.shape[0])],
-            },
-            "ftc_compensated_ratio": _rms_ratio(ftc.yc[:, w] - free.y[:, w], no.y[:, w] - free.y[:, w]) if r is not None else None,  # fmt: skip
-            "crosstalk_peak": [
-                None if q == j or not peaks[q] else float(np.max(np.abs(ftc.fhat[:, w, q]))) / peaks[q]
-                for q in range(lf)
-            ],
-            "detection_delay": math.fsum(hit_t) / len(hit_t) if hit_t else None,
-            "detection_delay_max": max(hit_t) if hit_t else None,
-            "missed_detections": P - standing - len(hit_t) if detect[j] else None,
-            "standing_alarm_paths": standing if detect[j] else None,
-            "detection_probability": len(hit_t) / P if detect[j] else None,
-            "detection_probability_interval": clopper_pearson(len(hit_t), P) if detect[j] else None,
-            "detection_delay_allowed": float(allowed),
-            "detection_probability_within": sum(1 for v in hit_t if v <= allowed + 1e-9 * max(abs(fp.stop), 1.0)) / P
-            if detect[j] else None,
-            "input_saturation": input_saturation(ftc.u, result.design.input_limits, w),
-        })  # fmt: skip
-        sq = lambda v: np.sum(v**2, axis=tuple(range(1, v.ndim)))  # noqa: E731 - per path
-        pairs += [(sq(e[:, w, j]), sq(ftc.f[:, w, j])), (sq(dC_ftc[:, w]), sq(dC_no[:, w]))]
-        pairs += [(sq(dC_ftc[:, w, k]), sq(dC_no[:, w, k])) for k in range(C.shape[0])]
-        pairs += [(sq(ftc.yc[:, w] - free.y[:, w]), sq(no.y[:, w] - free.y[:, w]))]
-    sq = lambda v: np.sum(v**2, axis=tuple(range(1, v.ndim)))  # noqa: E731
-    glob = [(sq(e[:, _mask(t, wins[j]), j]), sq(ftc.f[:, _mask(t, wins[j]), j])) for j in range(lf)]
-    glob += [(sq(dC_ftc[:, union]), sq(dC_no[:, union])), (sq(ftc.yc[:, union] - free.y[:, union]),
-             sq(no.y[:, union] - free.y[:, union]))]  # fmt: skip
-    iv = ratio_intervals(seed, pairs + glob)
-    k = 0
-    for wd in windows:
-        p_out = len(wd["ftc_true_ratio_per_output"])
-        wd["fault_rel_rms_error_interval"] = iv[k] if wd["fault_rel_rms_error"] is not None else None
-        wd["ftc_true_ratio_interval"] = iv[k + 1] if wd["ftc_true_ratio"] is not None else None
-        wd["ftc_true_ratio_per_output_interval"] = [
-            iv[k + 2 + q] if wd["ftc_true_ratio_per_output"][q] is not None else None for q in range(p_out)
-        ]
-        wd["ftc_compensated_ratio_interval"] = (
-            iv[k + 2 + p_out] if wd["ftc_compensated_ratio"] is not None else None
-        )
-        k += 3 + p_out
-    g = iv[k:]
-    true_all = _rms_ratio(dC_ftc[:, union], dC_no[:, union]) if has else None
-    comp_all = (
-        _rms_ratio(ftc.yc[:, union] - free.y[:, union], no.y[:, union] - free.y[:, union]) if has else None
-    )
-    xs = np.stack([free.x, no.x, ftc.x])
-    if result.region is None:
-        outside = np.zeros(xs.shape[1:3], bool)
-    else:
-        lo, hi = (np.asarray(v, dtype=float) for v in result.region)
-        outside = np.any((xs < lo) | (xs > hi), axis=(0, 3))
     return {
-        "paths": int(P),
-        "dt": float(result.dt),
-        "T": float(result.T),
-        "seed": int(result.seed),
-        "observer_time_constant": allow.tau if math.isfinite(allow.tau) else None,
-        "transient": float(allow.transient),
-        "settle_after": float(allow.settle_after),
-        "state_rms_error": srms,
         "fault_rel_rms_error": rel,
-        "fault_rel_rms_error_interval": [g[j] if rel[j] is not None else None for j in range(lf)],
         "fault_rel_rms_error_settled": rel_s,
         "false_alarm_peak": fa_peak,
         "false_alarm_peak_raw": fa_raw,
@@ -269,16 +228,119 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         "false_alarm_peak_at": fa_at,
         "false_alarm_peak_raw_at": fa_raw_at,
         "false_alarm_rel_rms": fa_rms,
-        "ftc_true_ratio": true_all,
-        "ftc_true_ratio_interval": g[lf] if true_all is not None else None,
-        "ftc_compensated_ratio": comp_all,
-        "ftc_compensated_ratio_interval": g[lf + 1] if comp_all is not None else None,
-        "detection": detection,
-        "windows": windows,
-        "outside_region": float(outside.mean()),
-        "input_saturation": input_saturation(ftc.u, result.design.input_limits),
-        "wall_s": float(result.wall_s),
+        "detection": _detection_from_arrays(c),
     }
+
+
+def _detection_from_arrays(c: _Run) -> list[dict]:
+    """The run's ``detection`` entries completed with the false-alarm rates and counts counted on the arrays
+    (fault-free run after the transient, FTC run outside the fault's windows) and their intervals."""
+    t, after, dt, P, n_after = c.t, c.after, c.dt, c.P, c.n_after
+    free, ftc = c.result.free, c.result.ftc
+    detection, counts, exposures, which = [], [], [], []
+    for j in range(min(ftc.f.shape[2], len(c.det_doc))):
+        out = outside_mask(t, c.wins[j], c.allow.transient, c.allow.settle_after)
+        entry = dict(c.det_doc[j])
+        if c.detect[j]:
+            raised_free, _ = alarms(free.fhat[:, :, j], c.thr[j], after)
+            raised_ftc, _ = alarms(ftc.fhat[:, :, j], c.thr[j], after)
+            entry["false_alarm_rate"] = (
+                float(raised_free[:, after].sum()) / (P * n_after * dt) if n_after else None
+            )
+            entry["false_alarm_count"] = int(raised_free[:, after].sum())
+            entry["false_alarm_rate_ftc_run"] = (float(raised_ftc[:, out].sum()) / (P * int(out.sum()) * dt)
+                                                 if out.any() else None)  # fmt: skip
+            entry["false_alarm_count_ftc_run"] = int(raised_ftc[:, out].sum())
+            if n_after:
+                counts.append(raised_free[:, after].sum(axis=1))
+                exposures.append(n_after * dt)
+                which.append((len(detection), "false_alarm_rate_measured_interval"))
+            if out.any():
+                counts.append(raised_ftc[:, out].sum(axis=1))
+                exposures.append(int(out.sum()) * dt)
+                which.append((len(detection), "false_alarm_rate_ftc_run_interval"))
+        detection.append(entry)
+    for (k, key), v in zip(which, rate_intervals(int(c.result.seed), counts, exposures) if counts else []):
+        detection[k][key] = v
+    return detection
+
+
+def _detections(c: _Run, fp, j: int, w: np.ndarray) -> tuple[list[float], int]:
+    """In the window of ``fp`` (mask ``w``) of fault j: the delay of each path's first alarm, and how many paths
+    had the alarm already on at the onset (a standing false alarm, not a detection)."""
+    t, ftc = c.t, c.result.ftc
+    hit_t, standing = [], 0
+    if c.detect[j]:
+        raised, on = alarms(ftc.fhat[:, :, j], c.thr[j], c.after)
+        k0 = np.flatnonzero(t >= fp.start)
+        for q in range(c.P):
+            if len(k0) and k0[0] > 0 and on[q, k0[0] - 1]:
+                standing += 1  # the alarm on at the onset: a standing false alarm, not a detection
+                continue
+            k = np.flatnonzero(w & raised[q])
+            if len(k):
+                hit_t.append(float(t[k[0]]) - fp.start)
+    return hit_t, standing
+
+
+def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
+    """The window of ``fp``'s entry of the document (its intervals filled later), and the per-path numerators and
+    denominators of its ratios."""
+    result, t, e, dC_ftc, dC_no, P = c.result, c.t, c.e, c.dC_ftc, c.dC_no, c.P
+    free, no, ftc = result.free, result.no_ftc, result.ftc
+    p, lf = dC_ftc.shape[2], ftc.f.shape[2]
+    j = list(result.names["faults"]).index(fp.fault)
+    w = _mask(t, [(fp.start, fp.stop)])
+    ws = _mask(t, [(fp.start, fp.stop)], SETTLE_FRACTION)
+    r = _rms_ratio(e[:, w, j], ftc.f[:, w, j])
+    size = float(np.max(np.mean(np.abs(ftc.f[:, w, j]), axis=0))) if w.any() else 0.0
+    err = np.mean(np.abs(e[:, w, j]), axis=0) if w.any() else np.zeros(0)
+    hit_t, standing = _detections(c, fp, j, w)
+    tau = c.allow.tau
+    allowed = min(3.0 * tau, fp.stop - fp.start) if math.isfinite(tau) else fp.stop - fp.start
+    detect = c.detect[j]
+    entry = {
+        "fault": fp.fault, "start": float(fp.start), "stop": float(fp.stop),
+        "fault_rel_rms_error": r,
+        "fault_rel_rms_error_settled": _rms_ratio(e[:, ws, j], ftc.f[:, ws, j]),
+        "settling_time": settling_time(err, size, t[w], fp.start),
+        "release_time": _release(t, result.scenario, fp, np.mean(np.abs(e[:, :, j]), axis=0), size),
+        "ftc_true_ratio": _rms_ratio(dC_ftc[:, w], dC_no[:, w]) if r is not None else None,
+        "ftc_true_ratio_per_output": [_rms_ratio(dC_ftc[:, w, k], dC_no[:, w, k]) if r is not None else None
+                                      for k in range(p)],
+        "ftc_true_rms_per_output": {
+            "ftc": [float(np.sqrt(np.mean(dC_ftc[:, w, k] ** 2))) if w.any() else None for k in range(p)],
+            "no_ftc": [float(np.sqrt(np.mean(dC_no[:, w, k] ** 2))) if w.any() else None for k in range(p)],
+        },
+        "ftc_compensated_ratio": _rms_ratio(ftc.yc[:, w] - free.y[:, w], no.y[:, w] - free.y[:, w]) if r is not None else None,
+        "crosstalk_peak": [
+            None if q == j or not peaks[q] else float(np.max(np.abs(ftc.fhat[:, w, q]))) / peaks[q]
+            for q in range(lf)
+        ],
+        "detection_delay": math.fsum(hit_t) / len(hit_t) if hit_t else None,
+        "detection_delay_max": max(hit_t) if hit_t else None,
+        "missed_detections": P - standing - len(hit_t) if detect else None,
+        "standing_alarm_paths": standing if detect else None,
+        "detection_probability": len(hit_t) / P if detect else None,
+        "detection_probability_interval": clopper_pearson(len(hit_t), P) if detect else None,
+        "detection_delay_allowed": float(allowed),
+        "detection_probability_within": sum(1 for v in hit_t if v <= allowed + 1e-9 * max(abs(fp.stop), 1.0)) / P
+        if detect else None,
+        "input_saturation": input_saturation(ftc.u, result.design.input_limits, w),
+    }  # fmt: skip
+    pairs = [(_sq(e[:, w, j]), _sq(ftc.f[:, w, j])), (_sq(dC_ftc[:, w]), _sq(dC_no[:, w]))]
+    pairs += [(_sq(dC_ftc[:, w, k]), _sq(dC_no[:, w, k])) for k in range(p)]
+    pairs += [(_sq(ftc.yc[:, w] - free.y[:, w]), _sq(no.y[:, w] - free.y[:, w]))]
+    return entry, pairs
+
+
+def _outside_region(result: SimulationResult) -> np.ndarray:
+    """(paths, samples): is any state of any of the three runs outside the plant's region?"""
+    xs = np.stack([result.free.x, result.no_ftc.x, result.ftc.x])
+    if result.region is None:
+        return np.zeros(xs.shape[1:3], bool)
+    lo, hi = (np.asarray(v, dtype=float) for v in result.region)
+    return np.any((xs < lo) | (xs > hi), axis=(0, 3))
 
 
 def metrics(result: SimulationResult) -> dict:

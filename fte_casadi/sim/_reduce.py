@@ -183,151 +183,184 @@ class Monitor:
         return np.array([-1.0 if nm.startswith("det") else 0.0 for nm in self.mon_names])
 
 
-def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None) -> Monitor:
-    """The summands, monitor updates and per-sample maxima of one sample (see :class:`Monitor`).
+class _Terms:
+    """The monitor's outputs as they are written: the summands (``out``, named ``names``), and the monitor state's
+    next values ``nxt`` from its symbols ``slot``."""
 
-    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc]``."""
-    n, lf, m = lay.n, lay.lf, lay.m
-    C = ca.DM(np.asarray(C, dtype=float))
-    rec = ca.SX.sym("rec", lay.nrec)
-    nm = mk.M.shape[0]
-    sh = ca.SX.sym("sh", nm + 1 + lf)
-    msk, t, thr = sh[:nm], sh[nm], sh[nm + 1 :]
+    def __init__(self, mon_names: list[str]):
+        self.out: list = []
+        self.names: list[str] = []
+        self.mon = ca.SX.sym("mon", len(mon_names))
+        self.slot = {nm_: self.mon[k] for k, nm_ in enumerate(mon_names)}
+        self.nxt: dict = {}
 
-    def run(r):
-        parts, k = {}, r * lay.run_rec
-        for name, size in lay.sizes.items():
-            parts[name] = rec[k : k + size]
-            k += size
-        return parts
+    def add(self, name: str, e) -> None:
+        self.out.append(e)
+        self.names.append(name)
 
-    free, noftc, ftc = run(0), run(1), run(2)
-    fhat = ftc["xbarhat"][n + lf :]
-    fhat_free = free["xbarhat"][n + lf :]
-    xhat = ftc["xbarhat"][:n]
-    row = mk.row
-    after = msk[row("after")]
-    dC_ftc = ca.mtimes(C, ftc["x"] - free["x"])
-    dC_no = ca.mtimes(C, noftc["x"] - free["x"])
-    dyc_ftc = ca.sumsqr(ftc["yc"] - free["y"])
-    dy_no = ca.sumsqr(noftc["y"] - free["y"])
-    out, names = [], []
-
-    def add(name, e):
-        out.append(e)
-        names.append(name)
-
-    mon_names = (
-        [f"{k}{j}" for k in ("pko", "tpo", "spo", "pks", "tps", "sps", "pkl", "tpl", "spl", "pkf", "alf", "alc")
-         for j in range(lf)]
-        + [f"{k}{w}" for k in ("det", "stw") for w in range(mk.nw)]
-        + [f"xt{w}_{j}" for w in range(mk.nw) for j in range(lf)]
-    )  # fmt: skip
-    mon = ca.SX.sym("mon", len(mon_names))
-    slot = {nm_: mon[k] for k, nm_ in enumerate(mon_names)}
-    nxt: dict = {}
-
-    def peak(tag, j, mask_row):
+    def peak(self, tag: str, j: int, mask_row, fhat, t) -> None:
         """The running peak of |fhat_j| (FTC run) under a mask, with its time and signed value."""
+        slot, nxt = self.slot, self.nxt
         a = mask_row * ca.fabs(fhat[j])
         new = a > slot[f"pk{tag}{j}"]
         nxt[f"pk{tag}{j}"] = ca.fmax(slot[f"pk{tag}{j}"], a)
         nxt[f"tp{tag}{j}"] = ca.if_else(new, t, slot[f"tp{tag}{j}"])
         nxt[f"sp{tag}{j}"] = ca.if_else(new, fhat[j], slot[f"sp{tag}{j}"])
 
+
+def _monitor_names(lf: int, nw: int) -> list[str]:
+    """The monitor state's entries (see :class:`Monitor`)."""
+    return (
+        [f"{k}{j}" for k in ("pko", "tpo", "spo", "pks", "tps", "sps", "pkl", "tpl", "spl", "pkf", "alf", "alc")
+         for j in range(lf)]
+        + [f"{k}{w}" for k in ("det", "stw") for w in range(nw)]
+        + [f"xt{w}_{j}" for w in range(nw) for j in range(lf)]
+    )  # fmt: skip
+
+
+def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None) -> Monitor:
+    """The summands, monitor updates and per-sample maxima of one sample (see :class:`Monitor`).
+
+    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc]``."""
+    n, lf = lay.n, lay.lf
+    C = ca.DM(np.asarray(C, dtype=float))
+    rec = ca.SX.sym("rec", lay.nrec)
+    nm = mk.M.shape[0]
+    sh = ca.SX.sym("sh", nm + 1 + lf)
+    msk, t, thr = sh[:nm], sh[nm], sh[nm + 1 :]
+    free, noftc, ftc = (_run_parts(lay, rec, r) for r in range(3))
+    fhat = ftc["xbarhat"][n + lf :]
+    row = mk.row
+    after = msk[row("after")]
+    dC = (ca.mtimes(C, ftc["x"] - free["x"]), ca.mtimes(C, noftc["x"] - free["x"]))
+    dy = (ca.sumsqr(ftc["yc"] - free["y"]), ca.sumsqr(noftc["y"] - free["y"]))
+    mon_names = _monitor_names(lf, mk.nw)
+    s = _Terms(mon_names)
+    xhat = ftc["xbarhat"][:n]
     for j in range(n):
-        add(f"sx{j}", after * (ftc["x"][j] - xhat[j]) ** 2)
+        s.add(f"sx{j}", after * (ftc["x"][j] - xhat[j]) ** 2)
     for j in range(lf):
-        e2 = (fhat[j] - ftc["f"][j]) ** 2
-        f2 = ftc["f"][j] ** 2
-        w_j, ws_j, o_j = msk[row("fault", j)], msk[row("fault_settled", j)], msk[row("outside", j)]
-        add(f"ef{j}", w_j * e2)
-        add(f"ff{j}", w_j * f2)
-        add(f"efs{j}", ws_j * e2)
-        add(f"ffs{j}", ws_j * f2)
-        add(f"oa{j}", o_j * fhat[j] ** 2)
-        # alarms with hysteresis, off until the transient: raised at |fhat| >= thr, cleared below HYSTERESIS thr
-        al_free, al_ftc = slot[f"alf{j}"], slot[f"alc{j}"]
-        a_free, a_ftc = ca.fabs(fhat_free[j]), ca.fabs(fhat[j])
-        add(f"rf{j}", after * (al_free == 0) * (a_free >= thr[j]))
-        add(f"ro{j}", o_j * (al_ftc == 0) * (a_ftc >= thr[j]))
-        peak("o", j, o_j)
-        peak("s", j, msk[row("startup_outside", j)])
-        peak("l", j, msk[row("lag_outside", j)])
-        nxt[f"pkf{j}"] = ca.fmax(slot[f"pkf{j}"], w_j * ca.fabs(ftc["f"][j]))
-        for key, al, a in ((f"alf{j}", al_free, a_free), (f"alc{j}", al_ftc, a_ftc)):
-            nxt[key] = after * ca.if_else(al != 0, a >= HYSTERESIS * thr[j], a >= thr[j])
-    add("a", msk[row("union")] * ca.sumsqr(dC_ftc))
-    add("b", msk[row("union")] * ca.sumsqr(dC_no))
-    add("ac", msk[row("union")] * dyc_ftc)
-    add("bc", msk[row("union")] * dy_no)
-    p = C.size1()
+        _fault_terms(s, j, mk, msk, t, thr, fhat, free["xbarhat"][n + lf :], ftc["f"])
+    s.add("a", msk[row("union")] * ca.sumsqr(dC[0]))
+    s.add("b", msk[row("union")] * ca.sumsqr(dC[1]))
+    s.add("ac", msk[row("union")] * dy[0])
+    s.add("bc", msk[row("union")] * dy[1])
     for w in range(mk.nw):
-        j = mk.fault_of_window[w]
-        m_w, m_ws = msk[row("window", w)], msk[row("window_settled", w)]
-        e2 = (fhat[j] - ftc["f"][j]) ** 2
-        f2 = ftc["f"][j] ** 2
-        add(f"ew{w}", m_w * e2)
-        add(f"fw{w}", m_w * f2)
-        add(f"ews{w}", m_ws * e2)
-        add(f"fws{w}", m_ws * f2)
-        for k in range(p):
-            add(f"at{w}_{k}", m_w * dC_ftc[k] ** 2)
-            add(f"bt{w}_{k}", m_w * dC_no[k] ** 2)
-        add(f"acw{w}", m_w * dyc_ftc)
-        add(f"bcw{w}", m_w * dy_no)
-        # a standing alarm: the FTC run's alarm already on at the window's onset (a false alarm, not a detection);
-        # a detection: the alarm rises in the window on a path where it was off at the onset
-        al = slot[f"alc{j}"]
-        standing = ca.if_else(msk[row("onset", w)], al != 0, slot[f"stw{w}"])
-        nxt[f"stw{w}"] = standing
-        rise = (
-            (slot[f"det{w}"] < 0) * m_w * after * (al == 0) * (ca.fabs(fhat[j]) >= thr[j]) * (standing == 0)
-        )
-        nxt[f"det{w}"] = ca.if_else(rise, t, slot[f"det{w}"])
+        _window_terms(s, w, mk, msk, t, thr, fhat, ftc["f"], dC, dy, C.size1())
     for w in range(mk.nw):  # cross-talk: the peak of every fault's estimate in each window
         m_w = msk[row("window", w)]
         for j in range(lf):
-            nxt[f"xt{w}_{j}"] = ca.fmax(slot[f"xt{w}_{j}"], m_w * ca.fabs(fhat[j]))
-    mon_next = [nxt[k] for k in mon_names]
-    lim = None if limits is None else np.asarray(limits, dtype=float)
-    for i in range(m):
-        at = ca.SX(0.0)
-        if lim is not None:
-            u = ftc["u"][i]
-            if np.isfinite(lim[i, 0]):
-                at = at + (u <= float(lim[i, 0]))
-            if np.isfinite(lim[i, 1]):
-                at = at + (u >= float(lim[i, 1]))
-        add(f"sat{i}", at)
-        for w in range(mk.nw):
-            add(f"satw{w}_{i}", msk[row("window", w)] * at)
-    outside = ca.SX(0.0)
-    if region is not None:
-        lo, hi = (np.asarray(v, dtype=float) for v in region)
-        for r in (free, noftc, ftc):
-            for j in range(n):
-                if np.isfinite(lo[j]):
-                    outside = outside + (r["x"][j] < float(lo[j]))
-                if np.isfinite(hi[j]):
-                    outside = outside + (r["x"][j] > float(hi[j]))
-    add("outreg", outside > 0)
+            s.nxt[f"xt{w}_{j}"] = ca.fmax(s.slot[f"xt{w}_{j}"], m_w * ca.fabs(fhat[j]))
+    mon_next = [s.nxt[k] for k in mon_names]
+    _saturation_terms(s, ftc["u"], limits, lay.m, mk, msk)
+    s.add("outreg", _outside_region(region, (free, noftc, ftc), n) > 0)
     pm, pm_names = [], []
     for j in range(lf):
         pm += [ca.fabs(fhat[j] - ftc["f"][j]), ca.fabs(ftc["f"][j])]
         pm_names += [f"pme{j}", f"pmf{j}"]
     fn = ca.Function(
         "fte_monitor",
-        [rec, mon, sh],
+        [rec, s.mon, sh],
         [
             ca.vertcat(*mon_next) if mon_next else ca.SX(0, 1),
-            ca.vertcat(*out),
+            ca.vertcat(*s.out),
             ca.vertcat(*pm) if pm else ca.SX(0, 1),
         ],
         ["rec", "mon", "sh"],
         ["mon_next", "incr", "pm"],
     )
-    return Monitor(fn, names, mon_names, pm_names)
+    return Monitor(fn, s.names, mon_names, pm_names)
+
+
+def _run_parts(lay, rec, r: int) -> dict:
+    """Run ``r``'s signals in one sample's record, by name."""
+    parts, k = {}, r * lay.run_rec
+    for name, size in lay.sizes.items():
+        parts[name] = rec[k : k + size]
+        k += size
+    return parts
+
+
+def _fault_terms(s: _Terms, j: int, mk: Masks, msk, t, thr, fhat, fhat_free, f) -> None:
+    """Fault j's summands (errors in and outside its windows, the alarms raised) and monitor updates (its peaks
+    outside its windows, its size in them, the alarms with hysteresis)."""
+    row, slot, nxt = mk.row, s.slot, s.nxt
+    after = msk[row("after")]
+    e2 = (fhat[j] - f[j]) ** 2
+    f2 = f[j] ** 2
+    w_j, ws_j, o_j = msk[row("fault", j)], msk[row("fault_settled", j)], msk[row("outside", j)]
+    s.add(f"ef{j}", w_j * e2)
+    s.add(f"ff{j}", w_j * f2)
+    s.add(f"efs{j}", ws_j * e2)
+    s.add(f"ffs{j}", ws_j * f2)
+    s.add(f"oa{j}", o_j * fhat[j] ** 2)
+    # alarms with hysteresis, off until the transient: raised at |fhat| >= thr, cleared below HYSTERESIS thr
+    al_free, al_ftc = slot[f"alf{j}"], slot[f"alc{j}"]
+    a_free, a_ftc = ca.fabs(fhat_free[j]), ca.fabs(fhat[j])
+    s.add(f"rf{j}", after * (al_free == 0) * (a_free >= thr[j]))
+    s.add(f"ro{j}", o_j * (al_ftc == 0) * (a_ftc >= thr[j]))
+    s.peak("o", j, o_j, fhat, t)
+    s.peak("s", j, msk[row("startup_outside", j)], fhat, t)
+    s.peak("l", j, msk[row("lag_outside", j)], fhat, t)
+    nxt[f"pkf{j}"] = ca.fmax(slot[f"pkf{j}"], w_j * ca.fabs(f[j]))
+    for key, al, a in ((f"alf{j}", al_free, a_free), (f"alc{j}", al_ftc, a_ftc)):
+        nxt[key] = after * ca.if_else(al != 0, a >= HYSTERESIS * thr[j], a >= thr[j])
+
+
+def _window_terms(s: _Terms, w: int, mk: Masks, msk, t, thr, fhat, f, dC: tuple, dy: tuple, p: int) -> None:
+    """Window w's summands (its fault's error, the true and compensated outputs of the FTC and no-FTC runs) and
+    monitor updates (a standing alarm at its onset, the first detection in it)."""
+    row, slot, nxt = mk.row, s.slot, s.nxt
+    j = mk.fault_of_window[w]
+    m_w, m_ws = msk[row("window", w)], msk[row("window_settled", w)]
+    e2 = (fhat[j] - f[j]) ** 2
+    f2 = f[j] ** 2
+    s.add(f"ew{w}", m_w * e2)
+    s.add(f"fw{w}", m_w * f2)
+    s.add(f"ews{w}", m_ws * e2)
+    s.add(f"fws{w}", m_ws * f2)
+    for k in range(p):
+        s.add(f"at{w}_{k}", m_w * dC[0][k] ** 2)
+        s.add(f"bt{w}_{k}", m_w * dC[1][k] ** 2)
+    s.add(f"acw{w}", m_w * dy[0])
+    s.add(f"bcw{w}", m_w * dy[1])
+    # a standing alarm: the FTC run's alarm already on at the window's onset (a false alarm, not a detection);
+    # a detection: the alarm rises in the window on a path where it was off at the onset
+    al = slot[f"alc{j}"]
+    standing = ca.if_else(msk[row("onset", w)], al != 0, slot[f"stw{w}"])
+    nxt[f"stw{w}"] = standing
+    after = msk[row("after")]
+    rise = (slot[f"det{w}"] < 0) * m_w * after * (al == 0) * (ca.fabs(fhat[j]) >= thr[j]) * (standing == 0)
+    nxt[f"det{w}"] = ca.if_else(rise, t, slot[f"det{w}"])
+
+
+def _saturation_terms(s: _Terms, u, limits, m: int, mk: Masks, msk) -> None:
+    """Per input: at a limit (FTC run), over the horizon and in each window."""
+    lim = None if limits is None else np.asarray(limits, dtype=float)
+    for i in range(m):
+        at = ca.SX(0.0)
+        if lim is not None:
+            if np.isfinite(lim[i, 0]):
+                at = at + (u[i] <= float(lim[i, 0]))
+            if np.isfinite(lim[i, 1]):
+                at = at + (u[i] >= float(lim[i, 1]))
+        s.add(f"sat{i}", at)
+        for w in range(mk.nw):
+            s.add(f"satw{w}_{i}", msk[mk.row("window", w)] * at)
+
+
+def _outside_region(region, runs: tuple, n: int):
+    """How many of the states of the three runs lie outside the plant's region (0: none)."""
+    outside = ca.SX(0.0)
+    if region is not None:
+        lo, hi = (np.asarray(v, dtype=float) for v in region)
+        for r in runs:
+            for j in range(n):
+                if np.isfinite(lo[j]):
+                    outside = outside + (r["x"][j] < float(lo[j]))
+                if np.isfinite(hi[j]):
+                    outside = outside + (r["x"][j] > float(hi[j]))
+    return outside
 
 
 def _fsum(col) -> float:
@@ -371,6 +404,25 @@ def _peak_at(mcol, tag: str, j: int, size: float) -> dict | None:
     return {"t": float(mcol[f"tp{tag}{j}"][k]), "value": float(mcol[f"sp{tag}{j}"][k]) / size}
 
 
+@dataclass(frozen=True)
+class _Columns:
+    """What :func:`finalize` reads: the per-path sums ``col``, monitor states ``mcol`` and per-sample sums ``pcol``
+    by name, the number of paths ``P``, the sample times, the masks, the monitor and ``meta``."""
+
+    col: dict
+    mcol: dict
+    pcol: dict
+    P: int
+    t: np.ndarray
+    mo: Monitor
+    mk: Masks
+    meta: dict
+
+    def n_rows(self, kind: str, j: int = 0) -> float:
+        """The samples of mask row ``kind`` (of fault or window ``j``)."""
+        return float(np.sum(self.mk.M[self.mk.row(kind, j)]))
+
+
 def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo: Monitor, mk: Masks,
              meta: dict) -> dict:  # fmt: skip
     """The metrics document from per-path sums ``acc`` (paths, len(names)), per-path monitor states ``mon``
@@ -380,34 +432,76 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
     none), ``detection`` (the document's ``detection`` entries, thresholds and the asked rate, to complete),
     ``tau`` (the observer's slowest time constant, or None). The intervals (:mod:`._intervals`) are seeded
     by ``seed`` and depend on the set of paths only."""
-    from ._intervals import clopper_pearson, rate_intervals, ratio_intervals
+    from ._intervals import ratio_intervals
 
-    col = {nm: acc[:, k] for k, nm in enumerate(mo.names)}
-    mcol = {nm: mon[:, k] for k, nm in enumerate(mo.mon_names)}
-    pcol = {nm: pm[:, k] for k, nm in enumerate(mo.pm_names)}
-    P = acc.shape[0]
+    c = _Columns({nm: acc[:, k] for k, nm in enumerate(mo.names)}, {nm: mon[:, k] for k, nm in enumerate(mo.mon_names)},
+                 {nm: pm[:, k] for k, nm in enumerate(mo.pm_names)}, acc.shape[0], t, mo, mk, meta)  # fmt: skip
+    col, P, lf = c.col, c.P, mk.lf
     seed = int(meta["seed"])
     dt = float(meta["dt"])
-    tau = meta.get("tau")
     nsamp = mk.M.shape[1]
-    n_after = float(np.sum(mk.M[mk.row("after")]))
+    n_after = c.n_rows("after")
     n = sum(1 for nm in mo.names if nm.startswith("sx"))
-    lf = mk.lf
     srms = [
         math.fsum(math.sqrt(v / n_after) for v in col[f"sx{j}"]) / P if n_after else None for j in range(n)
     ]
-    n_in = [float(np.sum(mk.M[mk.row("fault", j)])) for j in range(lf)]
-    n_out = [float(np.sum(mk.M[mk.row("outside", j)])) for j in range(lf)]
+    n_out = [c.n_rows("outside", j) for j in range(lf)]
+    peaks = _false_alarms(c, n_out)
+    windows, pairs = [], []
+    for w in range(len(mk.windows)):
+        entry, more = _window(c, w)
+        windows.append(entry)
+        pairs += more
+    has_window = any(w["fault_rel_rms_error"] is not None for w in windows)
+    globals_ = [(col[f"ef{j}"], col[f"ff{j}"]) for j in range(lf)]
+    globals_ += [(col["a"], col["b"]), (col["ac"], col["bc"])]
+    iv = ratio_intervals(seed, pairs + globals_) if P else [None] * (len(pairs) + len(globals_))
+    g = iv[_window_intervals(windows, iv) :]
+    rel_all = [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(lf)]
+    true_all, comp_all = _ratio(_fsum(col["a"]), _fsum(col["b"])), _ratio(_fsum(col["ac"]), _fsum(col["bc"]))
+    return {
+        "paths": int(meta["paths"]),
+        "dt": dt,
+        "T": float(meta["T"]),
+        "seed": seed,
+        "observer_time_constant": meta.get("tau"),
+        "transient": float(mk.transient),
+        "settle_after": float(mk.settle_after),
+        "state_rms_error": srms,
+        "fault_rel_rms_error": rel_all,
+        "fault_rel_rms_error_interval": [g[j] if rel_all[j] is not None else None for j in range(lf)],
+        "fault_rel_rms_error_settled": [
+            _ratio(_fsum(col[f"efs{j}"]), _fsum(col[f"ffs{j}"])) for j in range(lf)
+        ],
+        **peaks,
+        "ftc_true_ratio": true_all if has_window else None,
+        "ftc_true_ratio_interval": g[lf] if has_window and true_all is not None else None,
+        "ftc_compensated_ratio": comp_all if has_window else None,
+        "ftc_compensated_ratio_interval": g[lf + 1] if has_window and comp_all is not None else None,
+        "intervals": {"confidence": 0.95, "bootstrap_replicates": REPLICATES, "over": "paths"},
+        "detection": _detection(c, n_after * dt, n_out),
+        "windows": windows,
+        "outside_region": _fsum(col["outreg"]) / (P * nsamp),
+        "input_saturation": [_fsum(col[f"sat{i}"]) / (P * nsamp) for i in range(int(meta["m"]))],
+        "wall_s": float(meta.get("wall_s", 0.0)),
+    }
+
+
+def _false_alarms(c: _Columns, n_out: list[float]) -> dict:
+    """Per fault: the false-alarm peaks (outside its windows, in the start-up, after a window, raw: the largest),
+    where they were reached, and the relative RMS outside its windows (the document's ``false_alarm_*``)."""
+    col, mcol, mk, P = c.col, c.mcol, c.mk, c.P
     fa_rms, fa_peak, fa_raw, fa_start, fa_lag, fa_at, fa_raw_at = [], [], [], [], [], [], []
-    for j in range(lf):
+    for j in range(mk.lf):
         ff = _fsum(col[f"ff{j}"])
+        n_in = c.n_rows("fault", j)
         fa_rms.append(
-            _ratio(_fsum(col[f"oa{j}"]) / n_out[j], ff / n_in[j]) if n_out[j] and n_in[j] and ff else None
+            _ratio(_fsum(col[f"oa{j}"]) / n_out[j], ff / n_in) if n_out[j] and n_in and ff else None
         )
         size = float(np.max(mcol[f"pkf{j}"])) if P else 0.0
         parts = {}
         for tag, row_ in (("o", "outside"), ("s", "startup_outside"), ("l", "lag_outside")):
-            has = float(np.sum(mk.M[mk.row(row_, j)])) > 0
+            has = c.n_rows(row_, j) > 0
             parts[tag] = float(np.max(mcol[f"pk{tag}{j}"])) / size if has and size > 0 else None
         fa_peak.append(parts["o"])
         fa_start.append(parts["s"])
@@ -417,90 +511,113 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
         fa_at.append(_peak_at(mcol, "o", j, size) if parts["o"] is not None else None)
         top = max(known)[1] if known else None
         fa_raw_at.append(_peak_at(mcol, top, j, size) if top is not None else None)
-    windows, pairs = [], []
-    for w, (name, a, b) in enumerate(mk.windows):
-        j = mk.fault_of_window[w]
-        keep = mk.M[mk.row("window", w)] > 0
-        nw = float(np.sum(keep))
-        err = pcol[f"pme{j}"][keep] / P
-        size = float(np.max(pcol[f"pmf{j}"][keep])) / P if nw else 0.0
-        settle = settling_time(err, size, t[keep], a)
-        tail = release_mask(t, mk, w)
-        release = settling_time(pcol[f"pme{j}"][tail] / P, size, t[tail], b) if tail.any() else None
-        p_out = sum(1 for nm in mo.names if nm.startswith(f"at{w}_"))
-        det = mcol[f"det{w}"]
-        standing = mcol[f"stw{w}"] != 0
-        hit = (det >= 0) & ~standing
-        thr = float(meta["thresholds"][j])
-        detect = math.isfinite(thr)
-        allowed = min(TAU_MULTIPLE * tau, b - a) if tau is not None and math.isfinite(tau) else b - a
-        within = hit & (det - a <= allowed + 1e-9 * max(abs(b), 1.0))
-        why = []
-        rel = _ratio(_fsum(col[f"ew{w}"]), _fsum(col[f"fw{w}"]))
-        if nw == 0:
-            why.append("the window holds no sample")
-        elif rel is None:
-            why.append("the fault is zero throughout the window: no relative error and no FTC ratio")
-        if rel is not None and settle is None:
-            why.append(
-                f"the mean fault-estimation error does not settle within {SETTLE_TOL:g} of the fault's size by the "
-                "window's end"
-            )
-        if rel is not None and release is None:
-            why.append("no release time: the window ends at the horizon or at the next fault window" if not tail.any()
-                       else f"the mean estimate does not fall back within {SETTLE_TOL:g} of the fault's size before the "
-                       "next fault window or the horizon")  # fmt: skip
-        at_ = [col[f"at{w}_{k}"] for k in range(p_out)]
-        bt_ = [col[f"bt{w}_{k}"] for k in range(p_out)]
-        true_ratio = (
-            _ratio(sum(_fsum(v) for v in at_), sum(_fsum(v) for v in bt_)) if rel is not None else None
+    return {
+        "false_alarm_peak": fa_peak,
+        "false_alarm_peak_raw": fa_raw,
+        "false_alarm_peak_startup": fa_start,
+        "false_alarm_peak_after_window": fa_lag,
+        "false_alarm_peak_at": fa_at,
+        "false_alarm_peak_raw_at": fa_raw_at,
+        "false_alarm_rel_rms": fa_rms,
+    }
+
+
+def _window(c: _Columns, w: int) -> tuple[dict, list]:
+    """Window ``w``'s entry of the document (its intervals filled later, :func:`_window_intervals`), and the
+    per-path numerators and denominators of its ratios, bootstrapped together."""
+    from ._intervals import clopper_pearson
+
+    col, mcol, pcol, P, mk, t = c.col, c.mcol, c.pcol, c.P, c.mk, c.t
+    name, a, b = mk.windows[w]
+    j = mk.fault_of_window[w]
+    keep = mk.M[mk.row("window", w)] > 0
+    nw = float(np.sum(keep))
+    err = pcol[f"pme{j}"][keep] / P
+    size = float(np.max(pcol[f"pmf{j}"][keep])) / P if nw else 0.0
+    settle = settling_time(err, size, t[keep], a)
+    tail = release_mask(t, mk, w)
+    release = settling_time(pcol[f"pme{j}"][tail] / P, size, t[tail], b) if tail.any() else None
+    p_out = sum(1 for nm in c.mo.names if nm.startswith(f"at{w}_"))
+    det = mcol[f"det{w}"]
+    standing = mcol[f"stw{w}"] != 0
+    hit = (det >= 0) & ~standing
+    detect = math.isfinite(float(c.meta["thresholds"][j]))
+    tau = c.meta.get("tau")
+    allowed = min(TAU_MULTIPLE * tau, b - a) if tau is not None and math.isfinite(tau) else b - a
+    within = hit & (det - a <= allowed + 1e-9 * max(abs(b), 1.0))
+    rel = _ratio(_fsum(col[f"ew{w}"]), _fsum(col[f"fw{w}"]))
+    at_ = [col[f"at{w}_{k}"] for k in range(p_out)]
+    bt_ = [col[f"bt{w}_{k}"] for k in range(p_out)]
+    true_ratio = _ratio(sum(_fsum(v) for v in at_), sum(_fsum(v) for v in bt_)) if rel is not None else None
+    why = _window_why(nw, rel, settle, release, tail.any(), true_ratio, detect and hit.sum() == 0)
+    # the per-path numerators and denominators of the window's ratios, bootstrapped together
+    pairs = [(col[f"ew{w}"], col[f"fw{w}"]), (np.sum(at_, axis=0), np.sum(bt_, axis=0))]
+    pairs += [(at_[k], bt_[k]) for k in range(p_out)] + [(col[f"acw{w}"], col[f"bcw{w}"])]
+    entry = {
+        "fault": name, "start": a, "stop": b,
+        "fault_rel_rms_error": rel,
+        "fault_rel_rms_error_settled": _ratio(_fsum(col[f"ews{w}"]), _fsum(col[f"fws{w}"])),
+        "settling_time": settle,
+        "release_time": release,
+        "fault_peak": float(np.max(mcol[f"pkf{j}"])) if nw else None,
+        "ftc_true_ratio": true_ratio,
+        "ftc_true_ratio_per_output": [
+            _ratio(_fsum(col[f"at{w}_{k}"]), _fsum(col[f"bt{w}_{k}"])) if rel is not None else None
+            for k in range(p_out)
+        ],
+        "ftc_true_rms_per_output": {
+            run: [math.sqrt(_fsum(col[f"{cc}{w}_{k}"]) / (P * nw)) if nw else None for k in range(p_out)]
+            for run, cc in (("ftc", "at"), ("no_ftc", "bt"))
+        },
+        "ftc_compensated_ratio": _ratio(_fsum(col[f"acw{w}"]), _fsum(col[f"bcw{w}"])) if rel is not None else None,
+        "crosstalk_peak": [
+            None if q == j or not float(np.max(mcol[f"pkf{q}"])) else
+            float(np.max(mcol[f"xt{w}_{q}"])) / float(np.max(mcol[f"pkf{q}"]))
+            for q in range(mk.lf)
+        ],
+        "detection_delay": (math.fsum(float(v) - a for v in det[hit]) / int(hit.sum())) if hit.any() else None,
+        "detection_delay_max": float(np.max(det[hit]) - a) if hit.any() else None,
+        "missed_detections": int(P - standing.sum() - hit.sum()) if detect else None,
+        "standing_alarm_paths": int(standing.sum()) if detect else None,
+        "detection_probability": float(hit.sum()) / P if detect and P else None,
+        "detection_probability_interval": clopper_pearson(int(hit.sum()), P) if detect else None,
+        "detection_delay_allowed": float(allowed),
+        "detection_probability_within": float(within.sum()) / P if detect and P else None,
+        "input_saturation": [(_fsum(col[f"satw{w}_{i}"]) / (P * nw)) if nw else 0.0
+                             for i in range(int(c.meta["m"]))],
+        "why": "; ".join(why) or None,
+    }  # fmt: skip
+    return entry, pairs
+
+
+def _window_why(nw: float, rel, settle, release, has_tail: bool, true_ratio, undetected: bool) -> list[str]:
+    """Why a window's figures are undefined (null), in words."""
+    why = []
+    if nw == 0:
+        why.append("the window holds no sample")
+    elif rel is None:
+        why.append("the fault is zero throughout the window: no relative error and no FTC ratio")
+    if rel is not None and settle is None:
+        why.append(
+            f"the mean fault-estimation error does not settle within {SETTLE_TOL:g} of the fault's size by the "
+            "window's end"
         )
-        if rel is not None and true_ratio is None:
-            why.append("the fault leaves the true outputs unchanged without tolerant control: no FTC ratio")
-        if detect and hit.sum() == 0:
-            why.append(
-                "no detection delay: the alarm rose in the window on no path where it was off at its onset"
-            )
-        # the per-path numerators and denominators of the window's ratios, bootstrapped together below
-        pairs += [(col[f"ew{w}"], col[f"fw{w}"]), (np.sum(at_, axis=0), np.sum(bt_, axis=0))]
-        pairs += [(at_[k], bt_[k]) for k in range(p_out)] + [(col[f"acw{w}"], col[f"bcw{w}"])]
-        windows.append({
-            "fault": name, "start": a, "stop": b,
-            "fault_rel_rms_error": rel,
-            "fault_rel_rms_error_settled": _ratio(_fsum(col[f"ews{w}"]), _fsum(col[f"fws{w}"])),
-            "settling_time": settle,
-            "release_time": release,
-            "fault_peak": float(np.max(mcol[f"pkf{j}"])) if nw else None,
-            "ftc_true_ratio": true_ratio,
-            "ftc_true_ratio_per_output": [
-                _ratio(_fsum(col[f"at{w}_{k}"]), _fsum(col[f"bt{w}_{k}"])) if rel is not None else None
-                for k in range(p_out)
-            ],
-            "ftc_true_rms_per_output": {
-                run: [math.sqrt(_fsum(col[f"{c}{w}_{k}"]) / (P * nw)) if nw else None for k in range(p_out)]
-                for run, c in (("ftc", "at"), ("no_ftc", "bt"))
-            },
-            "ftc_compensated_ratio": _ratio(_fsum(col[f"acw{w}"]), _fsum(col[f"bcw{w}"])) if rel is not None else None,
-            "crosstalk_peak": [
-                None if q == j or not float(np.max(mcol[f"pkf{q}"])) else
-                float(np.max(mcol[f"xt{w}_{q}"])) / float(np.max(mcol[f"pkf{q}"]))
-                for q in range(lf)
-            ],
-            "detection_delay": (math.fsum(float(v) - a for v in det[hit]) / int(hit.sum())) if hit.any() else None,
-            "detection_delay_max": float(np.max(det[hit]) - a) if hit.any() else None,
-            "missed_detections": int(P - standing.sum() - hit.sum()) if detect else None,
-            "standing_alarm_paths": int(standing.sum()) if detect else None,
-            "detection_probability": float(hit.sum()) / P if detect and P else None,
-            "detection_probability_interval": clopper_pearson(int(hit.sum()), P) if detect else None,
-            "detection_delay_allowed": float(allowed),
-            "detection_probability_within": float(within.sum()) / P if detect and P else None,
-            "input_saturation": [(_fsum(col[f"satw{w}_{i}"]) / (P * nw)) if nw else 0.0 for i in range(int(meta["m"]))],
-            "why": "; ".join(why) or None,
-        })  # fmt: skip
-    has_window = any(w["fault_rel_rms_error"] is not None for w in windows)
-    globals_ = [(col[f"ef{j}"], col[f"ff{j}"]) for j in range(lf)]
-    globals_ += [(col["a"], col["b"]), (col["ac"], col["bc"])]
-    iv = ratio_intervals(seed, pairs + globals_) if P else [None] * (len(pairs) + len(globals_))
+    if rel is not None and release is None:
+        why.append("no release time: the window ends at the horizon or at the next fault window" if not has_tail
+                   else f"the mean estimate does not fall back within {SETTLE_TOL:g} of the fault's size before the "
+                   "next fault window or the horizon")  # fmt: skip
+    if rel is not None and true_ratio is None:
+        why.append("the fault leaves the true outputs unchanged without tolerant control: no FTC ratio")
+    if undetected:
+        why.append(
+            "no detection delay: the alarm rose in the window on no path where it was off at its onset"
+        )
+    return why
+
+
+def _window_intervals(windows: list[dict], iv: list) -> int:
+    """Fill each window's intervals from ``iv`` (in the order of :func:`_window`'s pairs); return how many
+    were the windows'."""
     k = 0
     for w in windows:
         p_out = len(w["ftc_true_ratio_per_output"])
@@ -514,13 +631,19 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
             iv[k + 2 + p_out] if w["ftc_compensated_ratio"] is not None else None
         )
         k += 3 + p_out
-    rel_all = [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(lf)]
-    g = iv[k:]
+    return k
+
+
+def _detection(c: _Columns, t_after: float, n_out: list[float]) -> list[dict]:
+    """The document's ``detection`` entries completed with the false-alarm rates and counts this run measured
+    (fault-free run after the transient, FTC run outside the fault's windows) and their intervals."""
+    from ._intervals import rate_intervals
+
+    col, P, meta = c.col, c.P, c.meta
+    seed, dt = int(meta["seed"]), float(meta["dt"])
     detection = []
-    t_after = n_after * dt
-    entries = meta.get("detection") or []
     counts, exposures, which = [], [], []
-    for j, entry in enumerate(entries):
+    for j, entry in enumerate(meta.get("detection") or []):
         entry = dict(entry)
         if math.isfinite(float(meta["thresholds"][j])):
             entry["false_alarm_rate"] = _fsum(col[f"rf{j}"]) / (P * t_after) if t_after else None
@@ -530,53 +653,14 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
             )
             entry["false_alarm_count_ftc_run"] = int(round(_fsum(col[f"ro{j}"])))
             if t_after:
-                (
-                    counts.append(col[f"rf{j}"]),
-                    exposures.append(t_after),
-                    which.append((j, "false_alarm_rate_measured_interval")),
-                )
+                counts.append(col[f"rf{j}"])
+                exposures.append(t_after)
+                which.append((j, "false_alarm_rate_measured_interval"))
             if n_out[j]:
-                (
-                    counts.append(col[f"ro{j}"]),
-                    exposures.append(n_out[j] * dt),
-                    which.append((j, "false_alarm_rate_ftc_run_interval")),
-                )
+                counts.append(col[f"ro{j}"])
+                exposures.append(n_out[j] * dt)
+                which.append((j, "false_alarm_rate_ftc_run_interval"))
         detection.append(entry)
     for (j, key), v in zip(which, rate_intervals(seed, counts, exposures) if counts and P else []):
         detection[j][key] = v
-    return {
-        "paths": int(meta["paths"]),
-        "dt": dt,
-        "T": float(meta["T"]),
-        "seed": seed,
-        "observer_time_constant": tau,
-        "transient": float(mk.transient),
-        "settle_after": float(mk.settle_after),
-        "state_rms_error": srms,
-        "fault_rel_rms_error": rel_all,
-        "fault_rel_rms_error_interval": [g[j] if rel_all[j] is not None else None for j in range(lf)],
-        "fault_rel_rms_error_settled": [
-            _ratio(_fsum(col[f"efs{j}"]), _fsum(col[f"ffs{j}"])) for j in range(lf)
-        ],
-        "false_alarm_peak": fa_peak,
-        "false_alarm_peak_raw": fa_raw,
-        "false_alarm_peak_startup": fa_start,
-        "false_alarm_peak_after_window": fa_lag,
-        "false_alarm_peak_at": fa_at,
-        "false_alarm_peak_raw_at": fa_raw_at,
-        "false_alarm_rel_rms": fa_rms,
-        "ftc_true_ratio": _ratio(_fsum(col["a"]), _fsum(col["b"])) if has_window else None,
-        "ftc_true_ratio_interval": g[lf]
-        if has_window and _ratio(_fsum(col["a"]), _fsum(col["b"])) is not None
-        else None,
-        "ftc_compensated_ratio": _ratio(_fsum(col["ac"]), _fsum(col["bc"])) if has_window else None,
-        "ftc_compensated_ratio_interval": g[lf + 1]
-        if has_window and _ratio(_fsum(col["ac"]), _fsum(col["bc"])) is not None
-        else None,
-        "intervals": {"confidence": 0.95, "bootstrap_replicates": REPLICATES, "over": "paths"},
-        "detection": detection,
-        "windows": windows,
-        "outside_region": _fsum(col["outreg"]) / (P * nsamp),
-        "input_saturation": [_fsum(col[f"sat{i}"]) / (P * nsamp) for i in range(int(meta["m"]))],
-        "wall_s": float(meta.get("wall_s", 0.0)),
-    }
+    return detection

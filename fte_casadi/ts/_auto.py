@@ -441,13 +441,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     order, states = _order(plant, terms_f + terms_g, inputs_f + inputs_g, rng)
     pieces = sorted(inputs_f + inputs_g + states, key=lambda p: p.seq)  # stable: row, term, inputs, states
     cand = [p for p in pieces if p.text]
-    for p in cand:
-        free = [plant.state_names[j] for j in range(plant.n) if ca.depends_on(p.expr, plant.x[j]) and np.isnan(plant.region_lo[j])]  # fmt: skip
-        if free:
-            raise DerivationError(
-                f"{p.where}: the coefficient {p.text} depends on {free}, which have no bounds: give them with "
-                f"b.region({free[0]}=(lower, upper))"
-            )
+    _check_bounded(plant, cand)
     reps, rep_of, coef = _group(plant, [p.expr for p in cand], rng)
     texts = [cand[r].text for r in reps]
     if len(reps) > MAX_PREMISES:
@@ -457,16 +451,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
             "region so that some coefficients become nearly constant, or linearise at operating points instead "
             "(b.operating_points)"
         )
-    # bounds, constants (a coefficient constant over the region after all), orientation
-    value, sign, bounds = {}, {}, {}
-    for r in reps:
-        members = [cand[k].where for k in range(len(cand)) if rep_of[k] == r]
-        mn, mx, idx, gap = _bounds(plant, cand[r].expr, cand[r].text, members)
-        if mx - mn <= 1e-12 * max(abs(mn), abs(mx)):  # relative: a coefficient in any unit
-            value[r] = 0.5 * (mn + mx)
-            continue
-        sign[r] = -1.0 if _orient(plant, cand[r].expr, mn, mx) else 1.0
-        bounds[r] = (mn, mx, idx, gap) if sign[r] > 0 else (0.0 - mx, 0.0 - mn, idx, gap)  # no -0.0
+    value, sign, bounds = _premise_bounds(plant, cand, reps, rep_of)
     live = [r for r in reps if r not in value]
     q = len(live)
     names = tuple(f"z{k + 1}" for k in range(q))
@@ -480,23 +465,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
             stacklevel=3,
         )
     z = ca.SX.sym("z", q)
-    mats = {k: ca.SX.zeros(plant.n, dim) for k, dim in (
-        ("A", plant.n), ("B", plant.m), ("Bd", plant.ld), ("Bf", plant.lf),
-        ("W", plant.n), ("G", plant.m), ("Gf", plant.lf), ("M", plant.d2.numel()))}  # fmt: skip
-    uses = {r: [] for r in live}
-    ci = 0
-    for p in pieces:
-        e = p.expr
-        if p.text:
-            (a, b), r = coef[ci], rep_of[ci]
-            e = a + b * value[r] if r in value else a + b * sign[r] * z[live.index(r)]
-            ci += 1
-            if (
-                r in uses
-                and f"{p.matrix}[{plant.state_names[p.row]}, {_column_name(plant, p)}]" not in uses[r]
-            ):
-                uses[r].append(f"{p.matrix}[{plant.state_names[p.row]}, {_column_name(plant, p)}]")
-        mats[p.matrix][p.row, p.col] += p.factor * e
+    mats, uses = _matrices(plant, pieces, coef, rep_of, value, sign, live, z)
     x, u, d, f, d2 = plant.x, plant.u, plant.d, plant.f, plant.d2
 
     def mv(M, v):
@@ -516,6 +485,57 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     if np.any(off_f):
         notes.append(f"constant drift offset a = {np.round(off_f, 6).tolist()} (the same in every rule)")
     return PremiseForm(work, tuple(bounds[r] for r in live), tuple(notes))
+
+
+def _check_bounded(plant: Plant, cand: list) -> None:
+    """Refuse a nonlinear coefficient of a state the region leaves unbounded (its premise would have no range)."""
+    for p in cand:
+        free = [plant.state_names[j] for j in range(plant.n) if ca.depends_on(p.expr, plant.x[j]) and np.isnan(plant.region_lo[j])]  # fmt: skip
+        if free:
+            raise DerivationError(
+                f"{p.where}: the coefficient {p.text} depends on {free}, which have no bounds: give them with "
+                f"b.region({free[0]}=(lower, upper))"
+            )
+
+
+def _premise_bounds(plant: Plant, cand: list, reps: list, rep_of: list) -> tuple[dict, dict, dict]:
+    """Per representative coefficient: its value when it is constant over the region after all (``value``), else
+    its orientation (``sign``: -1 when rule 1 must weigh most at the other bound) and its oriented bounds
+    ``(min, max, where, gap)``."""
+    value, sign, bounds = {}, {}, {}
+    for r in reps:
+        members = [cand[k].where for k in range(len(cand)) if rep_of[k] == r]
+        mn, mx, idx, gap = _bounds(plant, cand[r].expr, cand[r].text, members)
+        if mx - mn <= 1e-12 * max(abs(mn), abs(mx)):  # relative: a coefficient in any unit
+            value[r] = 0.5 * (mn + mx)
+            continue
+        sign[r] = -1.0 if _orient(plant, cand[r].expr, mn, mx) else 1.0
+        bounds[r] = (mn, mx, idx, gap) if sign[r] > 0 else (0.0 - mx, 0.0 - mn, idx, gap)  # no -0.0
+    return value, sign, bounds
+
+
+def _matrices(plant: Plant, pieces: list, coef: list, rep_of: list, value: dict, sign: dict, live: list,
+              z: ca.SX) -> tuple[dict, dict]:  # fmt: skip
+    """The model's matrices (A, B, Bd, Bf, W, G, Gf, M) with each nonlinear coefficient written in its premise
+    (affine in it), and, per live premise, the entries it schedules."""
+    mats = {k: ca.SX.zeros(plant.n, dim) for k, dim in (
+        ("A", plant.n), ("B", plant.m), ("Bd", plant.ld), ("Bf", plant.lf),
+        ("W", plant.n), ("G", plant.m), ("Gf", plant.lf), ("M", plant.d2.numel()))}  # fmt: skip
+    uses = {r: [] for r in live}
+    ci = 0
+    for p in pieces:
+        e = p.expr
+        if p.text:
+            (a, b), r = coef[ci], rep_of[ci]
+            e = a + b * value[r] if r in value else a + b * sign[r] * z[live.index(r)]
+            ci += 1
+            if (
+                r in uses
+                and f"{p.matrix}[{plant.state_names[p.row]}, {_column_name(plant, p)}]" not in uses[r]
+            ):
+                uses[r].append(f"{p.matrix}[{plant.state_names[p.row]}, {_column_name(plant, p)}]")
+        mats[p.matrix][p.row, p.col] += p.factor * e
+    return mats, uses
 
 
 def _column_name(plant: Plant, p: _Piece) -> str:

@@ -50,39 +50,13 @@ def fidelity(
     model, up to the point where a premise leaves its bounds (the memberships saturate there and
     the model is not claimed; ``trajectory_points`` and ``trajectory_horizon`` say how much was kept)."""
     plant = ts.plant
-    rng = np.random.default_rng(seed)
-    s = sample_box(plant, samples, rng)
-    N = samples
-    fd = plant.drift_function().map(N)
-    fg = plant.diffusion_function().map(N)
-    true_f = np.array(fd(s["x"], s["u"], s["d"], s["f"]))
-    true_g = np.array(fg(s["x"], s["u"], s["f"], s["d2"]))
-    bf, bg = blended(ts, s["x"], s["u"], s["d"], s["f"], s["d2"])
-    ef = float(np.max(np.abs(true_f - bf)))
-    eg = float(np.max(np.abs(true_g - bg)))
-    scale = float(np.max(np.abs(true_f))) or 1.0
-
+    ef, eg, scale = _sampled_errors(ts, samples, seed)
     # trajectory: open loop under the reference (or equilibrium) input, no noise
-    if plant.operating_inputs is not None:
-        j = plant.scheduling_state
-        xr = (
-            plant.x_ref
-            if plant.x_ref is not None
-            else plant.operating_points[len(plant.operating_points) // 2]
-        )
-        k = int(np.argmin(np.abs(plant.operating_points[:, j] - xr[j])))
-        uc = plant.operating_inputs[k]
-    else:
-        uc = plant.u_ref if plant.u_ref is not None else np.zeros(plant.m)
+    uc = _reference_input(plant)
     f1 = plant.drift_function()
     zd, zf = np.zeros(plant.ld), np.zeros(plant.lf)
     if horizon is None:
-        lam = max(np.max(np.abs(np.linalg.eigvals(lm.A))) for lm in ts.local_models)
-        slow = min(
-            (abs(v.real) for lm in ts.local_models for v in np.linalg.eigvals(lm.A) if abs(v.real) > 1e-9),
-            default=1.0,
-        )
-        horizon = float(np.clip(3.0 / slow, 1.0, 1000.0)) if lam > 0 else 10.0
+        horizon = _default_horizon(ts)
     # start off the reference, a fifth of the region's span away, so the trajectory sweeps the region
     lo, hi = plant.region_lo, plant.region_hi
     start = plant.x0 + np.where(np.isnan(lo), 0.0, 0.2 * (np.nan_to_num(hi) - np.nan_to_num(lo)))
@@ -98,27 +72,7 @@ def fidelity(
         plant.region_hi,
     )
     if ts.premises and ts.kind in ("sector", "sector_auto"):
-        # a sector model is exact where its premises lie within their bounds (outside, the memberships
-        # saturate): compare up to the first point where a premise leaves them
-        Z = np.array(ts.premise_fn.map(X.shape[1])(X)).reshape(len(ts.premises), -1)
-        mn = np.array([p.min for p in ts.premises])[:, None]
-        mx = np.array([p.max for p in ts.premises])[:, None]
-        tol = 1e-9 * np.maximum(np.abs(mn), np.abs(mx))  # relative: premises in any unit
-        within = (Z >= mn - tol) & (Z <= mx + tol)  # (premises, points)
-        for g in ts.groups:  # and within the polytope of each group
-            if g.polytope != "box":
-                within[list(g.premises)] &= g.inside(Z[list(g.premises)])[None, :]
-        inside = np.all(within, axis=0)
-        keep = max(1, X.shape[1] if np.all(inside) else int(np.argmin(inside)))
-        if keep < X.shape[1]:
-            k = int(np.argmin(inside))
-            bad = ts.premises[int(np.argmin(within[:, k]))]
-            stop = (
-                f"the open loop leaves the region: premise {bad.expr} leaves its bounds [{bad.min:.4g}, {bad.max:.4g}] "
-                f"or its group's polytope by t = {T[k]:.4g}, beyond which the model is not claimed"
-                + (f"; later {stop}" if stop else "")
-            )
-        X, T = X[:, :keep], T[:keep]
+        X, T, stop = _within_premises(ts, X, T, stop)
     M = X.shape[1]
     U = np.tile(uc[:, None], (1, M))
     tf = np.array(f1.map(M)(X, U, np.zeros((plant.ld, M)), np.zeros((plant.lf, M))))
@@ -131,7 +85,7 @@ def fidelity(
     et = float(max(np.max(np.abs(tf - bf2)), np.max(np.abs(tg - bg2))))
     return Fidelity(
         max_abs_error=max(ef, eg),
-        samples=N,
+        samples=samples,
         drift_max_abs_error=ef,
         diffusion_max_abs_error=eg,
         drift_max_rel_error=ef / scale,
@@ -140,6 +94,71 @@ def fidelity(
         trajectory_horizon=float(T[-1]) if M < points else float(horizon),
         trajectory_stop=stop,
     )
+
+
+def _sampled_errors(ts, samples: int, seed: int) -> tuple[float, float, float]:
+    """The largest drift and diffusion errors of the model over ``samples`` random points of the region, and
+    the largest drift there (1 when it is zero: the scale of the relative error)."""
+    plant = ts.plant
+    rng = np.random.default_rng(seed)
+    s = sample_box(plant, samples, rng)
+    fd = plant.drift_function().map(samples)
+    fg = plant.diffusion_function().map(samples)
+    true_f = np.array(fd(s["x"], s["u"], s["d"], s["f"]))
+    true_g = np.array(fg(s["x"], s["u"], s["f"], s["d2"]))
+    bf, bg = blended(ts, s["x"], s["u"], s["d"], s["f"], s["d2"])
+    ef = float(np.max(np.abs(true_f - bf)))
+    eg = float(np.max(np.abs(true_g - bg)))
+    return ef, eg, float(np.max(np.abs(true_f))) or 1.0
+
+
+def _reference_input(plant) -> np.ndarray:
+    """The open loop's input: the operating input nearest the reference state (local linearisation), else the
+    reference input (or zero)."""
+    if plant.operating_inputs is not None:
+        j = plant.scheduling_state
+        xr = (
+            plant.x_ref
+            if plant.x_ref is not None
+            else plant.operating_points[len(plant.operating_points) // 2]
+        )
+        k = int(np.argmin(np.abs(plant.operating_points[:, j] - xr[j])))
+        return plant.operating_inputs[k]
+    return plant.u_ref if plant.u_ref is not None else np.zeros(plant.m)
+
+
+def _default_horizon(ts) -> float:
+    """Three of the local models' slowest time constants, within [1, 1000] (10 when every A is zero)."""
+    lam = max(np.max(np.abs(np.linalg.eigvals(lm.A))) for lm in ts.local_models)
+    slow = min(
+        (abs(v.real) for lm in ts.local_models for v in np.linalg.eigvals(lm.A) if abs(v.real) > 1e-9),
+        default=1.0,
+    )
+    return float(np.clip(3.0 / slow, 1.0, 1000.0)) if lam > 0 else 10.0
+
+
+def _within_premises(ts, X: np.ndarray, T: np.ndarray, stop: str | None) -> tuple:
+    """The trajectory up to the first point where a premise leaves its bounds (or its group's polytope): a sector
+    model is exact only within them (outside, the memberships saturate); ``stop`` says where, when it does."""
+    Z = np.array(ts.premise_fn.map(X.shape[1])(X)).reshape(len(ts.premises), -1)
+    mn = np.array([p.min for p in ts.premises])[:, None]
+    mx = np.array([p.max for p in ts.premises])[:, None]
+    tol = 1e-9 * np.maximum(np.abs(mn), np.abs(mx))  # relative: premises in any unit
+    within = (Z >= mn - tol) & (Z <= mx + tol)  # (premises, points)
+    for g in ts.groups:  # and within the polytope of each group
+        if g.polytope != "box":
+            within[list(g.premises)] &= g.inside(Z[list(g.premises)])[None, :]
+    inside = np.all(within, axis=0)
+    keep = max(1, X.shape[1] if np.all(inside) else int(np.argmin(inside)))
+    if keep < X.shape[1]:
+        k = int(np.argmin(inside))
+        bad = ts.premises[int(np.argmin(within[:, k]))]
+        stop = (
+            f"the open loop leaves the region: premise {bad.expr} leaves its bounds [{bad.min:.4g}, {bad.max:.4g}] "
+            f"or its group's polytope by t = {T[k]:.4g}, beyond which the model is not claimed"
+            + (f"; later {stop}" if stop else "")
+        )
+    return X[:, :keep], T[:keep], stop
 
 
 #: right-hand-side evaluations allowed for the fidelity trajectory, per method (RK45: 6 per step)

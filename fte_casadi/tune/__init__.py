@@ -1,6 +1,7 @@
 """``fte tune``: designs chosen for how well they estimate and tolerate, not only for being certified."""
 
 from ._evaluate import evaluate as evaluate
+from ._options import TuneOptions as TuneOptions
 
 # the face the other subpackages use: internal names, not in __all__ (docs/api.md: what is public)
 from ._output import comparison as comparison
@@ -19,4 +20,4 @@ from ._search import tune as tune
 from ._space import Space as Space
 from ._space import space_for as space_for
 
-__all__ = ["evaluate", "RULES", "Record", "TuneResult", "choose", "pareto_front", "tune", "Space", "space_for"]  # fmt: skip
+__all__ = ["evaluate", "RULES", "Record", "TuneResult", "choose", "pareto_front", "tune", "TuneOptions", "Space", "space_for"]  # fmt: skip

@@ -125,35 +125,14 @@ def evaluate(task: dict) -> dict:
     bound, None when not computed). Never raises for a candidate that fails (a failed design, a
     design that is not certified, a diverging simulation are failed trials with their reason).
     """
-    import dataclasses
-
-    from ..design import KAPPA, Design, failures
-    from ..design import design as run_design
+    from ..design import failures
     from ..sim import Scenario, protected, simulate
 
     blob = task["plant"]
     plant, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob, task.get("vertices"))
     scenario = Scenario.from_dict(task["scenario"])
-    knobs = dict(task["knobs"])
     try:
-        if task.get("design") is not None:
-            d = Design.from_dict(json.loads(task["design"]), source="the design tuned from")
-        else:
-            common = dict(variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
-                          initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
-                          **design_kwargs(knobs))  # fmt: skip
-            d = run_design(ts, **common)
-            scale = float(knobs["alpha_scale"])
-            if abs(scale - 1.0) > 1e-12 and d.observer.alpha is not None:
-                d = run_design(ts, alpha=scale * float(d.observer.alpha), **common)
-            if knobs.get("use_boundary_layer") and task.get("e_scale"):
-                phi = (
-                    float(knobs["boundary_layer_rel"])
-                    * float(np.linalg.norm(d.N, 2))
-                    * float(task["e_scale"])
-                )
-                if phi > 0 and np.isfinite(phi):
-                    d = dataclasses.replace(d, params=d.params.replace(boundary_layer=phi))
+        d = _candidate(task, ts, dict(task["knobs"]))
         if not d.certified:
             return {
                 "state": "fail",
@@ -172,10 +151,42 @@ def evaluate(task: dict) -> dict:
     u = res.ftc.u
     m["input_peak"] = [float(v) for v in np.max(np.abs(u), axis=(0, 1))] if u.size else [0.0] * plant.m
     m["fault_error_bound"] = bound_gain(d.bounds)
+    return {"state": "ok", "params": _candidate_params(d), "metrics": m, "design": d.to_json(),
+            "e_scale": _output_error_scale(res, d)}  # fmt: skip
+
+
+def _candidate(task: dict, ts, knobs: dict):
+    """The candidate's design: the design document of the task (the one tuned from), or a design at its knobs,
+    with the decay rate scaled and the relative boundary layer applied when the knobs ask for them."""
+    import dataclasses
+
+    from ..design import Design
+    from ..design import design as run_design
+
+    if task.get("design") is not None:
+        return Design.from_dict(json.loads(task["design"]), source="the design tuned from")
+    common = dict(variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
+                  initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
+                  **design_kwargs(knobs))  # fmt: skip
+    d = run_design(ts, **common)
+    scale = float(knobs["alpha_scale"])
+    if abs(scale - 1.0) > 1e-12 and d.observer.alpha is not None:
+        d = run_design(ts, alpha=scale * float(d.observer.alpha), **common)
+    if knobs.get("use_boundary_layer") and task.get("e_scale"):
+        phi = float(knobs["boundary_layer_rel"]) * float(np.linalg.norm(d.N, 2)) * float(task["e_scale"])
+        if phi > 0 and np.isfinite(phi):
+            d = dataclasses.replace(d, params=d.params.replace(boundary_layer=phi))
+    return d
+
+
+def _candidate_params(d) -> dict:
+    """The design's params as a trial records them: the LMI parameters, the decay rate, kappa, the boundary layer
+    and the bound's weight (None where not set)."""
+    from ..design import KAPPA
+
     params = d.params.to_dict()
     params["alpha"] = None if d.observer.alpha is None else float(d.observer.alpha)
     params.setdefault("kappa", KAPPA)
     params.setdefault("boundary_layer", None)
     params.setdefault("bound_weight", None)
-    return {"state": "ok", "params": params, "metrics": m, "design": d.to_json(),
-            "e_scale": _output_error_scale(res, d)}  # fmt: skip
+    return params

@@ -50,9 +50,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._keywords import with_keywords
 from ..errors import ParameterError
 from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
 from ._evaluate import evaluate
+from ._options import RULES as RULES
+from ._options import TuneOptions
 from ._space import Space, space_for
 
 __all__ = ["tune", "TuneResult", "Record", "choose", "pareto_front", "RULES"]  # public: docs/api.md
@@ -61,8 +64,6 @@ __all__ = ["tune", "TuneResult", "Record", "choose", "pareto_front", "RULES"]  #
 BATCH = 4
 #: paths per candidate unless asked (or the scenario's, when more)
 DEFAULT_PATHS = 20
-#: the rules of :func:`choose`
-RULES = ("balanced", "fault-error", "false-alarm", "ftc", "bound")
 #: objective values for a metric a candidate leaves undefined
 UNDEFINED = 1e6
 #: floors of the base values the balanced rule divides by, per objective kind
@@ -275,10 +276,10 @@ def _runner(scheduler):
     return run, (client.close if isinstance(scheduler, str) else (lambda: None))
 
 
-def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str = "balanced",
+def tune(base_design, plant, scenario, *, trials: int | None = None, seed: int = 0, rule: str = "balanced",
          paths: int | None = None, scheduler=None, sigma_sup: float | None = None, base_is_given: bool = False,
          progress: Callable[[int, int], None] | None = None, storage: str | None = None,
-         resume: bool = False) -> TuneResult:  # fmt: skip
+         resume: bool = False, options: TuneOptions | None = None) -> TuneResult:  # fmt: skip
     """Search the knobs of ``base_design`` for designs that estimate and tolerate the faults of ``scenario``.
 
     Parameters
@@ -287,160 +288,187 @@ def tune(base_design, plant, scenario, *, trials: int, seed: int = 0, rule: str 
         Trial 0 and the centre of the search space (:func:`~fte_casadi.tune._space.space_for`).
     plant, scenario
         The nonlinear plant and the experiment every candidate is simulated on (same seed, same paths).
-    trials : int
-        Trials in all, trial 0 included (>= 2).
-    seed : int
-        Seed of the sampler and of the Monte Carlo.
-    rule : str
-        One of :data:`RULES`: how the chosen design is picked from the front.
-    paths : int, optional
-        Monte Carlo paths per candidate (default: :data:`DEFAULT_PATHS`, or the scenario's when more).
-    scheduler : str or distributed.Client, optional
-        Run the candidates on a dask.distributed cluster.
-    sigma_sup : float, optional
-        The largest sigma (45) allows for any gamma (caps the sigma range).
-    base_is_given : bool
-        Has no effect on the search: trial 0 is always ``base_design`` as it is (its alpha,
-        kappa and boundary layer may come from the plant's defaults, which a design from its
-        parameters alone would not reproduce).
-    progress : callable, optional
-        ``progress(done, total)`` after each trial.
-    storage : str, optional
-        An optuna storage URL (``sqlite:///DIR/optuna.db``) where every trial is kept as it finishes,
-        with its design and metrics: an interrupted search can be continued from it (``resume``).
-        Default: in memory.
-    resume : bool
-        Continue the search kept in ``storage`` (when it holds one; else start afresh): its finished
-        trials are taken as they are, the trials that were running are run again, and the search goes
-        on to ``trials`` in all with the sampler's random state as it was, so the trials are those an
-        uninterrupted run asks. The run must have the same plant, base design, seed and paths.
+    options : TuneOptions, optional
+        How the search goes: ``trials`` (required, here or as a keyword), ``seed``, ``rule``, ``paths``,
+        ``scheduler``, ``sigma_sup``, ``base_is_given``, ``progress``, ``storage``, ``resume``
+        (:class:`~fte_casadi.tune.TuneOptions` says what each does and its default). Each is also a keyword
+        argument of this function; a keyword given with a value other than its default changes the record's.
+
+    A resumed search (``resume`` with a ``storage`` that holds one) takes its finished trials as they are, runs
+    the trials that were running again, and goes on to ``trials`` in all with the sampler's random state as it
+    was, so the trials are those an uninterrupted run asks. The run must have the same plant, base design, seed
+    and paths.
     """
     import optuna
 
-    from ..sim._cluster import plant_bytes
-
-    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 2:
-        raise ParameterError(f"--trials must be an integer >= 2 (trial 0 is the base design); got {trials!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ParameterError(f"--seed must be a non-negative integer; got {seed!r}")
-    if rule not in RULES:
-        raise ParameterError(f"unknown --objective {rule!r}; choose one of {', '.join(RULES)}")
-    paths = int(paths or max(scenario.paths, DEFAULT_PATHS))
-    if paths < 1:
-        raise ParameterError(f"--paths must be a positive integer; got {paths}")
+    given = dict(trials=trials, seed=seed, rule=rule, paths=paths, scheduler=scheduler, sigma_sup=sigma_sup,
+                 base_is_given=base_is_given, progress=progress, storage=storage, resume=resume)  # fmt: skip
+    if options is not None and trials is None:
+        del given["trials"]
+    o = with_keywords(TuneOptions, options, given)
+    paths = int(o.paths or max(scenario.paths, DEFAULT_PATHS))
     t0 = time.perf_counter()
-    fixed = {"delta": float(base_design.params.delta)}
-    common = {
-        "plant": plant_bytes(plant), "scenario": scenario.to_dict(), "variant": base_design.variant,
-        "solver": base_design.solver, "sample_time": base_design.observer.sample_time or scenario.dt,
-        "initial_state": None if base_design.x0 is None else [float(v) for v in base_design.x0],
-        "plant_spec": base_design.plant_spec, "paths": paths, "seed": seed, "vertices": base_design.vertices,
-    }  # fmt: skip
-    run, close = _runner(scheduler)
+    search = _Search(optuna, base_design, plant, scenario, o, paths)
     level = optuna.logging.get_verbosity()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            sampler = optuna.samplers.TPESampler(seed=seed, multivariate=True,
-                                                 n_startup_trials=max(4, min(12, trials // 4)))  # fmt: skip
-        key = _fingerprint(plant, scenario, base_design, seed, paths)
-        study = _stored_study(optuna, storage, sampler, key) if resume and storage is not None else None
-        if study is None:  # a fresh search: trial 0 first, alone
-            if sigma_sup is None:
-                sigma_sup = _sigma_sup(plant, base_design)
-            base_task = dict(common, knobs=space_for(base_design, sigma_sup).base | fixed, e_scale=None,
-                             design=base_design.to_json())  # fmt: skip
-            out0 = run([base_task])[0]
-            if out0["state"] != "ok":
-                raise ParameterError(
-                    f"the base design of {plant.name} cannot be evaluated ({out0['reason']}); tune from a design "
-                    "that certifies and simulates (fte design, fte simulate)"
-                )
-        else:
-            sigma_sup = study.user_attrs.get("sigma_sup")
-            base_task = dict(common, knobs=space_for(base_design, sigma_sup).base | fixed, e_scale=None,
-                             design=base_design.to_json())  # fmt: skip
-            out0 = {"state": "ok", "e_scale": study.user_attrs["e_scale"], **study.user_attrs["trial-0"]}
-        names, values_of = objectives_for(
-            out0["metrics"], list(plant.fault_names), plant.input_limits is not None
-        )
-        e_scale = out0["e_scale"]
-        space: Space = space_for(base_design, sigma_sup, *_base_knobs(base_design, base_task, e_scale))
-        records: list[Record] = []
-
-        def told(t, kn: dict | None, out: dict) -> None:
-            """Tell optuna (and its storage) how trial ``t`` (a trial or its number) ended; record it."""
-            number = t if isinstance(t, int) else t.number
-            if out["state"] == "ok":
-                v = values_of(out["metrics"])
-                study.set_user_attr(
-                    f"trial-{number}", {k: out[k] for k in ("params", "metrics", "design")} | {"knobs": kn}
-                )
-                study.tell(t, list(v))
-                records.append(Record(number, kn, "ok", out["params"], out["metrics"], out["design"], v))
-            else:
-                study.set_user_attr(f"trial-{number}", {"knobs": kn, "reason": out["reason"]})
-                study.tell(t, state=optuna.trial.TrialState.FAIL)
-                records.append(Record(number, kn or {}, "fail", reason=out["reason"]))
-            if progress:
-                progress(len(records), trials)
-
-        def evaluated(knobs: list) -> list[dict]:
-            """The outcome of each trial of ``knobs`` (None: interrupted before its knobs were drawn)."""
-            todo = [kn for kn in knobs if kn is not None]
-            outs = iter(run([dict(common, knobs=kn | fixed, e_scale=e_scale, design=None) for kn in todo]))
-            return [next(outs) if kn is not None else {"state": "fail", "reason": "interrupted before its knobs "
-                    "were drawn"} for kn in knobs]  # fmt: skip
-
-        wall0 = 0.0
-        if study is None:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-                study = _new_study(optuna, storage, sampler, len(names))
-                study.set_user_attr("fte", key)
-                study.set_user_attr("sigma_sup", sigma_sup)
-                study.set_user_attr("e_scale", e_scale)
-                study.enqueue_trial(space.base)
-                t = study.ask()
-                space.suggest(t)
-                for knobs in space.local_steps(trials - 1):
-                    study.enqueue_trial(knobs)
-            told(t, dict(space.base), out0)
-        else:  # the finished trials as they are; those that were running, again
-            wall0 = float(study.user_attrs.get("wall_s", 0.0))
-            running = _restore(optuna, study, records, space)
-            if progress:
-                progress(len(records), trials)
-            for (number, kn), out in zip(running, evaluated([kn for _, kn in running])):
-                told(number, kn, out)
-        while len(records) < trials:
-            k = min(BATCH, trials - len(records))
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-                asked = [study.ask() for _ in range(k)]
-                knobs = [space.suggest(t) for t in asked]
-            if storage is not None:  # for a resumed run: the knobs, the sampler's state after drawing them
-                for t, kn in zip(asked, knobs):
-                    study.set_user_attr(f"trial-{t.number}", {"knobs": kn})
-                study.set_user_attr("sampler", _random_states(sampler))
-                study.set_user_attr("wall_s", wall0 + time.perf_counter() - t0)
-            for t, kn, out in zip(asked, knobs, evaluated(knobs)):
-                told(t, kn, out)
-        if storage is not None:
-            study.set_user_attr("wall_s", wall0 + time.perf_counter() - t0)
+        search.run(t0)
     finally:
         optuna.logging.set_verbosity(level)
-        close()
-    records.sort(key=lambda r: r.number)
-    done = [r for r in records if r.state == "ok"]
-    front = [done[i].number for i in pareto_front([r.values for r in done])]
-    chosen, tier = choose(records, front, names, rule)
-    limits = _limits(done, plant)
-    return TuneResult(plant=plant.name, objectives=names, records=tuple(records), front=tuple(front), chosen=chosen,
-                      rule=rule, tier=tier, seed=seed, paths=paths, space=dict(space.ranges),
-                      wall_s=wall0 + time.perf_counter() - t0,
-                      limits=tuple(limits))  # fmt: skip
+        search.close()
+    return search.result(t0)
+
+
+class _Search:
+    """One search of :func:`tune`: trial 0 (fresh, or as a stored search kept it), the trials asked in batches
+    and told back in trial order, the records they give."""
+
+    def __init__(self, optuna, base_design, plant, scenario, o: TuneOptions, paths: int):
+        from ..sim._cluster import plant_bytes
+
+        self.optuna, self.base_design, self.plant, self.scenario, self.o = (
+            optuna,
+            base_design,
+            plant,
+            scenario,
+            o,
+        )
+        self.paths, self.trials = paths, o.trials
+        self.fixed = {"delta": float(base_design.params.delta)}
+        self.common = {
+            "plant": plant_bytes(plant), "scenario": scenario.to_dict(), "variant": base_design.variant,
+            "solver": base_design.solver, "sample_time": base_design.observer.sample_time or scenario.dt,
+            "initial_state": None if base_design.x0 is None else [float(v) for v in base_design.x0],
+            "plant_spec": base_design.plant_spec, "paths": paths, "seed": o.seed, "vertices": base_design.vertices,
+        }  # fmt: skip
+        self.run_tasks, self.close = _runner(o.scheduler)
+        self.records: list[Record] = []
+        self.wall0 = 0.0
+
+    def run(self, t0: float) -> None:
+        """Trial 0, then the other trials to ``trials`` in all (continuing a stored search when asked)."""
+        optuna, o = self.optuna, self.o
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            sampler = optuna.samplers.TPESampler(seed=o.seed, multivariate=True,
+                                                 n_startup_trials=max(4, min(12, self.trials // 4)))  # fmt: skip
+        key = _fingerprint(self.plant, self.scenario, self.base_design, o.seed, self.paths)
+        study = _stored_study(optuna, o.storage, sampler, key) if o.resume and o.storage is not None else None
+        sigma_sup, base_task, out0 = self._trial0(study)
+        self.names, self.values_of = objectives_for(
+            out0["metrics"], list(self.plant.fault_names), self.plant.input_limits is not None
+        )
+        self.e_scale = out0["e_scale"]
+        self.space: Space = space_for(self.base_design, sigma_sup,
+                                      *_base_knobs(self.base_design, base_task, self.e_scale))  # fmt: skip
+        if study is None:
+            self._start(sampler, key, sigma_sup, out0)
+        else:
+            self.study = study
+            self._resume()
+        while len(self.records) < self.trials:
+            self._batch(sampler, t0)
+        if o.storage is not None:
+            self.study.set_user_attr("wall_s", self.wall0 + time.perf_counter() - t0)
+
+    def _trial0(self, study) -> tuple[float | None, dict, dict]:
+        """``(sigma_sup, trial 0's task, its outcome)``: evaluated afresh, or as the stored search kept it."""
+        sigma_sup = self.o.sigma_sup
+        if study is not None:
+            sigma_sup = study.user_attrs.get("sigma_sup")
+        elif sigma_sup is None:
+            sigma_sup = _sigma_sup(self.plant, self.base_design)
+        base_task = dict(self.common, knobs=space_for(self.base_design, sigma_sup).base | self.fixed, e_scale=None,
+                         design=self.base_design.to_json())  # fmt: skip
+        if study is not None:
+            return sigma_sup, base_task, {"state": "ok", "e_scale": study.user_attrs["e_scale"],
+                                          **study.user_attrs["trial-0"]}  # fmt: skip
+        out0 = self.run_tasks([base_task])[0]
+        if out0["state"] != "ok":
+            raise ParameterError(
+                f"the base design of {self.plant.name} cannot be evaluated ({out0['reason']}); tune from a design "
+                "that certifies and simulates (fte design, fte simulate)"
+            )
+        return sigma_sup, base_task, out0
+
+    def _start(self, sampler, key: dict, sigma_sup, out0: dict) -> None:
+        """A fresh search: the study, trial 0 told first, the local steps around it enqueued."""
+        optuna, space = self.optuna, self.space
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            study = self.study = _new_study(optuna, self.o.storage, sampler, len(self.names))
+            study.set_user_attr("fte", key)
+            study.set_user_attr("sigma_sup", sigma_sup)
+            study.set_user_attr("e_scale", self.e_scale)
+            study.enqueue_trial(space.base)
+            t = study.ask()
+            space.suggest(t)
+            for knobs in space.local_steps(self.trials - 1):
+                study.enqueue_trial(knobs)
+        self.told(t, dict(space.base), out0)
+
+    def _resume(self) -> None:
+        """A stored search: the finished trials as they are; those that were running, again."""
+        self.wall0 = float(self.study.user_attrs.get("wall_s", 0.0))
+        running = _restore(self.optuna, self.study, self.records, self.space)
+        if self.o.progress:
+            self.o.progress(len(self.records), self.trials)
+        for (number, kn), out in zip(running, self.evaluated([kn for _, kn in running])):
+            self.told(number, kn, out)
+
+    def _batch(self, sampler, t0: float) -> None:
+        """Up to :data:`BATCH` trials asked, evaluated together and told back in trial order."""
+        optuna, study = self.optuna, self.study
+        k = min(BATCH, self.trials - len(self.records))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            asked = [study.ask() for _ in range(k)]
+            knobs = [self.space.suggest(t) for t in asked]
+        if self.o.storage is not None:  # for a resumed run: the knobs, the sampler's state after drawing them
+            for t, kn in zip(asked, knobs):
+                study.set_user_attr(f"trial-{t.number}", {"knobs": kn})
+            study.set_user_attr("sampler", _random_states(sampler))
+            study.set_user_attr("wall_s", self.wall0 + time.perf_counter() - t0)
+        for t, kn, out in zip(asked, knobs, self.evaluated(knobs)):
+            self.told(t, kn, out)
+
+    def told(self, t, kn: dict | None, out: dict) -> None:
+        """Tell optuna (and its storage) how trial ``t`` (a trial or its number) ended; record it."""
+        study = self.study
+        number = t if isinstance(t, int) else t.number
+        if out["state"] == "ok":
+            v = self.values_of(out["metrics"])
+            study.set_user_attr(
+                f"trial-{number}", {k: out[k] for k in ("params", "metrics", "design")} | {"knobs": kn}
+            )
+            study.tell(t, list(v))
+            self.records.append(Record(number, kn, "ok", out["params"], out["metrics"], out["design"], v))
+        else:
+            study.set_user_attr(f"trial-{number}", {"knobs": kn, "reason": out["reason"]})
+            study.tell(t, state=self.optuna.trial.TrialState.FAIL)
+            self.records.append(Record(number, kn or {}, "fail", reason=out["reason"]))
+        if self.o.progress:
+            self.o.progress(len(self.records), self.trials)
+
+    def evaluated(self, knobs: list) -> list[dict]:
+        """The outcome of each trial of ``knobs`` (None: interrupted before its knobs were drawn)."""
+        todo = [kn for kn in knobs if kn is not None]
+        outs = iter(self.run_tasks([dict(self.common, knobs=kn | self.fixed, e_scale=self.e_scale, design=None)
+                                    for kn in todo]))  # fmt: skip
+        return [next(outs) if kn is not None else {"state": "fail", "reason": "interrupted before its knobs "
+                "were drawn"} for kn in knobs]  # fmt: skip
+
+    def result(self, t0: float) -> TuneResult:
+        """The records in trial order, their Pareto front and the chosen design."""
+        records, plant = self.records, self.plant
+        records.sort(key=lambda r: r.number)
+        done = [r for r in records if r.state == "ok"]
+        front = [done[i].number for i in pareto_front([r.values for r in done])]
+        chosen, tier = choose(records, front, self.names, self.o.rule)
+        return TuneResult(plant=plant.name, objectives=self.names, records=tuple(records), front=tuple(front),
+                          chosen=chosen, rule=self.o.rule, tier=tier, seed=self.o.seed, paths=self.paths,
+                          space=dict(self.space.ranges), wall_s=self.wall0 + time.perf_counter() - t0,
+                          limits=tuple(_limits(done, plant)))  # fmt: skip
 
 
 #: the name of the study in an optuna storage
