@@ -18,6 +18,7 @@ from .._text import shorten
 from ..errors import FteError, InfeasibleDesignError
 from ..ts import TSModel
 from . import _diffusion as diffusion
+from . import _necessary as necessary
 from . import _pipeline as pipeline
 from . import _separability as separability
 from ._cover import other_cover
@@ -155,6 +156,9 @@ def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOption
             return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.")
         return err
     text = f"{tol.text()} at {where}"
+    if found := necessary.limits(st.aug, DECIDING_SOLVER):  # where no design of any structure could do better
+        text += (f". It is the plant, not the method: {necessary.describe(found)} (a necessary condition for any "
+                 "design; docs/method.md)")  # fmt: skip
     fix = ""
     if tol.feasible > 0:
         why: list = []

@@ -120,6 +120,10 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     """Step 5, conditioned: Pbar, Q_i, N, theta from (46), (55), (64) at the resolved decay rate (a rate from
     the plant's defaults gives way, as a default, where it is infeasible or the sample time needs it).
 
+    Where (46) is infeasible, or its observer too slow for the fault windows, Theorem 1's (29) is tried at the same
+    bound on cond(Pbar): the closed loop's own certificate at step 3's K, with the loop's block of V an unknown
+    (:func:`observer`; the design then says it is certified by (29)).
+
     With ``options.settle_window`` (the scenario's shortest fault window), the observer must settle in it:
     :data:`SETTLE` of its slowest time constants at most that long. Where the default decay rate is too slow for
     that at the bound kappa on cond(Pbar), the larger bounds of :data:`KAPPA_LADDER` are tried (kappa searched,
@@ -129,29 +133,33 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     rate or a kappa the user gave is kept as given (then only a warning)."""
     K = [s3.K] * st.aug.r
     view = _closed_loop_view(ts, st.T, K, st.r5doc) if resolved.params.get("bound_weight") else None
+    window = options.settle_window
+    settle = bool(window) and resolved.alpha_source != "user" and "kappa" not in resolved.params
+    need = SETTLE / float(window) if settle else 0.0
 
-    def at(params):
+    def at(params, joint=False):
         return conditioned.step5(st.aug, params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
                                  sample_time=options.sample_time, bound_view=view,
-                                 alpha_is_default=resolved.alpha_source == "plant")  # fmt: skip
+                                 alpha_is_default=resolved.alpha_source == "plant", joint=joint)  # fmt: skip
+
+    def observer(params):
+        return _observer(at, params, lambda s5: not settle or slowest_rate(st, s5) >= need)
 
     try:
-        s5 = at(resolved.params)
+        s5 = observer(resolved.params)
     except InfeasibleDesignError as exc:
         if not options.diagnose or "kappa" in resolved.params or not (exc.lmi == "46" and exc.bounded):
             raise
-        s5 = _kappa_for_46(at, resolved.params, exc)
-    window = options.settle_window
-    if not window or resolved.alpha_source == "user" or "kappa" in resolved.params:
+        s5 = _kappa_for_46(observer, resolved.params, exc)
+    if not settle:
         return s5
-    need = SETTLE / float(window)
     rate = slowest_rate(st, s5)
     if rate >= need:
         return s5
     tried = [(s5.kappa, rate, s5)]
     for kappa in (k for k in KAPPA_LADDER if k > s5.kappa):
         try:
-            s5k = at(dict(resolved.params, kappa=kappa))
+            s5k = observer(dict(resolved.params, kappa=kappa))
         except FteError as exc:
             tried.append((kappa, None, exc))
             continue
@@ -163,6 +171,39 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
                                 f"{SETTLE / rate:.3g}; at kappa = {s5.kappa:g}: {SETTLE / tried[0][1]:.3g})")  # fmt: skip
             return s5k
     raise InfeasibleDesignError(_too_slow(ts, st, options, resolved, s3, window, need, tried))
+
+
+def _observer(at, params: dict, fits):
+    """Step 5 at ``params`` by (46), else by Theorem 1's (29) (``at(params, joint=True)``): where (46) is infeasible,
+    or its observer does not ``fits`` (too slow for the fault windows) while (29)'s does. (45)-(46) stay the
+    certificate wherever they give an observer that fits; (29) is the closed loop's own condition (Theorem 1), which
+    they imply at ``P = X^-1`` (Theorem 2), and it does not split the loop's margin into ``sigma P^2``."""
+    try:
+        s5 = at(params)
+    except InfeasibleDesignError as exc:
+        if not (exc.lmi == "46" and exc.bounded):
+            raise
+        try:
+            s5j = at(params, joint=True)
+        except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:
+            raise InfeasibleDesignError(
+                f"{str(exc).rstrip('.')}; and Theorem 1's (29) at step 3's K fails too: {shorten(str(jexc), 240, placeholder=' ...')}",
+                exc.result, lmi=exc.lmi, bounded=exc.bounded,
+            ) from None  # fmt: skip
+        s5j.notes.insert(0, f"step 5: certified by Theorem 1's (29): (46) is infeasible ({shorten(str(exc), 160, placeholder=' ...')}); "
+                            "(29) at step 3's K, with the loop's block of V an unknown, is not")  # fmt: skip
+        return s5j
+    if fits(s5):
+        return s5
+    try:
+        s5j = at(params, joint=True)
+    except (InfeasibleDesignError, conditioned.SolverFailedError):
+        return s5
+    if not fits(s5j):
+        return s5
+    s5j.notes.insert(0, "step 5: certified by Theorem 1's (29): the observer (46) gives is too slow for the fault "
+                        "windows, the one (29) gives (step 3's K, the loop's block of V an unknown) is not")  # fmt: skip
+    return s5j
 
 
 def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
@@ -318,6 +359,7 @@ def finish(
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=resolved.x0,
         remark5=st.r5doc,
+        P29=getattr(s5, "P29", None),
     )
     # the certificate at the numbers the record holds, by the very function a loaded document is judged with
     checks = certify(d)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core._lmis import LMIS
+from .core._certify import certified_by
+from .core._lmis import LMIS, routes
 
 __all__ = []  # public: docs/api.md
 
@@ -17,6 +18,31 @@ def _lmi_keys(checks: dict) -> list[str]:
     if checks.get("theorem") == 5:
         keys += [e.theorem5 for e in LMIS.values() if e.theorem5 and e.theorem5 in lmi]
     return keys
+
+
+def _certified_by(checks: dict) -> str:
+    """Which certificate holds (:func:`~.core._certify.certified_by`): Theorem 3's (45)-(46), or Theorem 1's (29)
+    where they do not (then (46) is shown above but not required)."""
+    held = (
+        checks["certified_by"] if "certified_by" in checks else certified_by(checks)
+    )  # older documents: computed
+    theorem = checks.get("theorem")
+    offered = routes()
+    if held is None or held not in offered:
+        return (
+            "  certificate: no route of "
+            + " or ".join(
+                "(" + ", ".join(LMIS[k].name(theorem) for k in keys) + ")" for keys in offered.values()
+            )
+            + " holds"
+        )
+    names = ", ".join(LMIS[k].name(theorem) for k in offered[held])
+    common = ", ".join(lmi.name(theorem) for lmi in LMIS.values() if not lmi.route)
+    first = next(iter(offered))
+    lam, eps = checks["lmi_max_eig"], checks.get("lmi_roundoff", {})
+    failed = [LMIS[k].name(theorem) for k in offered[first] if not lam.get(k, 0.0) < -eps.get(k, 0.0)]
+    rest = "" if held == first or not failed else f" ({', '.join(failed)}: not required, and not holding)"
+    return f"  certified by {held}'s {names}, with {common}{rest}"
 
 
 def design_summary(d) -> str:
@@ -39,6 +65,7 @@ def design_summary(d) -> str:
             if c.get("lmi_roundoff")
             else ""
         ),
+        _certified_by(c),
         f"  theta = {d.theta:.3g}, cond(Pbar) = {c['cond_Pbar']:.3g}, max|L1| = {c['max_abs_L1']:.3g}, max|K| = {K:.3g}",
         f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
         f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",
