@@ -6,6 +6,9 @@ drives a Monte Carlo simulation (:func:`simulate`, :func:`metrics`) and becomes 
 (:func:`generate_c`) through one CasADi Function (:func:`step_function`).
 """
 
+# first: a Ctrl-C while the modules below load ends `fte` with status 130 and one line, not a traceback
+from . import _interrupt as _interrupt  # noqa: F401
+from ._version import __version__ as __version__  # pyproject.toml's, read from the metadata
 from .codegen import generate_c as generate_c
 from .design import Design as Design
 from .design import design as design
@@ -19,5 +22,3 @@ from .sim import simulate as simulate
 from .step import step_function as step_function
 from .ts import TSModel as TSModel
 from .ts import derive as derive
-
-__version__ = "0.1.0"

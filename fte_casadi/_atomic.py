@@ -4,9 +4,11 @@ Every file fte writes goes through :func:`atomic_write`: the content is written 
 in the target's folder, flushed to disk, and renamed over the target (``os.replace``, atomic on
 POSIX and Windows). A kill, a Ctrl-C or a full disk at any moment leaves the previous file or the
 complete new one, never a partial one; an interrupted write removes its temporary file (a SIGKILL
-can leave one behind, named ``.NAME.*.tmp``).
+can leave one behind, named ``.NAME.*.tmp``). After a Ctrl-C of the ``fte`` command nothing more is put in
+place (:func:`fte_casadi._interrupt.check`), even where the ``KeyboardInterrupt`` was swallowed.
 
-:func:`replace_dir` does the same for a folder written as a set (``fte tune``'s output).
+:func:`replace_dir` does the same for a folder written as a set (``fte tune``'s output), and
+:func:`write_set` for files written as a set into a folder that may hold other files too (``fte codegen``).
 """
 
 from __future__ import annotations
@@ -19,14 +21,20 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write", "atomic_write_text", "replace_dir", "file_mode"]
+from ._interrupt import check as _not_interrupted
+
+__all__ = ["atomic_write", "atomic_write_text", "replace_dir", "write_set", "file_mode"]
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def file_mode() -> int:
     """The permission bits of a newly created file (``0o666`` less the umask): what ``open`` gives."""
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return 0o666 & ~mask
+    return 0o666 & ~_umask()
 
 
 def _folder(path: Path) -> Path:
@@ -77,6 +85,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -
             fh.flush()
             os.fsync(fh.fileno())
         os.chmod(tmp, mode)
+        _not_interrupted()  # after a Ctrl-C nothing is put in place, whoever swallowed its KeyboardInterrupt
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -119,6 +128,7 @@ def replace_dir(new: str | os.PathLike, target: str | os.PathLike) -> Path:
     ``target`` missing and both folders beside it. ``new`` and ``target`` must share a parent folder.
     """
     new, target = Path(new), Path(target)
+    _not_interrupted()
     if not target.exists():
         os.rename(new, target)
     elif _exchange(new, target):
@@ -130,3 +140,48 @@ def replace_dir(new: str | os.PathLike, target: str | os.PathLike) -> Path:
         shutil.rmtree(old)
     _sync_folder(_folder(target))
     return target
+
+
+def write_set(folder: str | os.PathLike, files: dict[str, bytes]) -> list[Path]:
+    """Put ``files`` (name: content) into ``folder`` as one set: a kill at any moment leaves all of them new or
+    all of them as they were, never a mix.
+
+    The new folder is made beside ``folder``: every other entry of ``folder`` carried over as hard links (the
+    same files, not copies; a folder in it as a tree of hard links), then the new files written and flushed;
+    it then replaces ``folder`` by :func:`replace_dir` (one swap where the system can). ``folder`` and the
+    folders above it are created if needed; a ``folder`` that holds the current directory cannot be swapped
+    (``ValueError``). Returns the paths of ``files`` in ``folder``.
+    """
+    target = Path(os.path.abspath(folder))
+    if target.is_symlink():
+        target = target.resolve()
+    here = Path.cwd().resolve()
+    if target.exists() and target.resolve() in (here, *here.parents):
+        raise ValueError(f"{folder} is the current directory or holds it")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    new = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
+    try:
+        if target.is_dir():
+            for entry in os.scandir(target):
+                if entry.name in files:
+                    continue
+                if entry.is_dir(follow_symlinks=False):
+                    shutil.copytree(entry.path, new / entry.name, symlinks=True, copy_function=os.link)
+                else:
+                    os.link(entry.path, new / entry.name, follow_symlinks=False)
+            shutil.copymode(target, new)
+        else:
+            os.chmod(new, 0o777 & ~_umask())  # what mkdir gives (mkdtemp gives 0o700)
+        mode = file_mode()
+        for name, data in files.items():
+            with open(new / name, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.chmod(new / name, mode)
+        _sync_folder(new)
+        replace_dir(new, target)
+    except BaseException:
+        shutil.rmtree(new, ignore_errors=True)
+        raise
+    return [target / name for name in files]

@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from .codegen._generate import BUILTIN_DIRS, file_mode, generate_c, prepare_dir
-from .design._record import Design
+from .codegen import BUILTIN_DIRS, file_mode, generate_c, prepare_dir
+from .design import Design
 
 __all__ = ["builtin_design", "regenerate_builtin"]
 

@@ -24,10 +24,9 @@ from ._atomic import atomic_write_text
 from ._text import shorten
 from .design import DesignOptions
 from .design import design as run_design
-from .design.core._lmis import LMIS
+from .design.core import LMIS
 from .errors import InfeasibleDesignError, SolverFailedError
-from .plants import BUILTIN, SCENARIOS
-from .plants._paper import PRINTED
+from .plants import BUILTIN, PRINTED, SCENARIOS
 from .sim import protected
 from .ts import derive
 
@@ -152,9 +151,15 @@ def _design_rows(designs: dict, printed: dict | None) -> list[str]:
 
 def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .bench import bench_c_step
-    from .codegen import compile_shared, find_compiler, generate_c
-    from .codegen._ctypes_step import CStep, closed_loop_compare
-    from .codegen._generate import default_sample_time, memory_report
+    from .codegen import (
+        CStep,
+        closed_loop_compare,
+        compile_shared,
+        default_sample_time,
+        find_compiler,
+        generate_c,
+        memory_report,
+    )
     from .errors import CodegenError, MissingDependencyError
     from .plants import SCENARIOS
 
@@ -210,47 +215,128 @@ def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     return out, info
 
 
+def _iv(iv) -> str:
+    return "" if not iv else f" [{iv[0]:.3g}, {iv[1]:.3g}]"
+
+
 def _windows_section(m: dict, plant) -> list[str]:
-    """One row per fault window with the true figures; the verdicts said plainly below."""
+    """One row per fault window with the true figures and their 95 % intervals over the paths; the verdicts said
+    plainly below."""
     from .verdicts import verdicts
 
-    out = ["Per fault window (FTC run, all paths pooled; docs/interface.md gives each formula; **bold**: tolerant "
-           "control worse than none on the true outputs):", "",
-           "| fault | window | fault error (whole window) | settled part | settling time | detection delay (missed) "
+    out = ["Per fault window (FTC run, all paths pooled; docs/interface.md gives each formula; [a, b]: the 95 % "
+           "interval over the paths; **bold**: tolerant control worse than none on the true outputs, its interval "
+           "above 1; a ratio above 1 whose interval holds 1 is a tie):", "",
+           "| fault | window | fault error (whole window) | settled part | settling time | detected (within the allowed "
+           "delay) / standing alarms / missed | detection delay "
            f"| FTC true ratio (per output: {', '.join(plant.output_names)}) | compensated ratio | inputs at a limit "
            f"({', '.join(plant.input_names)}) |",
-           "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+           "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+
+    def worse(v, iv) -> bool:
+        return v is not None and v > 1.0 and (iv is None or iv[0] > 1.0)
+
     for w in m["windows"]:
-        r = w["ftc_true_ratio"]
-        rs = _g(r) if r is None or r <= 1.0 else f"**{r:.3g} (worse than none)**"
+        r, riv = w["ftc_true_ratio"], w.get("ftc_true_ratio_interval")
+        rs = f"**{r:.3g}{_iv(riv)} (worse than none)**" if worse(r, riv) else f"{_g(r)}{_iv(riv)}"
+        ivs = w.get("ftc_true_ratio_per_output_interval") or [None] * len(w["ftc_true_ratio_per_output"])
         per = ", ".join(
-            _g(v) if v is None or v <= 1.0 else f"**{v:.3g}**" for v in w["ftc_true_ratio_per_output"]
+            f"**{v:.3g}**" if worse(v, iv) else _g(v) for v, iv in zip(w["ftc_true_ratio_per_output"], ivs)
         )
-        det = (
-            "-"
-            if w.get("missed_detections") is None
-            else f"{_g(w['detection_delay'])} ({w['missed_detections']})"
-        )
+        det = "-" if w.get("missed_detections") is None else (
+            f"{_g(w['detection_probability'])}{_iv(w.get('detection_probability_interval'))} "
+            f"({_g(w.get('detection_probability_within'))} within {_g(w.get('detection_delay_allowed'))}) / "
+            f"{w['standing_alarm_paths']} / {w['missed_detections']}")  # fmt: skip
         sat = ", ".join(_g(v) for v in w["input_saturation"])
         out.append(
-            f"| {w['fault']} | [{w['start']:g}, {w['stop']:g}) | {_g(w['fault_rel_rms_error'])} | "
-            f"{_g(w['fault_rel_rms_error_settled'])} | {_g(w['settling_time'])} | {det} | {rs} ({per}) | "
+            f"| {w['fault']} | [{w['start']:g}, {w['stop']:g}) | {_g(w['fault_rel_rms_error'])}"
+            f"{_iv(w.get('fault_rel_rms_error_interval'))} | {_g(w['fault_rel_rms_error_settled'])} | "
+            f"{_g(w['settling_time'])} | {det} | {_g(w['detection_delay'])} | {rs} ({per}) | "
             f"{_g(w['ftc_compensated_ratio'])} | {sat} |"
         )
-    out += ["", "Each fault's estimate outside its own windows (after the start-up allowance "
-            f"{m['transient']:.3g} and not within {m['settle_after']:.3g} after a window's end), relative to the "
-            "fault: peak " + ", ".join(f"{nm} {_g(v)}" for nm, v in zip(plant.fault_names, m["false_alarm_peak"]))
-            + "; RMS " + ", ".join(f"{nm} {_g(v)}" for nm, v in zip(plant.fault_names, m["false_alarm_rel_rms"]))
-            + "."]  # fmt: skip
+    names = plant.fault_names
+    out += ["", "Each fault's estimate outside its own windows, relative to the fault: peak after the start-up "
+            f"allowance {m['transient']:.3g} and not within {m['settle_after']:.3g} after a window's end "
+            + ", ".join(f"{nm} {_g(v)}" for nm, v in zip(names, m["false_alarm_peak"]))
+            + "; without the allowances " + ", ".join(f"{nm} {_g(v)}" for nm, v in zip(names, m["false_alarm_peak_raw"]))
+            + " (in the start-up " + ", ".join(f"{nm} {_g(v)}" for nm, v in zip(names, m["false_alarm_peak_startup"]))
+            + "; after a window " + ", ".join(f"{nm} {_g(v)}" for nm, v in zip(names, m["false_alarm_peak_after_window"]))
+            + "); RMS " + ", ".join(f"{nm} {_g(v)}" for nm, v in zip(names, m["false_alarm_rel_rms"])) + "."]  # fmt: skip
+    out += ["", "| detection of | threshold (from t) | start-up blocks | calibration | promised false alarms per unit "
+            "time (asked) | measured, fault-free paths | measured, faulty run outside its windows |",
+            "|---|---|---|---|---|---|---|"]  # fmt: skip
     for e in m.get("detection") or []:
-        out.append(f"- detection of {e['fault']}: threshold {_g(e['threshold'])}, {_g(e['false_alarm_rate'])} false "
-                   f"alarms per unit time on fault-free paths (asked {_g(e['false_alarm_rate_asked'])}), "
-                   f"{_g(e.get('false_alarm_rate_ftc_run'))} outside its windows in the faulty run; {e['rule']}")  # fmt: skip
+        out.append(
+            f"| {e['fault']} | {_g(e['threshold'])} ({_g(e.get('steady_from'), '.4g')}) | "
+            f"{len(e.get('startup_thresholds') or [])} | {e['calibration_paths']} paths, "
+            f"{_g(e.get('calibration_hours'))} path-hours, {e.get('calibration_method')} |"
+            f"{_iv(e.get('false_alarm_rate_interval'))} ({_g(e['false_alarm_rate_asked'])}) | "
+            f"{_g(e['false_alarm_rate'])}{_iv(e.get('false_alarm_rate_measured_interval'))} | "
+            f"{_g(e.get('false_alarm_rate_ftc_run'))}{_iv(e.get('false_alarm_rate_ftc_run_interval'))} |"
+        )
+    out += ["", f"Rule: {(m.get('detection') or [{}])[0].get('rule', 'no detection')}."]
     vs = verdicts(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names),
                   list(plant.output_units))  # fmt: skip
     if vs:
         out += ["", "Verdicts:", ""] + [f"- **{v['verdict']}**: {v['text']}" for v in vs]
     return out + [""]
+
+
+#: paths per point of the detection-probability curves in the report, the calibration paths of the noise level the
+#: run did not calibrate for (its thresholds serve the figure, not a promise), and the measurement noise added where
+#: the scenario has none: this multiple of each output's spread over the fault-free paths (its standard deviation
+#: across the paths at each sample, RMS over the samples after the start-up allowance: a sensor as noisy as the
+#: plant's own random fluctuation)
+DETECT_PATHS = 32
+OTHER_CALIBRATION_PATHS = 200
+REPORT_NOISE = 1.0
+
+
+def _detectability_sets(d, plant, sc, res, cal, seed: int):
+    """The detection probability against each fault's size without measurement noise and with it (the scenario's,
+    or REPORT_NOISE x each output's spread over the fault-free paths), each with its own thresholds: the run's
+    calibration ``cal`` for the scenario's own noise level, OTHER_CALIBRATION_PATHS paths for the other."""
+    from .sim import detectability
+
+    kw = dict(paths=DETECT_PATHS, seed=seed)
+    other = dict(kw, calibration_paths=OTHER_CALIBRATION_PATHS)
+    if sc.measurement_noise is None:
+        after = res.free.y[:, res.t >= res.metrics["transient"]]
+        # the spread over the paths at each sample, RMS over the samples: the random part, not the start-up's course
+        spread = np.sqrt(np.mean(after.std(axis=0) ** 2, axis=0)) if after.size else np.ones(plant.p)
+        noise = tuple(float(v) for v in REPORT_NOISE * spread)
+        noisy = dataclasses.replace(sc, measurement_noise=noise)
+        sets = [detectability(d, plant, sc, calibration=cal, **kw), detectability(d, plant, noisy, **other)]
+    else:
+        noise = tuple(sc.measurement_noise.reported(1.0))
+        sets = [detectability(d, plant, sc, scales={"measurement_noise_scale": 0.0}, **other),
+                detectability(d, plant, sc, calibration=cal, **kw)]  # fmt: skip
+    sets[0]["label"], sets[1]["label"] = "without measurement noise", "with measurement noise"
+    return sets, noise
+
+
+def _detectability_section(sets, noise, plant) -> list[str]:
+    """The smallest fault detected on 95 % of the paths within the allowed delay, without and with noise."""
+    out = [
+        f"The smallest fault the design detects: each fault alone, at sizes found in steps of 4 then halved twice, "
+        f"{sets[0]['paths']} paths a point; detected = the alarm rose within the allowed delay of the onset (three "
+        "observer time constants, at most the window) on a path where it was off. With measurement noise (the scenario's, "
+        "or as large as each output's spread over the fault-free paths after the start-up): std "
+        + ", ".join(f"{nm} {v:.3g}" for nm, v in zip(plant.output_names, noise))
+        + f" (each noise level with its own thresholds; the one the run was not calibrated for on "
+        f"{OTHER_CALIBRATION_PATHS} paths).",
+        "",
+        "| fault | within | without noise | with noise |",
+        "|---|---|---|---|",
+    ]
+    for c0, c1 in zip(sets[0]["curves"], sets[1]["curves"]):
+        out.append(f"| {c0['fault']} | {_g(c0['delay'])} | {_mdf(c0)} | {_mdf(c1)} |")
+    return out + [""]
+
+
+def _mdf(c: dict) -> str:
+    v = c["min_detectable_fault"]
+    return f"{v:.3g} (x {c['min_detectable_factor']:.3g})" if v is not None else f"n/a ({c['why']})"
 
 
 def _saturation_section(m: dict, m_free: dict, d, plant) -> list[str]:
@@ -291,9 +377,9 @@ def _saturation_sentence(m: dict, m_free: dict) -> str:
 
 
 def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> tuple[list[str], dict]:
-    from .plot import write_figures
+    from .plot import detectability_figure, write_figures
+    from .sim import attach, calibrate_detection, save_result, simulate
     from .sim import metrics as sim_metrics
-    from .sim import save_result, simulate
 
     printed = PRINTED.get(name)  # None for a plant that is not the paper's (the quadruple tank)
     plant = BUILTIN[name]()
@@ -346,9 +432,16 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
 
     sc = SCENARIOS[name]()
     npaths = max(paths or 0, sc.paths)
+    log(f"[{name}] calibrate the detection thresholds on fault-free paths")
+    cal = calibrate_detection(d, plant, sc, paths=npaths, seed=seed)
     log(f"[{name}] simulate {npaths} paths x 3 runs on the nonlinear plant")
-    res = simulate(d, plant, sc, paths=npaths, seed=seed, progress=False)
+    res = simulate(d, plant, sc, paths=npaths, seed=seed, progress=False, calibration=cal)
     m = sim_metrics(res)
+    log(
+        f"[{name}] the smallest fault detected, without and with measurement noise ({DETECT_PATHS} paths a point)"
+    )
+    sets, noise = _detectability_sets(d, plant, sc, res, cal, seed)
+    m = attach(m, sets)
     save_result(res, out / f"{name}-simulation.npz")
     sub = "figures" if printed is not None else f"figures/{name}"  # the paper's figure numbers, or a folder
     figs = write_figures(res, out / sub)
@@ -369,10 +462,19 @@ def _reproduce_one(name: str, out: Path, seed: int, log, paths: int | None) -> t
         "",
     ]
     sec += _windows_section(m, plant)
+    fig = detectability_figure(sets, name, out / sub, name=f"{name.replace('-', '_')}_detectability.png")
+    sec += _detectability_section(sets, noise, plant) + [f"![detectability]({sub}/{fig.name})", ""]
+    figs = [*figs, fig]
     if d.input_limits is not None:
         log(f"[{name}] simulate again without input limits, to say what saturation does")
         free = simulate(
-            dataclasses.replace(d, input_limits=None), plant, sc, paths=npaths, seed=seed, progress=False
+            dataclasses.replace(d, input_limits=None),
+            plant,
+            sc,
+            paths=npaths,
+            seed=seed,
+            progress=False,
+            detect=False,
         )
         sec += _saturation_section(m, free.metrics, d, plant)
     for f in figs:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .design._record import Design
+from .design import Design
 from .errors import ParameterError
 
 __all__ = ["step_function", "saturate", "STEP_INPUTS", "STEP_OUTPUTS"]
@@ -144,7 +144,7 @@ def step_function(
         The design record (gains, H, T, memberships).
     sample_time : float
         The observer/controller's sample time Ts; must be positive (the caller checks it against
-        ``checks.ts_max``). The former keyword ``ts`` still works, with a ``DeprecationWarning``.
+        ``checks.ts_max``). The former keyword ``ts`` was removed in 0.2.0: giving it is a ``TypeError``.
     tolerant : bool
         With tolerant control (Kf term and sensor compensation) or without it.
     boundary_layer : float, optional

@@ -4,8 +4,11 @@ A document is data. Loading one never runs code it names or holds: its ``plant_s
 only when it is a built-in plant's name or when the user names the same plant (``--plant``), and its
 scheduling map is rebuilt from that plant, or else replayed from the document's arithmetic tape
 (:mod:`fte_casadi.model._tape`), never deserialised. Then the design is re-certified at its own numbers
-(:func:`fte_casadi.design._recertify.recertify`) and, when the plant is at hand, checked against it: the
-fingerprint of its equations (``plant_hash``) and the local models of its T-S model.
+(:func:`fte_casadi.design._recertify.recertify`), the numbers its step uses beside the certificate are checked
+against what they are made of (Kf, H, N, ``checks.ts_max``: :func:`fte_casadi.design._identities.identity_failures`)
+and, when the plant is at hand, checked against it: the fingerprint of its equations (``plant_hash``), the local
+models of its T-S model, its reference input, input limits, region and initial state; its names are then the
+plant's.
 """
 
 from __future__ import annotations
@@ -15,8 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .design._recertify import recertify
-from .design._record import Design
+from .design import Design, identity_failures, recertify
 from .errors import DesignFileError
 from .model import Plant
 
@@ -38,8 +40,7 @@ def plant_for(d: Design, given: str | None) -> tuple[Plant | None, str | None]:
     """The plant to check ``d`` against: the one the user named (``given``), else the document's when it is
     a built-in name, else None (a document's ``file.py:function`` or ``module:function`` is not imported on
     the document's word)."""
-    from .plants import BUILTIN
-    from .plants._loader import load_plant
+    from .plants import BUILTIN, load_plant
 
     if given is not None:
         return load_plant(given), given
@@ -73,8 +74,7 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
     Raises :class:`DesignFileError` naming what changed when the plant's equations are not those the design
     was made for (its fingerprint, or, for a document without one, its T-S model).
     """
-    from .model._fingerprint import PARTS, changed_parts
-    from .model._tape import write_tape
+    from .model import PARTS, changed_parts, write_tape
     from .ts import scheduling_from_measurements, structure
 
     src = d.loaded.get("source", "the design")
@@ -94,8 +94,66 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
             f"{src} was designed for another plant: the plant's equations{named} differ from those the design was "
             f"made for ({why}). Design it again for this plant (`fte design PLANT -o FILE`)"
         )
-    sched, _ = scheduling_from_measurements(ts)
-    return dataclasses.replace(d, scheduling_ops=write_tape(sched))
+    why = _numbers_differ(d, plant, ts)
+    if why:
+        raise DesignFileError(
+            f"{src} does not match its plant{named}: {why}. Design it again for this plant (`fte design PLANT -o "
+            "FILE`), or name the plant it was made for with --plant"
+        )
+    sched, sources = scheduling_from_measurements(ts)
+    names = {
+        "states": list(plant.state_names),
+        "inputs": list(plant.input_names),
+        "outputs": list(plant.output_names),
+        "faults": list(plant.fault_names),
+        "state_units": list(plant.state_units),
+        "output_units": list(plant.output_units),
+        "scheduling_sources": sources,
+    }  # the plant's names, not the document's: names are data, and the plant is the one the user trusts
+    return dataclasses.replace(d, plant=plant.name, names=names, scheduling_ops=write_tape(sched))
+
+
+def _numbers_differ(d: Design, plant: Plant, ts) -> str:
+    """Which number the step uses beside the T-S model differs from the plant's ('' if none): the input limits,
+    the region (the generated C's accepted range of y), the reference input and the initial state."""
+    from .design import u_reference
+
+    limits = None if plant.input_limits is None else np.asarray(plant.input_limits, float)
+    mine = None if d.input_limits is None else np.asarray(d.input_limits, float)
+    if (limits is None) != (mine is None) or (limits is not None and not np.array_equal(limits, mine)):
+        show = lambda a: "none" if a is None else np.array2string(a, precision=6).replace("\n", "")  # noqa: E731
+        return f"its input_limits are {show(mine)}, the plant's {show(limits)}"
+    region = d.checks.get("region") if isinstance(d.checks, dict) else None
+    want = {side: [None if np.isnan(v) else float(v) for v in vals]
+            for side, vals in (("lo", plant.region_lo), ("hi", plant.region_hi))}  # fmt: skip
+    if region is not None and region != want:
+        return (
+            f"its checks.region is {region}, the plant's {want} (the region sets the C's accepted range of y)"
+        )
+    u_ref, x_ref = u_reference(ts, [np.asarray(K, float) for K in d.K], [])
+    if (x_ref is None) != (d.x_ref is None) or (
+        x_ref is not None and not np.allclose(d.x_ref, x_ref, rtol=1e-12)
+    ):
+        return f"its x_ref is {d.x_ref}, the plant's {x_ref}"
+    u = np.asarray(d.u_ref, float).ravel()
+    gap = float(np.max(np.abs(u - u_ref))) if u.shape == u_ref.shape else np.inf
+    if not gap <= 1e-6 * max(1.0, float(np.max(np.abs(u_ref)))):
+        held = (
+            "the input holding the plant at x_ref, less K x_ref"
+            if x_ref is not None
+            else "the plant's reference"
+        )
+        return f"its u_ref is {u.tolist()}, not {held}: {np.round(u_ref, 9).tolist()}"
+    if d.x0 is not None:
+        x0 = np.asarray(d.x0, float).ravel()
+        lo = np.where(np.isnan(plant.region_lo), -np.inf, plant.region_lo)
+        hi = np.where(np.isnan(plant.region_hi), np.inf, plant.region_hi)
+        out = np.flatnonzero((x0 < lo) | (x0 > hi))
+        if out.size:
+            k = int(out[0])
+            return (f"its x0 = {x0.tolist()} lies outside the plant's region ({plant.state_names[k]} = {x0[k]:g} not in "
+                    f"[{lo[k]:g}, {hi[k]:g}]), where its T-S model and the observer mean nothing")  # fmt: skip
+    return ""
 
 
 def _convex_memberships(d: Design) -> str:
@@ -137,11 +195,22 @@ def check_loaded(d: Design, plant_option: str | None = None, allow_uncertified: 
                 f"a built-in one: name the plant with --plant {d.plant_spec}, or make the document again with "
                 "`fte design`"
             )
+    if not d.plant_hash:
+        notes.append(
+            f"note: {src} has no plant_hash (it predates it, or it was removed): it is unchecked against any plant's "
+            "fingerprint; "
+            + (
+                "with its plant loaded it was compared through its T-S model, input limits, reference "
+                "and region"
+                if plant is not None
+                else "name its plant with --plant to compare them"
+            )
+        )
     bad = _convex_memberships(d)
     if bad:
         raise DesignFileError(f"{src}: its scheduling map ('scheduling_ops') is not a T-S membership map: {bad}; "
                               "make the document again with `fte design`")  # fmt: skip
-    reasons = recertify(d)
+    reasons = identity_failures(d) + recertify(d)
     if d.loaded.get("certified") is False:
         reasons.insert(0, 'the document says "certified": false')
     if not reasons:

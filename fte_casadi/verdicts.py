@@ -50,10 +50,48 @@ def _crosstalk(w: dict, faults) -> str:
     )
 
 
+def _above(value, interval, level: float) -> bool:
+    """``value`` is above ``level`` and, where the document gives its interval over the paths, so is the whole
+    interval (otherwise the figure ties with ``level``)."""
+    if value is None or not value > level:
+        return False
+    return interval is None or (interval[0] is not None and interval[0] > level)
+
+
+def _iv(interval) -> str:
+    return "" if interval is None else f", 95 % interval {interval[0]:.4g}-{interval[1]:.4g} over the paths"
+
+
+def _rate_verdicts(m: dict, add) -> None:
+    """Too many false alarms: a measured rate whose interval lies above the interval the calibration promised
+    (or above the rate asked, without one), on the fault-free paths and in the faulty run outside the fault's
+    windows (allowances left out)."""
+    for e in m.get("detection") or []:
+        asked = e.get("false_alarm_rate_asked")
+        promised = e.get("false_alarm_rate_interval") or ([asked, asked] if asked is not None else None)
+        if promised is None:
+            continue
+        for key, run in (("false_alarm_rate", "on fault-free paths"),
+                         ("false_alarm_rate_ftc_run", "in the faulty run outside its fault windows")):  # fmt: skip
+            v, iv = e.get(key), e.get(f"{key}_interval" if key != "false_alarm_rate" else
+                                      "false_alarm_rate_measured_interval")  # fmt: skip
+            if v is None:
+                continue
+            lo = iv[0] if iv is not None else v
+            if lo > promised[1]:
+                add("false-alarm rate", e["fault"], v,
+                    f"the alarm of {e['fault']} is raised {v:.3g} times per unit time {run} (95 % interval "
+                    f"{lo:.3g}-{(iv or [v, v])[1]:.3g}), above the {promised[0]:.3g}-{promised[1]:.3g} the thresholds "
+                    f"promise at the rate asked ({asked:.3g})")  # fmt: skip
+
+
 def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     """The verdicts on metrics document ``m``: a list of ``{"verdict", "where", "value", "text"}`` with
-    ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``, ``saturated``,
-    ``poor estimate``, ``slow observer``, ``not settled``, ``missed``, ``outside region``."""
+    ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``,
+    ``false-alarm rate``, ``standing alarm``, ``saturated``, ``poor estimate``, ``slow observer``, ``not
+    settled``, ``missed``, ``outside region``. A ratio is worse than none only when its interval over the
+    paths lies above 1 (where the document gives one); a ratio above 1 whose interval holds 1 is a tie. A poor
+    estimate likewise needs its interval at or above :data:`POOR_ESTIMATE`."""
     out = []
 
     def add(verdict, where, value, text):
@@ -64,10 +102,11 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
             add("false alarm", name, v,
                 f"the estimate of {name} outside its fault windows peaks at {v:.3g} x the fault's own peak "
                 f"(>= {FALSE_ALARM:g}): false alarms, e.g. cross-talk from another fault")  # fmt: skip
+    _rate_verdicts(m, add)
     for w in m.get("windows", []):
         where = _where(w)
         r = w.get("ftc_true_ratio")
-        if r is not None and r > WORSE_THAN_NONE:
+        if _above(r, w.get("ftc_true_ratio_interval"), WORSE_THAN_NONE):
             per = w.get("ftc_true_ratio_per_output") or []
             worst = ", ".join(
                 f"{outputs[k] if k < len(outputs) else k}: {v:.4g}"
@@ -76,11 +115,13 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
             )
             add("worse than none", where, r,
                 f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {r:.4g} > "
-                f"{WORSE_THAN_NONE:g}; per output {worst}){_crosstalk(w, faults)}")  # fmt: skip
+                f"{WORSE_THAN_NONE:g}{_iv(w.get('ftc_true_ratio_interval'))}; per output {worst})"
+                f"{_crosstalk(w, faults)}")  # fmt: skip
         elif r is not None:
             rms = w.get("ftc_true_rms_per_output") or {}
+            ivs = w.get("ftc_true_ratio_per_output_interval") or []
             for k, v in enumerate(w.get("ftc_true_ratio_per_output") or []):
-                if v is not None and v > WORSE_THAN_NONE:
+                if _above(v, ivs[k] if k < len(ivs) else None, WORSE_THAN_NONE):
                     name = outputs[k] if k < len(outputs) else f"output {k}"
                     size = ""
                     if rms.get("ftc") and rms.get("no_ftc"):
@@ -89,10 +130,10 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
                                 f"{rms['no_ftc'][k]:.3g}{unit} without")  # fmt: skip
                     add("worse than none on an output", f"{where}, {name}", v,
                         f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
-                        f"{WORSE_THAN_NONE:g}{size}), though the outputs as a whole are better (ftc_true_ratio "
-                        f"{r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
-        err = w.get("fault_rel_rms_error")
-        if err is not None and err >= POOR_ESTIMATE:
+                        f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
+                        f"whole are not worse (ftc_true_ratio {r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
+        err, err_iv = w.get("fault_rel_rms_error"), w.get("fault_rel_rms_error_interval")
+        if err is not None and err >= POOR_ESTIMATE and (err_iv is None or err_iv[0] >= POOR_ESTIMATE):
             add("poor estimate", where, err,
                 f"in {where} the fault estimate misses {100 * min(err, 9.99):.0f} % of the fault (relative RMS error "
                 f"{err:.3g} over the window): this design does not estimate this fault in this scenario")  # fmt: skip
@@ -108,12 +149,14 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
                 "the fault's peak by the window's end")  # fmt: skip
         miss = w.get("missed_detections")
         if miss:
-            add(
-                "missed",
-                where,
-                miss,
-                f"in {where} the fault is not detected on {miss} of {m.get('paths')} paths",
-            )
+            add("missed", where, miss,
+                f"in {where} the fault is not detected on {miss} of {m.get('paths')} paths (the alarm off at its "
+                "onset and never raised in it)")  # fmt: skip
+        standing = w.get("standing_alarm_paths")
+        if standing:
+            add("standing alarm", where, standing,
+                f"in {where} the alarm of {w['fault']} was already on at the onset on {standing} of {m.get('paths')} "
+                "paths: a false alarm the fault found raised, counted as neither a detection nor a miss")  # fmt: skip
         for i, frac in enumerate(w.get("input_saturation", [])):
             if frac > SATURATED:
                 name = inputs[i] if i < len(inputs) else str(i)

@@ -13,15 +13,12 @@ import numpy as np
 import pytest
 from tolerances import C_DOUBLE
 
+from fte_casadi.codegen import CStep, generate_c
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep
-from fte_casadi.codegen._generate import generate_c
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.errors import DesignFileError
-from fte_casadi.plants import SCENARIOS
-from fte_casadi.plants._loader import load_plant, load_scenario
-from fte_casadi.sim import simulate
-from fte_casadi.sim._accommodate import accommodated
+from fte_casadi.plants import SCENARIOS, load_plant, load_scenario
+from fte_casadi.sim import accommodated, simulate
 from fte_casadi.step import accommodation_gate, step_function
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -117,8 +117,7 @@ def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeyp
 
     import fte_casadi.bench
     from fte_casadi._report import _c_section
-    from fte_casadi.codegen import find_compiler
-    from fte_casadi.codegen._generate import memory_report
+    from fte_casadi.codegen import find_compiler, memory_report
     from fte_casadi.errors import MissingDependencyError
 
     if find_compiler() is None:
@@ -135,3 +134,30 @@ def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeyp
     assert f"{mem['state_bytes']} B" in row and f"{mem['const_bytes']} B" in row
     assert "(timings: not measured (no hand-written loop (test)).)" in lines
     assert info["max_diff"] < 1e-9 and info["bench"]["casadi_us"] is None
+
+
+def test_the_0_1_design_is_a_baseline_outside_the_wheel_that_fte_bench_runs_from_a_checkout(monkeypatch):
+    """The 0.1 formulation is not in the package (nor its wheel): it lives in baselines/, and `fte bench` loads it
+    from a checkout; where it is not there (a wheel), the design part is measured and the baseline said not run."""
+    import pathlib
+
+    from setuptools import find_packages
+
+    from fte_casadi.bench import _design, summary_lines
+    from fte_casadi.plants import manipulator
+    from fte_casadi.ts import derive
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    assert not any("baselines" in p for p in find_packages(str(root), include=["fte_casadi*"]))
+    assert (
+        not list((root / "fte_casadi").rglob("*design_01*"))
+        and (root / "baselines" / "design_01.py").is_file()
+    )
+    assert _design.design_01_baseline() is not None  # from this checkout
+    assert _design.design_01_baseline(root / "baselines" / "absent.py") is None
+    monkeypatch.setattr(_design, "design_01_baseline", lambda: None)  # as from a wheel
+    out = _design.bench_design(derive(manipulator(), fidelity_samples=100), sample_time=1e-3, repeats=1)
+    assert out["CLARABEL"]["certified"] and out["design_0.1"] == {"not_run": _design.NOT_RUN_01}
+    assert "speedup_vs_0.1" not in out
+    line = summary_lines({"design": {"manipulator": out}})[1]
+    assert "design_0.1: not run (source checkout only)" in line and "faster than 0.1" not in line

@@ -3,7 +3,8 @@
 A harness ``main`` (below) enables ``FE_DIVBYZERO | FE_INVALID | FE_OVERFLOW`` traps and runs the step of
 a built-in plant twice: once on sane measurements only, once with NaN, +-infinity, +-DBL_MAX (one entry
 or all) between them. Each bad sample must return non-zero and leave the state byte for byte as it was;
-the outputs of the two runs must then be identical (recovery). Denormal and zero measurements must go
+the outputs of the two runs must then be identical (recovery). ``init`` and ``init_from_y`` refuse such an
+initial state (``z0``, ``xbar0``) with 1 or 3 and leave the state as it was. Denormal and zero measurements must go
 through without a trap. Compiled ``-O0 -g -fsanitize=address,undefined,float-divide-by-zero
 -fno-sanitize-recover=all``: any 0/0 (even in a discarded branch), overflow or undefined behaviour stops
 the run. The float variant must compile with ``-Wdouble-promotion -Werror`` and pass the same harness,
@@ -20,7 +21,7 @@ import numpy as np
 import pytest
 
 from fte_casadi.codegen._generate import BUILTIN_DIRS, c_name, generate_c
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"
 CC = shutil.which("cc") or shutil.which("gcc")
@@ -122,6 +123,21 @@ int main(void) {
       printf("rc %d on %s\n", rc, j == 0 ? "denormal" : "zero"); fails++;
     }
   }
+  /* initial states: a NaN, an infinity or a huge one refused with its code (1, 3), the state untouched */
+  for (j = 0; j < 5; ++j) {
+    fte_real z[NX], xb[NX];
+    memcpy(&c, &a, sizeof c);
+    for (i = 0; i < NX; ++i) z[i] = 0;
+    z[(3 * j) % NX] = bad[j];
+    rc = fte_@name@_init(&c, z);
+    if (rc != (j < 3 ? 1 : 3) || memcmp(&c, &a, sizeof c) != 0) { printf("init took bad z0: rc %d\n", rc); fails++; }
+    memcpy(xb, fte_@name@_XBAR0, sizeof xb);
+    xb[(3 * j) % NX] = bad[j];
+    sane(0, y);
+    rc = fte_@name@_init_from_y(&c, y, xb);
+    if (rc != (j < 3 ? 1 : 3) || memcmp(&c, &a, sizeof c) != 0) { printf("init_from_y took bad xbar0: rc %d\n", rc); fails++; }
+  }
+  if (fte_@name@_init(&c, 0) != 0) { printf("init refused NULL\n"); fails++; }
   printf(fails ? "FAILED %d\n" : "OK\n", fails);
   return fails != 0;
 }

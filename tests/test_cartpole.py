@@ -10,7 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from fte_casadi.cli import main
-from fte_casadi.codegen._generate import default_sample_time
+from fte_casadi.codegen import default_sample_time
 from fte_casadi.design import design
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive

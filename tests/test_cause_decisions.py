@@ -8,10 +8,10 @@ from __future__ import annotations
 import pytest
 from plant_twin_fans import fans_alike
 
-from fte_casadi.design import _api as api
-from fte_casadi.design import design
-from fte_casadi.design._separability import blocking
+from fte_casadi.design import design, diagnose
 from fte_casadi.design.core import _conditioned as conditioned
+from fte_casadi.design.diagnose import _separability as separability
+from fte_casadi.design.diagnose import blocking
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive
 
@@ -37,16 +37,16 @@ def test_a_numerical_failure_is_no_claim_that_a_fault_blocks(fans, monkeypatch):
 
 def test_the_causes_are_decided_with_clarabel_when_scs_designs(fans, monkeypatch):
     asked = []
-    real = api.separability.blocking
+    real = separability.blocking
 
     def spy(ts, params, solver):
         asked.append(solver)
         return real(ts, params, solver)
 
-    monkeypatch.setattr(api.separability, "blocking", spy)
+    monkeypatch.setattr(separability, "blocking", spy)
     with pytest.raises(InfeasibleDesignError, match="'fan1_loss', 'fan2_loss' are the cause"):
         design(fans, solver="SCS")
-    assert asked and set(asked) == {api.DECIDING_SOLVER} == {"CLARABEL"}
+    assert asked and set(asked) == {diagnose.DECIDING_SOLVER} == {"CLARABEL"}
 
 
 def test_explore_names_the_faults_when_no_sigma_gives_a_design(fans):

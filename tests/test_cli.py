@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from tolerances import PAPER_H
 
 from fte_casadi.cli import main
-from fte_casadi.plants._paper import PRINTED
+from fte_casadi.plants import PRINTED
 
 
 def run(*args):

@@ -19,11 +19,11 @@ import pytest
 from tolerances import C_DOUBLE, C_FLOAT_REL
 
 from fte_casadi._rounding import series_floor
+from fte_casadi.codegen import CStep, closed_loop_compare
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep, closed_loop_compare
 from fte_casadi.codegen._generate import c_name, default_sample_time, generate_c, output_files
 from fte_casadi.errors import CodegenError, DesignFileError, ParameterError
-from fte_casadi.plants._loader import load_plant
+from fte_casadi.plants import load_plant
 from fte_casadi.step import step_function
 
 PLANTS = ("manipulator", "three-tank")
@@ -380,7 +380,7 @@ def test_no_compiler_is_reported(monkeypatch, tmp_path):
 @needs_cc
 def test_bench_measures_and_baseline_agrees(designs):
     """The benchmark runs; its hand-written baseline computes the same step; no mutable globals."""
-    from fte_casadi.bench._cstep import bench_c_step
+    from fte_casadi.bench import bench_c_step
 
     res = bench_c_step(designs["three-tank"], iters=2000, reps=1)
     assert res["c_ns"] > 0 and res["hand_ns"] > 0 and res["casadi_us"] > 0

@@ -10,8 +10,8 @@ import pytest
 from tolerances import C_DOUBLE
 
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._generate import default_sample_time
-from fte_casadi.design._record import Design
+from fte_casadi.codegen import default_sample_time
+from fte_casadi.design import Design
 from fte_casadi.step import step_function
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -20,11 +20,11 @@ from tolerances import C_DOUBLE
 
 from fte_casadi.cli import main
 from fte_casadi.codegen import _build as build
+from fte_casadi.codegen import default_sample_time
 from fte_casadi.codegen._fmu import fmu_variables, generate_fmu, is_fte_fmu
-from fte_casadi.codegen._generate import default_sample_time
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.errors import CodegenError
-from fte_casadi.plants._loader import load_plant
+from fte_casadi.plants import load_plant
 from fte_casadi.step import step_function
 
 try:

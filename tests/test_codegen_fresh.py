@@ -23,11 +23,10 @@ import casadi
 import numpy as np
 import pytest
 
+from fte_casadi.codegen import CStep
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep
 from fte_casadi.codegen._generate import BUILTIN_DIRS, c_name, generate_c, output_files
-from fte_casadi.design import augment
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design, augment
 from fte_casadi.design.core._certify import certificate, failures
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"

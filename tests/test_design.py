@@ -395,7 +395,7 @@ def test_kf_is_exact_when_the_fault_enters_with_the_input_even_if_b_varies():
 @pytest.mark.slow
 def test_a_numerical_failure_is_retried_with_the_other_solver(ts_models, monkeypatch):
     """Issue #17: a solver's numerical failure is retried with the other solver before it is reported."""
-    from fte_casadi.design._api import design as run_design
+    from fte_casadi.design import design as run_design
     from fte_casadi.design.core import _conditioned as conditioned
 
     real_step3 = conditioned.step3
@@ -421,8 +421,7 @@ def test_a_solver_failure_is_not_an_infeasibility_and_the_cli_still_reports_it(m
     and the one-paragraph message (no traceback, not 'internal error')."""
     from click.testing import CliRunner
 
-    from fte_casadi.cli import main
-    from fte_casadi.cli._common import EXIT_FAILED
+    from fte_casadi.cli import EXIT_FAILED, main
     from fte_casadi.design.core import _conditioned as conditioned
     from fte_casadi.errors import FteError, SolverFailedError
 

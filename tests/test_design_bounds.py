@@ -10,10 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fte_casadi.design import design
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design, design
 from fte_casadi.design.core._bounds import bound_value
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import Sinusoid, UniformNoise, simulate
 from fte_casadi.ts import derive
 

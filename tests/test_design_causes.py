@@ -13,11 +13,10 @@ from plant_chain_far import chainfar
 from plant_fjoint import fjoint, fjoint_calm
 from plant_twin_fans import fans_alike, fans_one_fault
 
-from fte_casadi.design import DesignOptions, design
-from fte_casadi.design._diffusion import scaled_model
-from fte_casadi.design._remedy import remedies
+from fte_casadi.design import DesignOptions, design, remedies
 from fte_casadi.design.core import _barrier as barrier
 from fte_casadi.design.core import _sdp as sdp
+from fte_casadi.design.diagnose import scaled_model
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.sim import Bias, Scenario
 from fte_casadi.ts import derive
@@ -87,7 +86,7 @@ def _counting(monkeypatch):
     return count
 
 
-def test_a_64_rule_chain_designs_at_its_defaults_within_three_designs_of_work(monkeypatch):
+def test_a_64_rule_chain_designs_at_its_defaults_within_one_and_a_half_designs_of_work(monkeypatch):
     ts = derive(chainfar(), fidelity_samples=300)
     assert ts.r == 64 and not ts.plant.design_defaults
     count = _counting(monkeypatch)
@@ -98,14 +97,18 @@ def test_a_64_rule_chain_designs_at_its_defaults_within_three_designs_of_work(mo
     assert d0.certified and "sigma" in d0.params_chosen
     count.update(newton=0, conic=[])
     t0 = time.perf_counter()
-    d1 = design(ts, sigma=d0.params.sigma)  # one design at the sigma the search ended with
+    d1 = design(
+        ts, sigma=d0.params.sigma
+    )  # one design at the sigma it ended with (gamma is minimised, as always)
     t_one = time.perf_counter() - t0
     assert d1.certified
     print(f"64-rule chain: defaults {t_defaults:.1f} s, one design {t_one:.1f} s; Newton steps "
           f"{at_defaults['newton']} vs {count['newton']}; conic solves {at_defaults['conic']} vs {count['conic']}")  # fmt: skip
-    # the work, counted (not timed): the search costs at most two more designs, and at most one conic solve
-    # (the bound on sigma) beyond what one design solves
-    assert at_defaults["newton"] <= 3 * count["newton"]
+    # the work, counted (not timed): numpy's Newton steps and the rows of the conic solves' PSD cones (a conic
+    # solve's work grows with them), each at most 1.5 times what one design at the sigma found costs, and at most
+    # one conic solve (the bound on sigma) beyond it
+    assert at_defaults["newton"] <= 1.5 * count["newton"]
+    assert sum(at_defaults["conic"]) <= 1.5 * sum(count["conic"])
     assert len(at_defaults["conic"]) <= len(count["conic"]) + 1
 
 
@@ -205,7 +208,7 @@ def test_a_heavy_bound_asked_of_scs_is_bisected_by_phase_1_and_agrees_with_clara
     """The 64-rule chain's sigma_max with SCS: phase 1's bisection in numpy, not a conic solve of 13 000 rows
     of PSD cones (minutes); within 10 % of Clarabel's conic bound, and the design's own step 3 agrees with
     it: feasible a little below, infeasible a little above."""
-    from fte_casadi.design._augment import augment
+    from fte_casadi.design import augment
     from fte_casadi.design.core import _conditioned as conditioned
     from fte_casadi.design.core import _diagnose
 

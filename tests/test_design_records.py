@@ -11,8 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fte_casadi.design import Design
-from fte_casadi.design._records import Dims, Observer, Params
+from fte_casadi.design import Design, Dims, Observer, Params
 from fte_casadi.errors import DesignFileError
 from fte_casadi.ts._model import LOCAL_MODEL_KEYS, LocalModel
 

@@ -12,11 +12,7 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from fte_casadi.design import DesignOptions, design
-from fte_casadi.design._augment import augment
-from fte_casadi.design._isolation import crosstalk
-from fte_casadi.design._recertify import recertify
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design, DesignOptions, augment, crosstalk, design, recertify
 from fte_casadi.design.core._decay import LOOP_AT_LEAST, LOOP_SPEEDUP, loop_decay_target
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive

@@ -10,11 +10,10 @@ import pytest
 from certified import assert_certified
 from tolerances import C_DOUBLE, ROUNDOFF
 
+from fte_casadi.codegen import CStep, closed_loop_compare, generate_c
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen import generate_c
-from fte_casadi.codegen._ctypes_step import CStep, closed_loop_compare
 from fte_casadi.design import design
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import metrics, simulate
 from fte_casadi.ts import derive
 

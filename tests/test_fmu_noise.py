@@ -11,9 +11,8 @@ from tolerances import C_DOUBLE
 
 from fte_casadi.codegen import _build as build
 from fte_casadi.codegen._fmu import fmu_variables, generate_fmu
-from fte_casadi.design._record import Design
-from fte_casadi.plants import SCENARIOS
-from fte_casadi.plants._loader import load_plant
+from fte_casadi.design import Design
+from fte_casadi.plants import SCENARIOS, load_plant
 from fte_casadi.sim import simulate
 from fte_casadi.step import step_function
 

@@ -6,7 +6,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.errors import DesignFileError, PlantError
 from fte_casadi.model import PlantBuilder
 from fte_casadi.step import saturate, step_function
@@ -76,8 +76,7 @@ def test_three_tank_saturation_from_the_saved_arrays(plants, real_designs, tmp_p
     import dataclasses
 
     from fte_casadi.plants import SCENARIOS
-    from fte_casadi.sim import load_result, save_result, simulate
-    from fte_casadi.sim._metrics import metrics_from_arrays
+    from fte_casadi.sim import load_result, metrics_from_arrays, save_result, simulate
 
     sc = dataclasses.replace(SCENARIOS["three-tank"]().until(300.0), x0_noise=2.0)  # a start that saturates
     res = simulate(real_designs["three-tank"], plants["three-tank"], sc, paths=4, seed=5, progress=False,

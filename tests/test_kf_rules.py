@@ -8,11 +8,9 @@ import pytest
 from plant_kf_rules import plant, scenario
 from tolerances import C_DOUBLE
 
+from fte_casadi.codegen import CStep, generate_c
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep
-from fte_casadi.codegen._generate import generate_c
-from fte_casadi.design import design
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design, design
 from fte_casadi.sim import simulate
 from fte_casadi.step import step_function
 from fte_casadi.ts import derive

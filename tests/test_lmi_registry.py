@@ -11,10 +11,7 @@ import numpy as np
 import pytest
 
 from fte_casadi._report import _design_rows
-from fte_casadi.design import design
-from fte_casadi.design._recertify import recertify
-from fte_casadi.design._record import Design
-from fte_casadi.design._summary import design_summary
+from fte_casadi.design import Design, design, design_summary, recertify
 from fte_casadi.design.core._lmis import LMI, LMIS, block_sizes, register, routes, unregister
 from fte_casadi.errors import InfeasibleDesignError
 
@@ -83,7 +80,7 @@ def test_a_registered_lmi_that_fails_refuses_the_design(toy, ts_models, tmp_path
 
 
 def _aug(d):
-    from fte_casadi.design._augment import augment
+    from fte_casadi.design import augment
 
     return augment(d.local_models, d.C, d.Df)
 

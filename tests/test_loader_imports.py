@@ -9,7 +9,7 @@ import textwrap
 from click.testing import CliRunner
 
 from fte_casadi.cli import main
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.plants import load_plant, load_scenario
 
 PLANT = """
 import casadi as ca

@@ -7,14 +7,16 @@ package's own metric code, so that a slip in one shows up as a disagreement with
 from __future__ import annotations
 
 import dataclasses
+import os
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
-from fte_casadi.design._record import Design
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.design import Design
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import simulate
 
 pytestmark = pytest.mark.slow
@@ -127,18 +129,68 @@ def outside_mask(res, j, transient, settle_after):
     return m
 
 
-def raises(r, thr, mask):
-    """Alarms raised at the samples in ``mask``: on at r >= thr, off at r < thr / 2 (per path)."""
-    count = 0
-    for rp in r:
+def thresholds_at(entry, t):
+    """A fault's threshold at each sample: a start-up block's own in [start, stop), else the steady one."""
+    thr = np.full(t.size, float(entry["threshold"]))
+    for b in entry["startup_thresholds"]:
+        thr[(t >= b["start"]) & (t < b["stop"])] = b["threshold"]
+    return thr
+
+
+def alarm_run(r, thr, after):
+    """Per path the samples where the alarm is raised and its state before each sample: off until ``after``,
+    on at r >= thr, off at r < thr / 2 (the thresholds of each sample)."""
+    raised = np.zeros(r.shape, bool)
+    before = np.zeros(r.shape, bool)
+    for p, rp in enumerate(r):
         on = False
         for k, v in enumerate(rp):
-            if not on and v >= thr:
-                on = True
-                count += bool(mask[k])
-            elif on and v < 0.5 * thr:
+            before[p, k] = on
+            if not after[k]:
                 on = False
-    return count
+            elif not on and v >= thr[k]:
+                on = raised[p, k] = True
+            elif on and v < 0.5 * thr[k]:
+                on = False
+    return raised, before
+
+
+def replicates(seed, a, b):
+    """The documented bootstrap over the paths of (sum a, sum b): the pairs sorted by (a, b), then Poisson(1)
+    weights (paths x 1000) of default_rng([seed, 39]), path by path in that order."""
+    order = np.lexsort((b, a))
+    W = np.random.default_rng([seed, 39]).poisson(1.0, (len(a), 1000)).astype(float)
+    return W.T @ np.asarray(a, float)[order], W.T @ np.asarray(b, float)[order]
+
+
+def percentiles(v):
+    return list(np.percentile(v, [2.5, 97.5])) if v.size >= 500 else None
+
+
+def ratio_interval(seed, a, b):
+    """The 95 % interval of sqrt(sum a / sum b) over the paths."""
+    num, den = replicates(seed, a, b)
+    return percentiles(np.sqrt(num[den > 0] / den[den > 0]))
+
+
+def rate_interval(seed, counts, exposure):
+    """Garwood's exact interval of the total count, widened where the bootstrap over the paths is wider."""
+    k, total = int(np.sum(counts)), exposure * len(counts)
+    lo = 0.0 if k == 0 else stats.chi2.ppf(0.025, 2 * k) / 2
+    hi = stats.chi2.ppf(0.975, 2 * k + 2) / 2
+    num, den = replicates(seed, counts, np.full(len(counts), exposure))
+    b = percentiles(num[den > 0] / den[den > 0]) or [np.inf, -np.inf]
+    return [min(lo / total, b[0]), max(hi / total, b[1])]
+
+
+def clopper_pearson(k, n):
+    lo = 0.0 if k == 0 else stats.beta.ppf(0.025, k, n - k + 1)
+    hi = 1.0 if k == n else stats.beta.ppf(0.975, k + 1, n - k)
+    return [lo, hi]
+
+
+def per_path(v):
+    return np.sum(np.square(v), axis=tuple(range(1, v.ndim)))
 
 
 def first_from(E, limit, idx):
@@ -209,6 +261,45 @@ def test_global_figures(res):
         check(f"false_alarm_peak[{name}]", doc["false_alarm_peak"][j], peak)
         rel = None if none else rms(fh[:, out]) / rms(f[:, whole])
         check(f"false_alarm_rel_rms[{name}]", doc["false_alarm_rel_rms"][j], rel)
+        want = (
+            None
+            if zero
+            else ratio_interval(res.seed, per_path(fh[:, whole] - f[:, whole]), per_path(f[:, whole]))
+        )
+        check(f"fault_rel_rms_error_interval[{name}]", doc["fault_rel_rms_error_interval"][j], want)
+        # the allowances' own peaks: before the transient, and within settle_after of a window's end (after it)
+        lag = np.zeros(t.size, bool)
+        for jj, _, _a, b in ws:
+            lag |= between(t, b, b + settle_after) if jj == j else False
+        parts = {
+            "": out,
+            "_startup": ~whole & (t < transient),
+            "_after_window": ~whole & (t >= transient) & lag,
+        }
+        peaks = {}
+        for tag, m in parts.items():
+            if not zero and m.any():
+                q, k = np.unravel_index(np.argmax(np.abs(fh[:, m])), fh[:, m].shape)
+                peaks[tag] = (
+                    np.abs(fh[:, m]).max() / np.abs(f[:, whole]).max(),
+                    t[m][k],
+                    fh[:, m][q, k] / np.abs(f[:, whole]).max(),
+                )
+        for tag in ("_startup", "_after_window"):
+            check(
+                f"false_alarm_peak{tag}[{name}]",
+                doc[f"false_alarm_peak{tag}"][j],
+                peaks[tag][0] if tag in peaks else None,
+            )
+        top = max(peaks.values(), key=lambda v: v[0]) if peaks else None
+        check(f"false_alarm_peak_raw[{name}]", doc["false_alarm_peak_raw"][j], top[0] if top else None)
+        for key, v in (("false_alarm_peak_at", peaks.get("")), ("false_alarm_peak_raw_at", top)):
+            got = doc[key][j]
+            check(
+                f"{key}[{name}]",
+                None if got is None else [got["t"], got["value"]],
+                None if v is None else v[1:],
+            )
     union = np.zeros(t.size, bool)
     for *_, a, b in ws:
         union |= between(t, a, b)
@@ -218,6 +309,10 @@ def test_global_figures(res):
     y0 = free.y[:, union]
     want = ratio(ftc.yc[:, union] - y0, noftc.y[:, union] - y0)
     check("ftc_compensated_ratio", doc["ftc_compensated_ratio"], want)
+    want = ratio_interval(res.seed, per_path(cx["ftc"] - cx["free"]), per_path(cx["noftc"] - cx["free"]))
+    check("ftc_true_ratio_interval", doc["ftc_true_ratio_interval"], want)
+    want = ratio_interval(res.seed, per_path(ftc.yc[:, union] - y0), per_path(noftc.y[:, union] - y0))
+    check("ftc_compensated_ratio_interval", doc["ftc_compensated_ratio_interval"], want)
     if res.region is None:
         check("outside_region", doc["outside_region"], 0.0)
     else:
@@ -232,7 +327,7 @@ def test_global_figures(res):
 
 def test_windows(res):
     doc, check, t, ftc = res.metrics, Checker(), res.t, res.ftc
-    thresholds = {d["fault"]: d["threshold"] for d in doc["detection"]}
+    thresholds = {d["fault"]: d for d in doc["detection"]}
     ws = windows(res)
     assert [(w["fault"], w["start"], w["stop"]) for w in doc["windows"]] == [(n, a, b) for _, n, a, b in ws]
     C = np.asarray(res.design.C)
@@ -271,11 +366,32 @@ def test_windows(res):
         check(
             f"{key}.input_saturation", w["input_saturation"], at_limit(res, ftc.u[:, inw]).mean(axis=(0, 1))
         )
+        seed = res.seed
+        if not zero:
+            want = ratio_interval(seed, per_path(fh[:, inw] - f[:, inw]), per_path(f[:, inw]))
+            check(f"{key}.fault_rel_rms_error_interval", w["fault_rel_rms_error_interval"], want)
+            check(
+                f"{key}.ftc_true_ratio_interval",
+                w["ftc_true_ratio_interval"],
+                ratio_interval(seed, per_path(d_ftc), per_path(d_no)),
+            )
+            for i in range(C.shape[0]):
+                want = ratio_interval(seed, per_path(d_ftc[..., i]), per_path(d_no[..., i]))
+                check(
+                    f"{key}.ftc_true_ratio_per_output_interval[{i}]",
+                    w["ftc_true_ratio_per_output_interval"][i],
+                    want,
+                )
         if name not in thresholds:
             assert w["detection_delay"] is None and w["missed_detections"] is None, key
             continue
-        hit = np.abs(fh[:, inw]) >= thresholds[name]
-        delays = [t[inw][np.argmax(h)] - a for h in hit if h.any()]
+        # the alarm rule at each sample's threshold; a path whose alarm is on at the onset is a standing alarm
+        after = t >= doc["transient"]
+        raised, before = alarm_run(np.abs(fh), thresholds_at(thresholds[name], t), after)
+        k0 = np.flatnonzero(inw)[0]
+        standing = before[:, k0]
+        delays = [t[inw][np.argmax(r)] - a for r, st in zip(raised[:, inw], standing) if r.any() and not st]
+        P = fh.shape[0]
         check(f"{key}.detection_delay", w["detection_delay"], np.mean(delays) if delays else None)
         check(
             f"{key}.detection_delay_max",
@@ -283,7 +399,23 @@ def test_windows(res):
             max(delays) if delays else None,
             exact=True,
         )
-        check(f"{key}.missed_detections", w["missed_detections"], hit.shape[0] - len(delays), exact=True)
+        check(f"{key}.standing_alarm_paths", w["standing_alarm_paths"], int(standing.sum()), exact=True)
+        check(
+            f"{key}.missed_detections",
+            w["missed_detections"],
+            P - int(standing.sum()) - len(delays),
+            exact=True,
+        )
+        check(f"{key}.detection_probability", w["detection_probability"], len(delays) / P)
+        check(
+            f"{key}.detection_probability_interval",
+            w["detection_probability_interval"],
+            clopper_pearson(len(delays), P),
+        )
+        allowed = min(3.0 * doc["observer_time_constant"], b - a)
+        check(f"{key}.detection_delay_allowed", w["detection_delay_allowed"], allowed)
+        within = sum(1 for v in delays if v <= allowed + 1e-9)
+        check(f"{key}.detection_probability_within", w["detection_probability_within"], within / P)
     check.done()
 
 
@@ -301,21 +433,44 @@ def test_detection(res):
     doc, check, t = res.metrics, Checker(), res.t
     transient, settle_after = doc["transient"], doc["settle_after"]
     assert [d["fault"] for d in doc["detection"]] == list(res.names["faults"])
+    P = res.free.x.shape[0]
+    tau = doc["observer_time_constant"]
     for j, d in enumerate(doc["detection"]):
-        thr, key = d["threshold"], f"detection[{d['fault']}]"
-        assert np.isfinite(thr) and thr > 0, key
-        assert d["calibration_paths"] == max(res.ftc.x.shape[0], 8), key
-        assert d["calibration_peak_max"] > 0, key
+        thr, key = thresholds_at(d, t), f"detection[{d['fault']}]"
+        assert np.all(np.isfinite(thr)) and np.all(thr >= d["threshold"]) and d["threshold"] > 0, key
+        # calibration: paths P, P + 1, ... for N = 25 expected alarms per block of one observer time constant
+        # (at least 200, at most the budget of path-steps, but at least 16), their fault-free time after the transient
+        steps = round(res.scenario.T / res.dt)
+        block = max(1, round(max(tau, res.scenario.T / 128) / res.dt)) * res.dt
+        budget = float(os.environ.get("FTE_CALIBRATION_BUDGET", 2e7))  # path-steps per pass (conftest.py)
+        want = min(
+            max(int(np.ceil(25 / (d["false_alarm_rate_asked"] * block))), 200), max(16, int(budget // steps))
+        )
+        check(f"{key}.calibration_paths", d["calibration_paths"], want, exact=True)
+        check(f"{key}.calibration_first_path", d["calibration_first_path"], P, exact=True)
+        check(f"{key}.calibration_time", d["calibration_time"], want * (res.scenario.T - transient))
+        lo, hi = d["false_alarm_rate_interval"]
+        assert lo <= d["false_alarm_rate_calibration"] <= hi and d["false_alarm_count_calibration"] >= 0, key
+        assert all(
+            b["start"] >= transient - 1e-12 and b["stop"] <= d["steady_from"] + 1e-9
+            for b in d["startup_thresholds"]
+        )
         per_hour = {"s": 3600.0, "min": 60.0, "h": 1.0}.get(res.names["time_unit"])
         if per_hour is not None:  # the default: one false alarm per hour of operation
             check(f"{key}.false_alarm_rate_asked", d["false_alarm_rate_asked"], 1.0 / per_hour)
         after = t >= transient
-        n = raises(np.abs(res.free.fhat[..., j]), thr, after)
-        check(
-            f"{key}.false_alarm_rate", d["false_alarm_rate"], n / (after.sum() * res.free.x.shape[0] * res.dt)
-        )
+        raised, _ = alarm_run(np.abs(res.free.fhat[..., j]), thr, after)
+        n = raised[:, after].sum(axis=1)
+        check(f"{key}.false_alarm_rate", d["false_alarm_rate"], n.sum() / (after.sum() * P * res.dt))
+        check(f"{key}.false_alarm_count", d["false_alarm_count"], int(n.sum()), exact=True)
+        check(f"{key}.false_alarm_rate_measured_interval", d["false_alarm_rate_measured_interval"],
+              rate_interval(res.seed, n, after.sum() * res.dt))  # fmt: skip
         out = outside_mask(res, j, transient, settle_after)
-        n = raises(np.abs(res.ftc.fhat[..., j]), thr, out)
-        want = None if not out.any() else n / (out.sum() * res.ftc.x.shape[0] * res.dt)
+        raised, _ = alarm_run(np.abs(res.ftc.fhat[..., j]), thr, after)
+        n = raised[:, out].sum(axis=1)
+        want = None if not out.any() else n.sum() / (out.sum() * P * res.dt)
         check(f"{key}.false_alarm_rate_ftc_run", d["false_alarm_rate_ftc_run"], want)
+        if out.any():
+            check(f"{key}.false_alarm_rate_ftc_run_interval", d["false_alarm_rate_ftc_run_interval"],
+                  rate_interval(res.seed, n, out.sum() * res.dt))  # fmt: skip
     check.done()

@@ -8,12 +8,10 @@ import numpy as np
 import pytest
 from tolerances import C_DOUBLE
 
+from fte_casadi.codegen import CStep, generate_c
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep
-from fte_casadi.codegen._generate import generate_c
 from fte_casadi.errors import ParameterError
-from fte_casadi.plants import SCENARIOS
-from fte_casadi.plants._loader import load_plant
+from fte_casadi.plants import SCENARIOS, load_plant
 from fte_casadi.sim import Scenario, simulate
 from fte_casadi.sim._sweep import sweep
 

@@ -342,3 +342,189 @@ def test_tune_refuses_a_directory_with_other_files(tmp_path):
     assert r.exit_code == 2 and "notes.txt" in _said(r) and "as a whole" in _said(r)
     assert (out / "notes.txt").read_text() == "mine"
     assert sorted(f.name for f in tmp_path.iterdir()) == ["t"]
+
+
+# -- Ctrl-C always wins ---------------------------------------------------------------------
+@pytest.mark.parametrize("then", ["goes on", "fails"])
+def test_a_swallowed_ctrl_c_still_ends_with_130_and_writes_nothing(tmp_path, monkeypatch, then):
+    """CasADi returns None from a call a Ctrl-C interrupted (the design then goes on, or fails later with an
+    error of its own): the command still ends with 130, and the document is not written."""
+    import fte_casadi.cli._design as cli_design
+    from fte_casadi.design import Design
+
+    def swallowing(*a, **k):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # the handler runs at the next bytecode
+        except KeyboardInterrupt:
+            pass  # what CasADi and a retrying library do with it
+        d = Design.load(ROOT / "generated" / "manipulator" / "design.json") if then == "goes on" else None
+        return d, None, None
+
+    monkeypatch.setattr(cli_design, "_make_design", swallowing)
+    target = tmp_path / "d.json"
+    r = CliRunner().invoke(main, ["design", "manipulator", "-o", str(target)])
+    assert r.exit_code == 130, r.output
+    assert "interrupted; nothing was written" in _said(r) and "internal error" not in r.output
+    assert os.listdir(tmp_path) == []
+
+
+def test_scs_catching_sigint_itself_is_a_ctrl_c():
+    """SCS installs its own SIGINT handler while it solves and reports 'interrupted' as a failure (the design
+    would then try the other solver): fte's SCS raises it as KeyboardInterrupt and records it."""
+    import cvxpy as cp
+
+    from fte_casadi import _interrupt
+    from fte_casadi.design.core._sdp import cvxpy_solver
+
+    n = 150
+    X = cp.Variable((n, n), PSD=True)
+    A = np.random.default_rng(0).normal(size=(n, n))
+    prob = cp.Problem(cp.Minimize(cp.trace((A + A.T) @ X)), [cp.trace(X) == 1])
+    timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    with _interrupt.handling():
+        timer.start()
+        with pytest.raises(KeyboardInterrupt) as caught:
+            prob.solve(solver=cvxpy_solver("SCS"), max_iters=10**7, eps_abs=1e-15, eps_rel=1e-15)
+        assert _interrupt.pending()
+    assert any(
+        f.name == "solve_via_data" for f in caught.traceback
+    )  # from SCS's status, not Python's handler
+    assert not _interrupt.pending()  # outside the command nothing is recorded
+
+
+def test_ctrl_c_while_the_modules_load_is_one_line():
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    code = "import sys; sys.stderr.write('go\\n'); sys.stderr.flush(); import fte_casadi.cli"
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)  # fmt: skip
+    assert p.stderr.readline() == b"go\n"  # Python is up; fte_casadi's modules load now (about 2 s)
+    time.sleep(0.2)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    assert err.decode().strip() == "fte: interrupted while loading; nothing was written"
+
+
+@pytest.mark.slow
+def test_sigint_at_any_moment_of_fte_design_ends_with_130(tmp_path):
+    """SIGINT while the modules load, while the T-S model is derived and while the LMIs are solved: always
+    status 130, one paragraph, and the document written only if the interrupt came after it was complete."""
+    target = tmp_path / "d.json"
+    for delay in (0.5, 2.5, 4.0):
+        target.unlink(missing_ok=True)
+        p = _fte("design", "manipulator", "-o", str(target))
+        time.sleep(delay)
+        alive = p.poll() is None
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=120)
+        err = " ".join(err.decode().split())
+        if not alive:  # the design was done before the signal (a fast machine)
+            continue
+        assert p.returncode in (130, -signal.SIGINT), (delay, p.returncode, err)
+        assert "Traceback" not in err and "internal error" not in err, err
+        if p.returncode == 130:
+            assert "interrupted" in err
+            assert target.exists() == ("written before the interrupt" in err), err
+
+
+# -- fte codegen: its files as one set ----------------------------------------------------------
+MANIP = ROOT / "generated" / "manipulator" / "design.json"
+
+
+def test_codegen_replaces_its_files_as_one_set_and_keeps_the_rest(tmp_path, monkeypatch):
+    from fte_casadi.codegen import generate_c
+    from fte_casadi.design import Design
+
+    d = Design.load(MANIP)
+    out = tmp_path / "c"
+    generate_c(d, out, sample_time=2e-3)
+    (out / "main.c").write_text("int main(void) { return 0; }\n")
+    (out / "lib").mkdir()
+    (out / "lib" / "x.txt").write_text("mine")
+    before = _files(out)
+    inode = (out / "main.c").stat().st_ino
+    real_open, opened = open, []
+
+    def failing(path, *a, **k):  # the third new file fails to be written (a full disk)
+        if str(path).startswith(str(tmp_path / ".c.new-")):
+            opened.append(path)
+            if len(opened) == 3:
+                raise OSError(28, "No space left on device")
+        return real_open(path, *a, **k)
+
+    monkeypatch.setattr("builtins.open", failing)
+    with pytest.raises(Exception, match="No space left on device"):
+        generate_c(d, out)
+    monkeypatch.undo()
+    assert _files(out) == before and sorted(p.name for p in tmp_path.iterdir()) == ["c"]  # no mix, no debris
+    files = generate_c(d, out)
+    assert [f.name for f in files] == ["fte_manipulator.h", "fte_manipulator.c", "fte_manipulator_casadi.h",
+                                       "fte_manipulator_casadi.c", "README.md"]  # fmt: skip
+    assert (out / "main.c").stat().st_ino == inode and (out / "lib" / "x.txt").read_text() == "mine"
+    assert _files(out) != before and sorted(p.name for p in tmp_path.iterdir()) == ["c"]
+
+
+def test_a_mix_of_two_sets_does_not_compile(tmp_path):
+    """Even without -Werror: each .c file checks the set's number of the headers it includes."""
+    from fte_casadi.codegen import _build as build
+    from fte_casadi.codegen import generate_c
+    from fte_casadi.design import Design
+
+    if build.find_compiler() is None:
+        pytest.skip("no C compiler")
+    d = Design.load(MANIP)
+    generate_c(d, tmp_path / "a")
+    generate_c(d, tmp_path / "b", sample_time=2e-3)
+    for name in ("fte_manipulator_casadi.c", "fte_manipulator.h"):
+        mixed = tmp_path / f"mix-{name}"
+        mixed.mkdir()
+        for f in (tmp_path / "a").glob("fte_*"):
+            (mixed / f.name).write_bytes(((tmp_path / "b") if f.name == name else (tmp_path / "a")).joinpath(
+                f.name).read_bytes())  # fmt: skip
+        r = subprocess.run([build.find_compiler(), "-std=c99", "-c", *map(str, mixed.glob("*.c"))], cwd=mixed,
+                           capture_output=True, text=True)  # fmt: skip
+        assert r.returncode != 0 and "of another run of fte codegen" in r.stderr, r.stderr
+
+
+def test_codegen_into_the_current_directory_is_refused(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(main, ["codegen", str(MANIP), "--out", "."])
+    assert r.exit_code == 2 and "replaces its output directory as one set" in _said(r), r.output
+    assert os.listdir(tmp_path) == []
+
+
+def test_the_printed_compile_line_builds_from_anywhere(tmp_path):
+    """A directory with a space: the line quotes it and names it with -I for the header."""
+    from fte_casadi.codegen import _build as build
+
+    if build.find_compiler() is None:
+        pytest.skip("no C compiler")
+    out = tmp_path / "my c"
+    r = CliRunner().invoke(main, ["codegen", str(MANIP), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    line = [x for x in r.stdout.splitlines() if x.startswith("compile with: ")][0][len("compile with: ") :]
+    assert f"-I'{out}'" in line
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    (work / "your_main.c").write_text('#include "fte_manipulator.h"\nint main(void) {\n  fte_manipulator_state s;\n'
+                                      "  return fte_manipulator_init(&s, 0);\n}\n")  # fmt: skip
+    r = subprocess.run(line + " -o prog", shell=True, cwd=work, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert subprocess.run([str(work / "prog")]).returncode == 0
+
+
+@pytest.mark.slow
+def test_a_refused_resume_of_a_finished_run_leaves_no_partial_folder(tmp_path):
+    """--resume of a finished run with another --seed is refused; the copy of its trials made for the run is
+    removed, so that the next run is not taken for an interrupted one."""
+    out = tmp_path / "t"
+    r = _tune(out, "--trials", "2")
+    assert r.exit_code == 0, r.output
+    earlier = _files(out)
+    r = _tune(out, "--trials", "3", "--resume", "--seed", "3")
+    assert r.exit_code == 2 and "differs from this one in seed (it was run with 2)" in _said(r), _said(r)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["t"] and _files(out) == earlier
+    from fte_casadi.cli._tune import _tune_target
+
+    _tune_target(str(out), resume=False)  # a fresh run is not refused as continuing an interrupted one

@@ -17,11 +17,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fte_casadi import PlantBuilder
-from fte_casadi.design import design
-from fte_casadi.design._recertify import recertify
-from fte_casadi.design._record import Design
-from fte_casadi.design._summary import design_summary
-from fte_casadi.design.core._lmis import LMIS, routes
+from fte_casadi.design import Design, design, design_summary, recertify
+from fte_casadi.design.core import LMIS
+from fte_casadi.design.core._lmis import routes
 from fte_casadi.errors import FteError
 from fte_casadi.trust import check_loaded
 from fte_casadi.ts import derive

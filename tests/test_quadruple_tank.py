@@ -11,10 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fte_casadi.codegen import CStep
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep
-from fte_casadi.design import design
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design, design
 from fte_casadi.design.core._certify import failures
 from fte_casadi.plants import SCENARIOS, quadruple_tank
 from fte_casadi.ts import derive

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from fte_casadi.design import design
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import simulate
 from fte_casadi.ts import derive
 

@@ -16,11 +16,9 @@ from plant_bd_rules import scenario as bd_scenario
 from plant_remark5 import plant, scenario
 from tolerances import C_DOUBLE
 
+from fte_casadi.codegen import CStep, generate_c
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep
-from fte_casadi.codegen._generate import generate_c
-from fte_casadi.design import augment, design
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design, augment, design
 from fte_casadi.design.core._certify import certificate
 from fte_casadi.errors import AssumptionError, DesignFileError
 from fte_casadi.sim import simulate

@@ -71,7 +71,7 @@ def test_one_step_everywhere(ts_models, tmp_path):
     from click.testing import CliRunner
 
     from fte_casadi.cli import main
-    from fte_casadi.codegen._generate import default_sample_time
+    from fte_casadi.codegen import default_sample_time
 
     d = design(ts_models["manipulator"], sample_time=0.002, plant_spec="manipulator")
     f = tmp_path / "m.json"

@@ -11,9 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from fte_casadi.design._record import Design
-from fte_casadi.plants import SCENARIOS
-from fte_casadi.plants._loader import load_plant
+from fte_casadi.design import Design
+from fte_casadi.plants import SCENARIOS, load_plant
 from fte_casadi.sim import simulate
 
 GENERATED = Path(__file__).resolve().parents[1] / "generated"

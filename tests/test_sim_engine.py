@@ -293,8 +293,7 @@ def test_metrics_do_not_depend_on_chunks_or_threads(plants, lqr_designs):
 def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, tmp_path):
     """The metrics reduced in the compiled loop equal those recomputed from every recorded sample."""
     from fte_casadi.plants import SCENARIOS
-    from fte_casadi.sim import load_result, save_result
-    from fte_casadi.sim._metrics import metrics_from_arrays
+    from fte_casadi.sim import load_result, metrics_from_arrays, save_result
 
     for name in ("manipulator", "three-tank"):
         sc = SCENARIOS[name]()

@@ -18,8 +18,7 @@ import casadi as ca
 import pytest
 
 from fte_casadi import PlantBuilder
-from fte_casadi.design import design
-from fte_casadi.design._augment import augment
+from fte_casadi.design import augment, design
 from fte_casadi.design.core._diagnose import sigma_max
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive

@@ -12,7 +12,7 @@ import pytest
 
 from fte_casadi.codegen import _template as template
 from fte_casadi.codegen._generate import c_name, generate_c, output_files
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.errors import CodegenError
 
 ROOT = Path(__file__).resolve().parents[1]

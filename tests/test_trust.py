@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from fte_casadi.cli import main
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.trust import check_loaded
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,8 +9,8 @@ from fte_casadi import PlantBuilder
 from fte_casadi.errors import DerivationError
 from fte_casadi.plants import manipulator, three_tank
 from fte_casadi.ts import derive
-from fte_casadi.ts._bounds import premise_bounds
 from fte_casadi.ts._memberships import rule_vertices, sector_memberships
+from fte_casadi.ts._premise_bounds import premise_bounds
 
 PAPER_MANIP_A1_32, PAPER_MANIP_A2_32 = -22.83, -18.77
 TANK_A = [

@@ -13,12 +13,11 @@ from hypothesis import strategies as st
 from plant_auto import linear, linear_scenario, manipulator_plain, two_state
 from tolerances import C_DOUBLE, PAPER_A, PAPER_BOUND, ROUNDOFF
 
+from fte_casadi.codegen import CStep, closed_loop_compare, generate_c
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen import generate_c
-from fte_casadi.codegen._ctypes_step import CStep, closed_loop_compare
 from fte_casadi.design import design
 from fte_casadi.errors import DerivationError, PlantError
-from fte_casadi.plants._loader import load_plant
+from fte_casadi.plants import load_plant
 from fte_casadi.sim import simulate
 from fte_casadi.ts import derive, scheduling_from_measurements
 from fte_casadi.ts._auto import TAYLOR_BAND, premise_form

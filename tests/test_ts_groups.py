@@ -13,9 +13,8 @@ from plant_pmsm import pmsm_dqw, pmsm_wdq
 from plant_twolink import arm, scenario
 from tolerances import C_DOUBLE
 
+from fte_casadi.codegen import CStep, generate_c
 from fte_casadi.codegen import _build as build
-from fte_casadi.codegen._ctypes_step import CStep
-from fte_casadi.codegen._generate import generate_c
 from fte_casadi.design import design
 from fte_casadi.errors import ParameterError
 from fte_casadi.step import step_function
@@ -202,7 +201,7 @@ def test_a_design_is_loaded_against_the_cover_it_was_made_with(tmp_path):
     design used the default loads."""
     import json
 
-    from fte_casadi.design._record import Design
+    from fte_casadi.design import Design
     from fte_casadi.errors import DesignFileError
     from fte_casadi.trust import check_loaded
 

@@ -21,8 +21,8 @@ EXACT = 1e-9  # relative to each row's size, as the automatic method's own check
 def quad():
     """The derivation, and the work it did: local searches and their evaluations, of the premises' bounds and of
     the simplices' normals (counted, not timed)."""
-    import fte_casadi.ts._bounds as bounds_mod
     import fte_casadi.ts._cover as cover_mod
+    import fte_casadi.ts._premise_bounds as bounds_mod
 
     work = {"bounds": [0, 0], "cover": [0, 0]}
 

@@ -1,4 +1,4 @@
-"""Automatic premises in any units (fte_casadi/ts/_auto.py, _auto_checks.py, _bounds.py): every tolerance of the
+"""Automatic premises in any units (fte_casadi/ts/_auto.py, _auto_checks.py, _premise_bounds.py): every tolerance of the
 automatic sector method is relative to the size of what it compares, so a plant written in m and in mm derives,
 and to the same model after the change of unit."""
 

@@ -11,18 +11,21 @@ import pytest
 from click.testing import CliRunner
 
 from fte_casadi.cli import main
-from fte_casadi.design import design
+from fte_casadi.design import Design, design
 from fte_casadi.design._limits import channel_zeros, explain_metrics
-from fte_casadi.design._record import Design
 from fte_casadi.design.core._certify import failures
 from fte_casadi.errors import ParameterError
-from fte_casadi.plants._loader import load_plant, load_scenario
+from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.ts import derive
 
 pytest.importorskip("optuna")
 
-from fte_casadi.tune import choose, pareto_front, tune  # noqa: E402
-from fte_casadi.tune._search import Record  # noqa: E402
+from fte_casadi.tune import (  # noqa: E402
+    Record,  # noqa: E402
+    choose,
+    pareto_front,
+    tune,
+)
 
 SPEC = f"{Path(__file__).parent / 'plant_tune.py'}:plant"
 #: every test here searches and simulates many candidates: the module took over 20 minutes on the shared

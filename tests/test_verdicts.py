@@ -93,3 +93,59 @@ def test_design_warnings_against_the_scenario():
     zero = verdicts.design_warnings({"R_max_real_eig": -10.0}, 0.0, sc)
     assert len(zero) == 1 and "lowered to 0" in zero[0]
     assert verdicts.design_warnings({"R_max_real_eig": -1.0}, 0.0, None) == []
+
+
+def test_a_ratio_above_one_is_worse_than_none_only_when_its_interval_is():
+    """The three-tank's h1 of 1.003-1.012 over seeds is a tie: a ratio above 1 whose interval over the paths
+    holds 1 gets no verdict; with the interval above 1 it is worse than none (window and output alike)."""
+
+    def doc(r, iv, per, per_iv):
+        w = {"fault": "fa", "start": 0.0, "stop": 2.0, "fault_rel_rms_error": 0.1, "settling_time": 0.2,
+             "ftc_true_ratio": r, "ftc_true_ratio_interval": iv, "ftc_true_ratio_per_output": per,
+             "ftc_true_ratio_per_output_interval": per_iv, "input_saturation": [0.0]}  # fmt: skip
+        return {"paths": 20, "windows": [w], "false_alarm_peak": [0.1]}
+
+    def said(m):
+        return sorted(v["verdict"] for v in verdicts.verdicts(m, ["u"], ["fa"], ["h1", "h2"]))
+
+    tie = doc(0.2, [0.19, 0.21], [1.008, 0.19], [[0.997, 1.02], [0.18, 0.2]])
+    assert said(tie) == []
+    worse = doc(0.2, [0.19, 0.21], [1.008, 0.19], [[1.002, 1.014], [0.18, 0.2]])
+    (v,) = verdicts.verdicts(worse, ["u"], ["fa"], ["h1", "h2"])
+    assert v["verdict"] == "worse than none on an output" and "95 % interval 1.002-1.014" in v["text"]
+    assert said(doc(1.05, [0.98, 1.1], [1.05, 1.05], [[0.9, 1.2], [0.9, 1.2]])) == []
+    assert said(doc(1.05, [1.01, 1.1], [1.05, 1.05], [[0.9, 1.2], [0.9, 1.2]])) == ["worse than none"]
+
+
+def test_false_alarm_rates_are_judged_against_the_promise():
+    """On the fault-free paths and in the faulty run outside a fault's windows: a verdict when the measured
+    rate's interval lies above the interval the calibration promised; a rate inside it, or an interval that
+    reaches into it, is none."""
+    e = {"fault": "fs", "false_alarm_rate_asked": 1 / 3600, "false_alarm_rate_interval": [1.5e-4, 4.5e-4],
+         "false_alarm_rate": 3e-4, "false_alarm_rate_measured_interval": [1e-4, 6e-4],
+         "false_alarm_rate_ftc_run": 0.76, "false_alarm_rate_ftc_run_interval": [0.61, 0.94]}  # fmt: skip
+    m = {"paths": 20, "windows": [], "detection": [e]}
+    (v,) = verdicts.verdicts(m, [], ["fs"])
+    assert v["verdict"] == "false-alarm rate" and "in the faulty run" in v["text"] and v["value"] == 0.76
+    m["detection"][0] = {**e, "false_alarm_rate_ftc_run_interval": [4e-4, 0.94]}  # reaches into the promise
+    assert verdicts.verdicts(m, [], ["fs"]) == []
+    m["detection"][0] = {**e, "false_alarm_rate": 2e-3, "false_alarm_rate_measured_interval": [1e-3, 3e-3],
+                         "false_alarm_rate_ftc_run": None}  # fmt: skip
+    (v,) = verdicts.verdicts(m, [], ["fs"])
+    assert "on fault-free paths" in v["text"]
+
+
+def test_a_standing_alarm_is_said_and_is_no_detection():
+    w = {"fault": "fs", "start": 7.0, "stop": 10.0, "fault_rel_rms_error": 0.1, "settling_time": 0.2,
+         "ftc_true_ratio": 0.7, "missed_detections": 0, "standing_alarm_paths": 7, "input_saturation": [0.0]}  # fmt: skip
+    (v,) = verdicts.verdicts({"paths": 20, "windows": [w]}, ["u"], ["fa", "fs"])
+    assert v["verdict"] == "standing alarm" and v["value"] == 7 and "7 of 20 paths" in v["text"]
+
+
+def test_a_poor_estimate_needs_its_interval_at_or_above_the_limit():
+    w = {"fault": "fa", "start": 0.0, "stop": 2.0, "fault_rel_rms_error": 0.52, "settling_time": 0.2,
+         "ftc_true_ratio": 0.5, "input_saturation": [0.0]}  # fmt: skip
+    poor = {**w, "fault_rel_rms_error_interval": [0.505, 0.54]}
+    tie = {**w, "fault_rel_rms_error_interval": [0.47, 0.57]}
+    assert [v["verdict"] for v in verdicts.verdicts({"paths": 9, "windows": [poor]})] == ["poor estimate"]
+    assert verdicts.verdicts({"paths": 9, "windows": [tie]}) == []

@@ -29,7 +29,7 @@ import numpy as np
 
 from fte_casadi.codegen import _build as build
 from fte_casadi.codegen._generate import _void_unused, c_name, default_sample_time, generate_c, memory_report
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.step import step_function
 
 __all__ = ["bench_c_step"]  # public: docs/api.md

@@ -8,7 +8,7 @@ from the design's certificate down to what no controller can beat.
 The optional JSON sets the design parameters (else the ones the design at the defaults ends with, or the generic
 ones where it is refused). Rows, each a largest s (bisection, 2 % in s):
 
-- ``design (45)-(46)``, ``design (45)-(46) or (29)``: what the tool certifies (:func:`~fte_casadi.design._diffusion.
+- ``design (45)-(46)``, ``design (45)-(46) or (29)``: what the tool certifies (:func:`~fte_casadi.design.diagnose.
   tolerance`, its decisions as the design makes them: step 3 at s, then step 5 at cond(Pbar) <= 1e4 with margins);
 - at step 3's K (step 3 at the plant's diffusion), no bound on cond(Pbar), no margins, by Clarabel: ``(46) at X``
   (the paper's step 5: Theorem 2's split ``-sigma P^2`` and step 3's ``P = X^-1``), ``(29) at P = c X^-1`` (the
@@ -18,7 +18,7 @@ ones where it is refused). Rows, each a largest s (bisection, 2 % in s):
   ``[x; e]' P [x; e]``, not block-diagonal), ``each frozen rule, exactly`` (the spectral abscissa of the second
   moments' Lyapunov operator, no common V: the most any certificate of these gains can claim);
 - ``no controller can (each rule)``: mean-square stabilisability and detectability
-  (:mod:`fte_casadi.design._necessary`).
+  (:func:`fte_casadi.design.diagnose.decide`).
 """
 
 from __future__ import annotations
@@ -134,8 +134,8 @@ def _paper46(aug, T, K, X, s, params) -> bool:
     """(45) at step 3's (X, K) and (46) in (Pbar, Q_i), the diffusion scaled by s, without a bound on cond(Pbar)."""
     import cvxpy as cp
 
-    from fte_casadi.design._diffusion import scaled
-    from fte_casadi.design.core._lmis import lmi45, lmi46_terms
+    from fte_casadi.design.core import lmi45, lmi46_terms
+    from fte_casadi.design.diagnose import scaled
 
     a = scaled(aug, s)
     sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
@@ -177,14 +177,11 @@ def _common_full(aug, T, K, L1, s) -> bool:
 
 def measure(spec: str, params: dict | None = None, log=print) -> dict:
     """The rows of the module docstring for the plant ``spec`` (``FILE.py:FUNCTION`` or a built-in name)."""
-    from fte_casadi.design import _diffusion as diffusion
-    from fte_casadi.design import design
-    from fte_casadi.design._augment import augment
-    from fte_casadi.design._necessary import _decide
-    from fte_casadi.design._uio import uio_gain
-    from fte_casadi.design.core import _conditioned as conditioned
+    from fte_casadi.design import augment, design, uio_gain
+    from fte_casadi.design.core import step3
+    from fte_casadi.design.diagnose import decide, tolerance
     from fte_casadi.errors import FteError
-    from fte_casadi.plants._loader import load_plant, load_scenario
+    from fte_casadi.plants import load_plant, load_scenario
     from fte_casadi.ts import derive
 
     ts = derive(load_plant(spec))
@@ -216,9 +213,9 @@ def measure(spec: str, params: dict | None = None, log=print) -> dict:
         log(f"{name:<48} {value:.4g}" if isinstance(value, float) else f"{name:<48} {value}")
 
     for name, routes in (("design (45)-(46)", ("46",)), ("design (45)-(46) or (29)", ("46", "29"))):
-        tol = diffusion.tolerance(aug, T, p, "CLARABEL", routes=routes, top=1e3, steps=10)
+        tol = tolerance(aug, T, p, "CLARABEL", routes=routes, top=1e3, steps=10)
         row(name, 1e3 if tol is None else tol.feasible)
-    s3 = conditioned.step3(aug, p, "CLARABEL")
+    s3 = step3(aug, p, "CLARABEL")
     K, X = s3.K, s3.X
     g = p["gamma"]
     row("(46) at step 3's X", _largest(lambda s: _paper46(aug, T, K, X, s, p)))
@@ -233,7 +230,7 @@ def measure(spec: str, params: dict | None = None, log=print) -> dict:
             min(_exact(*_closed_loop(aug, T, Kd, L1, i)) for i in range(aug.r)))  # fmt: skip
     for kind in ("stabilisable", "detectable"):
         row(f"no controller can: mean-square {kind}",
-            min(_largest(lambda s, i=i, k=kind: bool(_decide(aug, i, k, s, "CLARABEL"))) for i in range(aug.r)))  # fmt: skip
+            min(_largest(lambda s, i=i, k=kind: bool(decide(aug, i, k, s, "CLARABEL"))) for i in range(aug.r)))  # fmt: skip
     rows["seconds"] = time.perf_counter() - t0
     return rows
 

@@ -27,9 +27,10 @@ import numpy as np
 from tqdm import tqdm
 
 from fte_casadi._toolchain import cache_dir, find_compiler
-from fte_casadi.design._record import Design
+from fte_casadi.design import Design
 from fte_casadi.errors import ParameterError, SimulationError
 from fte_casadi.model import Plant
+from fte_casadi.sim import Scenario, Sinusoid, UniformNoise
 from fte_casadi.sim._engine import (
     PathLayout,
     _check_settings,
@@ -39,7 +40,6 @@ from fte_casadi.sim._engine import (
     result_names,
 )
 from fte_casadi.sim._result import RUNS, SimulationResult
-from fte_casadi.sim._scenario import Scenario, Sinusoid, UniformNoise
 
 __all__ = []  # public: docs/api.md
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import click
 
+from .. import _interrupt
 from . import _bench as bench
 from . import _codegen as codegen
 from . import _derive as derive
@@ -22,9 +23,33 @@ from . import _simulate as simulate
 from . import _tune as tune
 from ._common import EXIT_BAD_INPUT as EXIT_BAD_INPUT
 from ._common import EXIT_FAILED as EXIT_FAILED
+from ._common import _fail, _interrupted
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Fte(click.Group):
+    """The ``fte`` group: a Ctrl-C always ends a command with status 130, nothing written after it
+    (:mod:`fte_casadi._interrupt`), whatever catches the ``KeyboardInterrupt`` it raises."""
+
+    def main(self, *args, **kwargs):
+        with _interrupt.handling():
+            try:
+                return super().main(*args, **kwargs)
+            except SystemExit as exc:
+                if _interrupt.pending() and exc.code != 130:  # a Ctrl-C that something swallowed
+                    raise SystemExit(130) from None
+                raise
+
+    def invoke(self, ctx):
+        try:
+            rv = super().invoke(ctx)
+        except KeyboardInterrupt:  # outside a command's guard (click's own "Aborted!" would exit 1)
+            _fail(_interrupted(), 130)
+        if _interrupt.pending():
+            _fail(_interrupted(), 130)
+        return rv
+
+
+@click.group(cls=_Fte, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("--debug", is_flag=True, help="Show Python tracebacks on errors.")
 @click.version_option(package_name="fte_casadi")
 def main(debug: bool) -> None:

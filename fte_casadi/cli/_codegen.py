@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import shlex
+
 import click
 
 from ._common import _guard, _outputs, _positive
@@ -29,8 +31,7 @@ def codegen(
     target, out_dir, sample_time, sample_time_alias, real, boundary_layer, fmu, plant_opt, allow_uncertified
 ):
     """Generate the embedded C of the observer/controller step."""
-    from ..codegen import default_sample_time, generate_c
-    from ..codegen._fmu import check_fmu_target, generate_fmu
+    from ..codegen import check_fmu_target, default_sample_time, generate_c, generate_c_and_fmu
     from ..plants import SCENARIOS
 
     if sample_time is not None and sample_time_alias is not None:
@@ -43,8 +44,9 @@ def codegen(
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
     made_for = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
-    files = generate_c(d, out_dir, sample_time=made_for if sample_time is None else sample_time, real=real,
-                       boundary_layer=boundary_layer)  # fmt: skip
+    write = generate_c_and_fmu if fmu else generate_c
+    files = write(d, out_dir, sample_time=made_for if sample_time is None else sample_time, real=real,
+                  boundary_layer=boundary_layer)  # fmt: skip
     how = (
         "--sample-time" if sample_time is not None else "the design's sample time, the step fte simulate runs"
     )
@@ -52,9 +54,10 @@ def codegen(
         how += f"; the design was made for {made_for:g}"
     if sample_time is None:
         sample_time = made_for
-    click.echo(f"wrote {len(files)} files into {out_dir}: " + ", ".join(f.name for f in files))
+    c_files = [f for f in files if not f.name.endswith(".fmu")]
+    click.echo(f"wrote {len(c_files)} files into {out_dir} as one set: " + ", ".join(f.name for f in c_files))
     click.echo(f"sample time Ts = {sample_time:g} ({how})")
-    click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic {out_dir}/*.c your_main.c -lm")
-    if fmu:
-        path = generate_fmu(d, out_dir, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+    q = shlex.quote(str(out_dir))
+    click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic -I{q} {q}/*.c your_main.c -lm")
+    for path in files[len(c_files) :]:
         click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {sample_time:g} (docs/fmu.md)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 import textwrap
 from pathlib import Path
@@ -12,6 +13,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .. import _interrupt
 from ..errors import FteError, InfeasibleDesignError, ParameterError, SolverFailedError
 
 EXIT_BAD_INPUT = 2
@@ -29,10 +31,10 @@ def _ours(path: Path) -> bool:
     """True when ``path`` holds something fte wrote: a design document (JSON or MAT) or a saved result (.npz)."""
     import zipfile
 
-    from ..design._record import REQUIRED_KEYS
+    from ..design import REQUIRED_KEYS
 
     if path.suffix.lower() == ".mat":
-        from ..design._matfile import is_fte_mat
+        from ..design import is_fte_mat
 
         return is_fte_mat(path)
     try:
@@ -51,6 +53,13 @@ def _writable_target(path: str, option: str, what: str) -> None:
     p = Path(path)
     if p.is_dir():
         raise ParameterError(f"{option} {path} is a directory; give a file name such as {p / what}")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise ParameterError(f"{option} {path}: the directory {folder} does not exist (checked before any work); "
+                             "create it first, or give a file in an existing directory")  # fmt: skip
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ParameterError(f"{option} {path}: the directory {folder} is not writable (checked before any work); "
+                             "give a file in a writable directory")  # fmt: skip
     if p.exists() and not _ours(p):
         raise ParameterError(
             f"{option} {path} exists and was not written by fte (it is not a {what.split('.')[0]} document): it is "
@@ -82,9 +91,10 @@ def _outputs(*targets) -> None:
 
 def _interrupted() -> str:
     """What was written before a Ctrl-C, from the snapshot :func:`_outputs` took, and what to do next."""
-    ctx = click.get_current_context()
+    ctx = click.get_current_context(silent=True)
+    meta = ctx.meta if ctx is not None else {}
     written, removed = [], []
-    for path, before in ctx.meta.get("fte.outputs", {}).items():
+    for path, before in meta.get("fte.outputs", {}).items():
         after = _stat_tree(path)
         written += sorted(f for f, v in after.items() if before.get(f) != v)
         removed += sorted(f for f in before if f not in after)
@@ -98,38 +108,47 @@ def _interrupted() -> str:
         msg = "interrupted; " + "; ".join(parts) + "; nothing else was written"
     else:
         msg = "interrupted; nothing was written (earlier files are as they were)"
-    note = ctx.meta.get("fte.on_interrupt")
+    note = meta.get("fte.on_interrupt")
     return msg + (f"; {note()}" if note else "")
 
 
 def _guard(fn):
     """Run a command; on a known error print one paragraph and exit non-zero (130 after a Ctrl-C,
-    saying exactly which files were written)."""
+    saying exactly which files were written). A Ctrl-C wins over anything else: the command's result, or an
+    error that a swallowed ``KeyboardInterrupt`` caused (CasADi's, a solver's), ends with 130 too."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         debug = click.get_current_context().find_root().params.get("debug", False)
         try:
-            return fn(*args, **kwargs)
-        except (InfeasibleDesignError, SolverFailedError) as exc:
-            if debug:
-                raise
-            _fail(str(exc), EXIT_FAILED)
-        except FteError as exc:
-            if debug:
-                raise
-            _fail(str(exc), EXIT_BAD_INPUT)
+            rv = fn(*args, **kwargs)
         except BrokenPipeError:  # output piped into `head` and the like
             sys.stderr.close()
             sys.exit(0)
         except KeyboardInterrupt:
             _fail(_interrupted(), 130)
+        except (InfeasibleDesignError, SolverFailedError) as exc:
+            if _interrupt.pending():
+                _fail(_interrupted(), 130)
+            if debug:
+                raise
+            _fail(str(exc), EXIT_FAILED)
+        except FteError as exc:
+            if _interrupt.pending():
+                _fail(_interrupted(), 130)
+            if debug:
+                raise
+            _fail(str(exc), EXIT_BAD_INPUT)
         except MemoryError:
+            if _interrupt.pending():
+                _fail(_interrupted(), 130)
             if debug:
                 raise
             _fail("out of memory: the run asks for more than this machine has; use fewer --paths (or a cluster "
                   "with --scheduler), or leave out --save")  # fmt: skip
         except Exception as exc:  # noqa: BLE001 - the last line of defence: no traceback for users
+            if _interrupt.pending():  # CasADi turns an interrupt into an error of its own
+                _fail(_interrupted(), 130)
             if debug:
                 raise
             _fail(
@@ -137,6 +156,9 @@ def _guard(fn):
                 "input; run again with `fte --debug ...` to see where, and report it",
                 3,
             )
+        if _interrupt.pending():  # the interrupt was swallowed on the way: it still wins
+            _fail(_interrupted(), 130)
+        return rv
 
     return wrapper
 

@@ -26,7 +26,7 @@ def _fmt_matrix(M: np.ndarray, indent: str = "    ") -> str:
 @_guard
 def derive(plant: str, as_json: bool, vertices: str | None) -> None:
     """Derive the T-S fuzzy model of PLANT and check its fidelity."""
-    from ..plants._loader import load_plant
+    from ..plants import load_plant
     from ..ts import derive as derive_ts
 
     p = load_plant(plant)

@@ -9,37 +9,53 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
-from ..errors import ParameterError
+from ..errors import InfeasibleDesignError, ParameterError
 from ._common import _guard, _outputs, _positive, _writable_target
-from ._targets import _VERTICES, _make_design, _scenario
+from ._targets import _VERTICES, _design_options, _make_design, _scenario
+
+
+def _gamma_min_text(g) -> str:
+    """The frontier's gamma_min: '-' where no gamma makes (45) feasible, 'any' without unknown inputs (0)."""
+    return "-" if g is None else ("any" if g == 0 else format(g, ".4g"))
 
 
 def _check_params(**kw) -> dict:
+    """The options given, each positive (alpha, d_bound, bound_weight: >= 0) and at most
+    :data:`~fte_casadi.design._docchecks.PARAM_MAX`, before any work."""
+    from ..design import param_problem
+
     out = {}
     for k, v in kw.items():
         if v is not None:
             _positive(k, v, allow_zero=(k in ("alpha", "beta", "d_bound", "bound_weight", "settle_window")))
+            why = param_problem(v)
+            if why:
+                raise ParameterError(f"--{k.replace('_', '-')} {why}")
             out[k] = v
     return out
 
 
-def _scenario_sample_time(plant_spec: str) -> float | None:
-    """The sample time a design is made for: the plant's scenario step (``Scenario.dt``, the step
-    ``fte simulate`` runs the controller at), when the plant has a scenario."""
-    sc = _scenario(plant_spec)
-    return None if sc is None else float(sc.dt)
+def _save(d, output: str) -> None:
+    """Write the design document to ``output``: a MAT file when it ends in .mat, else JSON."""
+    if Path(output).suffix.lower() == ".mat":
+        d.save_mat(output)
+        click.echo(f"design document written to {output} (MAT file: every matrix under its contract name)")
+    else:
+        d.save(output)
+        click.echo(f"design document written to {output}")
 
 
-def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | None = None) -> None:
+def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, output: str | None = None) -> None:
+    """The feasible frontier of ``plant_spec`` with the options of a design (``options``: every option of
+    ``fte design`` but gamma, sigma and --allow-uncertified, which :func:`~fte_casadi.design.explore` refuses)."""
     from ..design import explore
-    from ..plants._loader import load_plant
+    from ..plants import load_plant
     from ..plot import frontier_figure
     from ..ts import derive as derive_ts
 
-    ts = derive_ts(load_plant(plant_spec))
+    ts = derive_ts(load_plant(plant_spec), vertices=vertices)
     with tqdm(total=12, desc=f"explore {ts.plant.name}", unit=" sigma", file=sys.stderr, delay=1.0) as bar:
-        points, info = explore(ts, solver=solver, gamma1=gamma1, sample_time=_scenario_sample_time(plant_spec),
-                               progress=lambda k, n: bar.update(1))  # fmt: skip
+        points, info = explore(ts, options, progress=lambda k, n: bar.update(1))
     click.echo(
         f"feasible frontier of {ts.plant.name} (gamma1 = {info['gamma1']:g}; (45) is feasible for any gamma only with "
         f"sigma < {info['sigma_sup']:.4g}); the plant's defaults: gamma = {info['gamma']:g}, sigma = {info['sigma']:g}"
@@ -49,7 +65,7 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | N
     )
     for pt in points:
         click.echo(
-            f"{pt.sigma:10.4g} {'-' if pt.gamma_min is None else format(pt.gamma_min, '.4g'):>15} "
+            f"{pt.sigma:10.4g} {_gamma_min_text(pt.gamma_min):>15} "
             f"{'-' if pt.gamma_tried is None else format(pt.gamma_tried, 'g'):>15} "
             f"{'-' if pt.alpha is None else format(pt.alpha, '.3g'):>9} "
             f"{'-' if pt.max_abs_L1 is None else format(pt.max_abs_L1, '.3g'):>9} "
@@ -61,16 +77,18 @@ def _explore(plant_spec: str, solver: str, gamma1, out_dir: str, output: str | N
     if info["skipped"]:
         click.echo(f"{info['skipped']} of the sigmas were not tried: the time budget (60 s) ran out")
     best = info["best"]
-    if best is None:
-        click.echo("no certified design found" + (f": {info['cause']}" if info["cause"] else ""))
-        return
+    if best is None:  # no certified design exists on the frontier: exit 1, as a refused design
+        raise InfeasibleDesignError(
+            "--explore found no certified design"
+            + (f": {info['cause']}" if info["cause"] else "")
+            + " (the frontier above lists what each sigma gave)"
+        )
     click.echo(
         f"best certified design found (the fastest observer): sigma = {best.params.sigma:.4g}, gamma = "
         f"{best.params.gamma:g}, decay rate {best.observer.alpha:.4g}"
     )
     if output:
-        best.save(output)
-        click.echo(f"design document written to {output}")
+        _save(best, output)
 
 
 @click.command()
@@ -163,22 +181,31 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
                            bound_weight=bound_weight, kappa=kappa)  # fmt: skip
     if no_remark5:
         params["remark5"] = False
+    if output is not None:
+        _writable_target(output, "-o", "design.json")
     if explore:
-        if output is not None:
-            _writable_target(output, "-o", "design.json")
+        refused = [opt for opt, v in (("--gamma", gamma), ("--sigma", sigma)) if v is not None]
+        if refused:
+            raise ParameterError(
+                f"--explore searches gamma and sigma itself: {' and '.join(refused)} cannot be given with it (design "
+                "at them without --explore, or leave them out)"
+            )
+        if allow_uncertified:
+            raise ParameterError(
+                "--explore writes only a certified design (its best one): --allow-uncertified means nothing with it"
+            )
+        options = _design_options(plant, variant, solver.upper(), params, False, accept)
         _outputs(out_dir or "fte-explore", output)
-        _explore(plant, solver.upper(), gamma1, out_dir or "fte-explore", output)
+        _explore(plant, options, vertices, out_dir or "fte-explore", output)
         return
     if out_dir is not None:
         raise ParameterError(
             f"--out {out_dir} is the directory of --explore's figure; to write the design document use -o FILE"
         )
-    if output is not None:
-        _writable_target(output, "-o", "design.json")
     _outputs(output)
     d, ts, options = _make_design(plant, variant, solver.upper(), params, allow_uncertified, accept, vertices,
                                   full=True, always_compensate=always_compensate or variant == "paper")  # fmt: skip
-    from ..design._summary import design_summary
+    from ..design import design_summary
 
     click.echo(design_summary(d))
     from ..verdicts import design_warnings
@@ -188,18 +215,11 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
     for w in warnings:
         click.echo(textwrap.fill("fte: warning: " + w, width=100), err=True)
     if warnings and d.certified:
-        from ..design._remedy import remedies
+        from ..design import remedies
 
         for line in remedies(ts, options, d, scenario):
             click.echo(textwrap.fill("fte: tried " + line, width=100), err=True)
     if output:
-        if Path(output).suffix.lower() == ".mat":
-            d.save_mat(output)
-            click.echo(
-                f"design document written to {output} (MAT file: every matrix under its contract name)"
-            )
-        else:
-            d.save(output)
-            click.echo(f"design document written to {output}")
+        _save(d, output)
     else:
         click.echo("(design document not saved: add -o FILE)")

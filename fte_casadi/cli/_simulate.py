@@ -7,6 +7,7 @@ import textwrap
 from pathlib import Path
 
 import click
+import numpy as np
 
 from ..errors import ParameterError
 from ._common import _check_paths, _check_seed, _guard, _outputs, _positive, _writable_target
@@ -28,19 +29,60 @@ def _fmt_list(v) -> str:
     return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
 
 
-def _with_noise(scenario, noise: str | None):
-    """The scenario with ``--measurement-noise`` (comma-separated standard deviations) when given."""
-    if not noise:
-        return scenario
-    import dataclasses
-
+def _noise_option(noise: str | None) -> list[float] | None:
+    """``--measurement-noise`` as standard deviations (None: not given), each a finite number >= 0."""
+    if noise is None:
+        return None
+    if not noise.strip():
+        raise ParameterError("--measurement-noise is empty: give one standard deviation per output, comma-separated "
+                             "(e.g. 0.01,0,0.02), or leave the option out")  # fmt: skip
     try:
         stds = [float(v) for v in noise.split(",")]
     except ValueError:
         raise ParameterError(
             f"--measurement-noise {noise!r}: give one standard deviation per output, comma-separated (e.g. 0.01,0,0.02)"
         ) from None
+    for v in stds:
+        _positive("measurement-noise", v, allow_zero=True)
+    return stds
+
+
+def _with_noise(scenario, stds: list[float] | None, d):
+    """The scenario with ``--measurement-noise`` when given: one standard deviation per output of ``d``, each at
+    most the width of the range the generated C accepts for that output (a larger one is no measurement, and the
+    run's estimates would overflow)."""
+    if stds is None:
+        return scenario
+    import dataclasses
+
+    from ..codegen import output_range
+
+    p = int(d.dims.p)
+    names = list((d.names or {}).get("outputs") or [f"y{k + 1}" for k in range(p)])
+    if len(stds) != p:
+        raise ParameterError(f"--measurement-noise has {len(stds)} entries; the plant has {p} outputs "
+                             f"({', '.join(names)}): give one standard deviation per output")  # fmt: skip
+    rng = output_range(d)
+    for k, v in enumerate(stds):
+        width = float(rng["hi"][k] - rng["lo"][k])
+        if v > width:
+            raise ParameterError(
+                f"--measurement-noise: {v:g} for output {names[k]} exceeds the whole range the generated C accepts "
+                f"for it ([{rng['lo'][k]:.6g}, {rng['hi'][k]:.6g}], width {width:.6g}): noise that large is no "
+                "measurement, and the run's estimates would overflow; give at most that"
+            )
     return dataclasses.replace(scenario, measurement_noise=tuple(stds))
+
+
+def _nonfinite(m, path: str = "") -> list[str]:
+    """The keys of a metrics document that hold a NaN or an infinity (a result is never a non-finite number)."""
+    if isinstance(m, dict):
+        return [p for k, v in m.items() for p in _nonfinite(v, f"{path}.{k}" if path else str(k))]
+    if isinstance(m, (list, tuple)):
+        return [p for k, v in enumerate(m) for p in _nonfinite(v, f"{path}[{k}]")]
+    if isinstance(m, float) and not np.isfinite(m):
+        return [path]
+    return []
 
 
 def _summary(plant: str, m: dict) -> str:
@@ -52,16 +94,34 @@ def _summary(plant: str, m: dict) -> str:
         f"  fault error, relative RMS over whole windows: {_fmt_list(m['fault_rel_rms_error'])} "
         f"(settled part, each window minus its first 20 %: {_fmt_list(m['fault_rel_rms_error_settled'])})",
         f"  false alarms, estimate outside its windows: peak / fault's peak {_fmt_list(m['false_alarm_peak'])}, "
-        f"relative RMS {_fmt_list(m['false_alarm_rel_rms'])}",
-        f"  tolerant control, true outputs C x (ftc_true_ratio, < 1: better than none): {_num(m['ftc_true_ratio'])}; "
-        f"compensated reading yc (ftc_compensated_ratio, estimation only): {_num(m['ftc_compensated_ratio'])}",
+        f"relative RMS {_fmt_list(m['false_alarm_rel_rms'])}; without the allowances (raw) "
+        f"{_fmt_list(m.get('false_alarm_peak_raw') or [])}: in the start-up "
+        f"{_fmt_list(m.get('false_alarm_peak_startup') or [])}, after a window "
+        f"{_fmt_list(m.get('false_alarm_peak_after_window') or [])}",
+        f"  tolerant control, true outputs C x (ftc_true_ratio, < 1: better than none): {_num(m['ftc_true_ratio'])}"
+        f"{_ival(m.get('ftc_true_ratio_interval'))}; compensated reading yc (ftc_compensated_ratio, estimation only): "
+        f"{_num(m['ftc_compensated_ratio'])}",
     ]
     for e in m.get("detection") or []:
         lines.append(
-            f"  detection of {e['fault']}: threshold {_num(e['threshold'])}, false alarms per unit time "
-            f"{_num(e['false_alarm_rate'])} on fault-free paths (asked {_num(e['false_alarm_rate_asked'])}), "
-            f"{_num(e.get('false_alarm_rate_ftc_run'))} outside its windows with the other faults"
+            f"  detection of {e['fault']}: threshold {_num(e['threshold'])} from t = {_num(e.get('steady_from'), '.4g')}"
+            f" ({len(e.get('startup_thresholds') or [])} start-up blocks with their own), calibrated on "
+            f"{e.get('calibration_paths')} fault-free paths ({_num(e.get('calibration_hours'))} path-hours, "
+            f"{e.get('calibration_method')}): it promises {_ival(e.get('false_alarm_rate_interval'), '')} false alarms "
+            f"per unit time (asked {_num(e['false_alarm_rate_asked'])}); measured {_num(e['false_alarm_rate'])}"
+            f"{_ival(e.get('false_alarm_rate_measured_interval'))} on this run's fault-free paths, "
+            f"{_num(e.get('false_alarm_rate_ftc_run'))}{_ival(e.get('false_alarm_rate_ftc_run_interval'))} outside its "
+            "windows in the faulty run"
         )
+    for s in m.get("detectability") or []:
+        for c in s["curves"]:
+            mdf = c["min_detectable_fault"]
+            lines.append(
+                f"  smallest {c['fault']} detected on {100 * s['target']:g} % of {s['paths']} paths within "
+                f"{_num(c['delay'])} ({s.get('label')}): "
+                + (f"{mdf:.3g} (factor {c['min_detectable_factor']:.3g} of the scenario's)" if mdf is not None
+                   else f"n/a ({c['why']})")
+            )  # fmt: skip
     if m.get("measurement_noise") is not None:
         lines.append(f"  measurement noise (std per output): {_fmt_list(m['measurement_noise'])}")
     lines.append(f"  samples outside the plant's region: {100 * m['outside_region']:.2g} %")
@@ -73,21 +133,52 @@ def _num(v, fmt: str = ".3g") -> str:
     return "n/a" if v is None else format(v, fmt)
 
 
+def _ival(iv, lead: str = " ") -> str:
+    """A 95 % interval over the paths, ``[lo, hi]``, or nothing."""
+    return "" if not iv else f"{lead}[{iv[0]:.3g}, {iv[1]:.3g}]"
+
+
 def _window_lines(m: dict) -> list[str]:
     """Per fault window: its estimation error, settling, detection and tolerant-control figures."""
     out = []
     for w in m.get("windows", []):
         det = w.get("detection_delay")
         miss = w.get("missed_detections")
+        detected = (
+            ""
+            if miss is None
+            else f"; detected on {_num(w.get('detection_probability'))}{_ival(w.get('detection_probability_interval'))}"
+            f" of the paths ({_num(w.get('detection_probability_within'))} within "
+            f"{_num(w.get('detection_delay_allowed'))}), after {_num(det)} on average, missed on {miss}, alarm already "
+            f"on at the onset (standing, not a detection) on {w.get('standing_alarm_paths')}"
+        )
         out.append(
             f"  window {w['fault']} [{w['start']:g}, {w['stop']:g}): fault error (relative RMS, whole window) "
-            f"{_num(w['fault_rel_rms_error'])}, settled part {_num(w.get('fault_rel_rms_error_settled'))}, "
-            f"settling time {_num(w.get('settling_time'))}; FTC true ratio {_num(w.get('ftc_true_ratio'))} "
-            f"(per output {_fmt_list(w.get('ftc_true_ratio_per_output') or [])}), compensated "
-            f"{_num(w.get('ftc_compensated_ratio'))}"
-            + ("" if miss is None else f"; detected after {_num(det)} on average, missed on {miss} paths")
+            f"{_num(w['fault_rel_rms_error'])}{_ival(w.get('fault_rel_rms_error_interval'))}, settled part "
+            f"{_num(w.get('fault_rel_rms_error_settled'))}, settling time {_num(w.get('settling_time'))}; FTC true ratio "
+            f"{_num(w.get('ftc_true_ratio'))}{_ival(w.get('ftc_true_ratio_interval'))} (per output "
+            f"{_fmt_list(w.get('ftc_true_ratio_per_output') or [])}), compensated {_num(w.get('ftc_compensated_ratio'))}"
+            + detected
         )
     return out
+
+
+def _detectability(
+    d, plant, scenario, m: dict, paths: int, seed: int, dt, rate, cal_paths, fast_math
+) -> dict:
+    """``m`` with the detection probability against each fault's size (``fte simulate --detectability``): with the
+    scenario's measurement noise and without it."""
+    from ..sim._detectability import attach, detectability
+
+    kw = dict(paths=max(64, int(paths)), seed=seed, dt=dt, false_alarm_rate=rate, calibration_paths=cal_paths,
+              exact=not fast_math)  # fmt: skip
+    sets = [detectability(d, plant, scenario, **kw)]
+    if scenario.measurement_noise is not None:
+        sets.append(detectability(d, plant, scenario, scales={"measurement_noise_scale": 0.0}, **kw))
+    for s in sets:
+        s["label"] = "without measurement noise" if s["measurement_noise"] is None or not any(
+            s["measurement_noise"]) else "with measurement noise"  # fmt: skip
+    return attach(m, sets)
 
 
 def _warnings(m: dict, inputs, faults=(), outputs=(), units=()) -> list[str]:
@@ -100,7 +191,7 @@ def _warnings(m: dict, inputs, faults=(), outputs=(), units=()) -> list[str]:
 def _why(d, m: dict) -> list[str]:
     """The structural cause behind a window where tolerant control is worse than none, or behind false
     alarms (:func:`fte_casadi.design._limits.explain_metrics`)."""
-    from ..design._limits import explain_metrics
+    from ..design import explain_metrics
 
     return ["why (the plant's structure, at this design; `fte tune` searches for a design that does better): " + s
             for s in explain_metrics(d, m)]  # fmt: skip
@@ -130,12 +221,18 @@ def _why(d, m: dict) -> list[str]:
 @click.option("--false-alarm-rate", "fa_rate", type=float,
               help="False alarms per unit of the plant's time the detection thresholds are set for "
                    "(default: one per hour of operation).")  # fmt: skip
+@click.option("--calibration-paths", "cal_paths", type=int,
+              help="Fault-free paths the detection thresholds are calibrated on (default: enough for the false-alarm "
+                   "rate asked, within a budget of path-steps).")  # fmt: skip
+@click.option("--detectability", "detect_curve", is_flag=True,
+              help="Also measure the smallest fault the design detects: per fault the detection probability against "
+                   "its size (each fault alone, at least 64 paths), with and without the measurement noise.")  # fmt: skip
 @click.option("--accommodate", is_flag=True,
               help="Compensate a fault in the control only while it is detected and isolated (thresholds calibrated "
                    "on fault-free paths at --false-alarm-rate); the C and FMU of --save-design's document do the same.")  # fmt: skip
-@click.option("--release", "release", type=float, default=0.5, show_default=True,
+@click.option("--release", "release", type=float,
               help="With --accommodate: a compensated fault stays compensated until |fhat| / threshold falls below "
-                   "this ratio (hysteresis); 1: the memoryless gate.")  # fmt: skip
+                   "this ratio (hysteresis; default 0.5); 1: the memoryless gate.")  # fmt: skip
 @click.option(
     "--save-design",
     "save_design",
@@ -153,12 +250,12 @@ def _why(d, m: dict) -> list[str]:
 @_plant_option
 @_allow_option
 @_guard
-def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, accommodate, release, save_design,
-             no_detect, as_json, quiet, plant_opt, allow_uncertified):  # fmt: skip
+def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, fa_rate, cal_paths, detect_curve,
+             accommodate, release, save_design, no_detect, as_json, quiet, plant_opt, allow_uncertified):  # fmt: skip
     """Monte Carlo of the closed loop on the nonlinear stochastic plant: per path fault-free,
     faulty without tolerant control, faulty with it."""
     from .._resources import check_paths_memory
-    from ..plants._loader import load_plant, load_scenario
+    from ..plants import load_plant, load_scenario
     from ..sim import save_result
     from ..sim import simulate as run_sim
 
@@ -166,26 +263,46 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     _check_seed(seed)
     if dt is not None:
         _positive("dt", dt)
+    _positive("false-alarm-rate", fa_rate)
+    stds = _noise_option(noise)
+    if release is not None and not accommodate:
+        raise ParameterError("--release is the hysteresis of --accommodate's gate: give --accommodate, or leave "
+                             "--release out")  # fmt: skip
+    release = 0.5 if release is None else release
+    if not (0 < release <= 1):
+        raise ParameterError(f"--release must be in (0, 1] (1: no hysteresis); got {release}")
+    if fa_rate is not None and no_detect and not accommodate:
+        raise ParameterError("--false-alarm-rate sets the detection thresholds, and --no-detection asks for none: "
+                             "give one of them")  # fmt: skip
+    if save_design and not accommodate:
+        raise ParameterError(
+            "--save-design writes the design with its accommodation thresholds: give --accommodate"
+        )
+    if save and save_design and Path(save).resolve() == Path(save_design).resolve():
+        raise ParameterError(f"--save and --save-design name the same file {save}: the result would replace the "
+                             "design; give two file names")  # fmt: skip
     if save:
         _writable_target(save, "--save", "result.npz")
+    if save_design:
+        _writable_target(save_design, "--save-design", "design.json")
     _outputs(save, plots, save_design)
     d, spec = _design_or_plant(
         target, progress=not quiet, plant=plant_opt, allow_uncertified=allow_uncertified
     )
     spec = _need_plant(d, spec, "simulate")
     plant = load_plant(spec)
-    scenario = _with_noise(load_scenario(spec), noise)
-    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
-    if not (0 < release <= 1):
-        raise ParameterError(f"--release must be in (0, 1] (1: no hysteresis); got {release}")
-    if save_design and not accommodate:
+    scenario = _with_noise(load_scenario(spec), stds, d)
+    if cal_paths is not None and cal_paths < 2:
+        raise ParameterError(f"--calibration-paths must be at least 2; got {cal_paths}")
+    step = float(dt if dt is not None else scenario.dt)
+    if fa_rate is not None and not fa_rate * step < 1:
         raise ParameterError(
-            "--save-design writes the design with its accommodation thresholds: give --accommodate"
+            f"--false-alarm-rate {fa_rate:g} asks for at least one false alarm per sample (the step is {step:g}): a "
+            f"rate is alarms per unit of the plant's time, below 1 / step = {1 / step:g}; the default is one per hour"
         )
-    if save_design:
-        _writable_target(save_design, "--save-design", "design.json")
+    check_paths_memory(d, scenario, paths or scenario.paths, dt, bool(save))
     if accommodate:
-        from ..sim._accommodate import accommodated
+        from ..sim import accommodated
 
         d = accommodated(
             d,
@@ -196,6 +313,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
             false_alarm_rate=fa_rate,
             dt=dt,
             release=release,
+            calibration_paths=cal_paths,
         )
         click.echo(f"note: {d.status[-1]}", err=True)
         if save_design:
@@ -203,8 +321,20 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
             click.echo(f"design with accommodation written to {save_design}", err=True)
     res = run_sim(d, plant, scenario, paths=paths or scenario.paths, seed=seed, dt=dt, progress=not quiet,
                   record_all=bool(save), scheduler=scheduler, exact=not fast_math, detect=not no_detect,
-                  false_alarm_rate=fa_rate)  # fmt: skip
+                  false_alarm_rate=fa_rate, calibration_paths=cal_paths)  # fmt: skip
     m = res.metrics
+    bad = _nonfinite(m)
+    if bad:  # a non-finite number is never printed as a result
+        first = bad[:6]  # the first keys (a list, not a message's text)
+        raise ParameterError(
+            f"the run's results are not finite ({', '.join(first)}{' ...' if len(bad) > 6 else ''}): the closed "
+            "loop overflowed with these settings. Lower the noise or the fault sizes, or check "
+            "the design"
+        )
+    if detect_curve and not no_detect:
+        m = _detectability(
+            d, plant, scenario, m, paths or scenario.paths, seed, dt, fa_rate, cal_paths, fast_math
+        )
     if save:
         save_result(res, save)
     figs = []
@@ -266,7 +396,7 @@ def sweep(
     """Monte Carlo over a grid of fault, noise and unknown-input factors: one metrics document per point."""
     from .._atomic import atomic_write_text
     from .._resources import check_paths_memory
-    from ..plants._loader import load_plant, load_scenario
+    from ..plants import load_plant, load_scenario
     from ..sim._sweep import parse_vary, to_csv, to_json
     from ..sim._sweep import sweep as run_sweep
 

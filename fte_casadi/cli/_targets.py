@@ -22,7 +22,7 @@ _VERTICES = click.option(
 def _scenario(plant_spec: str):
     """The plant's scenario, or None when it has none."""
     from ..errors import PlantLoadError
-    from ..plants._loader import load_scenario
+    from ..plants import load_scenario
 
     try:
         return load_scenario(plant_spec)
@@ -38,6 +38,23 @@ def _absolute_spec(plant_spec: str) -> str:
     return plant_spec
 
 
+def _design_options(
+    plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=()
+):  # fmt: skip
+    """The options record of a design of ``plant_spec`` on the command line (one record for a design and for
+    ``--explore``): the plant as it was named (made absolute), and what its scenario says of the design, unless
+    given (:meth:`~fte_casadi.sim.Scenario.design_options`: the sample time, the window the observer settles in,
+    the initial state)."""
+    from ..design import DesignOptions
+
+    options = DesignOptions(variant=variant, solver=solver, allow_uncertified=allow_uncertified,
+                            accept_assumptions=tuple(accept), plant_spec=_absolute_spec(plant_spec), **params)  # fmt: skip
+    sc = _scenario(plant_spec)
+    if sc is not None:  # its sample time, the window the observer settles in, the C's nominal start
+        options = sc.design_options(options)
+    return options
+
+
 def _make_design(
     plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
     vertices: str | None = None, full: bool = False, always_compensate: bool = False,
@@ -46,17 +63,13 @@ def _make_design(
     time, fault windows and start, unless given), with the gate that keeps the other faults' estimates out of a
     fault's compensation where they cross-talk (:func:`fte_casadi.sim.protected`; not with ``always_compensate``,
     the paper's policy); with ``full``, ``(design, T-S model, options)``."""
-    from ..design import DesignOptions
     from ..design import design as run_design
-    from ..plants._loader import load_plant
+    from ..plants import load_plant
     from ..ts import derive as derive_ts
 
-    options = DesignOptions(variant=variant, solver=solver, allow_uncertified=allow_uncertified,
-                            accept_assumptions=tuple(accept), plant_spec=_absolute_spec(plant_spec), **params)  # fmt: skip
+    options = _design_options(plant_spec, variant, solver, params, allow_uncertified, accept)
     ts = derive_ts(load_plant(plant_spec), vertices=vertices)
     sc = _scenario(plant_spec)
-    if sc is not None:  # its sample time, the window the observer settles in, the C's nominal start
-        options = sc.design_options(options)
     d = run_design(ts, options)
     if (
         sc is not None and not always_compensate
@@ -76,10 +89,13 @@ def _design_or_plant(
     against its plant when that is a built-in one or named with ``plant`` (--plant), never running code it
     names. Returns ``(design, plant spec or None)``: the spec of the plant it may be simulated on.
     """
-    from ..design._record import Design
+    from ..design import Design
     from ..trust import check_loaded
 
     p = Path(target)
+    if p.is_dir():
+        raise ParameterError(f"{target} is a directory; give a design document (the JSON file `fte design PLANT -o "
+                             "FILE.json` writes) or a plant (a built-in name, FILE.py:FUNCTION or module:function)")  # fmt: skip
     if target.endswith(".json") or p.is_file():
         trusted = check_loaded(Design.load(p), plant, allow_uncertified)
         for note in trusted.notes:

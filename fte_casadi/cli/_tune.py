@@ -41,7 +41,7 @@ def _is_optuna_db(path: Path) -> bool:
 
 def _tune_folder(folder: Path, option: str) -> None:
     """Refuse, before any work, a folder holding anything fte tune did not write: it is replaced as a whole."""
-    from ..tune._output import is_tune_record
+    from ..tune import is_tune_record
 
     if folder.exists() and not folder.is_dir():
         raise ParameterError(f"{option} {folder} is a file; give a directory (fte tune writes tuned.json and more "
@@ -88,18 +88,29 @@ def _tune_target(out_dir: str, resume: bool = False) -> tuple[Path, Path]:
     return out, work
 
 
-def _tune_work(out: Path, work: Path, resume: bool) -> str:
+def _tune_work(out: Path, work: Path, resume: bool) -> tuple[str, bool]:
     """Make DIR.partial ready for the run (with --resume of a finished run, a copy of its trials);
-    return the optuna storage of the run."""
+    return the optuna storage of the run and whether its trials are that copy."""
     import shutil
 
     kept = work / "optuna.db"
     if work.is_dir() and not kept.exists():  # an earlier run stopped before its first trial was kept
         shutil.rmtree(work)
     work.mkdir(parents=True, exist_ok=True)
-    if resume and not kept.exists() and _is_optuna_db(out / "optuna.db"):  # a finished run, continued
+    copied = resume and not kept.exists() and _is_optuna_db(out / "optuna.db")
+    if copied:  # a finished run, continued
         shutil.copyfile(out / "optuna.db", kept)
-    return f"sqlite:///{kept.resolve()}"
+    return f"sqlite:///{kept.resolve()}", copied
+
+
+def _trial_count(db: Path) -> int:
+    """The trials an optuna database holds (0 when it holds no search)."""
+    import optuna
+
+    try:
+        return sum(s.n_trials for s in optuna.get_all_study_summaries(storage=f"sqlite:///{db.resolve()}"))
+    except Exception:  # noqa: BLE001 - an unreadable database holds nothing to keep
+        return 0
 
 
 @click.command()
@@ -139,10 +150,9 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
     import shutil
 
     from ..errors import MissingDependencyError
-    from ..plants._loader import load_plant, load_scenario
-    from ..tune._output import comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
-    from ..tune._search import RULES
-    from ..tune._search import tune as run_tune
+    from ..plants import load_plant, load_scenario
+    from ..tune import RULES, comparison, dominates, fmt_rows, front_documents, front_table, write_outputs
+    from ..tune import tune as run_tune
 
     if trials < 2:
         raise ParameterError(f"--trials must be at least 2 (trial 0 is the base design, the others the search); "
@@ -178,11 +188,17 @@ def tune(target, trials, seed, rule, paths, scheduler, out_dir, as_json, quiet, 
         "command with --resume to continue" if (work / "optuna.db").exists() else f"{out} is as it was")  # fmt: skip
     with tqdm(total=trials, desc=f"tune {plant.name}", unit=" trials", file=sys.stderr, disable=quiet,
               delay=1.0) as bar:  # fmt: skip
-        storage = _tune_work(out, work, resume)
+        storage, copied = _tune_work(out, work, resume)
         try:
             result = run_tune(d, plant, scenario, trials=trials, seed=seed, rule=rule, paths=paths,
                               scheduler=scheduler, base_is_given=given, progress=progress, storage=storage,
                               resume=resume)  # fmt: skip
+        except BaseException:
+            # a refused --resume of a finished run (another --seed, target or --paths) leaves no copy of its
+            # trials behind, which the next run would take for an interrupted one
+            if copied and _trial_count(work / "optuna.db") <= _trial_count(out / "optuna.db"):
+                shutil.rmtree(work, ignore_errors=True)
+            raise
         finally:
             if not (work / "optuna.db").exists():  # stopped before a trial was kept: nothing to resume
                 shutil.rmtree(work, ignore_errors=True)

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from ..design._record import Design
+from ..design import Design
 from ..errors import CodegenError
 from ..step import step_function
 from ._generate import c_name
@@ -36,7 +36,7 @@ class CStep:
         self._step = getattr(self.lib, f"fte_{name}_step")
         ptr = ctypes.POINTER(_CTYPES[real])
         self._init.argtypes = [ctypes.c_void_p, ptr]
-        self._init.restype = None
+        self._init.restype = ctypes.c_int
         self._init_from_y = getattr(self.lib, f"fte_{name}_init_from_y")
         self._init_from_y.argtypes = [ctypes.c_void_p, ptr, ptr]
         self._init_from_y.restype = ctypes.c_int
@@ -49,12 +49,12 @@ class CStep:
     def _p(self, a: np.ndarray):
         return a.ctypes.data_as(self._ptr)
 
-    def init(self, z0=None) -> None:
+    def init(self, z0=None) -> int:
+        """``fte_NAME_init``: z0 (None: zeros); its return code (0, or 1/3 for a refused z0)."""
         if z0 is None:
-            self._init(ctypes.byref(self.state), None)
-        else:
-            z = np.ascontiguousarray(z0, dtype=self.dtype)
-            self._init(ctypes.byref(self.state), self._p(z))
+            return int(self._init(ctypes.byref(self.state), None))
+        z = np.ascontiguousarray(z0, dtype=self.dtype)
+        return int(self._init(ctypes.byref(self.state), self._p(z)))
 
     def init_from_y(self, y0, xbar0=None) -> int:
         """``fte_NAME_init_from_y``: z0 = xbar0 - H y0 (xbar0 None: the design's nominal one); its return code."""

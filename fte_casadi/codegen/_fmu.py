@@ -44,12 +44,22 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..design._record import Design
+from .._labels import c_comment, c_string, xml_text
+from ..design import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import _build as build
 from . import _template as template
-from ._generate import _check_sample_time, _version, c_name, file_mode, generate_c, output_files, prepare_dir
+from ._generate import (
+    _check_sample_time,
+    _version,
+    c_name,
+    c_texts,
+    check_out,
+    output_files,
+    prepare_dir,
+    write_c_set,
+)
 
 __all__ = ["generate_fmu"]  # public: docs/api.md
 
@@ -173,9 +183,9 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
         "fmiModelDescription",
         {
             "fmiVersion": "2.0",
-            "modelName": design.plant,
+            "modelName": xml_text(design.plant),
             "guid": guid,
-            "description": f"observer / fault estimator / tolerant controller of plant {design.plant} "
+            "description": f"observer / fault estimator / tolerant controller of plant {xml_text(design.plant)} "
             f"(design variant {design.variant}, {'certified' if design.certified else 'NOT CERTIFIED'}); "
             f"one fmi2DoStep = one sample, fixed step Ts = {sample_time!r}",
             "generationTool": f"{_TOOL} {_version()}",
@@ -207,7 +217,7 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
     if units:
         ud = ET.SubElement(root, "UnitDefinitions")
         for u in units:
-            ET.SubElement(ud, "Unit", {"name": u})
+            ET.SubElement(ud, "Unit", {"name": xml_text(u)})
     cats = ET.SubElement(root, "LogCategories")
     ET.SubElement(cats, "Category", {"name": "logStatusError", "description": "errors (always logged)"})
     ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stepSize": repr(float(sample_time))})
@@ -216,7 +226,7 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
         attrs = {
             "name": v.name,
             "valueReference": str(v.value_reference),
-            "description": v.description,
+            "description": xml_text(v.description),
             "causality": v.causality,
             "variability": "discrete",
         }
@@ -225,7 +235,7 @@ def _model_description(design, variables, sample_time, deps, guid, sources, mid)
         sv = ET.SubElement(mv, "ScalarVariable", attrs)
         real = {}
         if v.unit:
-            real["unit"] = v.unit
+            real["unit"] = xml_text(v.unit)
         if v.start is not None:
             real["start"] = repr(float(v.start))
         ET.SubElement(sv, "Real", real)
@@ -293,7 +303,7 @@ def check_fmu_target(design: Design, out_dir: str | os.PathLike) -> Path:
 
 
 def _c_strings(names) -> str:
-    return ",\n".join(f'  "{n}"' for n in names)
+    return ",\n".join(f'  "{c_string(n)}"' for n in names)
 
 
 def _c_reals(values) -> str:
@@ -308,26 +318,27 @@ def _guid(parts) -> str:
     return "{" + str(uuid.UUID(h.hexdigest()[:32])) + "}"
 
 
-def _write_zip(target: Path, members: dict[str, bytes]) -> None:
-    """Write the archive to a temporary file next to ``target``, then rename it over ``target``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+def _zip_bytes(members: dict[str, bytes]) -> bytes:
+    """The zip archive of ``members`` (fixed timestamps and modes: the same design gives the same bytes)."""
+    import io
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in members.items():
+            info = zipfile.ZipInfo(name, _ZIP_TIME)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
+            z.writestr(info, data)
+    return buf.getvalue()
+
+
+def _write_zip(target: Path, data: bytes) -> None:
+    """Write the archive whole or not at all (:func:`fte_casadi._atomic.atomic_write`)."""
+    from .._atomic import atomic_write
+
     try:
-        with os.fdopen(fd, "wb") as fh:
-            with zipfile.ZipFile(fh, "w", zipfile.ZIP_DEFLATED) as z:
-                for name, data in members.items():
-                    info = zipfile.ZipInfo(name, _ZIP_TIME)
-                    info.compress_type = zipfile.ZIP_DEFLATED
-                    info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
-                    z.writestr(info, data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, file_mode())
-        os.replace(tmp, target)
+        atomic_write(target, lambda fh: fh.write(data))
     except OSError as exc:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
         raise CodegenError(f"cannot write the FMU {str(target)!r}: {exc.strerror or exc}") from None
 
 
@@ -350,8 +361,8 @@ def generate_fmu(
         of that name is replaced only when fte wrote it (:func:`is_fte_fmu`).
     sample_time, real, boundary_layer
         As for :func:`~fte_casadi.codegen._generate.generate_c`; ``sample_time`` is the FMU's fixed
-        communication step (default: the design's sample time). The former keyword ``ts`` still
-        works, with a ``DeprecationWarning``.
+        communication step (default: the design's sample time). The former keyword ``ts`` was removed
+        in 0.2.0: giving it is a ``TypeError``.
 
     Returns
     -------
@@ -382,6 +393,38 @@ def generate_fmu(
         raise ParameterError(f"--real must be one of ['double', 'float']; got {real!r}")
     sample_time = _check_sample_time(design, sample_time)
     target = check_fmu_target(design, out_dir)
+    texts = c_texts(design, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+    data = fmu_member(design, texts, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+    prepare_dir(Path(out_dir))
+    _write_zip(target, data)
+    return target
+
+
+def generate_c_and_fmu(design: Design, out_dir: str | os.PathLike, *, sample_time: float | None = None,
+                       real: str = "double", boundary_layer: float | None = None) -> list[Path]:  # fmt: skip
+    """The C of :func:`~fte_casadi.codegen._generate.generate_c` and its FMU (``<plant>.fmu``), put into
+    ``out_dir`` as one set (``fte codegen --fmu``): a kill leaves the old C and FMU or the new ones."""
+    if real not in ("double", "float"):
+        raise ParameterError(f"--real must be one of ['double', 'float']; got {real!r}")
+    sample_time = _check_sample_time(design, sample_time)
+    if boundary_layer is None:  # the design's own (fte tune), as the simulation runs it
+        boundary_layer = design.params.boundary_layer
+    out = Path(out_dir)
+    check_out(out)
+    target = check_fmu_target(design, out)
+    texts = c_texts(design, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+    files = {name: text.encode("utf-8") for name, text in texts.items()}
+    files[target.name] = fmu_member(
+        design, texts, sample_time=sample_time, real=real, boundary_layer=boundary_layer
+    )
+    return write_c_set(out, files)
+
+
+def fmu_member(
+    design: Design, texts: dict[str, str], *, sample_time: float, real: str, boundary_layer
+) -> bytes:
+    """The FMU (the bytes of its zip archive) of the generated C ``texts`` (:func:`~._generate.c_texts` of the
+    same ``design``, ``sample_time``, ``real`` and ``boundary_layer``), its binary compiled here."""
     folder, suffix = _platform()
     mid = model_identifier(design.plant)
     name = c_name(design.plant)
@@ -389,8 +432,10 @@ def generate_fmu(
     deps = _dependencies(design, sample_time, boundary_layer)
     with tempfile.TemporaryDirectory(prefix="fte_fmu_") as tmp:
         src = Path(tmp, "sources")
-        generate_c(design, src, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
-        generated = {f: (src / f).read_text() for f in output_files(design.plant)}
+        src.mkdir()
+        for f, text in texts.items():
+            (src / f).write_text(text)
+        generated = {f: texts[f] for f in output_files(design.plant)}
         readme = generated.pop("README.md")
         wrapper_name = f"{mid}_fmi2.c"
         c_files = sorted([f for f in generated if f.endswith(".c")] + [wrapper_name])
@@ -403,7 +448,7 @@ def generate_fmu(
                 mid=mid,
                 name=name,
                 NAME=name.upper(),
-                plant=design.plant,
+                plant=c_comment(design.plant),
                 version=_version(),
                 guid=guid,
                 ny=p,
@@ -429,6 +474,4 @@ def generate_fmu(
         for f in sorted(generated) + [wrapper_name, FMI2_HEADER_NAME]:
             members[f"sources/{f}"] = (src / f).read_bytes()
         members["documentation/README.md"] = readme.encode()
-    prepare_dir(Path(out_dir))
-    _write_zip(target, members)
-    return target
+    return _zip_bytes(members)

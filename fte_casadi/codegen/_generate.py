@@ -25,6 +25,7 @@ near 0.2, so the discrete observer follows the continuous one closely.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import re
@@ -35,11 +36,15 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .._atomic import write_set
+from .._labels import c_comment, markdown
 from .._rounding import series_floor
-from ..design._record import Design
+from .._version import VERSION
+from ..design import Design
 from ..errors import CodegenError, ParameterError
 from ..step import step_function
 from . import _template as template
+from ._ranges import Y_FALLBACK, Y_FAULT_MARGIN, Y_MARGIN, initial_range, output_range
 
 __all__ = ["generate_c", "default_sample_time", "output_files"]  # public: docs/api.md
 
@@ -47,29 +52,30 @@ __all__ = ["generate_c", "default_sample_time", "output_files"]  # public: docs/
 BUILTIN_DIRS = {"manipulator": "manipulator", "three-tank": "three_tank", "quadruple-tank": "quadruple_tank"}
 
 _REALS = ("double", "float")
+#: the version of fte_casadi a generated file names (left out of the set's number: a source checkout and an
+#: installed package make the same files)
+_FTE_VERSION = re.compile(r"fte_casadi \S+")
 _REAL_BYTES = {"double": 8, "float": 4}
 _FORBIDDEN = ("stdio.h", "printf", "fopen", "malloc", "calloc", "realloc", "free(")
 
 
 def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("fte_casadi")
-    except Exception:  # noqa: BLE001 - metadata missing in a source checkout
-        return "0"
+    """The package's version (:data:`fte_casadi._version.VERSION`), as the generated files say it."""
+    return VERSION
 
 
 def c_name(plant: str) -> str:
     """C identifier part for a plant name (``three-tank`` -> ``three_tank``; ``pendül`` -> ``pendul``: C99
-    identifiers are ASCII letters, digits and ``_``, so accents are dropped and other characters become ``_``)."""
+    identifiers are ASCII letters, digits and ``_``, so accents are dropped and other characters become ``_``,
+    never two in a row nor at either end: CasADi refuses a function name such as ``fte_a__casadi_step``)."""
     import unicodedata
 
     plain = unicodedata.normalize("NFKD", plant).encode("ascii", "ignore").decode()
     out = "".join(ch if (ch.isascii() and (ch.isalnum() or ch == "_")) else "_" for ch in plain)
-    if not out or out[0].isdigit():
-        out = "p_" + out
-    return out
+    out = re.sub(r"_+", "_", out).strip("_")
+    if not out:
+        return "p"
+    return "p_" + out if out[0].isdigit() else out
 
 
 def output_files(plant: str) -> list[str]:
@@ -258,11 +264,11 @@ def _memory(c_src: str, real: str, nxbar: int, sizes: dict, latches: int = 0) ->
 
 
 def _fmt(v: float, real: str = "double") -> str:
-    text = repr(float(v))
+    literal = repr(float(v))
     if real == "float":
-        text += "" if ("." in text or "e" in text) else ".0"
-        return text + "f"
-    return text
+        literal += "" if ("." in literal or "e" in literal) else ".0"
+        return literal + "f"
+    return literal
 
 
 def _c_values(values, real: str = "double") -> str:
@@ -281,6 +287,8 @@ def _wrapper(
     c_src: str,
     h_src: str,
     y_range: dict,
+    init_range: dict,
+    set_id: str = "0UL",
 ):
     fname = f"fte_{name}_casadi_step"
     sizes = _sizes(h_src, fname)
@@ -288,9 +296,25 @@ def _wrapper(
     n, m, p, lf, nbar = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.nbar))
     names = design.names or {}
 
-    def joined(key, count, stem):
-        v = names.get(key) or [f"{stem}{k}" for k in range(count)]
-        return ", ".join(str(t) for t in v)
+    def labels(esc) -> dict:
+        """The texts that carry the plant's names and units, each name escaped by ``esc`` (a document's names
+        are data: escaped for C comments in the C, for Markdown in the README; fte_casadi._labels)."""
+
+        def joined(key, count, stem):
+            v = names.get(key) or [f"{stem}{k}" for k in range(count)]
+            return ", ".join(esc(t) for t in v)
+
+        return {
+            "plant": esc(design.plant),
+            "time_unit": esc(names.get("time_unit", "s")),
+            "y_names": joined("outputs", p, "y"),
+            "u_names": joined("inputs", m, "u"),
+            "x_names": joined("states", n, "x"),
+            "f_names": joined("faults", lf, "f"),
+            "y_range_text": _range_text(design, y_range, real, esc),
+            "saturation_text": _saturation_text(design, esc),
+            **_sliding_text(design, esc),
+        }
 
     NAME = name.upper()
     work_fields = ""
@@ -318,7 +342,6 @@ def _wrapper(
     sub = {
         "name": name,
         "NAME": NAME,
-        "plant": design.plant,
         "version": _version(),
         "variant": design.variant,
         "certified": certified,
@@ -333,16 +356,10 @@ def _wrapper(
         "exp_mask": "UINT64_C(0x7FF0000000000000)" if real == "double" else "UINT32_C(0x7F800000)",
         "ymin_values": _c_values(y_range["lo"], real),
         "ymax_values": _c_values(y_range["hi"], real),
-        "y_range_text": _range_text(design, y_range, real)[0],
         "y_margin_text": f"{Y_MARGIN:g}",
         "y_fault_margin_text": f"{Y_FAULT_MARGIN:g}",
         "sample_time_text": _fmt(sample_time),
         "ts_max_text": f"{ts_max:.6g}",
-        "time_unit": names.get("time_unit", "s"),
-        "y_names": joined("outputs", p, "y"),
-        "u_names": joined("inputs", m, "u"),
-        "x_names": joined("states", n, "x"),
-        "f_names": joined("faults", lf, "f"),
         "work_fields": work_fields,
         **gate,
         "work_init": work_init,
@@ -353,12 +370,16 @@ def _wrapper(
         "iw_arg": "s->iw" if sizes["SZ_IW"] else "0",
         "w_arg": "s->w" if sizes["SZ_W"] else "0",
         "sliding": "sgn(s)" if boundary_layer is None else f"sat(s / {_fmt(boundary_layer)})",
-        **_sliding_text(design),
         "affine": " + T abar_i" if affine else "",
         "u_ref": "[" + ", ".join(f"{v:.17g}" for v in np.ravel(design.u_ref)) + "]",
-        "saturation_text": _saturation_text(design),
         "H_values": _c_values(np.asarray(design.H, dtype=float).ravel(), real),
         "xbar0_values": _c_values(design.xbar0, real),
+        "xbar0_min_values": _c_values(init_range["xbar_lo"], real),
+        "xbar0_max_values": _c_values(init_range["xbar_hi"], real),
+        "z_min_values": _c_values(init_range["z_lo"], real),
+        "z_max_values": _c_values(init_range["z_hi"], real),
+        "fallback_text": f"{Y_FALLBACK[real]:.0e}",
+        "set_id": set_id,
         "x0_text": ", ".join(_fmt(v) for v in design.xbar0[:n]),
         **mem,
     }
@@ -371,10 +392,11 @@ def _wrapper(
         files[4]: "this file",
     }
     sub["file_table"] = "\n".join(f"| `{k}` | {v} |" for k, v in table.items())
+    in_c, in_md = {**sub, **labels(c_comment)}, {**sub, **labels(markdown)}
     return {
-        files[0]: template.fill(template.TEMPLATES["header"], sub),
-        files[1]: template.fill(template.TEMPLATES["source"], sub),
-        files[4]: template.fill(template.TEMPLATES["readme"], sub),
+        files[0]: template.fill(template.TEMPLATES["header"], in_c),
+        files[1]: template.fill(template.TEMPLATES["source"], in_c),
+        files[4]: template.fill(template.TEMPLATES["readme"], in_md),
     }, mem
 
 
@@ -419,15 +441,15 @@ def _gate_texts(design: Design, NAME: str) -> dict:
     return out
 
 
-def _sliding_text(design: Design) -> dict:
+def _sliding_text(design: Design, esc=str) -> dict:
     """The sliding variables' count and gains: ``(delta + eps)`` per fault, and with Remark 5 first the
-    gains of the unknown inputs H does not decouple."""
+    gains of the unknown inputs H does not decouple (their names escaped by ``esc``)."""
     lf = int(design.dims.lf)
     r5 = design.remark5 or {}
     if not r5.get("used"):
         return {"ns": lf, "ns_text": "", "sliding_gain": "(delta + eps)"}
     k = len(r5["gain"])
-    names = ", ".join(r5.get("unknown_inputs", []))
+    names = ", ".join(esc(t) for t in r5.get("unknown_inputs", []))
     gains = ", ".join(f"{v:.6g}" for v in design.sliding_gain())
     return {
         "ns": lf + k,
@@ -436,128 +458,33 @@ def _sliding_text(design: Design) -> dict:
     }
 
 
-def _saturation_text(design: Design) -> str:
-    """One line saying how u is clipped (the step applies it, and feeds the observer the clipped u)."""
+def _saturation_text(design: Design, esc=str) -> str:
+    """One line saying how u is clipped (the step applies it, and feeds the observer the clipped u); the
+    inputs' names escaped by ``esc``."""
     if design.input_limits is None:
         return "none (u is not clipped)."
     names = (design.names or {}).get("inputs") or [f"u{k}" for k in range(int(design.dims.m))]
+
+    def bound(v: float) -> str:
+        return f"{v:.17g}".replace("inf", "infinity")  # the number only: a name may hold 'inf'
+
     parts = [
-        f"{nm} in [{lo:.17g}, {hi:.17g}]"
+        f"{esc(nm)} in [{bound(lo)}, {bound(hi)}]"
         for nm, (lo, hi) in zip(names, np.asarray(design.input_limits, float))
     ]
-    return (
-        "u is clipped to "
-        + ", ".join(parts).replace("inf", "infinity")
-        + "; the observer is fed the clipped u."
-    )
+    return "u is clipped to " + ", ".join(parts) + "; the observer is fed the clipped u."
 
 
-#: the margin the range check of y adds on each side of an output's range over the region, as a
-#: fraction of that range's width: an output free of sensor faults ...
-Y_MARGIN = 0.1
-#: ... and an output with a sensor fault, whose size the plant does not declare
-Y_FAULT_MARGIN = 1.0
-#: the bound on |y| where the range is not known (a state without bounds, a design document without
-#: the region): no product of two such numbers overflows (1e150^2 < DBL_MAX, 1e18^2 < FLT_MAX)
-Y_FALLBACK = {"double": 1e150, "float": 1e18}
-#: points per output along each side of its margin where the step is evaluated before that margin is kept
-_MARGIN_POINTS = 17
-
-
-def output_range(design: Design, fn: ca.Function | None = None, real: str = "double") -> dict:
-    """The range the generated C accepts for each measurement ``y_k`` (outside it the step returns 3 and
-    changes nothing).
-
-    It is ``C_k x`` over the plant's region (the box ``checks["region"]`` of the design document),
-    widened on each side by :data:`Y_MARGIN` of its width (:data:`Y_FAULT_MARGIN` for an output with a
-    sensor fault, whose size is not declared). When ``fn`` (the step) is given, the step is evaluated
-    along each widened side, the other outputs at the middle of their ranges and ``z`` such that
-    ``xbarhat`` is the nominal start: where it is not finite (a premise outside its domain, such as the
-    square root of a negative level), the margin of that side is halved until it is, down to none.
-    Where the range is unknown, ``|y_k| <=`` :data:`Y_FALLBACK`. Returns ``{"lo", "hi", "margin_lo",
-    "margin_hi", "known"}``, per output.
-    """
-    C, Df = np.asarray(design.C, float), np.asarray(design.Df, float)
-    p, n = C.shape
-    region = design.checks.get("region") if isinstance(design.checks, dict) else None
-    big = Y_FALLBACK[real]
-    xlo = np.full(n, np.nan)
-    xhi = np.full(n, np.nan)
-    if isinstance(region, dict):
-        try:
-            xlo = np.array([np.nan if v is None else float(v) for v in region.get("lo", [])], float)
-            xhi = np.array([np.nan if v is None else float(v) for v in region.get("hi", [])], float)
-        except (TypeError, ValueError):
-            xlo = xhi = np.full(n, np.nan)
-        if xlo.shape != (n,) or xhi.shape != (n,) or np.any(xlo > xhi):
-            xlo = xhi = np.full(n, np.nan)
-    lo, hi = np.zeros(p), np.zeros(p)
-    for k in range(p):
-        a = np.where(C[k] > 0, xlo, xhi) * C[k]
-        b = np.where(C[k] > 0, xhi, xlo) * C[k]
-        used = C[k] != 0
-        lo[k], hi[k] = np.sum(a[used]), np.sum(b[used])
-    known = np.isfinite(lo) & np.isfinite(hi) & (np.abs(lo) < big) & (np.abs(hi) < big)
-    width = np.where(known, hi - lo, 0.0)
-    frac = np.where(np.any(Df != 0, axis=1), Y_FAULT_MARGIN, Y_MARGIN)
-    m_lo, m_hi = frac * width, frac * width
-    if fn is not None and np.any(known):
-        H = np.asarray(design.H, float)
-        xbar0 = np.asarray(design.xbar0, float)
-
-        every = _every_value(fn)
-
-        def finite(ys: np.ndarray) -> bool:
-            N = ys.shape[1]
-            zs = xbar0[:, None] - H @ ys
-            if fn.size1_in(0) > zs.shape[0]:  # a latched accommodation gate's latches, off as init sets them
-                zs = np.vstack([zs, np.zeros((fn.size1_in(0) - zs.shape[0], N))])
-            return bool(np.all(np.isfinite(np.array(every.map(N)(zs, ys)))))
-
-        mid = np.where(known, 0.5 * (lo + hi), 0.0)
-        for k in np.flatnonzero(known):
-            for side, edge, margin in (("lo", lo[k], m_lo), ("hi", hi[k], m_hi)):
-                sign = -1.0 if side == "lo" else 1.0
-                while True:
-                    ys = np.tile(mid[:, None], (1, _MARGIN_POINTS))
-                    ys[k] = edge + sign * np.linspace(0.0, margin[k], _MARGIN_POINTS)
-                    if finite(ys) or margin[k] == 0.0:
-                        break
-                    margin[k] = 0.0 if margin[k] < 1e-3 * width[k] else 0.5 * margin[k]
-    ylo = np.where(known, lo - m_lo, -big)
-    yhi = np.where(known, hi + m_hi, big)
-    return {"lo": ylo, "hi": yhi, "margin_lo": m_lo, "margin_hi": m_hi, "known": known}
-
-
-def _every_value(fn: ca.Function) -> ca.Function:
-    """``(z, y) ->`` every intermediate value of the step ``fn`` (an ``SX`` Function), branches that an
-    ``if_else`` discards included: a NaN swallowed later (``fmax(NaN, lo)`` is ``lo``) still shows, as it
-    would as a floating-point exception in the C."""
-    z, y = ca.SX.sym("z", fn.size1_in(0)), ca.SX.sym("y", fn.size1_in(1))
-    outs = ca.vertcat(*[ca.vec(o) for o in fn.call([z, y])])
-    seen, nodes = set(), []
-    stack = [outs[k] for k in range(outs.numel())]
-    while stack:
-        e = stack.pop()
-        key = e.element_hash()
-        if key in seen:
-            continue
-        seen.add(key)
-        nodes.append(e)
-        stack.extend(e.dep(i) for i in range(e.n_dep()))
-    return ca.Function("every", [z, y], [ca.vertcat(*nodes)])
-
-
-def _range_text(design: Design, rng: dict, real: str) -> tuple[str, str]:
-    """The header's and the README's lines on the accepted range of y."""
+def _range_text(design: Design, rng: dict, real: str, esc=str) -> str:
+    """The line on the accepted range of y, the outputs' names escaped by ``esc``."""
     names = (design.names or {}).get("outputs") or [f"y{k}" for k in range(len(rng["lo"]))]
     parts = []
-    for k, nm in enumerate(names):
+    for k, nm in enumerate(map(esc, names)):
         if rng["known"][k]:
             parts.append(f"{nm} in [{rng['lo'][k]:.6g}, {rng['hi'][k]:.6g}]")
         else:
             parts.append(f"|{nm}| <= {rng['hi'][k]:.0e} (range unknown)")
-    return "; ".join(parts), ", ".join(parts)
+    return "; ".join(parts)
 
 
 def prepare_dir(out_dir: Path) -> None:
@@ -582,33 +509,6 @@ def file_mode() -> int:
     return 0o666 & ~mask
 
 
-def write_files(out_dir: Path, texts: dict[str, str]) -> list[Path]:
-    """Write every file to a temporary name first, then rename them all; a failure removes the temporaries."""
-    temps: list[tuple[str, Path]] = []
-    mode = file_mode()
-    try:
-        for fname, text in texts.items():
-            fd, tmp = tempfile.mkstemp(prefix=f".{fname}.", suffix=".tmp", dir=out_dir)
-            temps.append((fname, Path(tmp)))
-            with os.fdopen(fd, "w", newline="\n") as fh:
-                fh.write(text)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.chmod(tmp, mode)
-        for fname, tmp in temps:
-            os.replace(tmp, out_dir / fname)
-    except OSError as exc:
-        for _, tmp in temps:
-            try:
-                tmp.unlink()
-            except OSError:
-                pass
-        raise CodegenError(
-            f"cannot write the generated C into {str(out_dir)!r}: {exc.strerror or exc}"
-        ) from None
-    return [out_dir / f for f in texts]
-
-
 def generate_c(
     design: Design | str | os.PathLike,
     out_dir: str | os.PathLike,
@@ -624,8 +524,10 @@ def generate_c(
     design : Design or path
         The design record, or the path of a design document (read with ``Design.load``).
     out_dir : path
-        Created if needed. Only the files of :func:`output_files` are written (atomically:
-        temporary files, then renames); nothing else in the directory is touched.
+        Created if needed. The files of :func:`output_files` are put in place as one set
+        (:func:`fte_casadi._atomic.write_set`: the directory is swapped with a new one holding the new files
+        and every other entry of the old one, carried over as hard links), so that a kill at any moment leaves
+        the old set or the new one, never a mix; nothing else in the directory changes.
     sample_time : float, optional
         The step's sample time Ts (the CLI's ``--sample-time``); positive and below
         ``design.checks["ts_max"]``. Default :func:`default_sample_time`.
@@ -659,12 +561,38 @@ def generate_c(
     if real not in _REALS:
         raise ParameterError(f"--real must be one of {list(_REALS)}; got {real!r}")
     sample_time = _check_sample_time(design, sample_time)
-    ts_max = _ts_max(design)
     if boundary_layer is None:  # the design's own (fte tune), as the simulation runs it
         boundary_layer = design.params.boundary_layer
-    name = c_name(design.plant)
     out = Path(out_dir)
-    prepare_dir(out)
+    check_out(out)
+    texts = c_texts(design, sample_time=sample_time, real=real, boundary_layer=boundary_layer)
+    return write_c_set(out, {name: text.encode("utf-8") for name, text in texts.items()})
+
+
+def write_c_set(out: Path, files: dict[str, bytes]) -> list[Path]:
+    """Put the generated ``files`` into ``out`` as one set (:func:`fte_casadi._atomic.write_set`)."""
+    try:
+        return write_set(out, files)
+    except ValueError:
+        raise CodegenError(f"--out {out} is the current directory or holds it; fte codegen replaces its output "
+                           "directory as one set: give a directory of its own, such as c/") from None  # fmt: skip
+    except OSError as exc:
+        raise CodegenError(
+            f"cannot write the generated C into {str(out)!r}: {exc.strerror or exc}; choose a writable --out"
+        ) from None
+
+
+def c_texts(
+    design: Design, *, sample_time: float, real: str = "double", boundary_layer=None
+) -> dict[str, str]:
+    """The files of :func:`generate_c` (name: text, in the order of :func:`output_files`) for ``design`` at the
+    checked ``sample_time``. Each C file carries the set's number (``FTE_NAME_SET``, a hash of everything the
+    files are made of): a ``.c`` file compiled with headers of another run of ``fte codegen`` stops the
+    compilation with an ``#error``, so that a mix of two sets never builds."""
+    ts_max = _ts_max(design)
+    name = c_name(design.plant)
+    if boundary_layer is None:  # the design's own (fte tune), as the simulation runs it
+        boundary_layer = design.params.boundary_layer
     try:
         fn = step_function(
             design, sample_time, tolerant=True, boundary_layer=boundary_layer, name=f"fte_{name}_casadi_step"
@@ -677,16 +605,47 @@ def generate_c(
         ) from None
     c_src, h_src = _casadi_sources(fn, name, real)
     y_range = output_range(design, fn, real)
-    texts, _ = _wrapper(design, name, real, sample_time, ts_max, boundary_layer, c_src, h_src, y_range)
+    try:
+        init_range = initial_range(design, fn, y_range, real)
+    except ValueError as exc:
+        raise CodegenError(f"{exc}: the generated C would refuse its own nominal start; make the design again "
+                           "for this plant (`fte design PLANT -o FILE`)") from None  # fmt: skip
+    args = (design, name, real, sample_time, ts_max, boundary_layer, c_src, h_src, y_range, init_range)
+    draft, _ = _wrapper(*args, "SET")  # the set's number: a hash of the files (fte's version left out)
+    made_of = [c_src, h_src, *(_FTE_VERSION.sub("fte_casadi", t) for t in draft.values())]
+    set_id = f"0x{hashlib.sha256(chr(0).join(made_of).encode('utf-8')).hexdigest()[:8]}UL"
+    texts, _ = _wrapper(*args, set_id)
+    NAME = name.upper()
+    h_src = h_src.replace(
+        " */\n", f" */\n#define FTE_{NAME}_CASADI_SET {set_id} /* the set these files belong to */\n", 1
+    )
+    c_src = c_src.replace(f'#include "fte_{name}_casadi.h"\n', f'#include "fte_{name}_casadi.h"\n'
+                          f"#if FTE_{NAME}_CASADI_SET != {set_id}\n"
+                          f'#error "fte_{name}_casadi.h is of another run of fte codegen than this file: generate '
+                          'the C again as one set (fte codegen)"\n#endif\n', 1)  # fmt: skip
     files = output_files(design.plant)
-    ordered = {
+    return {
         files[0]: texts[files[0]],
         files[1]: texts[files[1]],
         files[2]: h_src,
         files[3]: c_src,
         files[4]: texts[files[4]],
     }
-    return write_files(out, ordered)
+
+
+def check_out(out: Path) -> None:
+    """Refuse an output directory that is a file, or whose folder cannot be written into (before any work)."""
+    if out.exists() and not out.is_dir():
+        raise CodegenError(
+            f"output directory {str(out)!r} exists and is not a directory; choose another --out"
+        )
+    near = out.absolute().parent
+    while not near.exists():
+        near = near.parent
+    if not os.access(near, os.W_OK | os.X_OK):
+        raise CodegenError(
+            f"output directory {str(out)!r} is not writable (nor is {near}); choose a writable --out"
+        )
 
 
 def memory_report(design: Design, *, sample_time: float | None = None, real: str = "double") -> dict:

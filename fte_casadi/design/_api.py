@@ -1,9 +1,10 @@
 """``design(ts)``: the whole of Section 4.3 (steps 1-8) with certificates, as one call.
 
 The call is one frozen record of options (:class:`~fte_casadi.design._options.DesignOptions`) run through the
-pipeline of :mod:`~fte_casadi.design._pipeline`; where a stage fails, the parameter search
-(:mod:`~fte_casadi.design._search`) tries the record changed, and the diagnosis
-(:mod:`~fte_casadi.design._explain`) says what failed and what was checked to work.
+pipeline of :mod:`~fte_casadi.design._pipeline`; where a stage fails, the diagnosis
+(:mod:`fte_casadi.design.diagnose`) tries the record changed (the parameter search), says what failed and what
+was checked to work, and names the cause behind it. A refusal is read by its record's fields
+(:class:`~fte_casadi.errors.Refusal`), never by its message.
 """
 
 from __future__ import annotations
@@ -15,21 +16,16 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from .._text import shorten
-from ..errors import FteError, InfeasibleDesignError
-from ..ts import TSModel
-from . import _diffusion as diffusion
-from . import _necessary as necessary
+from ..errors import FteError, InfeasibleDesignError, ParameterError, Refused
+from ..ts import TSModel, as_model
 from . import _pipeline as pipeline
-from . import _separability as separability
-from ._cover import other_cover
-from ._explain import explain_45, explain_46, outside_45
-from ._options import GENERIC_DEFAULTS, SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
+from . import diagnose
+from ._options import SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
 from ._record import Design
-from ._search import choose, try_design
 from .core import _conditioned as conditioned
 from .core._diagnose import FrontierPoint, gamma_min, sigma_max
 
-__all__ = ["design", "explore", "DesignOptions", "GENERIC_DEFAULTS"]
+__all__ = ["design", "explore"]
 
 
 def _one_blas_thread(fn):
@@ -80,7 +76,7 @@ def design(ts: TSModel, options: DesignOptions | None = None, **changes) -> Desi
     (True, True)
     """
     options = DesignOptions(**changes) if options is None else options.replace(**changes)
-    return _attempt(ts, options)
+    return _attempt(as_model(ts, "design()"), options)
 
 
 def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) -> Design:
@@ -101,77 +97,47 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
                 _refuse_beyond_sigma_max(st.aug, params, solver)
             s3 = pipeline.step3(st, res, solver)
         except conditioned.SolverFailedError as exc:
-            beyond = outside_45(st.aug, params, solver)
+            beyond = diagnose.beyond_sigma_max(st.aug, params, solver)
             if beyond is None:
-                return _other_solver(ts, options, exc, "step 3 (LMI (45))", retried)
+                return _other_solver(ts, options, exc, "step 3 (LMI (45))", "45", retried)
             raise InfeasibleDesignError(beyond) from None
     except InfeasibleDesignError as exc:
         if not options.diagnose:
             raise exc from None
         refused: list = []
-        chosen = choose(_attempt, ts, options, st.aug, params, generic, "45", exc, refused)
+        chosen = diagnose.choose(_attempt, ts, options, st.aug, params, generic, "45", exc, refused)
         if chosen is not None:
             return chosen
-        raise _naming_cause(explain_45(_attempt, ts, options, st.aug, params, refused), ts, options, st,
-                               params, refused, "45") from None  # fmt: skip
+        raise _explained(ts, options, st, params, refused, "45", exc) from None
     try:
         s3, s5 = pipeline.loop_then_observer(ts, st, options, res, s3)
     except conditioned.SolverFailedError as exc:
-        return _other_solver(ts, options, exc, "step 5 (LMIs (46), (55), (64))", retried)
+        return _other_solver(ts, options, exc, "step 5 (LMIs (46), (55), (64))", "46", retried)
     except InfeasibleDesignError as exc:
-        if options.diagnose and "alpha" not in str(exc) and "sample time" not in str(exc):
-            refused = []
-            chosen = choose(_attempt, ts, options, st.aug, params, generic, "46", exc, refused)
-            if chosen is not None:
-                return chosen
-            raise _naming_cause(explain_46(_attempt, ts, options, st.aug, params, exc, refused), ts, options,
-                                   st, params, refused, "46") from None  # fmt: skip
-        raise
+        if not options.diagnose or exc.refusal.kind in ASKED:
+            raise
+        refused = []
+        chosen = diagnose.choose(_attempt, ts, options, st.aug, params, generic, "46", exc, refused)
+        if chosen is not None:
+            return chosen
+        raise _explained(ts, options, st, params, refused, "46", exc) from None
     return pipeline.finish(ts, options, res, st, s3, [s3.K] * st.aug.r, s5, t0)
 
 
-#: the solver the causes of a refusal are decided with (:func:`_naming_cause`)
-DECIDING_SOLVER = "CLARABEL"
+#: refusals of what was asked for (a decay rate, a sample time, a settling window): the parameter search and the
+#: diagnosis of sigma and gamma do not answer them, so they are raised as they are
+ASKED = (Refused.DECAY_RATE, Refused.SAMPLE_TIME, Refused.SETTLE)
 
 
-def _naming_cause(err: InfeasibleDesignError, ts: TSModel, options: DesignOptions, st, params: dict,
-                  refused: list, lmi: str) -> InfeasibleDesignError:  # fmt: skip
-    """``err`` with its cause named, where one is found, at the parameters tried where (45) held (else the given
-    ones): the diffusion (:func:`~._diffusion.tolerance`: the fraction of it the design tolerates, and whether
-    the whole design certifies with the diffusion scaled to that fraction, run, not guessed), else, where (46)
-    fails, a fault the outputs tell apart only weakly (:func:`~._separability.blocking`), else the cover's
-    vertices where another cover gives a certified design (:func:`~._cover.other_cover`)."""
-    at = next((change for change, why in refused if "(46)" in why), {})
-    p = dict(params, **at)
-    where = ", ".join(f"{k} = {p[k]:g}" for k in ("sigma", "gamma", "gamma1"))
-    msg = str(err).split(" No value tried")[0].split(" No larger sigma tried")[0].rstrip(".")
-    # the causes are decisions about the LMIs: made with the interior-point solver (and phase 1 in numpy where
-    # it fails), whichever solver the design asked for; SCS's first-order answers near the boundary decide less
-    tol = diffusion.tolerance(st.aug, st.T, p, DECIDING_SOLVER)
-    if tol is None or not tol.blocks:
-        if (at or lmi == "46") and not st.r5doc and (found := separability.blocking(ts, p, DECIDING_SOLVER)):
-            text = separability.text(found, where)
-            return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.")
-        if text := other_cover(_attempt, ts, options):
-            return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.")
-        return err
-    text = f"{tol.text()} at {where}"
-    if found := necessary.limits(st.aug, DECIDING_SOLVER):  # where no design of any structure could do better
-        text += (f". It is the plant, not the method: {necessary.describe(found)} (a necessary condition for any "
-                 "design; docs/method.md)")  # fmt: skip
-    fix = ""
-    if tol.feasible > 0:
-        why: list = []
-        d = try_design(_attempt, diffusion.scaled_model(ts, tol.feasible), options, why, **at)
-        fix = (
-            f" With the diffusion scaled by {tol.feasible:.3g} the whole design is certified (checked): if the "
-            "plant's noise is smaller than written, write it as it is; otherwise this method cannot certify an "
-            "observer for it at the parameters tried."
-            if d is not None
-            else f" Even with the diffusion scaled by {tol.feasible:.3g} the whole design is not certified: "
-            f"{shorten(why[0][1], 300) if why else 'not certified'}."
-        )
-    return InfeasibleDesignError(f"{msg}. {text[0].upper() + text[1:]}.{fix}")
+def _explained(ts: TSModel, options: DesignOptions, st, params: dict, refused: list, lmi: str,
+               exc: InfeasibleDesignError) -> InfeasibleDesignError:  # fmt: skip
+    """The refusal of ``lmi`` ("45" or "46") at ``params`` with its bounds, the advice checked, and its cause named
+    (:mod:`fte_casadi.design.diagnose`); ``refused``: the values the parameter search tried."""
+    if lmi == "45":
+        err = diagnose.explain_45(_attempt, ts, options, st.aug, params, refused)
+    else:
+        err = diagnose.explain_46(_attempt, ts, options, st.aug, params, exc, refused)
+    return diagnose.name_cause(_attempt, err, ts, options, st, params, refused, lmi)
 
 
 def _refuse_beyond_sigma_max(aug, params: dict, solver: str) -> None:
@@ -179,22 +145,18 @@ def _refuse_beyond_sigma_max(aug, params: dict, solver: str) -> None:
 
     The generic sigma is often outside what a plant's (45) allows, and a conic solver takes long to say so
     (24-state chain at sigma = 1: SCS 45 s); the bound is one solve that the parameter search needs anyway,
-    and only a definite bound is taken as a refusal here."""
-    smax, st = sigma_max(aug, params["gamma"], params["gamma1"], solver)
-    if smax is None and (st in ("optimal", "infeasible") or st.startswith("phase 1")):  # no sigma > 0 at all
-        raise InfeasibleDesignError(
-            f"LMI (45) is infeasible: no sigma > 0 makes it feasible at gamma = {params['gamma']:g}"
-        )
-    if smax is not None and params["sigma"] >= smax:
-        raise InfeasibleDesignError(
-            f"LMI (45) is infeasible: sigma = {params['sigma']:g} is above the largest sigma "
-            f"{smax:.3g} it allows at gamma = {params['gamma']:g}"
-        )
+    and only a decided bound is taken as a refusal here."""
+    refusal = diagnose.beyond_sigma_max(aug, params, solver, decided=True)
+    if refusal is not None:
+        raise InfeasibleDesignError(refusal)
 
 
-def _other_solver(ts, options: DesignOptions, exc: Exception, where: str, retried: str | None) -> Design:
+def _other_solver(
+    ts, options: DesignOptions, exc: Exception, where: str, lmi: str, retried: str | None
+) -> Design:
     """A numerical failure of one solver is retried with the other (the same record, its solver changed)
-    before it is reported; the design's status says so, and a failure of both names both."""
+    before it is reported; the design's status says so, and a failure of both names both (``lmi``: the LMI of
+    the step ``where`` that failed)."""
     solver = options.solver
     other = SOLVERS[1 - SOLVERS.index(solver)]
     if getattr(exc, "solver_independent", False):  # numpy's stages would fail the same with the other solver
@@ -203,7 +165,8 @@ def _other_solver(ts, options: DesignOptions, exc: Exception, where: str, retrie
         raise conditioned.SolverFailedError(
             f"both solvers failed numerically: first {retried.rstrip('.')}; then {solver} in {where}: "
             f"{str(exc).rstrip('.')}. See the feasible region with `fte design PLANT --explore`, or rescale the "
-            "plant's units"
+            "plant's units",
+            lmi=lmi,
         ) from None
     d = _attempt(ts, options.replace(solver=other), retried=f"{solver} in {where}: {exc}")
     d.status.insert(0, f"{solver} failed numerically in {where} ({shorten(exc, 200)}); "
@@ -215,27 +178,49 @@ def _other_solver(ts, options: DesignOptions, exc: Exception, where: str, retrie
 LADDER = (1.05, 1.25, 1.6, 2.5, 4.0, 6.3, 10.0)
 
 
-def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas=None, count: int = 12,
-            sample_time: float | None = None, progress=None, budget: float | None = 60.0,
-            ) -> tuple[list[FrontierPoint], dict]:  # fmt: skip
+def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int = 12, progress=None,
+            budget: float | None = 60.0, **changes) -> tuple[list[FrontierPoint], dict]:  # fmt: skip
     """The feasible frontier: for each sigma, the smallest gamma for which (45) is feasible, and the
     smallest gamma of :data:`LADDER` x that value for which the whole design (both steps and the
     certificate) is certified: step 5 needs some room above the frontier of (45).
+
+    ``options`` is the :class:`~fte_casadi.design._options.DesignOptions` of a design (keyword arguments are its
+    fields and change it, as for :func:`design`): every design along the frontier is made with it (variant,
+    solver, gamma1, delta, epsilon, alpha, kappa, bound_weight, sample_time, initial_state, accepted assumptions,
+    Remark 5, plant_spec), gamma and sigma excepted, which the frontier searches: giving either is refused, as is
+    ``allow_uncertified`` (the frontier counts certified designs only), with
+    :class:`~fte_casadi.errors.ParameterError`.
 
     ``sigmas`` default: ``count`` values spaced in log scale from ``min(sigma / 30, 1e-3 sigma_sup)``
     (``sigma`` the plant's default) to just below ``sigma_sup``, the largest sigma any gamma allows. Returns the
     points and a dict with the plant's default parameters, that sigma bound, ``best`` (the certified design
     with the fastest observer, None without one) and ``cause`` (why none is certified, when the diffusion is
-    why: :func:`~fte_casadi.design._diffusion.tolerance`). ``budget`` (seconds, None: none): sigmas not reached
+    why: :func:`~fte_casadi.design.diagnose.tolerance`). ``budget`` (seconds, None: none): sigmas not reached
     within it are listed as not tried, and said so in ``info["skipped"]``.
     """
     from ._augment import augment
     from ._uio import uio_gain
 
+    ts = as_model(ts, "explore()")
+    options = DesignOptions(**changes) if options is None else options.replace(**changes)
+    given = [k for k in ("gamma", "sigma") if getattr(options, k) is not None]
+    if given:
+        raise ParameterError(
+            f"the frontier searches gamma and sigma itself; {' and '.join(given)} cannot be given to it (design at "
+            "them without exploring, or leave them out)"
+        )
+    if options.allow_uncertified:
+        raise ParameterError(
+            "the frontier counts certified designs only, and its best design is certified: allow_uncertified "
+            "(--allow-uncertified) means nothing to it"
+        )
+    solver, gamma1 = options.solver, options.gamma1
     t0 = time.perf_counter()
     status: list[str] = []
     params = _params(
-        ts, {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": None, "epsilon": None}, status
+        ts,
+        {"gamma": None, "gamma1": gamma1, "sigma": None, "delta": options.delta, "epsilon": options.epsilon},
+        status,
     )
     aug = augment(ts.local_models, ts.C, ts.Df)
     g1 = params["gamma1"]
@@ -244,11 +229,12 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
         if sup is None:
             raise InfeasibleDesignError(
                 f"LMI (45) is infeasible for every gamma and sigma with gamma1 = {g1:g}: the loop cannot be made to "
-                "dominate the plant's diffusion with this output; check W_i and C"
+                "dominate the plant's diffusion with this output; check W_i and C",
+                lmi="45",
             )
         sigmas = np.geomspace(min(params["sigma"] / 30, sup * 1e-3), sup * 0.98, count)
     gs = gamma_size(ts)
-    base = DesignOptions(diagnose=False, solver=solver, gamma1=g1, sample_time=sample_time)
+    base = options.replace(diagnose=False, gamma1=g1)
     points, best, skipped, refused_46 = [], None, 0, None
     # the largest sigma first ((46) asks for a large one, (45) for a small one), within 70 % of the budget: the
     # rest is left for the diagnosis of a frontier without a certified design
@@ -269,14 +255,19 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                 FrontierPoint(float(sg), None, None, False, None, None, "(45) infeasible for every gamma")
             )
         else:
-            point, why = None, ""
+            point, why, tried = None, "", set()
             for f in LADDER:  # the smallest gamma on the ladder whose whole design is certified
                 gt = round_gamma(max(f * gmin, 1.01 * g1), gs)
+                if gt in tried:  # without unknown inputs gamma bounds nothing: one design tells
+                    continue
+                tried.add(gt)
                 try:
                     d = design(ts, base.replace(gamma=gt, sigma=float(sg)))
                 except FteError as exc:
                     why = shorten(exc, 100)
-                    if "(46)" in why and refused_46 is None:
+                    if (
+                        getattr(exc, "lmi", None) == "46" and refused_46 is None
+                    ):  # step 3 passed: (46) refused it
                         refused_46 = dict(params, gamma=gt, sigma=float(sg), gamma1=g1)
                     continue
                 if d.certified:
@@ -292,21 +283,21 @@ def explore(ts, *, solver: str = "CLARABEL", gamma1: float | None = None, sigmas
                     if best is None or d.observer.alpha > best.observer.alpha:
                         best = d
                     break
-            points.append(point or FrontierPoint(float(sg), gmin, None, False, None, None, f"no gamma up to "
-                                                 f"{LADDER[-1]:g} x {gmin:.3g} certifies: {why}"))  # fmt: skip
+            what = (f"no gamma up to {LADDER[-1]:g} x {gmin:.3g} certifies" if gmin > 0 else
+                    "no design certifies (gamma bounds no unknown input here)")  # fmt: skip
+            points.append(point or FrontierPoint(float(sg), gmin, None, False, None, None, f"{what}: {why}"))
         if progress is not None:
             progress(k + 1, len(sigmas))
     points.sort(key=lambda pt: pt.sigma)
     cause = None
     if (
         best is None and refused_46 is not None
-    ):  # the causes of a refusal (_naming_cause), decided the same way
+    ):  # the causes of a refusal (diagnose.name_cause), decided the same way
         _, T = uio_gain(aug)
-        where = f"sigma = {refused_46['sigma']:.3g}, gamma = {refused_46['gamma']:g}"
-        tol = diffusion.tolerance(aug, T, refused_46, DECIDING_SOLVER)
-        if tol is not None and tol.blocks:
-            cause = f"{tol.text()} at {where}"
-        elif found := separability.blocking(ts, refused_46, DECIDING_SOLVER):
-            cause = separability.text(found, where)
+        at = {"sigma": float(f"{refused_46['sigma']:.3g}"), "gamma": refused_46["gamma"]}
+        found = diagnose.blocking_diffusion(aug, T, refused_46, at) or diagnose.weak_faults(
+            ts, refused_46, at
+        )
+        cause = found.render() if found is not None else None
     return points, {"gamma": params["gamma"], "gamma1": g1, "sigma": params["sigma"], "sigma_sup": sup,
                     "best": best, "cause": cause, "skipped": skipped}  # fmt: skip

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..ts._model import LocalModel
+from ..ts import LocalModel
 
 __all__ = ["Augmented", "augment", "time_scaled"]  # public: docs/api.md
 

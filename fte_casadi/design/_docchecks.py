@@ -6,33 +6,122 @@ the key, e.g. ``'theta' must be a finite number >= 0; got -1``.
 
 from __future__ import annotations
 
+import json
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 
+from .._labels import label_problem
 from ..errors import DesignFileError
-from ..ts._cover import VERTEX_CHOICES
+from ..ts import VERTEX_CHOICES
 
 __all__ = []  # public: docs/api.md
 
 _REMAKE = "make it again with `fte design PLANT -o FILE`"
+
+#: the largest file read as a design document: fte's are kilobytes to a few megabytes (a 24-state design of
+#: 4 rules, or 64 rules of 6 states: under 1 MB); reading JSON takes about 5 times its size in memory
+MAX_DOCUMENT_BYTES = 64 * 2**20
+
+
+def _reject_constant(name: str):
+    raise DesignFileError(f"the design document holds {name}; every number must be finite")
+
+
+def _one_value_per_key(pairs: list) -> dict:
+    seen: set[str] = set()
+    for key, _ in pairs:
+        if key in seen:
+            raise DesignFileError(
+                f"the design document holds the key {key!r} twice in one JSON object (which of the two would be "
+                "used is a guess: a document is data with one value per key); make it again with `fte design`"
+            )
+        seen.add(key)
+    return dict(pairs)
+
+
+def read_document(path: str | os.PathLike) -> dict:
+    """The JSON of the design document at ``path``, or :class:`DesignFileError` saying what it is instead: a
+    directory, a missing file, a file too large to be a design document (before it is read), a MAT file, not
+    text, not JSON (truncated or corrupt), nested too deeply, a key twice in one object, or a NaN/Infinity."""
+    p = Path(path)
+    name = f"design file {str(p)!r}"
+    if p.is_dir():
+        raise DesignFileError(f"{name} is a directory; give the design document itself (the JSON file "
+                              f"`fte design PLANT -o FILE.json` writes)")  # fmt: skip
+    if not p.is_file():
+        raise DesignFileError(f"{name} does not exist; make one with `fte design PLANT -o {p}`")
+    size = p.stat().st_size
+    if size > MAX_DOCUMENT_BYTES:
+        raise DesignFileError(
+            f"{name} is {size / 2**20:.0f} MB, more than the {MAX_DOCUMENT_BYTES / 2**20:.0f} MB a design "
+            "document fte reads may be (fte's are a few MB at most): it is not read. Make it again with `fte design`"
+        )
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        raise DesignFileError(f"{name} cannot be read: {exc.strerror or exc}") from None
+    if data.startswith(b"MATLAB 5.0 MAT-file") or p.suffix.lower() == ".mat":
+        raise DesignFileError(f"{name} is a MAT file (`fte design -o FILE.mat` writes one for MATLAB); fte reads "
+                              "a design document as JSON: give the .json one (`fte design PLANT -o FILE.json`)")  # fmt: skip
+    try:
+        return json.loads(
+            data.decode("utf-8"), parse_constant=_reject_constant, object_pairs_hook=_one_value_per_key
+        )
+    except DesignFileError as exc:
+        raise DesignFileError(f"{name}: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise DesignFileError(
+            f"{name} is not valid JSON (truncated or corrupt: {exc.msg} at line {exc.lineno}); "
+            "make it again with `fte design`"
+        ) from None
+    except UnicodeDecodeError:
+        raise DesignFileError(f"{name} is not a text file, so no design document (fte writes them as JSON); give "
+                              "the JSON document `fte design PLANT -o FILE.json` writes") from None  # fmt: skip
+    except RecursionError:
+        raise DesignFileError(
+            f"{name} nests its JSON too deeply to be a design document (fte writes matrices as "
+            "lists of rows, three levels deep); make it again with `fte design`"
+        ) from None
 
 
 def _fail(source: str, key: str, what: str) -> DesignFileError:
     return DesignFileError(f"{source}: {key!r} {what}; {_REMAKE}")
 
 
-def _number(source: str, key: str, v, *, low=None, strict=False, integer=False, optional=False):
-    """A finite JSON number (int or float, not bool), optionally >= / > ``low``."""
+#: the largest design parameter (gamma, sigma, delta, ...) a document or an option may give: the certificate
+#: squares the parameters and multiplies them by the design's matrices, and the step multiplies the sliding gain
+#: by its state, so a larger one overflows a double (gamma = 1e160 gave gamma**2 = inf)
+PARAM_MAX = 1e100
+
+
+def param_problem(value) -> str:
+    """What makes ``value`` no design parameter ('' when it is one): a finite number, positive, at most
+    :data:`PARAM_MAX`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return f"must be a finite number; got {value!r}"
+    if value > PARAM_MAX:
+        return (f"must be at most {PARAM_MAX:g} (the certificate squares it: a larger one overflows a double); "
+                f"got {value!r}")  # fmt: skip
+    return ""
+
+
+def _number(source: str, key: str, v, *, low=None, strict=False, integer=False, optional=False, high=None):
+    """A finite JSON number (int or float, not bool), optionally >= / > ``low`` and <= ``high``."""
     if v is None and optional:
         return None
     kind = "an integer" if integer else "a finite number"
     bound = "" if low is None else f" {'>' if strict else '>='} {low:g}"
+    bound += "" if high is None else f"{' and' if bound else ''} <= {high:g}"
     ok = not isinstance(v, bool) and isinstance(v, int if integer else (int, float))
     if ok and not integer:
         ok = math.isfinite(v)
     if ok and low is not None:
         ok = v > low if strict else v >= low
+    if ok and high is not None:
+        ok = v <= high
     if not ok:
         raise _fail(source, key, f"must be {kind}{bound}; got {v!r}")
     return v
@@ -107,17 +196,17 @@ def check_document(doc: dict, source: str) -> None:
     n, m, p, ld, lf, r, nbar = (d[k] for k in _DIMS)
     params = doc["params"]
     for k, (low, strict) in _PARAMS.items():
-        _number(source, f"params.{k}", params.get(k), low=low, strict=strict)
+        _number(source, f"params.{k}", params.get(k), low=low, strict=strict, high=PARAM_MAX)
     for k, (low, strict) in _OPTIONAL_PARAMS.items():
         if k in params:
-            _number(source, f"params.{k}", params[k], low=low, strict=strict, optional=True)
+            _number(source, f"params.{k}", params[k], low=low, strict=strict, optional=True, high=PARAM_MAX)
     observer = doc.get("observer") or {}
     if not isinstance(observer, dict):
         raise _fail(source, "observer", "must be a JSON object")
     for k, (low, strict) in _OBSERVER.items():
         if k in observer:
             _number(source, f"observer.{k}", observer[k], low=low, strict=strict, optional=True)
-    _number(source, "theta", doc["theta"], low=0)
+    _number(source, "theta", doc["theta"], low=0, high=PARAM_MAX)
     r5 = doc.get("remark5") or {}
     if not isinstance(r5, dict):
         raise _fail(source, "remark5", "must be a JSON object")
@@ -186,7 +275,46 @@ def check_document(doc: dict, source: str) -> None:
     for k in ("plant", "plant_spec", "variant", "solver"):
         if k in doc and not isinstance(doc[k], str):
             raise _fail(source, k, f"must be a string; got {doc[k]!r}")
+    _labels(source, doc, d)
     if doc.get("vertices") is not None and doc["vertices"] not in VERTEX_CHOICES:
         raise _fail(
             source, "vertices", f"must be one of {', '.join(VERTEX_CHOICES)} or null; got {doc['vertices']!r}"
         )
+
+
+#: the lists of ``names`` and the size each has (from ``dims``); units may be empty strings
+_NAME_LISTS = {"states": "n", "inputs": "m", "outputs": "p", "faults": "lf", "unknown_inputs": "ld",
+               "state_units": "n", "input_units": "m", "output_units": "p"}  # fmt: skip
+
+
+def _label(source: str, key: str, v, empty: bool = False) -> None:
+    why = label_problem(v, empty=empty)
+    if why:
+        raise _fail(source, key, f"{why}: names and units are plain labels (printable text on one line, without "
+                    "'/*', '*/', '//', '??', a backslash or a backquote); a document is data, never code")  # fmt: skip
+
+
+def _labels(source: str, doc: dict, dims: dict) -> None:
+    """Every name a document carries that is written into the generated C, README, FMU or MAT file is a plain
+    label (:func:`fte_casadi._labels.label_problem`), and ``names``' lists have the lengths ``dims`` gives."""
+    _label(source, "plant", doc["plant"])
+    names = doc.get("names", {})
+    if not isinstance(names, dict):
+        raise _fail(source, "names", "must be a JSON object of lists of names")
+    for k, v in names.items():
+        if k in _NAME_LISTS:
+            want = dims[_NAME_LISTS[k]]
+            if not isinstance(v, list) or len(v) != want:
+                raise _fail(source, f"names.{k}", f"must be a list of {want} names (dims.{_NAME_LISTS[k]})")
+            for i, t in enumerate(v):
+                _label(source, f"names.{k}[{i}]", t, empty=k.endswith("_units"))
+        elif isinstance(v, str):
+            _label(source, f"names.{k}", v, empty=True)
+        elif isinstance(v, list):
+            for i, t in enumerate(v):
+                _label(source, f"names.{k}[{i}]", t, empty=True)
+        else:
+            raise _fail(source, f"names.{k}", "must be a name or a list of names")
+    r5 = doc.get("remark5") or {}
+    for i, t in enumerate(r5.get("unknown_inputs") or [] if isinstance(r5, dict) else []):
+        _label(source, f"remark5.unknown_inputs[{i}]", t)

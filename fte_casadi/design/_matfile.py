@@ -17,6 +17,7 @@ import re
 import numpy as np
 
 from .._atomic import atomic_write
+from .._labels import plain
 from ..errors import DesignFileError
 
 __all__ = []  # public: docs/api.md
@@ -75,6 +76,8 @@ def mat_variables(doc: dict) -> dict:
     out = {MARKER: "design"}
     for key, v in doc.items():
         name = _field(key)
+        if key in ("plant", "names"):  # names are data: one line of plain text each (fte_casadi._labels)
+            v = plain(v) if isinstance(v, str) else {k: _plain_names(x) for k, x in v.items()}
         if key in _PER_RULE:
             out[name] = _cell([_mat(M) for M in v])
         elif key == "local_models":
@@ -82,6 +85,12 @@ def mat_variables(doc: dict) -> dict:
         else:
             out[name] = _value(v, key)
     return out
+
+
+def _plain_names(v):
+    if isinstance(v, list):
+        return [plain(t) if isinstance(t, str) else t for t in v]
+    return plain(v) if isinstance(v, str) else v
 
 
 def save_mat(doc: dict, path: str | os.PathLike) -> None:

@@ -136,6 +136,22 @@ class DesignOptions:
         """This record with ``changes`` (:func:`dataclasses.replace`)."""
         return dataclasses.replace(self, **changes)
 
+    def flags(self) -> str:
+        """The ``fte design`` options this record was given that advice must keep (e.g. ``" --kappa 1e+06"``): the
+        LMI parameters, the rates, kappa and the bound weight, the variant and solver where not the defaults. What
+        ``fte design`` fills from the plant's scenario (the sample time, the window, the start) is left out: it fills
+        it again."""
+        out = []
+        if self.variant != "conditioned":
+            out.append(f"--variant {self.variant}")
+        if self.solver != "CLARABEL":
+            out.append(f"--solver {self.solver}")
+        for k in (*LMI_PARAMETERS, "alpha", "beta", "kappa", "bound_weight"):
+            v = getattr(self, k)
+            if v is not None:
+                out.append(f"--{k.replace('_', '-')} {v:g}")
+        return "".join(" " + f for f in out)
+
 
 @dataclass(frozen=True)
 class Resolved:

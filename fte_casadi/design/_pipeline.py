@@ -3,7 +3,7 @@
 
 No stage retries or searches: a stage that fails raises (:class:`~fte_casadi.errors.InfeasibleDesignError`,
 :class:`~fte_casadi.design.core._conditioned.SolverFailedError`), and :func:`fte_casadi.design.design` decides
-what to try next (:mod:`fte_casadi.design._search`) or what to say (:mod:`fte_casadi.design._explain`).
+what to try next or what to say (:mod:`fte_casadi.design.diagnose`).
 """
 
 from __future__ import annotations
@@ -17,22 +17,22 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
-from ..errors import AssumptionError, FteError, InfeasibleDesignError
-from ..model._fingerprint import plant_fingerprint
+from ..errors import AssumptionError, FteError, InfeasibleDesignError, Refusal, Refused
+from ..model import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
 from ._augment import Augmented, augment
 from ._options import DesignOptions, Resolved
+from ._parts import Dims, Observer, Params
 from ._recertify import certify
 from ._record import Design
-from ._records import Dims, Observer, Params
 from ._remark5 import explain_causes, with_remark5
 from ._remark5 import fallback as remark5_fallback
 from ._remark5 import record as remark5_record
 from ._uio import check_assumptions, enforce, uio_gain
 from .core import _conditioned as conditioned
 from .core import _paper as paper
-from .core._certify import failures
-from .core._lmis import loop_decay
+from .core._certify import failed
+from .core._lmis import LMIS, loop_decay
 
 __all__ = ["structure", "step3", "step5"]
 
@@ -148,7 +148,11 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     try:
         s5 = observer(resolved.params)
     except InfeasibleDesignError as exc:
-        if not options.diagnose or "kappa" in resolved.params or not (exc.lmi == "46" and exc.bounded):
+        if (
+            not options.diagnose
+            or "kappa" in resolved.params
+            or not (exc.refusal.lmi == "46" and exc.refusal.bounded)
+        ):
             raise
         s5 = _kappa_for_46(observer, resolved.params, exc)
     if not settle:
@@ -218,8 +222,13 @@ def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
         s5.notes.insert(0, f"step 5: kappa = {kappa:g}: (46) is infeasible with cond(Pbar) <= {base:g} (the bound "
                            f"binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
         return s5
-    raise InfeasibleDesignError(f"{str(exc).rstrip('.')}; and with cond(Pbar) <= {KAPPA_LADDER[-1]:g} too (the bound "
-                                "is not what binds)", lmi="46") from None  # fmt: skip
+    r = exc.refusal
+    statement = f"{r.statement.rstrip('.')}; and with cond(Pbar) <= {KAPPA_LADDER[-1]:g} too (the bound is not what binds)"
+    raise InfeasibleDesignError(
+        dataclasses.replace(
+            r, statement=statement, bounded=False, numbers=dict(r.numbers, kappa=KAPPA_LADDER[-1])
+        )
+    ) from None
 
 
 def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3):
@@ -251,7 +260,7 @@ def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resol
     raise first
 
 
-def _too_slow(ts, st, options, resolved, s3, window: float, need: float, tried: list) -> str:
+def _too_slow(ts, st, options, resolved, s3, window: float, need: float, tried: list) -> Refusal:
     """Why no observer of the kappa ladder settles within ``window``: the limit that binds, with its number."""
     rates = [(k, r) for k, r, _ in tried if r is not None]
     best_k, best_r = max(rates, key=lambda t: t[1]) if rates else (None, None)
@@ -260,23 +269,25 @@ def _too_slow(ts, st, options, resolved, s3, window: float, need: float, tried: 
             f"constants need a decay rate of {need:.3g}, and the fastest found decays at "
             + (f"{best_r:.3g} (kappa = {best_k:g}; " + ", ".join(f"{r:.3g} at kappa = {k:g}" for k, r in rates) + ")"
                if best_r is not None else "none (every kappa tried was refused)"))  # fmt: skip
-    why = (best.observer.get("why") or "") if best is not None else ""
-    if "sample time" in why and "lowered" in why:
+    numbers = {"window": window, "rate_needed": need, **({"rate": best_r, "kappa": best_k} if rates else {})}
+    if best is not None and best.observer.get("alpha_before_sample_time") is not None:
         limit = (f"What binds is the sample time {options.sample_time:g}: the decay rate was lowered so that the "
                  "discrete step z+ = z + Ts (...) is proven stable; a shorter sample time allows a faster observer")  # fmt: skip
+        lmi, bounded = None, False
     elif len(rates) >= 2 and rates[-1][1] > 1.1 * rates[-2][1]:
         limit = (f"What binds is kappa, the bound on cond(Pbar): the rate still grows with it ({rates[-2][1]:.3g} at "
                  f"{rates[-2][0]:g}, {rates[-1][1]:.3g} at {rates[-1][0]:g}); a larger --kappa may reach it, with larger "
                  "observer gains (checked only up to the ladder's end)")  # fmt: skip
+        lmi, bounded = "46", True
     else:
         limit = (
             "What binds is (46) itself, not kappa (the rate stopped growing with it): its -sigma P^2 block must "
             "dominate the observer's coupling with the loop (K) and the diffusion"
         )
-    return (
-        f"{head}. {limit}. To accept a slower observer, design with --settle-within a longer window (0: none) or "
-        "give --alpha"
-    )
+        lmi, bounded = "46", False
+    return Refusal(Refused.SETTLE, head, lmi=lmi, bounded=bounded, numbers=numbers,
+                   detail=limit, advice="To accept a slower observer, design with --settle-within a longer window (0: "
+                   "none) or give --alpha")  # fmt: skip
 
 
 def finish(
@@ -302,7 +313,7 @@ def finish(
     L2 = [Ri @ H for Ri in R]
     Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
     Kf, Kf_rules = _fault_gains(ts, status)
-    u_ref, x_ref = _u_reference(ts, K, status)
+    u_ref, x_ref = u_reference(ts, K, status)
     sched, sources = scheduling_from_measurements(ts)
     plant = ts.plant
     total = time.perf_counter() - t0
@@ -373,9 +384,9 @@ def finish(
     checks["loop"].update(
         beta=float(getattr(s3, "beta", 0.0)), why=getattr(s3, "beta_why", "as printed (paper variant)")
     )
-    bad = failures(checks)
+    bad = failed(checks)
     if bad:
-        what = "; ".join(bad)
+        what = "; ".join(f.text for f in bad)
         hint = (
             "use variant='conditioned'"
             if options.variant == "paper"
@@ -383,13 +394,17 @@ def finish(
         )
         msg = f"the design is not certified at the returned point: {what} does not hold; {hint}"
         if not options.allow_uncertified:
-            raise InfeasibleDesignError(msg, result=checks)
+            lmis = [f.item for f in bad if f.item in LMIS]  # (46) first where it fails: step 3's (45) held
+            raise InfeasibleDesignError(msg, result=checks, kind=Refused.CERTIFICATE,
+                                        lmi="46" if "46" in lmis else next(iter(lmis), None))  # fmt: skip
         status.append("NOT CERTIFIED: " + msg)
     bounds = _bounds(not bad, d.R, K, Kf, Kf_rules, T, ts, u_ref, st.r5doc, getattr(s5, "bound", None))
     return dataclasses.replace(d, checks=checks, certified=not bad, bounds=bounds, status=status)
 
 
-def _u_reference(ts: TSModel, K, status: list):
+def u_reference(ts: TSModel, K, status: list):
+    """``(u_ref, x_ref)``: the input that holds ``x_ref`` (the plant's ``u_ref`` where it gives one), its lines in
+    ``status``."""
     plant = ts.plant
     if plant.u_ref is not None:
         return np.asarray(plant.u_ref, dtype=float).ravel(), None
@@ -467,7 +482,7 @@ def _closed_loop_view(ts: TSModel, T, K, r5doc, gains=None, u_ref=None, **known)
         return None
     scratch: list = []
     Kf, Kf_rules = _fault_gains(ts, scratch) if gains is None else gains
-    u_ref = _u_reference(ts, K, scratch)[0] if u_ref is None else u_ref
+    u_ref = u_reference(ts, K, scratch)[0] if u_ref is None else u_ref
     return SimpleNamespace(dims=SimpleNamespace(n=ts.n, lf=ts.lf), T=T, u_ref=u_ref, Kf=Kf, Kf_rules=Kf_rules, r=ts.r,
                            local_models=ts.local_models, K=K, **known)  # fmt: skip
 

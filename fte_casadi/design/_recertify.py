@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 
 from ._augment import augment
-from .core._certify import certificate, discrete_certificate, failures
+from .core._certify import Failure, certificate, discrete_certificate, failed
 from .core._lmis import LMIS, distinct, loop_decay
 
 __all__ = []  # public: docs/api.md
@@ -119,27 +119,25 @@ def recertify(d) -> list[str]:
         checks = certify(d)
     except np.linalg.LinAlgError as exc:
         return out + [f"the certificate cannot be evaluated at the loaded numbers ({exc})"]
-    return out + _described(failures(checks), checks, aug, point)
+    return out + _described(failed(checks), checks, aug, point)
 
 
-def _described(bad: list[str], checks: dict, aug, point: dict) -> list[str]:
-    """The failures of :func:`~.core._certify.failures` (the decision) in the words of a loaded document: the LMI's
+def _described(bad: list[Failure], checks: dict, aug, point: dict) -> list[str]:
+    """The failures of :func:`~.core._certify.failed` (the decision) in the words of a loaded document: the LMI's
     recomputed value, and the rule behind a non-Hurwitz matrix."""
     out = []
-    names = {lmi.name(checks.get("theorem")): k for k, lmi in LMIS.items()}
     for f in bad:
-        name = f[: f.index(")") + 1] if f.startswith("LMI (") else None
-        if name in names:
-            k = names[name]
-            out.append(f"{name} recomputes to {checks['lmi_max_eig'][k]:+.3g} at the loaded numbers (balanced; it must "
-                       f"be below -{checks['lmi_roundoff'][k]:.1g}, its round-off)")  # fmt: skip
-        elif f.startswith("R_i Hurwitz"):
+        if f.item in LMIS and f.item in checks["lmi_max_eig"]:
+            name = LMIS[f.item].name(checks.get("theorem"))
+            out.append(f"{name} recomputes to {checks['lmi_max_eig'][f.item]:+.3g} at the loaded numbers (balanced; it "
+                       f"must be below -{checks['lmi_roundoff'][f.item]:.1g}, its round-off)")  # fmt: skip
+        elif f.item == "R":
             for i, Ri in enumerate(point["R"]):
                 top = float(np.max(np.linalg.eigvals(Ri).real))
                 if not top < 0:
                     out.append(f"the observer matrix R_{i + 1} = T Abar_{i + 1} - L1_{i + 1} Cbar has an eigenvalue with "
                                f"real part {top:+.3g}")  # fmt: skip
-        elif f.startswith("A_i + B_i K_j Hurwitz"):
+        elif f.item == "closed_loop":
             for i in range(aug.r):
                 for j in distinct(point["K"]):
                     A = aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ point["K"][j]
@@ -148,5 +146,5 @@ def _described(bad: list[str], checks: dict, aug, point: dict) -> list[str]:
                         out.append(f"the closed loop A_{i + 1} + B_{i + 1} K_{j + 1} has an eigenvalue with real part "
                                    f"{top:+.3g}")  # fmt: skip
         else:
-            out.append(f)
+            out.append(f.text)
     return out

@@ -25,8 +25,8 @@ import numpy as np
 
 from .._atomic import atomic_write_text
 from ..errors import DesignFileError
-from ..ts._model import LocalModel
-from ._records import Dims, Observer, Params, _Record
+from ..ts import LocalModel
+from ._parts import Dims, Observer, Params, _Record
 
 __all__ = ["Design", "Dims", "Params", "Observer"]  # public: docs/api.md
 
@@ -72,8 +72,8 @@ def _arr(x) -> np.ndarray:
 class Design:
     """A certified (or honestly uncertified) observer/controller design for one plant.
 
-    ``params``, ``dims`` and ``observer`` are typed frozen records (:class:`~fte_casadi.design._records.Params`,
-    :class:`~fte_casadi.design._records.Dims`, :class:`~fte_casadi.design._records.Observer`), read by attribute:
+    ``params``, ``dims`` and ``observer`` are typed frozen records (:class:`~fte_casadi.design._parts.Params`,
+    :class:`~fte_casadi.design._parts.Dims`, :class:`~fte_casadi.design._parts.Observer`), read by attribute:
     ``d.dims.n``, ``d.params.sigma``, ``d.observer.alpha``; a plain dict given for one (for example in
     ``dataclasses.replace(d, params={...})``) becomes the record. ``checks`` stays a dict (its key set is open; see the records' module).
     """
@@ -163,7 +163,7 @@ class Design:
             # same program; a document's (self.loaded set) is never deserialised
             import casadi as ca
 
-            from ..model._tape import write_tape
+            from ..model import write_tape
 
             fn = self.scheduling
             if isinstance(fn, str) and fn:
@@ -240,7 +240,7 @@ class Design:
         """The CasADi Function ``(y, xhat) -> h``, replayed from :attr:`scheduling_ops` (data, never a
         deserialised Function). A document older than ``scheduling_ops`` needs its plant:
         :func:`fte_casadi.trust.with_plant` rebuilds the map from it."""
-        from ..model._tape import read_tape
+        from ..model import read_tape
 
         if self.scheduling_ops is None:
             raise DesignFileError(
@@ -261,7 +261,7 @@ class Design:
         poles are ``eig(A_i + B_i K_j)`` and ``eig(R_i)`` (the observer error decouples). With
         ``sample_time``: the loop as the generated C runs it, the plant by zero-order hold and the observer
         by the explicit Euler step of docs/method.md. Needs python-control (``fte_casadi[control]``).
-        The former keyword ``dt`` still works, with a ``DeprecationWarning``.
+        The former keyword ``dt`` was removed in 0.2.0: giving it is a ``TypeError``.
         """
         from ..interop import closed_loop_ss
 
@@ -459,26 +459,12 @@ class Design:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Design:
-        """Read a design document, refusing a missing, truncated or corrupt file with a clear message."""
+        """Read a design document, refusing a missing, truncated or corrupt file with a clear message
+        (:func:`~fte_casadi.design._docchecks.read_document`)."""
+        from ._docchecks import read_document
+
         p = Path(path)
-        if not p.is_file():
-            raise DesignFileError(
-                f"design file {str(p)!r} does not exist; make one with `fte design PLANT -o {p}`"
-            )
-        try:
-            doc = json.loads(p.read_text(), parse_constant=_reject_constant)
-        except json.JSONDecodeError as exc:
-            raise DesignFileError(
-                f"design file {str(p)!r} is not valid JSON (truncated or corrupt: {exc.msg} at line {exc.lineno}); "
-                "make it again with `fte design`"
-            ) from None
-        except UnicodeDecodeError:
-            raise DesignFileError(f"design file {str(p)!r} is not a text file") from None
-        except RecursionError:
-            raise DesignFileError(
-                f"design file {str(p)!r} nests its JSON too deeply to be a design document (fte writes matrices as "
-                "lists of rows, three levels deep); make it again with `fte design`"
-            ) from None
+        doc = read_document(p)
         return cls.from_dict(doc, source=f"design file {str(p)!r}")
 
 
@@ -611,10 +597,6 @@ def _first_nonfinite(obj, path: str = "") -> str | None:
     elif isinstance(obj, float) and not math.isfinite(obj):
         return path
     return None
-
-
-def _reject_constant(name: str):
-    raise DesignFileError(f"the design document holds {name}; every number must be finite")
 
 
 def _finite(source: str, key: str, value) -> np.ndarray:

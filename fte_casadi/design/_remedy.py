@@ -50,7 +50,7 @@ def remedies(
         return []
     kappa = options.kappa or KAPPA
     changes = [{"kappa": kappa * f} for f in KAPPA_FACTORS]
-    lowered = "lowered" in (d.observer.why or "")
+    lowered = d.observer.alpha_before_sample_time is not None  # the sample time bound the rate
     if options.sample_time is not None and (lowered or alpha == 0.0):
         changes += [{"sample_time": options.sample_time * f} for f in SAMPLE_TIME_FACTORS]
     # at the parameters the design ended with (the tool may have chosen them): only the change differs

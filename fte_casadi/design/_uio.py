@@ -168,11 +168,20 @@ def check_decoupling(aug: Augmented) -> AssumptionCheck:
     Bd = np.hstack(aug.Bdbar)
     r1, r2 = rank(aug.Cbar @ Bd), rank(Bd)
     ok = r1 == r2
-    msg = (f"assumption (1) holds: rank(Cbar Bdbar) = rank(Bdbar) = {r2}" if ok else
-           f"assumption (1) fails: rank(Cbar Bdbar) = {r1} < rank(Bdbar) = {r2}; the unknown input cannot be "
+    msg = (f"assumption (1) holds: {_decoupling_ranks(r1, r2)}" if ok else
+           f"assumption (1) fails: {_decoupling_ranks(r1, r2)}; the unknown input cannot be "
            "decoupled by H. Remark 5's fallback (applied by default; --no-remark5 / remark5=False turned it off): replace J1 by [Bdbar_u J1] so that the sliding term attenuates the "
            "part of d that H cannot decouple, or measure more outputs")  # fmt: skip
     return AssumptionCheck("(1)", ok, msg, {"rank_CBd": r1, "rank_Bd": r2})
+
+
+def _decoupling_ranks(r1: int, r2: int) -> str:
+    """Assumption (1)'s ranks, ``rank(Cbar Bdbar) = r1`` and ``rank(Bdbar) = r2``, as its message says them."""
+    return (
+        f"rank(Cbar Bdbar) = rank(Bdbar) = {r2}"
+        if r1 == r2
+        else f"rank(Cbar Bdbar) = {r1} < rank(Bdbar) = {r2}"
+    )
 
 
 def check_full_column_rank(aug: Augmented, models) -> AssumptionCheck:
@@ -306,8 +315,9 @@ def check_assumptions(
 
     first = check_decoupling(aug)
     k, q = remark5.Bdu.shape[1], remark5.D.shape[1]
+    ranks = _decoupling_ranks(first.numbers["rank_CBd"], first.numbers["rank_Bd"])
     first = dataclasses.replace(first, holds=True, message=(
-        f"assumption (1) {'fails' if not first.holds else 'holds'}: {first.message.split(': ', 1)[1].split(';')[0]}; "
+        f"assumption (1) {'fails' if not first.holds else 'holds'}: {ranks}; "
         f"{remark5.why + '; ' if remark5.why else ''}Remark 5's fallback is used: H decouples {q} direction(s) of d "
         f"and the sliding term attenuates the {k} it cannot ([Bdbar_u J1] in place of J1)"),
         numbers=dict(first.numbers, remark5=True, decoupled=q, attenuated=k))  # fmt: skip

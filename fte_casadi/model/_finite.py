@@ -11,7 +11,7 @@ inputs and faults at 0. A row that is not finite there is refused when it holds 
 constant, or when it is not finite at any of the points. A row with finite coefficients that is
 singular only at some points (``sin(x)/x`` unguarded at 0, ``1/x1`` on a region through 0) is left
 to the T-S derivation, which explains a singularity by name (:mod:`fte_casadi.ts._auto_checks`,
-:func:`fte_casadi.ts._bounds.premise_bounds`).
+:func:`fte_casadi.ts._premise_bounds.premise_bounds`).
 """
 
 from __future__ import annotations

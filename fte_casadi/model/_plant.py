@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import PlantError
 from ._record import Plant as Plant
-from ._record import _names, _units
+from ._record import _names, _units, label
 from ._validate import validate
 
 __all__ = ["Plant", "PlantBuilder"]
@@ -51,7 +51,7 @@ class PlantBuilder:
     def __init__(self, name: str):
         if not isinstance(name, str) or not name.strip():
             raise PlantError("plant name must be a non-empty string, e.g. PlantBuilder('manipulator')")
-        self._name = name
+        self._name = label("plant name", name)
         self._x: list[ca.SX] = []
         self._xn: tuple[str, ...] = ()
         self._xu: tuple[str, ...] = ()
@@ -244,7 +244,7 @@ class PlantBuilder:
         self._params.update({k: float(v) for k, v in params.items()})
 
     def time_unit(self, unit: str) -> None:
-        self._time_unit = unit
+        self._time_unit = label("time unit", unit)
 
     def design_defaults(self, **values: float) -> None:
         """Default design parameters: any of gamma, gamma1, sigma, delta, epsilon, and the knobs

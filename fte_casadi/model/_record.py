@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from .._labels import label_problem
 from ..errors import PlantError
 
 __all__ = ["Plant"]
@@ -130,7 +131,20 @@ def _names(kind: str, names: Sequence[str]) -> tuple[str, ...]:
     for nm in names:
         if not isinstance(nm, str) or not nm.isidentifier():
             raise PlantError(f"{kind} name {nm!r} is not a valid identifier; use letters, digits and '_'")
+        label(f"{kind} name", nm)
     return names
+
+
+def label(what: str, text, empty: bool = False) -> str:
+    """``text`` when it is a plain label (:func:`fte_casadi._labels.label_problem`), else :class:`PlantError`
+    naming ``what`` and what is wrong with it."""
+    why = label_problem(text, empty=empty)
+    if why:
+        raise PlantError(
+            f"{what} {text!r} {why}: a name or a unit is a plain label of printable characters on one line, "
+            "without '/*', '*/', '//', '??', a backslash or a backquote (it is written into C comments and Markdown)"
+        )
+    return text
 
 
 def _units(kind: str, units, count: int) -> tuple[str, ...]:
@@ -141,6 +155,8 @@ def _units(kind: str, units, count: int) -> tuple[str, ...]:
     units = tuple(units)
     if len(units) != count:
         raise PlantError(f"{kind} units: expected {count} entries instead of {len(units)}")
+    for u in units:
+        label(f"{kind} unit", u, empty=True)
     return units
 
 

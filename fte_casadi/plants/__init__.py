@@ -1,18 +1,14 @@
 """Built-in plants, written exactly as a user writes their own."""
 
+from ._builtin import BUILTIN as BUILTIN
+from ._builtin import SCENARIOS as SCENARIOS
+
+# the face the other subpackages use: internal names, not in __all__ (docs/api.md: what is public)
+from ._loader import load_plant as load_plant
+from ._loader import load_scenario as load_scenario
 from ._manipulator import manipulator as manipulator
+from ._paper import PRINTED as PRINTED
 from ._quadruple_tank import quadruple_tank as quadruple_tank
 from ._three_tank import three_tank as three_tank
 
-BUILTIN = {"manipulator": manipulator, "three-tank": three_tank, "quadruple-tank": quadruple_tank}
-
-from ._manipulator import scenario as _manipulator_scenario  # noqa: E402
-from ._quadruple_tank import scenario as _quadruple_tank_scenario  # noqa: E402
-from ._three_tank import scenario as _three_tank_scenario  # noqa: E402
-
-#: the paper's experiments, by built-in plant name (functions returning a Scenario)
-SCENARIOS = {
-    "manipulator": _manipulator_scenario,
-    "three-tank": _three_tank_scenario,
-    "quadruple-tank": _quadruple_tank_scenario,
-}
+__all__ = ["BUILTIN", "SCENARIOS", "manipulator", "three_tank", "quadruple_tank"]

@@ -17,7 +17,7 @@ __all__ = []  # public: docs/api.md
 
 
 def builtin_names() -> list[str]:
-    from . import BUILTIN
+    from ._builtin import BUILTIN
 
     return sorted(BUILTIN)
 
@@ -58,7 +58,7 @@ def _last_frame(exc: BaseException, path: str | None) -> str:
 
 def load_plant(spec: str) -> Plant:
     """Return the :class:`Plant` named by ``spec``; every failure is a :class:`PlantLoadError`."""
-    from . import BUILTIN
+    from ._builtin import BUILTIN
 
     if not isinstance(spec, str) or not spec.strip():
         raise PlantLoadError(
@@ -145,7 +145,7 @@ def load_scenario(spec: str):
     Built-in plants: the paper's scenario. ``file.py:function`` / ``module:function``: the
     module's ``function_scenario()`` or else its ``scenario()``.
     """
-    from . import SCENARIOS
+    from ._builtin import SCENARIOS
 
     spec = spec.strip()
     if spec in SCENARIOS:

@@ -89,7 +89,7 @@ def scenario():
     """Section 6.1's experiment: 40 % loss of actuator effectiveness for 2.5 <= t < 5 s (``fa = -0.4 u``),
     first sensor stuck at its reading at t = 7 s for 7 <= t < 10 s, d uniform in [-0.1, 0.1] each step,
     x0 = [0.1, 0.05, 0.02, 0.03] plus Gaussian noise (std 0.005), T = 10 s, dt = 1 ms, 5 paths."""
-    from ..sim._scenario import LossOfEffectiveness, Scenario, Stuck, UniformNoise
+    from ..sim import LossOfEffectiveness, Scenario, Stuck, UniformNoise
 
     return Scenario(
         name="manipulator",

@@ -75,7 +75,7 @@ def scenario():
     """Pump 1 loses 30 % of its effectiveness for 150 <= t < 350 s; the level-1 sensor reads 1 cm high for
     450 <= t < 650 s; an unknown inflow into tank 3, uniform in [-0.5, 0.5] cm^3/s each step; x0 = the
     operating point plus Gaussian noise (std 0.1 cm); T = 800 s, dt = 0.1 s, 10 paths."""
-    from ..sim._scenario import Bias, LossOfEffectiveness, Scenario, UniformNoise
+    from ..sim import Bias, LossOfEffectiveness, Scenario, UniformNoise
 
     return Scenario(
         name="quadruple-tank",

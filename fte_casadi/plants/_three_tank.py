@@ -71,7 +71,7 @@ def scenario():
     """Section 6.2's experiment: pump 2 delivers 10 cm^3/s less for 200 <= t < 400 s (additive ``fa = -10``),
     d uniform in [-0.1, 0.1] each step, x0 = [20, 10, 15] cm plus Gaussian noise (std 0.2 cm), T = 600 s,
     dt = 10 ms (well below the designs' ts_max; the simulator lowers it if a design needs), 10 paths."""
-    from ..sim._scenario import Bias, Scenario, UniformNoise
+    from ..sim import Bias, Scenario, UniformNoise
 
     return Scenario(
         name="three-tank",

@@ -1,5 +1,7 @@
 """Figures from simulation results; never computes, never calls show()."""
 
+from ._detectability import detectability_figure as detectability_figure
+from ._detectability import detectability_plot as detectability_plot
 from ._figures import fault_figure as fault_figure
 from ._figures import figure_set as figure_set
 from ._figures import output_figure as output_figure

@@ -19,6 +19,9 @@ Two names for time steps, one meaning each:
 
 from ._accommodate import accommodated as accommodated
 from ._accommodate import protected as protected
+from ._detectability import attach as attach
+from ._detectability import detectability as detectability
+from ._engine import calibrate_detection as calibrate_detection
 from ._engine import simulate as simulate
 from ._fault_shapes import FaultRows as FaultRows
 from ._fault_shapes import FaultShape as FaultShape

@@ -25,9 +25,9 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..design._record import Design
+from ..design import Design
 from ..errors import ParameterError, SimulationError
-from ._engine import calibrate_thresholds
+from ._engine import calibrate_detection
 
 __all__ = ["accommodated", "protected"]
 
@@ -37,9 +37,11 @@ RELEASE = 0.5
 
 def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, false_alarm_rate: float | None = None,
                  dt: float | None = None, threads: int | None = None, release: float = RELEASE,
-                 rule: str = "isolate") -> Design:  # fmt: skip
+                 rule: str = "isolate", calibration_paths: int | None = None) -> Design:  # fmt: skip
     """``design`` with accommodation after detection, its thresholds calibrated at ``false_alarm_rate``
-    (alarms per unit of the plant's time; default one per hour) on ``max(paths, 8)`` fault-free paths;
+    (alarms per unit of the plant's time; default one per hour) on the fault-free paths that follow the run's
+    ``paths`` (as many as the rate asks, or ``calibration_paths``; :func:`._engine.calibrate_detection`): the
+    steady thresholds (the gate has no clock, so the start-up blocks' own thresholds are not used);
     ``release`` in (0, 1]: the ratio ``|fhat_j| / threshold_j`` below which a compensated fault is released
     (1: no hysteresis, the memoryless gate); ``rule`` ``"isolate"`` or ``"explain"`` (module docstring)."""
     if rule not in ("isolate", "explain"):
@@ -50,8 +52,9 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
         )
     if plant.lf < 1:
         raise ParameterError(f"{plant.name}: the plant has no faults to accommodate")
-    thr, entries = calibrate_thresholds(design, plant, scenario, paths=paths, seed=seed,
-                                        false_alarm_rate=false_alarm_rate, dt=dt, threads=threads)  # fmt: skip
+    cal = calibrate_detection(design, plant, scenario, paths=paths, seed=seed, false_alarm_rate=false_alarm_rate,
+                              dt=dt, threads=threads, calibration_paths=calibration_paths)  # fmt: skip
+    thr, entries = cal.thresholds, cal.entries
     bad = [e["fault"] for e, v in zip(entries, thr) if not (v > 0 and v < float("inf"))]
     if bad:
         raise ParameterError(
@@ -87,7 +90,7 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
 
 
 def _crosstalk(design: Design):
-    from ..design._isolation import crosstalk
+    from ..design import crosstalk
 
     return crosstalk(design.R, design.T, int(design.dims.n), int(design.dims.lf))
 

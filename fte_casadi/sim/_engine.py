@@ -37,12 +37,12 @@ import numpy as np
 from tqdm import tqdm
 
 from .._rounding import series_floor
-from ..design._record import Design
+from ..design import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
 from ..step import step_function
 from ._cluster import plant_from_bytes, run_on_cluster
-from ._detect import calibrate, default_rate
+from ._detect import default_rate
 from ._reduce import allowances, finalize, masks, monitor
 from ._result import RUNS, RunData, SimulationResult
 from ._scenario import FaultSchedule, Scenario, fault_schedule
@@ -292,6 +292,7 @@ class Prepared:
         from ._vector import VectorEngine
 
         self.design, self.plant, self.scenario, self.dt, self.nsteps = design, plant, scenario, dt, nsteps
+        self._cal_box: list = []  # the calibration engine, built on first use, shared by copies
         self.scales = scales
         self.exact = bool(exact)
         nsamp = nsteps + 1
@@ -315,6 +316,7 @@ class Prepared:
                 ddet[:] = terms.deterministic
         self.sqdt = math.sqrt(dt) * scales["noise_scale"]
         thr = np.full(lf, np.inf) if thresholds is None else np.asarray(thresholds, dtype=float)
+        self.threshold_spec = (tuple(float(v) for v in thr), ())
         vstd = np.zeros((lay.nv, nsamp))
         if noise:  # v = vstd * N(0, 1)
             vstd[:] = scenario.measurement_noise.deviations(self.t, scales["measurement_noise_scale"])
@@ -336,8 +338,11 @@ class Prepared:
         w = ca.SX.sym("w", lay.nw)
         sh = ca.SX.sym("sh", nsh)
         c = self.cols
-        wd = ca.vertcat(w[0], w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]],
-                        w[1 + ld :] * sh[c["vstd"][0] : c["vstd"][1]])  # fmt: skip
+        # an empty slice of an SX column can come out 1x0: a plant without unknown inputs (or without measurement
+        # noise) gets an explicit 0x1 block
+        d_part = w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]] if ld else ca.SX(0, 1)
+        v_part = w[1 + ld :] * sh[c["vstd"][0] : c["vstd"][1]] if lay.nv else ca.SX(0, 1)
+        wd = ca.vertcat(w[0], d_part, v_part)
         nxt, rec = sample(S[: lay.ns], wd, sh[: 4 * lf])
         mon_next, inc, pm = self.monitor.fn(rec, S[lay.ns :], sh[c["mask"][0] : c["thr"][1]])
         # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)
@@ -349,19 +354,35 @@ class Prepared:
         self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv)
         self.notes = (self.engine.note,) if self.engine.note else ()
 
+    def calibration_engine(self):
+        """The compiled fault-free loop that calibrates the detection thresholds (:mod:`._calibrate`), built
+        on first use and shared by the copies of this engine (other scales or thresholds)."""
+        from ._calibrate import CalibrationEngine
+
+        box = self._cal_box
+        if not box:
+            box.append(CalibrationEngine(self))
+        return box[0]
+
     @property
     def thresholds(self) -> np.ndarray:
-        a, b = self.cols["thr"]
-        return self.SH[0, a:b].copy()
+        """The steady detection thresholds (per fault; inf: none)."""
+        return np.asarray(self.threshold_spec[0], dtype=float)
 
-    def with_thresholds(self, thresholds) -> Prepared:
-        """The same compiled engine with other detection thresholds (per fault; inf: none)."""
+    def with_thresholds(self, thresholds, startup=()) -> Prepared:
+        """The same compiled engine with other detection thresholds: per fault the steady one (inf: none), and
+        the start-up blocks' own as ``(fault, first sample, last sample + 1, threshold)``."""
         import copy
+
+        from ._detect import threshold_column
 
         out = copy.copy(self)
         out.SH = self.SH.copy()
         a, b = self.cols["thr"]
-        out.SH[:, a:b] = np.asarray(thresholds, dtype=float)[None, :]
+        steady = tuple(float(v) for v in np.asarray(thresholds, dtype=float))
+        segs = tuple((int(j), int(k0), int(k1), float(v)) for j, k0, k1, v in startup)
+        out.SH[:, a:b] = threshold_column(steady, segs, out.SH.shape[0])
+        out.threshold_spec = (steady, segs)
         return out
 
     def rescaled(self, scales: dict) -> Prepared:
@@ -380,6 +401,19 @@ class Prepared:
         a, b = self.cols["vstd"]
         out.SH[:, a:b] *= ratio("measurement_noise_scale")
         out.sqdt = math.sqrt(self.dt) * scales["noise_scale"]
+        return out
+
+    def with_fault_factors(self, factors) -> Prepared:
+        """The same compiled engine with each fault's magnitude multiplied by its own factor (one per fault, in
+        the plant's order; on top of ``fault_scale``): e.g. one fault alone at a size, the others absent."""
+        import copy
+
+        out = copy.copy(self)
+        out.SH = self.SH.copy()
+        lf = self.plant.lf
+        f = np.asarray(factors, dtype=float)
+        for r in range(3):  # bias/drift, loss, stuck deviation; not the latch
+            out.SH[:, r * lf : (r + 1) * lf] *= f[None, :]
         return out
 
     def initial_states(self, paths: np.ndarray, seed: int) -> np.ndarray:
@@ -435,12 +469,24 @@ def _prepared(design_json: str, plant_blob: bytes, scenario_json: str, dt: float
 def chunk_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str, seed: int,
                path0: int, count: int, exact: bool = True, thresholds: tuple = ()):  # fmt: skip
     """One chunk on a worker: the per-path metric sums, divergence marks, monitor states and the per-sample
-    maxima of ``path0 .. path0 + count - 1`` (``thresholds``: the detection thresholds; empty: none)."""
+    maxima of ``path0 .. path0 + count - 1`` (``thresholds``: the detection thresholds, ``(steady, start-up
+    segments)`` of :meth:`Prepared.with_thresholds`; empty: none)."""
     prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json, bool(exact))
     if thresholds:
-        prep = prep.with_thresholds(thresholds)
+        prep = prep.with_thresholds(*thresholds)
     acc, div, _, mon, pm = run_paths(prep, path0, count, seed)
     return acc, div, mon, pm
+
+
+def calibration_task(design_json: str, plant_blob: bytes, scenario_json: str, dt: float, scales_json: str, seed: int,
+                     path0: int, count: int, exact: bool = True, block: int = 1, thresholds=None):  # fmt: skip
+    """One chunk of calibration paths on a worker: block maxima, alarms raised at ``thresholds`` and
+    divergence marks (:func:`._calibrate.run_block_maxima`)."""
+    from ._calibrate import _column, run_block_maxima
+
+    prep = _prepared(design_json, plant_blob, scenario_json, float(dt), scales_json, bool(exact))
+    return run_block_maxima(prep.calibration_engine(), prep, int(block), path0, count, seed,
+                            _column(prep, thresholds))  # fmt: skip
 
 
 def check_scenario(plant: Plant, scenario: Scenario) -> None:
@@ -468,32 +514,30 @@ def check_scenario(plant: Plant, scenario: Scenario) -> None:
         )
 
 
-def calibrate_thresholds(design: Design, plant: Plant, scenario: Scenario, *, paths: int, seed: int,
-                         false_alarm_rate: float | None = None, dt: float | None = None, threads: int | None = None,
-                         prepared: Prepared | None = None, bar=None, chunk: int | None = None,
-                         scheduler=None):  # fmt: skip
-    """Detection thresholds per fault and the metrics document's ``detection`` entries, from ``max(paths, 8)``
-    fault-free paths ``paths, paths + 1, ...`` of ``seed`` (those after the run's own; :mod:`._detect`)."""
-    from types import SimpleNamespace
+def calibrate_detection(design: Design, plant: Plant, scenario: Scenario, *, paths: int, seed: int,
+                        false_alarm_rate: float | None = None, dt: float | None = None, threads: int | None = None,
+                        prepared: Prepared | None = None, bar=None, chunk: int | None = None, scheduler=None,
+                        calibration_paths: int | None = None):  # fmt: skip
+    """Detection thresholds per fault (:class:`._calibrate.Calibration`), from fault-free paths ``paths, paths +
+    1, ...`` of ``seed`` (those after the run's own) in the calibration engine (:mod:`._calibrate`), as many as
+    :func:`._detect.calibration_paths` asks for the rate (``calibration_paths``: that many)."""
+    from ._calibrate import calibration
 
     rate = default_rate(plant.time_unit) if false_alarm_rate is None else float(false_alarm_rate)
     if not (math.isfinite(rate) and rate > 0):
         raise ParameterError(
             f"false_alarm_rate must be a positive number of alarms per time unit; got {false_alarm_rate!r}"
         )
+    cp = calibration_paths
+    if cp is not None and (not isinstance(cp, (int, np.integer)) or isinstance(cp, bool) or cp < 2):
+        raise ParameterError(f"calibration_paths must be an integer of at least 2; got {cp!r}")
     if prepared is None:
         check_scenario(plant, scenario)
         dt, nsteps, _ = resolve_dt(design, scenario, dt)
         prepared = Prepared(design, plant, scenario, dt, nsteps, _scales(None, scenario))
-    ncal = max(int(paths), 8)
-    cal = prepared.rescaled({**prepared.scales, "fault_scale": 0.0}).with_thresholds(
-        np.full(plant.lf, np.inf)
-    )
-    bar = bar or SimpleNamespace(update=lambda k: None)
-    _, cdiv, cmon, _, _ = _run_chunks(cal, plant, ncal, seed, int(paths), chunk, threads, scheduler, 0, bar)
-    _diverged(cdiv, plant, prepared.scenario, prepared.dt, int(paths))
-    t_after = prepared.nsteps * prepared.dt - prepared.masks.transient
-    return calibrate(cmon, prepared.monitor.mon_names, plant.fault_names, t_after, rate)
+    return calibration(prepared, rate, seed, int(paths), cp, threads=threads, chunk=chunk, bar=bar,
+                       scheduler=scheduler, cluster_task=calibration_task,
+                       diverged=lambda div: _diverged(div, plant, prepared.scenario, prepared.dt, int(paths)))  # fmt: skip
 
 
 def _run_chunks(prep: Prepared, plant: Plant, paths: int, seed: int, path0: int, chunk, threads, scheduler,
@@ -516,8 +560,7 @@ def _run_chunks(prep: Prepared, plant: Plant, paths: int, seed: int, path0: int,
         bar.update(len(dv))
 
     if scheduler is not None:
-        thr = tuple(float(v) for v in prep.thresholds)
-        task = functools.partial(chunk_task, exact=prep.exact, thresholds=thr)
+        task = functools.partial(chunk_task, exact=prep.exact, thresholds=prep.threshold_spec)
         for a, (ca_, dv, mo, pmx) in run_on_cluster(scheduler, prep.design, plant, prep.scenario, prep.dt,
                                                     prep.scales, seed, paths, chunk, task,
                                                     path0=path0):  # fmt: skip
@@ -573,6 +616,8 @@ def simulate(
     exact: bool = True,
     detect: bool = True,
     false_alarm_rate: float | None = None,
+    calibration_paths: int | None = None,
+    calibration=None,
 ) -> SimulationResult:
     """Monte Carlo of ``scenario`` on the nonlinear ``plant`` closed by ``design``: three runs per path.
 
@@ -620,6 +665,12 @@ def simulate(
     false_alarm_rate : float, optional
         False alarms per unit of the plant's time the thresholds are set for (default: one per hour of
         operation, in the plant's time unit; :func:`._detect.default_rate`).
+    calibration_paths : int, optional
+        Fault-free paths the thresholds are calibrated on (default: enough for the rate asked, within a
+        budget; :func:`._detect.calibration_paths`).
+    calibration : Calibration, optional
+        Thresholds calibrated before (:func:`calibrate_detection`, for the same fault-free behaviour: the
+        same design, scenario, step and factors other than ``fault_scale``): used instead of calibrating.
 
     Returns
     -------
@@ -668,17 +719,25 @@ def simulate(
         )
     # all paths recorded (--save) in-process: the chunks record as they run; else the examples run again below
     every_all = record_every if (record_all and scheduler is None) else 0
-    ncal = max(paths, 8) if detect and plant.lf else 0
-    bar = tqdm(total=paths + ncal, disable=not progress, delay=1.0, file=sys.stderr, unit=" paths",
+    ncal = 0
+    if detect and plant.lf and calibration is None:
+        from ._calibrate import block_samples
+        from ._detect import calibration_paths as n_for
+
+        ncal = n_for(
+            rate, block_samples(prep.allowances.tau, nsteps * dt, dt) * dt, nsteps, given=calibration_paths
+        )
+    bar = tqdm(total=paths + 2 * ncal, disable=not progress, delay=1.0, file=sys.stderr, unit=" paths",
                desc=f"simulate {plant.name}")  # fmt: skip
-    detection = []
     try:
-        thresholds = np.full(plant.lf, np.inf)
+        cal = calibration
         if ncal:  # fault-free runs of other paths (paths P, P + 1, ... of the same seed, after the run's own)
-            thresholds, detection = calibrate_thresholds(design, plant, scenario, paths=paths, seed=seed,
-                                                         false_alarm_rate=rate, threads=threads, prepared=prep,
-                                                         bar=bar, chunk=chunk, scheduler=scheduler)  # fmt: skip
-        prep_run = prep.with_thresholds(thresholds)
+            cal = calibrate_detection(design, plant, scenario, paths=paths, seed=seed, false_alarm_rate=rate,
+                                      threads=threads, prepared=prep, bar=bar, chunk=chunk, scheduler=scheduler,
+                                      calibration_paths=calibration_paths)  # fmt: skip
+        thresholds = cal.thresholds if (detect and cal is not None) else np.full(plant.lf, np.inf)
+        detection = [dict(e) for e in cal.entries] if (detect and cal is not None) else []
+        prep_run = prep.with_thresholds(thresholds, cal.segments if (detect and cal is not None) else ())
         acc, div, mon, pm, rec = _run_chunks(
             prep_run, plant, paths, seed, 0, chunk, threads, scheduler, every_all, bar
         )

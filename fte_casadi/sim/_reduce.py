@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ._intervals import REPLICATES
+
 __all__ = []  # public: docs/api.md
 
 #: fraction of each fault window left out of ``fault_rel_rms_error_settled`` (only there)
@@ -105,7 +107,9 @@ class Masks:
     def row(self, kind: str, k: int = 0) -> int:
         lf, nw = self.lf, self.nw
         base = {"after": 0, "fault": 1, "fault_settled": 1 + lf, "union": 1 + 2 * lf, "window": 2 + 2 * lf,
-                "window_settled": 2 + 2 * lf + nw, "outside": 2 + 2 * lf + 2 * nw}[kind]  # fmt: skip
+                "window_settled": 2 + 2 * lf + nw, "outside": 2 + 2 * lf + 2 * nw,
+                "startup_outside": 2 + 3 * lf + 2 * nw, "lag_outside": 2 + 4 * lf + 2 * nw,
+                "onset": 2 + 5 * lf + 2 * nw}[kind]  # fmt: skip
         return base + k
 
 
@@ -113,6 +117,25 @@ def outside_mask(t: np.ndarray, wins, transient: float, settle_after: float) -> 
     """After ``transient``, outside ``wins`` and not within ``settle_after`` of a window's end."""
     lag = _mask(t, [(b, b + settle_after) for _, b in wins]) if settle_after > 0 else np.zeros(t.shape, bool)
     return (t >= transient) & ~_mask(t, wins) & ~lag
+
+
+def allowance_masks(
+    t: np.ndarray, wins, transient: float, settle_after: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The samples outside ``wins`` that the allowances leave out: before ``transient``, and (after it)
+    within ``settle_after`` of a window's end."""
+    lag = _mask(t, [(b, b + settle_after) for _, b in wins]) if settle_after > 0 else np.zeros(t.shape, bool)
+    out = ~_mask(t, wins)
+    return out & (t < transient), out & (t >= transient) & lag
+
+
+def onset_mask(t: np.ndarray, a: float) -> np.ndarray:
+    """The first sample of a window starting at ``a`` (``t_k >= a``)."""
+    m = np.zeros(t.shape, bool)
+    k = np.flatnonzero(t >= a)
+    if len(k):
+        m[k[0]] = True
+    return m
 
 
 def masks(t: np.ndarray, scenario, fault_names, allow: Allowances) -> Masks:
@@ -126,6 +149,9 @@ def masks(t: np.ndarray, scenario, fault_names, allow: Allowances) -> Masks:
     rows += [_mask(t, [(a, b)]) for _, a, b in prof]
     rows += [_mask(t, [(a, b)], SETTLE_FRACTION) for _, a, b in prof]
     rows += [outside_mask(t, wins[j], allow.transient, allow.settle_after) for j in range(len(names))]
+    parts = [allowance_masks(t, wins[j], allow.transient, allow.settle_after) for j in range(len(names))]
+    rows += [p[0] for p in parts] + [p[1] for p in parts]
+    rows += [onset_mask(t, a) for _, a, _ in prof]
     M = np.array(rows, dtype=float).reshape(len(rows), len(t))
     return Masks(M, tuple(names.index(f) for f, _, _ in prof), tuple(prof), len(names), allow.transient,
                  allow.settle_after)  # fmt: skip
@@ -135,10 +161,13 @@ def masks(t: np.ndarray, scenario, fault_names, allow: Allowances) -> Masks:
 class Monitor:
     """The monitor Function ``(rec, mon, sh) -> (mon_next, incr, pm)`` and its layouts.
 
-    ``sh = [mask; t; threshold (lf)]``; ``mon`` per path: per fault the peak ``|fhat_j|`` outside its
-    windows (FTC run), the peak ``|f_j|`` in them (FTC run), the peak ``|fhat_j|`` after the transient in
-    the fault-free run, the alarm flags of the fault-free and FTC runs; per window the first time the
-    FTC run's ``|fhat_j|`` reached the threshold in it (-1: not yet)."""
+    ``sh = [mask; t; threshold (lf)]`` (the thresholds at this sample: a start-up block's own, or the steady
+    one); ``mon`` per path (:attr:`mon_names`): per fault the peak ``|fhat_j|`` outside its windows (FTC
+    run), with the time and the signed value where it was reached, the same over the two allowances (the
+    start-up, and after a window's end), the peak ``|f_j|`` in its windows, the alarm states of the
+    fault-free and FTC runs (off until ``transient``); per window the first time the FTC run's alarm rose in
+    it (-1: not yet), whether the alarm was already on at its onset (a standing alarm), and the other faults'
+    cross-talk peaks."""
 
     fn: ca.Function
     names: list[str]
@@ -188,11 +217,26 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
         out.append(e)
         names.append(name)
 
+    mon_names = (
+        [f"{k}{j}" for k in ("pko", "tpo", "spo", "pks", "tps", "sps", "pkl", "tpl", "spl", "pkf", "alf", "alc")
+         for j in range(lf)]
+        + [f"{k}{w}" for k in ("det", "stw") for w in range(mk.nw)]
+        + [f"xt{w}_{j}" for w in range(mk.nw) for j in range(lf)]
+    )  # fmt: skip
+    mon = ca.SX.sym("mon", len(mon_names))
+    slot = {nm_: mon[k] for k, nm_ in enumerate(mon_names)}
+    nxt: dict = {}
+
+    def peak(tag, j, mask_row):
+        """The running peak of |fhat_j| (FTC run) under a mask, with its time and signed value."""
+        a = mask_row * ca.fabs(fhat[j])
+        new = a > slot[f"pk{tag}{j}"]
+        nxt[f"pk{tag}{j}"] = ca.fmax(slot[f"pk{tag}{j}"], a)
+        nxt[f"tp{tag}{j}"] = ca.if_else(new, t, slot[f"tp{tag}{j}"])
+        nxt[f"sp{tag}{j}"] = ca.if_else(new, fhat[j], slot[f"sp{tag}{j}"])
+
     for j in range(n):
         add(f"sx{j}", after * (ftc["x"][j] - xhat[j]) ** 2)
-    mon = ca.SX.sym("mon", 5 * lf + mk.nw + mk.nw * lf)
-    mon_next, mon_names = [], []
-    pk_out, pk_in, pk_cal = [], [], []
     for j in range(lf):
         e2 = (fhat[j] - ftc["f"][j]) ** 2
         f2 = ftc["f"][j] ** 2
@@ -202,25 +246,17 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
         add(f"efs{j}", ws_j * e2)
         add(f"ffs{j}", ws_j * f2)
         add(f"oa{j}", o_j * fhat[j] ** 2)
-        # alarms with hysteresis: raised at |fhat| >= thr, cleared below HYSTERESIS thr
-        al_free, al_ftc = mon[3 * lf + j], mon[4 * lf + j]
+        # alarms with hysteresis, off until the transient: raised at |fhat| >= thr, cleared below HYSTERESIS thr
+        al_free, al_ftc = slot[f"alf{j}"], slot[f"alc{j}"]
         a_free, a_ftc = ca.fabs(fhat_free[j]), ca.fabs(fhat[j])
         add(f"rf{j}", after * (al_free == 0) * (a_free >= thr[j]))
         add(f"ro{j}", o_j * (al_ftc == 0) * (a_ftc >= thr[j]))
-        pk_out.append(ca.fmax(mon[j], o_j * a_ftc))
-        pk_in.append(ca.fmax(mon[lf + j], w_j * ca.fabs(ftc["f"][j])))
-        pk_cal.append(ca.fmax(mon[2 * lf + j], after * a_free))
-    mon_next += pk_out + pk_in + pk_cal
-    mon_names += (
-        [f"pko{j}" for j in range(lf)] + [f"pkf{j}" for j in range(lf)] + [f"pkc{j}" for j in range(lf)]
-    )
-    al_next_free, al_next_ftc = [], []
-    for j in range(lf):
-        for lst, al, a in ((al_next_free, mon[3 * lf + j], ca.fabs(fhat_free[j])),
-                           (al_next_ftc, mon[4 * lf + j], ca.fabs(fhat[j]))):  # fmt: skip
-            lst.append(ca.if_else(al != 0, a >= HYSTERESIS * thr[j], a >= thr[j]))
-    mon_next += al_next_free + al_next_ftc
-    mon_names += [f"alf{j}" for j in range(lf)] + [f"alc{j}" for j in range(lf)]
+        peak("o", j, o_j)
+        peak("s", j, msk[row("startup_outside", j)])
+        peak("l", j, msk[row("lag_outside", j)])
+        nxt[f"pkf{j}"] = ca.fmax(slot[f"pkf{j}"], w_j * ca.fabs(ftc["f"][j]))
+        for key, al, a in ((f"alf{j}", al_free, a_free), (f"alc{j}", al_ftc, a_ftc)):
+            nxt[key] = after * ca.if_else(al != 0, a >= HYSTERESIS * thr[j], a >= thr[j])
     add("a", msk[row("union")] * ca.sumsqr(dC_ftc))
     add("b", msk[row("union")] * ca.sumsqr(dC_no))
     add("ac", msk[row("union")] * dyc_ftc)
@@ -240,15 +276,20 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
             add(f"bt{w}_{k}", m_w * dC_no[k] ** 2)
         add(f"acw{w}", m_w * dyc_ftc)
         add(f"bcw{w}", m_w * dy_no)
-        det = mon[5 * lf + w]
-        mon_next.append(ca.if_else((det < 0) * m_w * (ca.fabs(fhat[j]) >= thr[j]), t, det))
-        mon_names.append(f"det{w}")
+        # a standing alarm: the FTC run's alarm already on at the window's onset (a false alarm, not a detection);
+        # a detection: the alarm rises in the window on a path where it was off at the onset
+        al = slot[f"alc{j}"]
+        standing = ca.if_else(msk[row("onset", w)], al != 0, slot[f"stw{w}"])
+        nxt[f"stw{w}"] = standing
+        rise = (
+            (slot[f"det{w}"] < 0) * m_w * after * (al == 0) * (ca.fabs(fhat[j]) >= thr[j]) * (standing == 0)
+        )
+        nxt[f"det{w}"] = ca.if_else(rise, t, slot[f"det{w}"])
     for w in range(mk.nw):  # cross-talk: the peak of every fault's estimate in each window
         m_w = msk[row("window", w)]
         for j in range(lf):
-            k = 5 * lf + mk.nw + w * lf + j
-            mon_next.append(ca.fmax(mon[k], m_w * ca.fabs(fhat[j])))
-            mon_names.append(f"xt{w}_{j}")
+            nxt[f"xt{w}_{j}"] = ca.fmax(slot[f"xt{w}_{j}"], m_w * ca.fabs(fhat[j]))
+    mon_next = [nxt[k] for k in mon_names]
     lim = None if limits is None else np.asarray(limits, dtype=float)
     for i in range(m):
         at = ca.SX(0.0)
@@ -320,18 +361,34 @@ def release_mask(t: np.ndarray, mk: Masks, w: int) -> np.ndarray:
     return (t >= b) & (t < end)
 
 
+def _peak_at(mcol, tag: str, j: int, size: float) -> dict | None:
+    """Where the largest of the paths' peaks ``tag`` of fault j was reached: its time, and the signed
+    estimate there relative to the fault's size."""
+    pk = mcol[f"pk{tag}{j}"]
+    if not len(pk) or not size > 0 or not float(np.max(pk)) > 0:
+        return None
+    k = int(np.argmax(pk))
+    return {"t": float(mcol[f"tp{tag}{j}"][k]), "value": float(mcol[f"sp{tag}{j}"][k]) / size}
+
+
 def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo: Monitor, mk: Masks,
              meta: dict) -> dict:  # fmt: skip
     """The metrics document from per-path sums ``acc`` (paths, len(names)), per-path monitor states ``mon``
     (paths, nmon) and per-sample maxima over the paths ``pm`` (samples, npm), at sample times ``t``.
 
-    ``meta``: ``paths, dt, T, seed, wall_s``, ``m`` (inputs), ``thresholds`` (per fault; inf: none),
-    ``detection`` (the document's ``detection`` entries, thresholds and the asked rate, to complete)."""
+    ``meta``: ``paths, dt, T, seed, wall_s``, ``m`` (inputs), ``thresholds`` (per fault, the steady ones; inf:
+    none), ``detection`` (the document's ``detection`` entries, thresholds and the asked rate, to complete),
+    ``tau`` (the observer's slowest time constant, or None). The intervals (:mod:`._intervals`) are seeded
+    by ``seed`` and depend on the set of paths only."""
+    from ._intervals import clopper_pearson, rate_intervals, ratio_intervals
+
     col = {nm: acc[:, k] for k, nm in enumerate(mo.names)}
     mcol = {nm: mon[:, k] for k, nm in enumerate(mo.mon_names)}
     pcol = {nm: pm[:, k] for k, nm in enumerate(mo.pm_names)}
     P = acc.shape[0]
+    seed = int(meta["seed"])
     dt = float(meta["dt"])
+    tau = meta.get("tau")
     nsamp = mk.M.shape[1]
     n_after = float(np.sum(mk.M[mk.row("after")]))
     n = sum(1 for nm in mo.names if nm.startswith("sx"))
@@ -341,15 +398,26 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
     ]
     n_in = [float(np.sum(mk.M[mk.row("fault", j)])) for j in range(lf)]
     n_out = [float(np.sum(mk.M[mk.row("outside", j)])) for j in range(lf)]
-    fa_rms, fa_peak = [], []
+    fa_rms, fa_peak, fa_raw, fa_start, fa_lag, fa_at, fa_raw_at = [], [], [], [], [], [], []
     for j in range(lf):
         ff = _fsum(col[f"ff{j}"])
         fa_rms.append(
             _ratio(_fsum(col[f"oa{j}"]) / n_out[j], ff / n_in[j]) if n_out[j] and n_in[j] and ff else None
         )
-        size = float(np.max(mcol[f"pkf{j}"]))
-        fa_peak.append(float(np.max(mcol[f"pko{j}"])) / size if n_out[j] and size > 0 else None)
-    windows = []
+        size = float(np.max(mcol[f"pkf{j}"])) if P else 0.0
+        parts = {}
+        for tag, row_ in (("o", "outside"), ("s", "startup_outside"), ("l", "lag_outside")):
+            has = float(np.sum(mk.M[mk.row(row_, j)])) > 0
+            parts[tag] = float(np.max(mcol[f"pk{tag}{j}"])) / size if has and size > 0 else None
+        fa_peak.append(parts["o"])
+        fa_start.append(parts["s"])
+        fa_lag.append(parts["l"])
+        known = [(v, tag) for tag, v in parts.items() if v is not None]
+        fa_raw.append(max(v for v, _ in known) if known else None)
+        fa_at.append(_peak_at(mcol, "o", j, size) if parts["o"] is not None else None)
+        top = max(known)[1] if known else None
+        fa_raw_at.append(_peak_at(mcol, top, j, size) if top is not None else None)
+    windows, pairs = [], []
     for w, (name, a, b) in enumerate(mk.windows):
         j = mk.fault_of_window[w]
         keep = mk.M[mk.row("window", w)] > 0
@@ -361,8 +429,12 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
         release = settling_time(pcol[f"pme{j}"][tail] / P, size, t[tail], b) if tail.any() else None
         p_out = sum(1 for nm in mo.names if nm.startswith(f"at{w}_"))
         det = mcol[f"det{w}"]
-        hit = det >= 0
+        standing = mcol[f"stw{w}"] != 0
+        hit = (det >= 0) & ~standing
         thr = float(meta["thresholds"][j])
+        detect = math.isfinite(thr)
+        allowed = min(TAU_MULTIPLE * tau, b - a) if tau is not None and math.isfinite(tau) else b - a
+        within = hit & (det - a <= allowed + 1e-9 * max(abs(b), 1.0))
         why = []
         rel = _ratio(_fsum(col[f"ew{w}"]), _fsum(col[f"fw{w}"]))
         if nw == 0:
@@ -378,10 +450,20 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
             why.append("no release time: the window ends at the horizon or at the next fault window" if not tail.any()
                        else f"the mean estimate does not fall back within {SETTLE_TOL:g} of the fault's size before the "
                        "next fault window or the horizon")  # fmt: skip
-        true_ratio = _ratio(sum(_fsum(col[f"at{w}_{k}"]) for k in range(p_out)),
-                            sum(_fsum(col[f"bt{w}_{k}"]) for k in range(p_out))) if rel is not None else None  # fmt: skip
+        at_ = [col[f"at{w}_{k}"] for k in range(p_out)]
+        bt_ = [col[f"bt{w}_{k}"] for k in range(p_out)]
+        true_ratio = (
+            _ratio(sum(_fsum(v) for v in at_), sum(_fsum(v) for v in bt_)) if rel is not None else None
+        )
         if rel is not None and true_ratio is None:
             why.append("the fault leaves the true outputs unchanged without tolerant control: no FTC ratio")
+        if detect and hit.sum() == 0:
+            why.append(
+                "no detection delay: the alarm rose in the window on no path where it was off at its onset"
+            )
+        # the per-path numerators and denominators of the window's ratios, bootstrapped together below
+        pairs += [(col[f"ew{w}"], col[f"fw{w}"]), (np.sum(at_, axis=0), np.sum(bt_, axis=0))]
+        pairs += [(at_[k], bt_[k]) for k in range(p_out)] + [(col[f"acw{w}"], col[f"bcw{w}"])]
         windows.append({
             "fault": name, "start": a, "stop": b,
             "fault_rel_rms_error": rel,
@@ -406,38 +488,92 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
             ],
             "detection_delay": (math.fsum(float(v) - a for v in det[hit]) / int(hit.sum())) if hit.any() else None,
             "detection_delay_max": float(np.max(det[hit]) - a) if hit.any() else None,
-            "missed_detections": int(P - hit.sum()) if math.isfinite(thr) else None,
+            "missed_detections": int(P - standing.sum() - hit.sum()) if detect else None,
+            "standing_alarm_paths": int(standing.sum()) if detect else None,
+            "detection_probability": float(hit.sum()) / P if detect and P else None,
+            "detection_probability_interval": clopper_pearson(int(hit.sum()), P) if detect else None,
+            "detection_delay_allowed": float(allowed),
+            "detection_probability_within": float(within.sum()) / P if detect and P else None,
             "input_saturation": [(_fsum(col[f"satw{w}_{i}"]) / (P * nw)) if nw else 0.0 for i in range(int(meta["m"]))],
             "why": "; ".join(why) or None,
         })  # fmt: skip
+    has_window = any(w["fault_rel_rms_error"] is not None for w in windows)
+    globals_ = [(col[f"ef{j}"], col[f"ff{j}"]) for j in range(lf)]
+    globals_ += [(col["a"], col["b"]), (col["ac"], col["bc"])]
+    iv = ratio_intervals(seed, pairs + globals_) if P else [None] * (len(pairs) + len(globals_))
+    k = 0
+    for w in windows:
+        p_out = len(w["ftc_true_ratio_per_output"])
+        defined = w["fault_rel_rms_error"] is not None
+        w["fault_rel_rms_error_interval"] = iv[k] if defined else None
+        w["ftc_true_ratio_interval"] = iv[k + 1] if w["ftc_true_ratio"] is not None else None
+        w["ftc_true_ratio_per_output_interval"] = [
+            iv[k + 2 + q] if w["ftc_true_ratio_per_output"][q] is not None else None for q in range(p_out)
+        ]
+        w["ftc_compensated_ratio_interval"] = (
+            iv[k + 2 + p_out] if w["ftc_compensated_ratio"] is not None else None
+        )
+        k += 3 + p_out
+    rel_all = [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(lf)]
+    g = iv[k:]
     detection = []
     t_after = n_after * dt
-    for j, entry in enumerate(meta.get("detection") or []):
+    entries = meta.get("detection") or []
+    counts, exposures, which = [], [], []
+    for j, entry in enumerate(entries):
         entry = dict(entry)
         if math.isfinite(float(meta["thresholds"][j])):
             entry["false_alarm_rate"] = _fsum(col[f"rf{j}"]) / (P * t_after) if t_after else None
+            entry["false_alarm_count"] = int(round(_fsum(col[f"rf{j}"])))
             entry["false_alarm_rate_ftc_run"] = (
                 _fsum(col[f"ro{j}"]) / (P * n_out[j] * dt) if n_out[j] else None
             )
+            entry["false_alarm_count_ftc_run"] = int(round(_fsum(col[f"ro{j}"])))
+            if t_after:
+                (
+                    counts.append(col[f"rf{j}"]),
+                    exposures.append(t_after),
+                    which.append((j, "false_alarm_rate_measured_interval")),
+                )
+            if n_out[j]:
+                (
+                    counts.append(col[f"ro{j}"]),
+                    exposures.append(n_out[j] * dt),
+                    which.append((j, "false_alarm_rate_ftc_run_interval")),
+                )
         detection.append(entry)
-    has_window = any(w["fault_rel_rms_error"] is not None for w in windows)
+    for (j, key), v in zip(which, rate_intervals(seed, counts, exposures) if counts and P else []):
+        detection[j][key] = v
     return {
         "paths": int(meta["paths"]),
         "dt": dt,
         "T": float(meta["T"]),
-        "seed": int(meta["seed"]),
-        "observer_time_constant": meta.get("tau"),
+        "seed": seed,
+        "observer_time_constant": tau,
         "transient": float(mk.transient),
         "settle_after": float(mk.settle_after),
         "state_rms_error": srms,
-        "fault_rel_rms_error": [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(lf)],
+        "fault_rel_rms_error": rel_all,
+        "fault_rel_rms_error_interval": [g[j] if rel_all[j] is not None else None for j in range(lf)],
         "fault_rel_rms_error_settled": [
             _ratio(_fsum(col[f"efs{j}"]), _fsum(col[f"ffs{j}"])) for j in range(lf)
         ],
         "false_alarm_peak": fa_peak,
+        "false_alarm_peak_raw": fa_raw,
+        "false_alarm_peak_startup": fa_start,
+        "false_alarm_peak_after_window": fa_lag,
+        "false_alarm_peak_at": fa_at,
+        "false_alarm_peak_raw_at": fa_raw_at,
         "false_alarm_rel_rms": fa_rms,
         "ftc_true_ratio": _ratio(_fsum(col["a"]), _fsum(col["b"])) if has_window else None,
+        "ftc_true_ratio_interval": g[lf]
+        if has_window and _ratio(_fsum(col["a"]), _fsum(col["b"])) is not None
+        else None,
         "ftc_compensated_ratio": _ratio(_fsum(col["ac"]), _fsum(col["bc"])) if has_window else None,
+        "ftc_compensated_ratio_interval": g[lf + 1]
+        if has_window and _ratio(_fsum(col["ac"]), _fsum(col["bc"])) is not None
+        else None,
+        "intervals": {"confidence": 0.95, "bootstrap_replicates": REPLICATES, "over": "paths"},
         "detection": detection,
         "windows": windows,
         "outside_region": _fsum(col["outreg"]) / (P * nsamp),

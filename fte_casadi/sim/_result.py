@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_write
-from ..design._record import Design
+from ..design import Design
 from ..errors import SimulationError
 from ._scenario import Scenario
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from tqdm import tqdm
 
 from ..errors import ParameterError
-from ._engine import SCALES, Prepared, _check_settings, _scales, resolve_dt, simulate
+from ._engine import SCALES, Prepared, _check_settings, _scales, calibrate_detection, resolve_dt, simulate
 
 if TYPE_CHECKING:  # an optional dependency (the [dask] extra)
     import distributed
@@ -75,12 +75,18 @@ def sweep(design, plant, scenario, vary: dict[str, list[float]], *, paths: int, 
         client = scheduler = client_for(scheduler)
     bar = tqdm(total=len(grid) * paths, disable=not progress, delay=1.0, file=sys.stderr, unit=" paths",
                desc=f"sweep {plant.name} ({len(grid)} points)")  # fmt: skip
+    cals: dict = {}  # the thresholds depend on the fault-free behaviour only: one calibration per other factors
     try:
         for point in grid:
             sc = _scales(point, scenario)
+            prep = base.rescaled(sc)
+            key = tuple(sorted((k, v) for k, v in sc.items() if k != "fault_scale"))
+            if key not in cals and plant.lf:
+                cals[key] = calibrate_detection(design, plant, scenario, paths=paths, seed=seed, prepared=prep,
+                                                threads=threads, scheduler=scheduler)  # fmt: skip
             res = simulate(design, plant, scenario, paths=paths, seed=seed, dt=dt, progress=False, record_paths=0,
-                           threads=threads, scheduler=scheduler, scales=sc, prepared=base.rescaled(sc),
-                           exact=bool(exact))  # fmt: skip
+                           threads=threads, scheduler=scheduler, scales=sc, prepared=prep, exact=bool(exact),
+                           calibration=cals.get(key))  # fmt: skip
             out.append({"point": dict(point), "metrics": res.metrics})
             bar.update(paths)
     finally:

@@ -19,6 +19,7 @@ from ._model import Fidelity as Fidelity
 from ._model import LocalModel as LocalModel
 from ._model import Premise as Premise
 from ._model import TSModel as TSModel
+from ._model import as_model as as_model
 from ._reach import reach_notes
 from ._sector import sector_local_models
 

@@ -60,8 +60,8 @@ import numpy as np
 from ..errors import BoundsError, DerivationError
 from ..model import Plant
 from ._auto_checks import TAYLOR_BAND, check_term, expr_text, state_scale
-from ._bounds import premise_bounds
 from ._cover import estimate_rules, plan_groups
+from ._premise_bounds import premise_bounds
 
 __all__ = ["premise_form", "PremiseForm", "WARN_PREMISES", "MAX_PREMISES", "TAYLOR_BAND", "state_scale"]
 
@@ -85,7 +85,7 @@ class PremiseForm:
     """The plant rewritten with automatic premises ``z1..zq``, their bounds, and notes for reports."""
 
     plant: Plant
-    #: per premise ``(min, max, states, gap)``, as :func:`~fte_casadi.ts._bounds.premise_bounds` returns
+    #: per premise ``(min, max, states, gap)``, as :func:`~fte_casadi.ts._premise_bounds.premise_bounds` returns
     bounds: tuple[tuple[float, float, tuple[int, ...], float], ...]
     notes: tuple[str, ...]
 

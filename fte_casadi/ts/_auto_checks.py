@@ -17,8 +17,8 @@ import numpy as np
 from .._text import shorten
 from ..errors import BoundsError, DerivationError
 from ..model import Plant
-from ._bounds import premise_bounds
 from ._fidelity import blended, sample_box
+from ._premise_bounds import premise_bounds
 
 __all__ = ["check_term", "check_exact", "expr_text", "EXACT_TOL", "TAYLOR_BAND", "state_scale"]
 

@@ -15,7 +15,7 @@ extremes, which no configuration has). Here:
 - a group of ``k`` premises whose image spans an affine space of dimension ``r`` is enclosed by a
   simplex of ``r + 1`` vertices: facet normals chosen to make it small around sampled points of the
   image (in coordinates whitened by the image's own spread), then each facet pushed out to the
-  certified maximum of its linear form over the region (:func:`~fte_casadi.ts._bounds.certified_max`:
+  certified maximum of its linear form over the region (:func:`~fte_casadi.ts._premise_bounds.certified_max`:
   a dense grid, a Lipschitz bound per cell and a local search from every cell that could exceed
   the best value; not sampling alone). Its memberships are the barycentric coordinates, affine in
   ``z`` and in closed form: ``h = T^-1 [W (z - c); 1]``;
@@ -48,7 +48,7 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import minimize
 
-from ._bounds import certified_max
+from ._premise_bounds import certified_max
 
 __all__ = ["GroupCover", "cover_premises", "VERTEX_CHOICES", "MERGE_ABOVE", "estimate_rules", "plan_groups"]
 

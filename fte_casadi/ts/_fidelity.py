@@ -155,15 +155,16 @@ def _trajectory(fun, start, horizon, points, lo, hi, max_evaluations=MAX_EVALUAT
     """The open-loop trajectory by RK45 (as ``solve_ivp`` would), and by LSODA, which switches to a
     stiff method, where RK45 spends a third of the budget (see :func:`_integrate`; the built-in plants
     and examples take 300-4300 evaluations)."""
-    X, T, stop = _integrate(RK45, fun, start, horizon, points, lo, hi, max_evaluations // 3)
-    if stop.startswith("stiff"):
+    spent = [0]
+    X, T, stop = _integrate(RK45, fun, start, horizon, points, lo, hi, max_evaluations // 3, spent)
+    if spent[0] > max_evaluations // 3:  # RK45 spent its budget: stiff
         X2, T2, stop2 = _integrate(LSODA, fun, start, horizon, points, lo, hi, max_evaluations)
         if T2[-1] > T[-1]:
             return X2, T2, stop2
     return X, T, stop
 
 
-def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
+def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations, spent: list | None = None):
     """Integrate ``x' = fun(t, x)`` from ``start`` by ``method`` (rtol 1e-8, atol 1e-10) and return its values
     at ``points`` equally spaced times of ``[0, horizon]`` (the same as ``solve_ivp`` with ``t_eval``),
     up to where it stops early, and why it did ("" if it did not).
@@ -172,10 +173,10 @@ def _integrate(method, fun, start, horizon, points, lo, hi, max_evaluations):
     without bounds: ``ESCAPE max(1, |start|)`` from 0) or not finite -- an unstable open loop escaping,
     possibly in finite time, which an adaptive integrator would otherwise chase with ever smaller
     steps -- and when ``max_evaluations`` right-hand sides have been spent (a stiff plant over a long
-    horizon)."""
+    horizon). ``spent`` (a one-element list, if given) counts the right-hand sides evaluated."""
     t_eval = np.linspace(0.0, horizon, points)
     x_start = np.asarray(start, float)
-    spent = [0]
+    spent = [0] if spent is None else spent
 
     def rhs(t, xx):
         # every trial step of the integrator comes through here, also the ones its inner loop

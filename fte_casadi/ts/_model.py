@@ -270,3 +270,18 @@ class TSModel:
             "faults": list(self.plant.fault_names),
             "outputs": list(self.plant.output_names),
         }
+
+
+def as_model(obj, where: str) -> TSModel:
+    """``obj`` when it is a :class:`TSModel`; else :class:`~fte_casadi.errors.ParameterError` saying what
+    ``where`` (``design()``, ``explore()``) takes, and how to make it from a plant."""
+    from ..errors import ParameterError
+
+    if isinstance(obj, TSModel):
+        return obj
+    if isinstance(obj, Plant):
+        raise ParameterError(
+            f"{where} takes the T-S model of a plant, not the plant itself: {where.split('(')[0]}(derive(plant), "
+            "...), with derive from fte_casadi"
+        )
+    raise ParameterError(f"{where} takes a T-S model (fte_casadi.derive(plant)); got {type(obj).__name__}")

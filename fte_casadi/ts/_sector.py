@@ -7,9 +7,9 @@ import numpy as np
 
 from ..errors import DerivationError
 from ..model import Plant
-from ._bounds import premise_bounds
 from ._cover import cover_premises, memberships_of, rule_vertices_of
 from ._model import LocalModel, Premise
+from ._premise_bounds import premise_bounds
 
 __all__ = ["sector_local_models"]
 

@@ -70,7 +70,7 @@ def default_alpha(task: dict) -> float | None:
 
 def design_kwargs(knobs: dict) -> dict:
     """The arguments of :func:`fte_casadi.design.design` a candidate's knobs give (alpha aside)."""
-    from ..design.core._conditioned import KAPPA
+    from ..design import KAPPA
 
     g = float(knobs["gamma"])
     kw = {"gamma": g, "gamma1": float(knobs["gamma1_ratio"]) * g, "sigma": float(knobs["sigma"]),
@@ -127,9 +127,8 @@ def evaluate(task: dict) -> dict:
     """
     import dataclasses
 
+    from ..design import KAPPA, Design, failures
     from ..design import design as run_design
-    from ..design._record import Design
-    from ..design.core._conditioned import KAPPA
     from ..sim import Scenario, protected, simulate
 
     blob = task["plant"]
@@ -158,7 +157,7 @@ def evaluate(task: dict) -> dict:
         if not d.certified:
             return {
                 "state": "fail",
-                "reason": "not certified: " + "; ".join(s for s in d.status if "CERTIF" in s),
+                "reason": "not certified: " + "; ".join(failures(d.checks)),
             }
         if (
             task.get("design") is None

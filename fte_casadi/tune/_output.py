@@ -10,7 +10,7 @@ import tempfile
 from pathlib import Path
 
 from .._atomic import atomic_write_text, replace_dir
-from ..design._record import Design
+from ..design import Design
 from ..errors import ParameterError
 
 __all__ = ["comparison"]  # public: docs/api.md

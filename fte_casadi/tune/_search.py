@@ -578,8 +578,7 @@ def _base_knobs(base_design, base_task: dict, e_scale: float | None) -> tuple[fl
 
 def _sigma_sup(plant, base_design) -> float | None:
     """The largest sigma (45) allows for any gamma at the base gamma1 (None when none or on failure)."""
-    from ..design._augment import augment
-    from ..design.core._diagnose import sigma_max
+    from ..design import augment, sigma_max
     from ..errors import FteError
     from ..ts import derive
 
@@ -595,8 +594,7 @@ def _limits(done, plant) -> list[str]:
     """The windows where no certified candidate makes tolerant control better
     than none, and the faults whose false alarms none keeps below 1, with their structural causes
     (:func:`fte_casadi.design._limits.explain_metrics`, at the candidate closest to succeeding)."""
-    from ..design._limits import explain_metrics
-    from ..design._record import Design
+    from ..design import Design, explain_metrics
 
     if not done:
         return []

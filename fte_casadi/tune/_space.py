@@ -92,7 +92,7 @@ def space_for(base_design, sigma_sup: float | None, alpha_scale: float = 1.0,
     boundary layer over ``||N||`` x the base run's RMS output error. The ranges are widened to hold them.
     The base's bound weight is its ``params.bound_weight`` (off when it has none).
     """
-    from ..design.core._conditioned import KAPPA
+    from ..design import KAPPA
 
     p = base_design.params
     g0, s0, e0 = float(p.gamma), float(p.sigma), float(p.epsilon)

@@ -4,6 +4,10 @@
 #include "fte_manipulator.h"
 #include "fte_manipulator_casadi.h"
 
+#if FTE_MANIPULATOR_SET != 0x360824f7UL || FTE_MANIPULATOR_CASADI_SET != 0x360824f7UL
+#error "fte_manipulator.h or fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
+#endif
+
 const fte_real fte_manipulator_Y_MIN[3] = {
   -18.84955592153876, -6.0, -7.5398223686155035
 };
@@ -21,16 +25,22 @@ static int fte_manipulator_not_finite(fte_real v) {
   return (b.u & UINT64_C(0x7FF0000000000000)) == UINT64_C(0x7FF0000000000000);
 }
 
-/* 0 when every y[i] is accepted, 1 for a NaN or an infinity, 3 for a finite value out of range. */
-static int fte_manipulator_check_y(const fte_real *y) {
+/* 0 when every v[i] (count values) lies in [lo[i], hi[i]], 1 for a NaN or an infinity, 3 for a finite
+ * value out of range; the bits are read before any comparison. */
+static int fte_manipulator_check(const fte_real *v, const fte_real *lo, const fte_real *hi, int count) {
   int i;
-  for (i = 0; i < FTE_MANIPULATOR_NY; ++i) {
-    if (fte_manipulator_not_finite(y[i])) return 1;
+  for (i = 0; i < count; ++i) {
+    if (fte_manipulator_not_finite(v[i])) return 1;
   }
-  for (i = 0; i < FTE_MANIPULATOR_NY; ++i) {
-    if (y[i] < fte_manipulator_Y_MIN[i] || y[i] > fte_manipulator_Y_MAX[i]) return 3;
+  for (i = 0; i < count; ++i) {
+    if (v[i] < lo[i] || v[i] > hi[i]) return 3;
   }
   return 0;
+}
+
+/* 0 when every y[i] is accepted, 1 for a NaN or an infinity, 3 for a finite value out of range. */
+static int fte_manipulator_check_y(const fte_real *y) {
+  return fte_manipulator_check(y, fte_manipulator_Y_MIN, fte_manipulator_Y_MAX, FTE_MANIPULATOR_NY);
 }
 
 const fte_real fte_manipulator_H[FTE_MANIPULATOR_NXBAR * FTE_MANIPULATOR_NY] = {
@@ -47,13 +57,44 @@ const fte_real fte_manipulator_XBAR0[FTE_MANIPULATOR_NXBAR] = {
   0.0, 0.0, 0.0, 0.0
 };
 
-void fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0) {
+const fte_real fte_manipulator_XBAR0_MIN[FTE_MANIPULATOR_NXBAR] = {
+  -7.5398223686155035, -6.0, -7.5398223686155035, -6.0,
+  -1e+150, -1e+150, -1e+150, -1e+150
+};
+
+const fte_real fte_manipulator_XBAR0_MAX[FTE_MANIPULATOR_NXBAR] = {
+  7.5398223686155035, 6.0, 7.5398223686155035, 6.0,
+  1e+150, 1e+150, 1e+150, 1e+150
+};
+
+const fte_real fte_manipulator_Z_MIN[FTE_MANIPULATOR_NXBAR] = {
+  -11.359038299143023, -13.63843186105504, -18.99747016019806, -25.0960796526376,
+  -1e+150, -1e+150, -1e+150, -1e+150
+};
+
+const fte_real fte_manipulator_Z_MAX[FTE_MANIPULATOR_NXBAR] = {
+  11.359038299143023, 13.63843186105504, 18.99747016019806, 25.0960796526376,
+  1e+150, 1e+150, 1e+150, 1e+150
+};
+
+/* z_0 = z0 (zeros when z0 is NULL), z_next the same, the work arrays cleared. */
+static void fte_manipulator_set(fte_manipulator_state *s, const fte_real *z0) {
   int i;
-  if (s == 0) return;
   for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) {
     s->z[i] = z0 ? z0[i] : (fte_real)0;
     s->z_next[i] = s->z[i];
   }
+}
+
+int fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0) {
+  int bad;
+  if (s == 0) return -1;
+  if (z0) {
+    bad = fte_manipulator_check(z0, fte_manipulator_Z_MIN, fte_manipulator_Z_MAX, FTE_MANIPULATOR_NXBAR);
+    if (bad) return bad;
+  }
+  fte_manipulator_set(s, z0);
+  return 0;
 }
 
 int fte_manipulator_init_from_y(fte_manipulator_state *s, const fte_real *y0, const fte_real *xbar0) {
@@ -61,9 +102,8 @@ int fte_manipulator_init_from_y(fte_manipulator_state *s, const fte_real *y0, co
   const fte_real *xb = xbar0 ? xbar0 : fte_manipulator_XBAR0;
   int i, j, bad;
   if (s == 0 || y0 == 0) return -1;
-  for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) {
-    if (fte_manipulator_not_finite(xb[i])) return 1;
-  }
+  bad = fte_manipulator_check(xb, fte_manipulator_XBAR0_MIN, fte_manipulator_XBAR0_MAX, FTE_MANIPULATOR_NXBAR);
+  if (bad) return bad;
   bad = fte_manipulator_check_y(y0);
   if (bad) return bad;
   for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) {
@@ -71,7 +111,7 @@ int fte_manipulator_init_from_y(fte_manipulator_state *s, const fte_real *y0, co
     for (j = 0; j < FTE_MANIPULATOR_NY; ++j) hy += fte_manipulator_H[i * FTE_MANIPULATOR_NY + j] * y0[j];
     z0[i] = xb[i] - hy;
   }
-  fte_manipulator_init(s, z0);
+  fte_manipulator_set(s, z0);
   return 0;
 }
 
@@ -91,6 +131,12 @@ int fte_manipulator_step(fte_manipulator_state *s, const fte_real *y,
   res[3] = yc;
   res[4] = 0; /* s: not exported */
   if (fte_manipulator_casadi_step(arg, res, 0, 0, 0) != 0) return 2;
+  for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) {
+    if (fte_manipulator_not_finite(s->z_next[i])) return 4;
+  }
+  for (i = 0; u != 0 && i < FTE_MANIPULATOR_NU; ++i) {
+    if (fte_manipulator_not_finite(u[i])) return 4;
+  }
   for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) s->z[i] = s->z_next[i];
   return 0;
 }

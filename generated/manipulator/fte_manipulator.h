@@ -24,6 +24,10 @@ extern "C" {
 
 typedef double fte_real;
 
+/* The set these files belong to: each .c file stops the compilation with an #error when a header is of
+ * another run of fte codegen (a mix of two sets never builds). */
+#define FTE_MANIPULATOR_SET 0x360824f7UL
+
 /* The accepted range of each measurement (see above); a y outside it is refused with return 3. */
 extern const fte_real fte_manipulator_Y_MIN[3];
 extern const fte_real fte_manipulator_Y_MAX[3];
@@ -47,16 +51,26 @@ extern const fte_real fte_manipulator_H[FTE_MANIPULATOR_NXBAR * FTE_MANIPULATOR_
 /* The nominal augmented initial state [x0; 0; 0] the simulation (fte simulate) starts from:
  * x0 = [0.1, 0.05, 0.02, 0.03]. */
 extern const fte_real fte_manipulator_XBAR0[FTE_MANIPULATOR_NXBAR];
+/* The initial states accepted (outside them init_from_y and init return 3 and change nothing): xbar0 of
+ * init_from_y in XBAR0_MIN .. XBAR0_MAX (each state in the plant's region widened by 0.1 of its
+ * width, where the step is finite; the fault estimates |v| <= 1e+150), z0 of init in Z_MIN .. Z_MAX
+ * (|z0| at most the largest |xbar0 - H y0| over the accepted xbar0 and y0). */
+extern const fte_real fte_manipulator_XBAR0_MIN[FTE_MANIPULATOR_NXBAR];
+extern const fte_real fte_manipulator_XBAR0_MAX[FTE_MANIPULATOR_NXBAR];
+extern const fte_real fte_manipulator_Z_MIN[FTE_MANIPULATOR_NXBAR];
+extern const fte_real fte_manipulator_Z_MAX[FTE_MANIPULATOR_NXBAR];
 
-/* Set z_0 = z0 (FTE_MANIPULATOR_NXBAR values), or zeros when z0 is NULL. Does nothing when s is NULL. */
-void fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0);
+/* Set z_0 = z0 (FTE_MANIPULATOR_NXBAR values), or zeros when z0 is NULL. Returns 0; returns 1 for a z0 holding a
+ * NaN or an infinity, 3 for one outside FTE_MANIPULATOR_Z_MIN .. _Z_MAX, -1 when s is NULL (the state untouched
+ * on each). */
+int fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0);
 
 /* Start as the simulation does, from the first measurement y0 (FTE_MANIPULATOR_NY values):
  * z_0 = xbar0 - H y0, so that the first xbarhat = z_0 + H y0 is xbar0 (FTE_MANIPULATOR_NXBAR values;
  * NULL: the nominal fte_manipulator_XBAR0). Call it once, then fte_manipulator_step with y0 itself.
  * Returns 0; returns 1 and leaves the state untouched when y0 or xbar0 holds a NaN or an
- * infinity, 3 (state untouched) when y0 is outside the accepted range; returns -1 (state
- * untouched) when s or y0 is NULL. */
+ * infinity, 3 (state untouched) when xbar0 is outside FTE_MANIPULATOR_XBAR0_MIN .. _MAX or y0 outside the
+ * accepted range; returns -1 (state untouched) when s or y0 is NULL. */
 int fte_manipulator_init_from_y(fte_manipulator_state *s, const fte_real *y0, const fte_real *xbar0);
 
 /* One sample of the discrete step (fte_casadi's docs/method.md, "The discrete step"):
@@ -67,7 +81,8 @@ int fte_manipulator_init_from_y(fte_manipulator_state *s, const fte_real *y0, co
  * infinity, 3 (state and outputs untouched) when y is outside FTE_MANIPULATOR_Y_MIN .. _Y_MAX;
  * returns -1 when s or y is NULL; returns 2 (state untouched) if the generated maths reports
  * an error (it does not for this step: no iteration, and no division by a value that can be 0,
- * not even in a branch whose result is discarded). */
+ * not even in a branch whose result is discarded); returns 4 (state untouched, the outputs not to be
+ * used: hold the last u) when the new state or u would not be finite. */
 int fte_manipulator_step(fte_manipulator_state *s, const fte_real *y,
                      fte_real *u, fte_real *xbarhat, fte_real *yc);
 

@@ -20,6 +20,9 @@ extern "C" {
 
 #include <math.h>
 #include "fte_manipulator_casadi.h"
+#if FTE_MANIPULATOR_CASADI_SET != 0x360824f7UL
+#error "fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
+#endif
 
 #ifndef casadi_real
 #define casadi_real double

@@ -4,6 +4,10 @@
 #include "fte_quadruple_tank.h"
 #include "fte_quadruple_tank_casadi.h"
 
+#if FTE_QUADRUPLE_TANK_SET != 0xa103f04aUL || FTE_QUADRUPLE_TANK_CASADI_SET != 0xa103f04aUL
+#error "fte_quadruple_tank.h or fte_quadruple_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
+#endif
+
 const fte_real fte_quadruple_tank_Y_MIN[4] = {
   -18.0, -7.2, -1.8, -1.3199999999999998
 };
@@ -21,16 +25,22 @@ static int fte_quadruple_tank_not_finite(fte_real v) {
   return (b.u & UINT64_C(0x7FF0000000000000)) == UINT64_C(0x7FF0000000000000);
 }
 
-/* 0 when every y[i] is accepted, 1 for a NaN or an infinity, 3 for a finite value out of range. */
-static int fte_quadruple_tank_check_y(const fte_real *y) {
+/* 0 when every v[i] (count values) lies in [lo[i], hi[i]], 1 for a NaN or an infinity, 3 for a finite
+ * value out of range; the bits are read before any comparison. */
+static int fte_quadruple_tank_check(const fte_real *v, const fte_real *lo, const fte_real *hi, int count) {
   int i;
-  for (i = 0; i < FTE_QUADRUPLE_TANK_NY; ++i) {
-    if (fte_quadruple_tank_not_finite(y[i])) return 1;
+  for (i = 0; i < count; ++i) {
+    if (fte_quadruple_tank_not_finite(v[i])) return 1;
   }
-  for (i = 0; i < FTE_QUADRUPLE_TANK_NY; ++i) {
-    if (y[i] < fte_quadruple_tank_Y_MIN[i] || y[i] > fte_quadruple_tank_Y_MAX[i]) return 3;
+  for (i = 0; i < count; ++i) {
+    if (v[i] < lo[i] || v[i] > hi[i]) return 3;
   }
   return 0;
+}
+
+/* 0 when every y[i] is accepted, 1 for a NaN or an infinity, 3 for a finite value out of range. */
+static int fte_quadruple_tank_check_y(const fte_real *y) {
+  return fte_quadruple_tank_check(y, fte_quadruple_tank_Y_MIN, fte_quadruple_tank_Y_MAX, FTE_QUADRUPLE_TANK_NY);
 }
 
 const fte_real fte_quadruple_tank_H[FTE_QUADRUPLE_TANK_NXBAR * FTE_QUADRUPLE_TANK_NY] = {
@@ -49,13 +59,44 @@ const fte_real fte_quadruple_tank_XBAR0[FTE_QUADRUPLE_TANK_NXBAR] = {
   0.0, 0.0, 0.0, 0.0
 };
 
-void fte_quadruple_tank_init(fte_quadruple_tank_state *s, const fte_real *z0) {
+const fte_real fte_quadruple_tank_XBAR0_MIN[FTE_QUADRUPLE_TANK_NXBAR] = {
+  -7.2, -7.2, -1.8, -1.44,
+  -1e+150, -1e+150, -1e+150, -1e+150
+};
+
+const fte_real fte_quadruple_tank_XBAR0_MAX[FTE_QUADRUPLE_TANK_NXBAR] = {
+  7.2, 7.2, 1.8, 1.44,
+  1e+150, 1e+150, 1e+150, 1e+150
+};
+
+const fte_real fte_quadruple_tank_Z_MIN[FTE_QUADRUPLE_TANK_NXBAR] = {
+  -7.2, -7.2, -3.6, -1.44,
+  -1e+150, -1e+150, -1e+150, -1e+150
+};
+
+const fte_real fte_quadruple_tank_Z_MAX[FTE_QUADRUPLE_TANK_NXBAR] = {
+  7.2, 7.2, 3.6, 1.44,
+  1e+150, 1e+150, 1e+150, 1e+150
+};
+
+/* z_0 = z0 (zeros when z0 is NULL), z_next the same, the work arrays cleared. */
+static void fte_quadruple_tank_set(fte_quadruple_tank_state *s, const fte_real *z0) {
   int i;
-  if (s == 0) return;
   for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR; ++i) {
     s->z[i] = z0 ? z0[i] : (fte_real)0;
     s->z_next[i] = s->z[i];
   }
+}
+
+int fte_quadruple_tank_init(fte_quadruple_tank_state *s, const fte_real *z0) {
+  int bad;
+  if (s == 0) return -1;
+  if (z0) {
+    bad = fte_quadruple_tank_check(z0, fte_quadruple_tank_Z_MIN, fte_quadruple_tank_Z_MAX, FTE_QUADRUPLE_TANK_NXBAR);
+    if (bad) return bad;
+  }
+  fte_quadruple_tank_set(s, z0);
+  return 0;
 }
 
 int fte_quadruple_tank_init_from_y(fte_quadruple_tank_state *s, const fte_real *y0, const fte_real *xbar0) {
@@ -63,9 +104,8 @@ int fte_quadruple_tank_init_from_y(fte_quadruple_tank_state *s, const fte_real *
   const fte_real *xb = xbar0 ? xbar0 : fte_quadruple_tank_XBAR0;
   int i, j, bad;
   if (s == 0 || y0 == 0) return -1;
-  for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR; ++i) {
-    if (fte_quadruple_tank_not_finite(xb[i])) return 1;
-  }
+  bad = fte_quadruple_tank_check(xb, fte_quadruple_tank_XBAR0_MIN, fte_quadruple_tank_XBAR0_MAX, FTE_QUADRUPLE_TANK_NXBAR);
+  if (bad) return bad;
   bad = fte_quadruple_tank_check_y(y0);
   if (bad) return bad;
   for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR; ++i) {
@@ -73,7 +113,7 @@ int fte_quadruple_tank_init_from_y(fte_quadruple_tank_state *s, const fte_real *
     for (j = 0; j < FTE_QUADRUPLE_TANK_NY; ++j) hy += fte_quadruple_tank_H[i * FTE_QUADRUPLE_TANK_NY + j] * y0[j];
     z0[i] = xb[i] - hy;
   }
-  fte_quadruple_tank_init(s, z0);
+  fte_quadruple_tank_set(s, z0);
   return 0;
 }
 
@@ -93,6 +133,12 @@ int fte_quadruple_tank_step(fte_quadruple_tank_state *s, const fte_real *y,
   res[3] = yc;
   res[4] = 0; /* s: not exported */
   if (fte_quadruple_tank_casadi_step(arg, res, 0, 0, 0) != 0) return 2;
+  for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR; ++i) {
+    if (fte_quadruple_tank_not_finite(s->z_next[i])) return 4;
+  }
+  for (i = 0; u != 0 && i < FTE_QUADRUPLE_TANK_NU; ++i) {
+    if (fte_quadruple_tank_not_finite(u[i])) return 4;
+  }
   for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR; ++i) s->z[i] = s->z_next[i];
   return 0;
 }

@@ -5,6 +5,7 @@
  *   3) user code: owned by the user
  *
  */
+#define FTE_QUADRUPLE_TANK_CASADI_SET 0xa103f04aUL /* the set these files belong to */
 #ifdef __cplusplus
 extern "C" {
 #endif

@@ -20,6 +20,9 @@ extern "C" {
 
 #include <math.h>
 #include "fte_three_tank_casadi.h"
+#if FTE_THREE_TANK_CASADI_SET != 0xef7cfd40UL
+#error "fte_three_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
+#endif
 
 #ifndef casadi_real
 #define casadi_real double

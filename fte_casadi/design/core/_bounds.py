@@ -138,7 +138,7 @@ def _solve(verts, Cz, names, sizes, solver: str, schur: bool):
     import cvxpy as cp
 
     from ._linalg import sym
-    from ._sdp import SOLVER_SETTINGS
+    from ._sdp import SOLVER_SETTINGS, cvxpy_solver
 
     N = Cz.shape[1]
     P = cp.Variable((N, N), symmetric=True)
@@ -161,7 +161,7 @@ def _solve(verts, Cz, names, sizes, solver: str, schur: bool):
     try:
         with warnings.catch_warnings():  # "may be inaccurate": the point is checked with numpy
             warnings.simplefilter("ignore", UserWarning)
-            prob.solve(solver=solver, **SOLVER_SETTINGS.get(solver, {}))
+            prob.solve(solver=cvxpy_solver(solver), **SOLVER_SETTINGS.get(solver, {}))
     except cp.error.SolverError as exc:
         del exc  # cvxpy's text ("Try another solver, or solve with verbose=True") is not advice for a user
         return None, None, f"{solver} failed numerically on the analysis LMI"

@@ -7,13 +7,15 @@ N, theta), so a solver that reports "optimal" at a point where an LMI does not h
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ._linalg import sym as _sym
 from ._lmis import LMIS, THEOREM1, distinct, routes
 
 __all__ = ["certificate", "ts_max", "lyapunov_ts_max", "discrete_certificate", "balanced", "eig_roundoff",
-           "failures", "certified_by"]  # fmt: skip
+           "failures", "failed", "Failure", "certified_by"]  # fmt: skip
 
 
 def _maxeig(L: np.ndarray) -> float:
@@ -212,8 +214,17 @@ def certified_by(checks: dict) -> str | None:
     return None
 
 
-def failures(checks: dict) -> list[str]:
-    """Names of the certificate items that do not hold (empty: certified).
+@dataclass(frozen=True)
+class Failure:
+    """One certificate item that does not hold: ``item`` is a registered LMI's key (``"45"``, ...) or ``"X"``,
+    ``"Pbar"``, ``"R"``, ``"closed_loop"``, ``"discrete"``; ``text`` says it with its number."""
+
+    item: str
+    text: str
+
+
+def failed(checks: dict) -> list[Failure]:
+    """The certificate items that do not hold (empty: certified), as records read by field.
 
     The one decision of "certified", wherever a design is judged (made, loaded, simulated, generated, tuned):
     each registered LMI holds iff its balanced largest eigenvalue ``lmi_max_eig`` is below minus its round-off
@@ -229,31 +240,36 @@ def failures(checks: dict) -> list[str]:
             continue
         v = lmi.name(theorem)
         if k not in checks["lmi_max_eig"]:
-            bad.append(f"{v} (not in the certificate)")
+            bad.append(Failure(k, f"{v} (not in the certificate)"))
             continue
         lam, eps = checks["lmi_max_eig"][k], roundoff.get(k, 0.0)
         if lam < -eps:
             continue
         if not lam < 0:
-            bad.append(f"{v} (largest eigenvalue {lam:+.3g}, balanced; it must be negative)")
+            bad.append(Failure(k, f"{v} (largest eigenvalue {lam:+.3g}, balanced; it must be negative)"))
         else:
-            bad.append(
-                f"{v} (largest eigenvalue {lam:.3g}, balanced, is within the round-off {eps:.3g} of its matrix)"
-            )
+            bad.append(Failure(
+                k, f"{v} (largest eigenvalue {lam:.3g}, balanced, is within the round-off {eps:.3g} of its matrix)"
+            ))  # fmt: skip
     if not checks["X_min_eig"] > 0:
-        bad.append(f"X > 0 (smallest eigenvalue {checks['X_min_eig']:.3g})")
+        bad.append(Failure("X", f"X > 0 (smallest eigenvalue {checks['X_min_eig']:.3g})"))
     if not checks["Pbar_min_eig"] > 0:
-        bad.append(f"Pbar > 0 (smallest eigenvalue {checks['Pbar_min_eig']:.3g})")
+        bad.append(Failure("Pbar", f"Pbar > 0 (smallest eigenvalue {checks['Pbar_min_eig']:.3g})"))
     if "P29_min_eig" in checks and not checks["P29_min_eig"] > 0:
-        bad.append(f"P29 > 0 (smallest eigenvalue {checks['P29_min_eig']:.3g})")
+        bad.append(Failure("P29", f"P29 > 0 (smallest eigenvalue {checks['P29_min_eig']:.3g})"))
     if not checks["R_max_real_eig"] < 0:
-        bad.append(f"R_i Hurwitz (largest real part {checks['R_max_real_eig']:.3g})")
+        bad.append(Failure("R", f"R_i Hurwitz (largest real part {checks['R_max_real_eig']:.3g})"))
     if not checks["closed_loop_max_real_eig"] < 0:
-        bad.append(f"A_i + B_i K_j Hurwitz (largest real part {checks['closed_loop_max_real_eig']:.3g})")
+        bad.append(Failure(
+            "closed_loop", f"A_i + B_i K_j Hurwitz (largest real part {checks['closed_loop_max_real_eig']:.3g})"
+        ))  # fmt: skip
     disc = checks.get("discrete")
     if disc is not None and not disc["holds"]:
-        bad.append(
-            f"the discrete step at Ts = {disc['sample_time']:g} (Pbar decreases only for Ts < "
-            f"{disc['ts_max_lyapunov']:.3g})"
-        )
+        bad.append(Failure("discrete", f"the discrete step at Ts = {disc['sample_time']:g} (Pbar decreases only for "
+                           f"Ts < {disc['ts_max_lyapunov']:.3g})"))  # fmt: skip
     return bad
+
+
+def failures(checks: dict) -> list[str]:
+    """The texts of :func:`failed`: the certificate items that do not hold (empty: certified)."""
+    return [f.text for f in failed(checks)]

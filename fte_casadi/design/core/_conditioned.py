@@ -53,7 +53,7 @@ import numpy as np
 
 from ..._rounding import nice_floor
 from ..._text import shorten
-from ...errors import CentringError, InfeasibleDesignError
+from ...errors import CentringError, InfeasibleDesignError, Refused
 from ...errors import SolverFailedError as SolverFailedError
 from .._augment import (
     Augmented,
@@ -469,7 +469,18 @@ def step3(
     tau = time_scale(aug)
     layout, family, c, prob, res, v0 = _step3_start(aug, dict(params, beta=0.0), solver, Su, tau)
     if beta is not None and beta > 0:  # the user's rate: posed, refused where (45) does not allow it
-        return _step3_at(aug, params, solver, Su, tau, float(beta), why or "set by the user", v0, refuse=True)
+        return _step3_at(
+            aug,
+            params,
+            solver,
+            Su,
+            tau,
+            float(beta),
+            why or "set by the user",
+            v0,
+            refuse=True,
+            asked=why is None,
+        )
     if beta is not None:
         return _step3_result(aug, params, Su, layout, _centre3(aug, layout, family, c, res, v0), prob, res, solver,
                              0.0, why or "set by the user: no rate asked")  # fmt: skip
@@ -500,18 +511,23 @@ def step3(
     return out
 
 
-def _step3_at(aug, params, solver, Su, tau, target: float, why: str, v_low, *, refuse: bool) -> Step3:
-    """Step 3 with the closed loop asked to decay at ``target``; where (45) does not allow it, refused (``refuse``)
-    or at ``ALPHA_FRACTION`` of the largest rate it allows (by bisection from ``v_low``, a point of (45) alone)."""
+def _step3_at(aug, params, solver, Su, tau, target: float, why: str, v_low, *, refuse: bool,
+              asked: bool = False) -> Step3:  # fmt: skip
+    """Step 3 with the closed loop asked to decay at ``target``; where (45) does not allow it, refused (``refuse``;
+    ``asked``: the user asked for the rate, and the refusal says what (45) allows) or at ``ALPHA_FRACTION`` of the
+    largest rate it allows (by bisection from ``v_low``, a point of (45) alone)."""
     try:
         layout, family, c, prob, res, v0 = _step3_start(aug, dict(params, beta=target), solver, Su, tau)
     except (InfeasibleDesignError, SolverFailedError):
-        if refuse and why.startswith("set by the user"):
+        if refuse and asked:
             lo, _ = _beta_max(aug, params, Su, v_low, target)
             raise InfeasibleDesignError(
                 f"LMI (45) with the closed loop's decay rate beta = {target:g} is infeasible at sigma = "
                 f"{params['sigma']:g}, gamma = {params['gamma']:g}: the largest rate it allows there is about "
-                f"{lo:.4g}; lower beta to <= {nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
+                f"{lo:.4g}; lower beta to <= {nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)",
+                kind=Refused.DECAY_RATE,
+                lmi="45",
+                numbers={"beta": target, "beta_max": lo},
             ) from None
         if refuse:
             raise
@@ -973,7 +989,10 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         raise InfeasibleDesignError(
             f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which {lmi} is "
             f"feasible with cond(Pbar) <= {prob.kappa:g} is about {lo:.4g}; lower alpha to <= "
-            f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)"
+            f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)",
+            kind=Refused.DECAY_RATE,
+            lmi="46",
+            numbers={"alpha": a, "alpha_max": lo},
         )
     if pt is None and (
         alpha is None or alpha_is_default
@@ -994,6 +1013,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         and sample_time is not None
         and pt["ts_cert"] < TS_FACTOR * sample_time
     ):
+        observer["alpha_before_sample_time"] = a  # the sample time binds the rate
         a, pt, why = cap_for_sample_time(prob, a, pt, why, sample_time)
     observer.update(alpha=a, why=why)  # ts_max is the certificate's (checks.ts_max)
     if pt["bound"] is not None:

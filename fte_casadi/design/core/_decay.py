@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..._rounding import nice_floor
-from ...errors import InfeasibleDesignError
+from ...errors import InfeasibleDesignError, Refused
 
 __all__ = ["alpha_max"]  # public: docs/api.md
 
@@ -90,7 +90,10 @@ def cap_for_sample_time(prob, a: float, pt: dict, why: str, sample_time: float):
         f"no certified design runs at the sample time {sample_time:g}: over the observer decay rates tried "
         f"(0 to {a:.3g}) the discrete step z+ = z + Ts (...) is proven stable at best for Ts < {fastest:.3g}{limit}. "
         f"Run the observer at a sample time <= {nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
-        "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)"
+        "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)",
+        kind=Refused.SAMPLE_TIME,
+        lmi="46",
+        numbers={"sample_time": sample_time, "ts_max": fastest},
     )
 
 

@@ -146,6 +146,10 @@ def _bound(aug: Augmented, sigma, gamma, gamma1: float, solver: str, value) -> t
     return min(inaccurate, key=lambda a: a[0]) if inaccurate else (None, first)
 
 
+#: the status of a bound found by phase 1's bisection in numpy
+PHASE1 = "phase 1 (numpy), bisection"
+#: the statuses of a bound that was decided: a solver's optimum or proof of infeasibility, or phase 1's bisection
+DECIDED = ("optimal", "infeasible", PHASE1)
 #: a bound found by phase 1 in numpy is bracketed this tightly (its feasible end is returned)
 BRACKET = 1.05
 #: at most this many factors of 10 from the start before a bound is given up (the conic solve then)
@@ -210,7 +214,7 @@ def _numpy_sigma_max(aug: Augmented, gamma: float, gamma1: float):
     out = _edge(lambda s: _decide(aug, s, gamma, gamma1), 1.0 / (tau * sy) ** 2, up_feasible=False)
     if out is None or out[0] == "all":
         return None
-    return (None if out[0] == "none" else float(out[1])), "phase 1 (numpy), bisection"
+    return (None if out[0] == "none" else float(out[1])), PHASE1
 
 
 def _numpy_gamma_min(aug: Augmented, sigma: float, gamma1: float):
@@ -220,8 +224,8 @@ def _numpy_gamma_min(aug: Augmented, sigma: float, gamma1: float):
     if out is None:
         return None
     if out[0] == "all":  # feasible down to gamma1: the d block does not bind
-        return float(out[1]), "phase 1 (numpy), bisection"
-    return (None if out[0] == "none" else float(out[1])), "phase 1 (numpy), bisection"
+        return float(out[1]), PHASE1
+    return (None if out[0] == "none" else float(out[1])), PHASE1
 
 
 @_memo
@@ -232,7 +236,13 @@ def gamma_min(aug: Augmented, sigma: float, gamma1: float, solver: str) -> tuple
     in minutes and millimetres, or one whose rates are 1e3/s, is solved in numbers of order one. A heavy problem
     (many rules) is bisected on phase 1's decisions in numpy (:func:`_edge`) where the conic solve is slow (SCS)
     or fails: on the 64-rule chain's sigma_max, SCS took 56 s, the bisection 11.6 s and Clarabel 2.3 s
-    (measured), so Clarabel's answer is kept where it has one."""
+    (measured), so Clarabel's answer is kept where it has one.
+
+    A plant without unknown inputs has no d block in (45): gamma bounds nothing there, and the answer is 0 (any
+    gamma) where (45) is feasible at ``sigma`` (:func:`sigma_max`), None where it is not."""
+    if aug.ld == 0:
+        smax, status = sigma_max(aug, None, gamma1, solver)
+        return (0.0 if smax is not None and sigma < smax else None), status
     numpy = _heavy(aug, gamma1)
     if numpy and solver == "SCS" and (found := _numpy_gamma_min(aug, sigma, gamma1)) is not None:
         return found

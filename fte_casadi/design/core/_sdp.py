@@ -63,6 +63,33 @@ SOLVER_SETTINGS = {
     "SCS": {"max_iters": 100_000, "eps_abs": 1e-6, "eps_rel": 1e-6},
 }
 
+#: SCS's status when it stopped on a SIGINT (its own handler catches the signal while it solves)
+SCS_SIGINT = -5
+
+
+def cvxpy_solver(name: str):
+    """What to pass cvxpy's ``solve(solver=...)`` for ``name``: the name, except for SCS, which catches a SIGINT
+    itself while it solves and reports it as a solver failure (cvxpy's ``SolverError``, which the design would
+    answer by trying the other solver): SCS is called through a subclass of cvxpy's interface that raises the
+    Ctrl-C as ``KeyboardInterrupt`` (:func:`fte_casadi._interrupt.interrupted`)."""
+    if name != "SCS":
+        return name
+    from cvxpy.reductions.solvers.conic_solvers.scs_conif import SCS
+
+    from ..._interrupt import interrupted
+
+    class InterruptibleSCS(SCS):
+        def name(self) -> str:
+            return "SCS_FTE"  # cvxpy refuses a custom solver under a built-in name
+
+        def solve_via_data(self, data, warm_start, verbose, solver_opts, solver_cache=None):
+            results = super().solve_via_data(data, warm_start, verbose, solver_opts, solver_cache)
+            if (results.get("info") or {}).get("status_val") == SCS_SIGINT:
+                raise interrupted()
+            return results
+
+    return InterruptibleSCS()
+
 
 @dataclass(frozen=True)
 class Var:
@@ -448,7 +475,7 @@ class ConicProblem:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                prob.solve(solver=solver, **(SOLVER_SETTINGS[solver] | (settings or {})))
+                prob.solve(solver=cvxpy_solver(solver), **(SOLVER_SETTINGS[solver] | (settings or {})))
                 status = str(prob.status)
             except cp.SolverError as exc:
                 status = f"solver_error ({shorten(exc, 120)})"

@@ -4,22 +4,23 @@ Every trial is the given :class:`~fte_casadi.design._options.DesignOptions` chan
 :meth:`~fte_casadi.design._options.DesignOptions.replace` (another sigma, another gamma) and designed again by
 ``attempt`` (one attempt of :func:`fte_casadi.design.design`, passed in so that this module does not import
 the one that calls it). A trial's settings are resolved afresh, so what the plant's defaults gave stays a
-default in every trial.
+default in every trial. A trial refused is kept as a :class:`Trial`: the change and the error, read by field.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
+from dataclasses import dataclass
 
-from .._rounding import nice_floor
-from .._text import shorten
-from ..errors import FteError
-from ._options import DesignOptions, gamma_size, round_gamma
-from ._record import Design
-from .core._diagnose import gamma_min, sigma_max
+from ..._rounding import nice_floor
+from ..._text import shorten
+from ...errors import FteError, InfeasibleDesignError
+from .._options import DesignOptions, gamma_size, round_gamma
+from .._record import Design
+from ..core._diagnose import gamma_min, sigma_max
 
-__all__ = ["choose"]
+__all__ = ["choose", "try_design", "Trial", "first_of_each_kind"]
 
 #: one attempt of the design: ``attempt(ts, options) -> Design``
 Attempt = Callable[..., Design]
@@ -30,35 +31,58 @@ SIGMA_TRIALS = (0.8, 0.6, 0.4, 0.2, 0.1, 0.05)
 GAMMA_TRIALS = (1.25, 1.6, 2.5, 4.0, 10.0)
 
 
+@dataclass(frozen=True)
+class Trial:
+    """A value tried and refused: the change of the options (``{"sigma": 0.4}``) and the error that refused it
+    (None: the design was made but not certified)."""
+
+    change: dict
+    error: FteError | None
+
+    @property
+    def lmi(self) -> str | None:
+        """The registered LMI that refused the trial, where one did (``"46"``: step 3's (45) held)."""
+        return getattr(self.error, "lmi", None)
+
+    @property
+    def kind(self) -> tuple:
+        """What refused it, as data: the error's class and, for a refusal, its kind and LMI."""
+        if isinstance(self.error, InfeasibleDesignError):
+            return (type(self.error), self.error.refusal.kind, self.error.refusal.lmi)
+        return (type(self.error), None, self.lmi)
+
+    @property
+    def message(self) -> str:
+        return " ".join(str(self.error).split()) if self.error is not None else "not certified"
+
+
 def try_design(
     attempt: Attempt, ts, options: DesignOptions, refused: list | None = None, **change
 ) -> Design | None:
     """The whole design with ``options`` changed by ``change`` (without diagnosis unless ``change`` asks for it,
-    a certificate required), or None when it does not give a certified design (then ``(change, why)`` is
+    a certificate required), or None when it does not give a certified design (then its :class:`Trial` is
     appended to ``refused``)."""
     try:
         d = attempt(ts, options.replace(**{"diagnose": False, "allow_uncertified": False, **change}))
     except FteError as exc:
         if refused is not None:
-            refused.append((change, " ".join(str(exc).split())))
+            refused.append(Trial(change, exc))
         return None
     if not d.certified and refused is not None:
-        refused.append((change, "not certified"))
+        refused.append(Trial(change, None))
     return d if d.certified else None
 
 
-def refusals(refused: list) -> str:
-    """What stopped the values tried (the first of each kind), for the refusal's message: a bound can be
-    right and the design still fail at it for another reason (e.g. the sample time)."""
+def first_of_each_kind(refused: list[Trial], count: int = 2) -> tuple:
+    """What stopped the values tried, for a refusal's ``tried``: the first trial of each kind (:attr:`Trial.kind`),
+    at most ``count`` of them, as ``(change, message)``: a bound can be right and the design still fail at it for
+    another reason (e.g. the sample time)."""
     seen, out = set(), []
-    for change, why in refused:
-        kind = why[:40]
-        if kind in seen:
-            continue
-        seen.add(kind)
-        at = ", ".join(f"{k} = {v:g}" for k, v in change.items())
-        out.append(f"at {at}: {shorten(why, 700)}")
-    return (" The values tried were refused for other reasons: " + "; ".join(out[:2]) + ".") if out else ""
+    for t in refused:
+        if t.kind not in seen:
+            seen.add(t.kind)
+            out.append((t.change, t.message))
+    return tuple(out[:count])
 
 
 def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, generic, lmi: str, exc,
@@ -66,7 +90,7 @@ def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, gene
     """Parameters the tool finds itself: when sigma and/or gamma came from the generic defaults (neither the
     user nor the plant set them) and the design fails at them, the feasibility bounds say where to look:
     sigma below the largest sigma (45) allows, else gamma above the smallest one it allows (rounded to two
-    digits in the size of the outputs and unknown inputs, :func:`~.options.gamma_size`). The first value
+    digits in the size of the outputs and unknown inputs, :func:`~.._options.gamma_size`). The first value
     tried that gives a certified design is taken, and the document's ``params_chosen`` says what was chosen
     and why. None when nothing was generic or nothing tried works. ``lmi``: the LMI that failed, "45" or "46"."""
     if not generic:

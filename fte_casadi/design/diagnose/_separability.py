@@ -8,24 +8,26 @@ fault out of ``Bf``, ``Gf`` and ``Df`` in turn and decides the design's feasibil
 (:func:`~._diffusion.feasible`: step 3, then step 5 at alpha = 0, phase 1 in numpy where the conic solver
 fails), so a fault is named only where (45)-(46) are feasible without it: a fact about the LMIs, with the
 smallest singular value of assumption (2)'s column-normalised test with and without the fault
-(:func:`~._limits.separation`) as the measure of how weakly it is told apart.
+(:func:`~.._limits.separation`) as the measure of how weakly it is told apart.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
-from ._augment import augment
+from .._augment import augment
+from .._limits import WEAK_SEPARATION, separation
+from .._uio import uio_gain
 from ._diffusion import feasible
-from ._limits import WEAK_SEPARATION, separation
-from ._uio import uio_gain
 
-__all__ = ["blocking"]
+__all__ = ["blocking", "Faults"]
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclass(frozen=True)
 class Blocking:
     """Fault ``name`` (column ``k``): (45)-(46) are feasible without it; the separation of assumption (2)'s
     test with it (``with_it``, at rule ``rule``) and without it (``without``, the smallest over the rules)."""
@@ -37,24 +39,33 @@ class Blocking:
     rule: int
 
 
-def text(found: list[Blocking], where: str) -> str:
-    """The sentence a refusal carries for the faults :func:`blocking` found (one or several)."""
-    b = found[0]
-    test = (f"the smallest singular value of assumption (2)'s column-normalised test [[A_i, Bf_i, Bd_i], [C, Df, 0]] "
-            f"is {b.with_it:.2g} at rule {b.rule + 1}")  # fmt: skip
-    if len(found) == 1:
+@dataclass(frozen=True)
+class Faults:
+    """The cause a refusal names: the faults :func:`blocking` found (one or several), without each of which
+    (45)-(46) are feasible at the parameters ``at`` (``{"sigma": ..., "gamma": ...}``)."""
+
+    found: tuple[Blocking, ...]
+    at: Mapping[str, float]
+
+    def render(self) -> str:
+        """The sentence a refusal carries."""
+        b, found = self.found[0], self.found
+        where = ", ".join(f"{k} = {v:g}" for k, v in self.at.items())
+        test = (f"the smallest singular value of assumption (2)'s column-normalised test [[A_i, Bf_i, Bd_i], [C, Df, 0]] "
+                f"is {b.with_it:.2g} at rule {b.rule + 1}")  # fmt: skip
+        if len(found) == 1:
+            return (
+                f"fault {b.name!r} is the cause: the outputs tell it apart from the unknown inputs and the other faults "
+                f"only weakly ({test}, {b.without:.2g} without it), and without it LMIs (45)-(46) are feasible at "
+                f"{where} (checked); model only faults the outputs can tell apart, or measure what separates it"
+            )
+        names = ", ".join(repr(f.name) for f in found)
+        without = ", ".join(f"{f.without:.2g} without {f.name!r}" for f in found)
         return (
-            f"fault {b.name!r} is the cause: the outputs tell it apart from the unknown inputs and the other faults "
-            f"only weakly ({test}, {b.without:.2g} without it), and without it LMIs (45)-(46) are feasible at "
-            f"{where} (checked); model only faults the outputs can tell apart, or measure what separates it"
+            f"the faults {names} are the cause: the outputs tell them apart only weakly ({test}; {without}), and "
+            f"without any one of them LMIs (45)-(46) are feasible at {where} (checked); where they act alike, model "
+            "them as one fault, or measure what separates them"
         )
-    names = ", ".join(repr(f.name) for f in found)
-    without = ", ".join(f"{f.without:.2g} without {f.name!r}" for f in found)
-    return (
-        f"the faults {names} are the cause: the outputs tell them apart only weakly ({test}; {without}), and "
-        f"without any one of them LMIs (45)-(46) are feasible at {where} (checked); where they act alike, model "
-        "them as one fault, or measure what separates them"
-    )
 
 
 def _drop(models, k: int):
@@ -78,7 +89,7 @@ def blocking(ts, params: dict, solver: str) -> list[Blocking]:
     """The faults of ``ts`` without which the design's LMIs are feasible at ``params`` (each decided by
     :func:`~._diffusion.feasible`); empty with fewer than two faults (without its only fault there is no
     observer to design), when the LMIs are feasible with every fault (the refusal has another cause), when
-    the outputs tell the faults apart well (separation >= :data:`~._limits.WEAK_SEPARATION`) or when no
+    the outputs tell the faults apart well (separation >= :data:`~.._limits.WEAK_SEPARATION`) or when no
     single fault is the cause."""
     names = list(ts.plant.fault_names)
     models, C, Df = list(ts.local_models), np.asarray(ts.C, float), np.asarray(ts.Df, float)

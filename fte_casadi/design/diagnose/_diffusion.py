@@ -9,7 +9,7 @@ the LMIs. :func:`tolerance` bisects ``s``; a design that is also infeasible at `
 diffusion, and then no fraction is named. ``routes=("46",)`` measures what (45)-(46) alone tolerate (the paper's
 certificate; docs/design.md has both).
 
-Where the diffusion blocks the design, :func:`necessary` says whether any feedback could do better: a rule whose
+Where the diffusion blocks the design, :func:`~._necessary.limits` says whether any feedback could do better: a rule whose
 local model is not mean-square stabilisable, or not mean-square detectable, with the diffusion scaled by s has no
 linear controller at all, the observer-based one or any other, that makes it mean-square stable (docs/method.md,
 "What no observer can do"): then it is the plant, not the method.
@@ -22,9 +22,9 @@ import math
 
 import numpy as np
 
-from ..errors import FteError
-from ._augment import Augmented
-from .core import _conditioned as conditioned
+from ...errors import FteError
+from .._augment import Augmented
+from ..core import _conditioned as conditioned
 
 __all__ = ["tolerance"]
 

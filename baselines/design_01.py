@@ -5,7 +5,8 @@ unique (N, Q_i, Y_j are free at its optimum, so different machines land on diffe
 needs about 30 solves (a grid over scales of Pbar x decay rates x a bisection on theta) and
 takes seconds. ``fte bench`` runs :func:`design_01` beside today's design in the same process
 so that the speed-up it reports is measured, not remembered (the numbers measured are also kept in
-docs/benchmarks.md). Nothing else uses this module.
+docs/benchmarks.md). Nothing else uses this module. It lives in the source repository, not in the package
+or its wheel: ``fte bench`` loads it from a checkout (:func:`fte_casadi.bench._design.design_01_baseline`).
 
 Corrections of the printed LMIs are listed in :mod:`fte_casadi.design.core._certify`.
 
@@ -59,7 +60,7 @@ from dataclasses import dataclass, field
 import cvxpy as cp
 import numpy as np
 
-from fte_casadi.design._augment import Augmented
+from fte_casadi.design import Augmented
 from fte_casadi.design.core._certify import ts_max
 from fte_casadi.design.core._linalg import sym as _sym
 from fte_casadi.design.core._lmis import block_sizes, lmi45, lmi46, lmi46_terms, lmi55, lmi64
@@ -491,8 +492,7 @@ def _default_alpha_step5(ts, aug, params, P, K, T, solver):
 
 def design_01(ts, solver: str = "CLARABEL") -> dict:
     """The 0.1 conditioned design of a T-S model with the plant's default parameters, and its certificate."""
-    from fte_casadi.design._augment import augment
-    from fte_casadi.design._uio import uio_gain
+    from fte_casadi.design import augment, uio_gain
     from fte_casadi.design.core._certify import certificate
 
     defaults = {"gamma": 1.0, "gamma1": 0.5, "sigma": 1.0, "delta": 1e-4, "epsilon": 1e-4}

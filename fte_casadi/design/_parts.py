@@ -169,8 +169,9 @@ class Observer(_Record):
 
     ``sample_time`` the sample time the design was made for (``None`` when none was given),
     ``alpha`` the decay rate used, ``why`` the reason, ``alpha_max`` and ``alpha_max_upper`` the bisection's
-    bracket of the largest feasible rate (absent when the user set ``alpha``); with the fault-error bound
-    in step 5's objective (weight ``Design.params.bound_weight``), the smallest block-diagonal bound (sum of
+    bracket of the largest feasible rate (absent when the user set ``alpha``), ``alpha_before_sample_time`` the
+    rate chosen before the sample time lowered it (absent where the sample time did not bind the rate); with the
+    fault-error bound in step 5's objective (weight ``Design.params.bound_weight``), the smallest block-diagonal bound (sum of
     squared channel gains) at the observer designed without the term, weight 0
     (``bound_objective_unweighted``), and at the observer designed with it (``bound_objective``). The paper
     variant holds only ``alpha`` (0) and ``why``; documents older than the observer entry hold none.
@@ -191,6 +192,7 @@ class Observer(_Record):
     alpha_max_upper: float | None = None
     alpha: float | None = None
     why: str | None = None
+    alpha_before_sample_time: float | None = None
     bound_objective_unweighted: float | None = None
     bound_objective: float | None = None
     extra: dict = field(default_factory=dict, repr=False)

@@ -26,11 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._augment import Augmented, time_scale
-from .core._linalg import sym as _sym
-from .core._sdp import ConicProblem, Layout, Var, affine_lmi
+from .._augment import Augmented, time_scale
+from ..core._linalg import sym as _sym
+from ..core._sdp import ConicProblem, Layout, Var, affine_lmi
 
-__all__ = ["limits", "Limit", "describe"]
+__all__ = ["limits", "Limit", "describe", "decide"]
 
 #: the margin of the decisions, relative to the normalisation ``S >= I`` in the plant's own time
 MARGIN = 1e-6
@@ -71,7 +71,7 @@ def describe(found: list[Limit]) -> str:
     return "; ".join(parts)
 
 
-def _decide(aug: Augmented, i: int, kind: str, s: float, solver: str) -> bool | None:
+def decide(aug: Augmented, i: int, kind: str, s: float, solver: str) -> bool | None:
     """Is rule i ``kind`` with the diffusion scaled by ``s``? Posed in the plant's own time (drift times tau,
     diffusion times sqrt(tau): the same question), ``S >= I`` and the LMI below ``-MARGIN I``; a point is checked
     with numpy, infeasibility is the solver's status; None: undecided."""
@@ -115,10 +115,10 @@ def limits(aug: Augmented, solver: str = "CLARABEL") -> list[Limit]:
         if not np.any(aug.Wbar[i]):
             continue
         for kind in ("stabilisable", "detectable"):
-            if _decide(aug, i, kind, 1.0, solver) is not False:
+            if decide(aug, i, kind, 1.0, solver) is not False:
                 continue
             lo, hi = 1e-3, 1.0
-            at_lo = _decide(aug, i, kind, lo, solver)
+            at_lo = decide(aug, i, kind, lo, solver)
             if at_lo is None:
                 continue
             if at_lo is False:
@@ -126,7 +126,7 @@ def limits(aug: Augmented, solver: str = "CLARABEL") -> list[Limit]:
                 continue
             for _ in range(STEPS):
                 mid = math.sqrt(lo * hi)
-                got = _decide(aug, i, kind, mid, solver)
+                got = decide(aug, i, kind, mid, solver)
                 if got is None:
                     break
                 lo, hi = (mid, hi) if got else (lo, mid)
