@@ -190,10 +190,9 @@ def _observer(at, params: dict, fits):
         try:
             s5j = at(params, joint=True)
         except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:
-            raise InfeasibleDesignError(
-                f"{str(exc).rstrip('.')}; and Theorem 1's (29) at step 3's K fails too: {shorten(str(jexc), 240, placeholder=' ...')}",
-                exc.result, lmi=exc.lmi, bounded=exc.bounded,
-            ) from None  # fmt: skip
+            also = f"; and Theorem 1's (29) at step 3's K fails too: {shorten(str(jexc), 240, placeholder=' ...')}"
+            refusal = dataclasses.replace(exc.refusal, statement=exc.refusal.statement.rstrip(".") + also)
+            raise InfeasibleDesignError(refusal, exc.result) from None
         s5j.notes.insert(0, f"step 5: certified by Theorem 1's (29): (46) is infeasible ({shorten(str(exc), 160, placeholder=' ...')}); "
                             "(29) at step 3's K, with the loop's block of V an unknown, is not")  # fmt: skip
         return s5j

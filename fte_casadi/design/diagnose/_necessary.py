@@ -28,7 +28,7 @@ import numpy as np
 
 from .._augment import Augmented, time_scale
 from ..core._linalg import sym as _sym
-from ..core._sdp import ConicProblem, Layout, Var, affine_lmi
+from ..core._sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
 __all__ = ["limits", "Limit", "describe", "decide"]
 
@@ -97,7 +97,7 @@ def decide(aug: Augmented, i: int, kind: str, s: float, solver: str) -> bool | N
     res = ConicProblem(layout, lmis).solve(solver)
     if res.infeasible:
         return False
-    if res.v is None or res.status not in ("optimal", "optimal_inaccurate"):
+    if res.v is None or res.status not in SOLVED:
         return None
     u = layout.unpack(res.v)
     M = _sym(main(u["S"], u["Y"])) - MARGIN * np.diag(np.r_[np.ones(n), np.zeros(n)])
