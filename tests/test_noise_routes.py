@@ -11,14 +11,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fte_casadi.codegen import CStep
+from fte_casadi.codegen._build import compile_shared, find_compiler
+from fte_casadi.codegen._generate import default_sample_time, generate_c
 from fte_casadi.design import Design, augment, design, design_summary, recertify
 from fte_casadi.design._recertify import certify
 from fte_casadi.design.diagnose import decide, limits
 from fte_casadi.errors import InfeasibleDesignError
+from fte_casadi.step import step_function
 from fte_casadi.ts import derive
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import plant_ballbeam  # noqa: E402
+from tolerances import C_DOUBLE  # noqa: E402
 
 
 def _aug(noise: float):
@@ -26,12 +31,18 @@ def _aug(noise: float):
     return ts, augment(ts.local_models, ts.C, ts.Df)
 
 
+@pytest.fixture(scope="module")
+def by_theorem_1():
+    """The ball and beam at 3 % noise, designed at its defaults (about 15 s)."""
+    ts, _ = _aug(0.03)
+    return design(ts, sample_time=1e-3)
+
+
 @pytest.mark.slow
-def test_a_design_certified_by_theorem_1_says_so_and_recertifies_on_load(tmp_path):
+def test_a_design_certified_by_theorem_1_says_so_and_recertifies_on_load(by_theorem_1, tmp_path):
     """The ball and beam at 3 % noise: (46) is infeasible at the defaults, (29) is not; every LMI the certificate
     relies on is re-checked at the returned point, P29 > 0, and the loaded document certifies again."""
-    ts, _ = _aug(0.03)
-    d = design(ts, sample_time=1e-3)
+    d = by_theorem_1
     assert d.certified and d.checks["certified_by"] == "Theorem 1"
     assert d.P29 is not None and d.checks["P29_min_eig"] > 0
     lam, eps = d.checks["lmi_max_eig"], d.checks["lmi_roundoff"]
@@ -53,6 +64,28 @@ def test_a_design_certified_by_theorem_1_says_so_and_recertifies_on_load(tmp_pat
     bare = Design.from_dict(doc)
     assert certify(bare)["certified_by"] is None
     assert any("(46)" in why for why in recertify(bare))
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(find_compiler() is None, reason="no C compiler on PATH")
+def test_the_c_step_of_a_theorem_1_design_matches_casadi(by_theorem_1, tmp_path):
+    """The generated C of the (29)-certified design (P29 is no part of the step) reproduces CasADi's step, at
+    states and outputs inside the plant's region (|r| <= 0.3, |phi| <= 0.25)."""
+    d = by_theorem_1
+    fn = step_function(d, default_sample_time(d))
+    generate_c(d, tmp_path, real="double")
+    c = CStep(compile_shared(tmp_path, tmp_path / "libstep.so"), d, "double")
+    rng = np.random.default_rng(1)
+    worst = 0.0
+    for _ in range(100):
+        z, y = rng.normal(scale=0.05, size=int(d.dims.nbar)), rng.normal(scale=0.05, size=int(d.dims.p))
+        zn, u, xb, yc, _ = (np.asarray(v).ravel() for v in fn(z, y))
+        c.init(z)
+        rc, uc, xbc, ycc = c.step(y)
+        assert rc == 0
+        for a, b in ((c.z, zn), (uc, u), (xbc, xb), (ycc, yc)):
+            worst = max(worst, float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b)))))
+    assert worst <= C_DOUBLE
 
 
 def test_the_plants_own_limit_brackets_the_diffusion_no_controller_beats():

@@ -1,4 +1,4 @@
-"""Where the conservatism with diffusion comes from (docs/design.md, "How much noise a design tolerates"): for one
+"""Where the conservatism with diffusion comes from (docs/design.md, "When the diffusion is the cause"): for one
 plant, the largest scale s of its diffusion (every ``W_i`` times s; 1: as written) that each condition allows,
 from the design's certificate down to what no controller can beat.
 
