@@ -11,9 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fte_casadi.codegen import CStep
-from fte_casadi.codegen._build import compile_shared, find_compiler
-from fte_casadi.codegen._generate import default_sample_time, generate_c
+from fte_casadi.codegen import CStep, compile_shared, default_sample_time, find_compiler, generate_c
 from fte_casadi.design import Design, augment, design, design_summary, recertify
 from fte_casadi.design._recertify import certify
 from fte_casadi.design.diagnose import decide, limits
