@@ -116,13 +116,14 @@ def slowest_rate(st: Structure, s5) -> float:
     )
 
 
-def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3) -> conditioned.Step5:
+def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3, *,
+          joint: bool = False) -> conditioned.Step5:  # fmt: skip
     """Step 5, conditioned: Pbar, Q_i, N, theta from (46), (55), (64) at the resolved decay rate (a rate from
     the plant's defaults gives way, as a default, where it is infeasible or the sample time needs it).
 
-    Where (46) is infeasible, or its observer too slow for the fault windows, Theorem 1's (29) is tried at the same
-    bound on cond(Pbar): the closed loop's own certificate at step 3's K, with the loop's block of V an unknown
-    (:func:`observer`; the design then says it is certified by (29)).
+    ``joint``: Theorem 1's (29) in place of (46) (the closed loop's own certificate at step 3's K, with the loop's
+    block of V an unknown), with the same search of kappa and the same settling window; :func:`loop_then_observer`
+    asks for it only where (46) gives no observer at any loop it tries.
 
     With ``options.settle_window`` (the scenario's shortest fault window), the observer must settle in it:
     :data:`SETTLE` of its slowest time constants at most that long. Where the default decay rate is too slow for
@@ -137,24 +138,21 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     settle = bool(window) and resolved.alpha_source != "user" and "kappa" not in resolved.params
     need = SETTLE / float(window) if settle else 0.0
 
-    def at(params, joint=False):
+    def at(params):
         return conditioned.step5(st.aug, params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
                                  sample_time=options.sample_time, bound_view=view,
                                  alpha_is_default=resolved.alpha_source == "plant", joint=joint)  # fmt: skip
 
-    def observer(params):
-        return _observer(at, params, lambda s5: not settle or slowest_rate(st, s5) >= need)
-
     try:
-        s5 = observer(resolved.params)
+        s5 = at(resolved.params)
     except InfeasibleDesignError as exc:
         if (
             not options.diagnose
             or "kappa" in resolved.params
-            or not (exc.refusal.lmi == "46" and exc.refusal.bounded)
+            or not (exc.refusal.lmi in ("46", "29") and exc.refusal.bounded)
         ):
             raise
-        s5 = _kappa_for_46(observer, resolved.params, exc)
+        s5 = _kappa_for_46(at, resolved.params, exc)
     if not settle:
         return s5
     rate = slowest_rate(st, s5)
@@ -163,7 +161,7 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     tried = [(s5.kappa, rate, s5)]
     for kappa in (k for k in KAPPA_LADDER if k > s5.kappa):
         try:
-            s5k = observer(dict(resolved.params, kappa=kappa))
+            s5k = at(dict(resolved.params, kappa=kappa))
         except FteError as exc:
             tried.append((kappa, None, exc))
             continue
@@ -177,38 +175,6 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     raise InfeasibleDesignError(_too_slow(ts, st, options, resolved, s3, window, need, tried))
 
 
-def _observer(at, params: dict, fits):
-    """Step 5 at ``params`` by (46), else by Theorem 1's (29) (``at(params, joint=True)``): where (46) is infeasible,
-    or its observer does not ``fits`` (too slow for the fault windows) while (29)'s does. (45)-(46) stay the
-    certificate wherever they give an observer that fits; (29) is the closed loop's own condition (Theorem 1), which
-    they imply at ``P = X^-1`` (Theorem 2), and it does not split the loop's margin into ``sigma P^2``."""
-    try:
-        s5 = at(params)
-    except InfeasibleDesignError as exc:
-        if not (exc.lmi == "46" and exc.bounded):
-            raise
-        try:
-            s5j = at(params, joint=True)
-        except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:
-            also = f"; and Theorem 1's (29) at step 3's K fails too: {shorten(str(jexc), 240, placeholder=' ...')}"
-            refusal = dataclasses.replace(exc.refusal, statement=exc.refusal.statement.rstrip(".") + also)
-            raise InfeasibleDesignError(refusal, exc.result) from None
-        s5j.notes.insert(0, f"step 5: certified by Theorem 1's (29): (46) is infeasible ({shorten(str(exc), 160, placeholder=' ...')}); "
-                            "(29) at step 3's K, with the loop's block of V an unknown, is not")  # fmt: skip
-        return s5j
-    if fits(s5):
-        return s5
-    try:
-        s5j = at(params, joint=True)
-    except (InfeasibleDesignError, conditioned.SolverFailedError):
-        return s5
-    if not fits(s5j):
-        return s5
-    s5j.notes.insert(0, "step 5: certified by Theorem 1's (29): the observer (46) gives is too slow for the fault "
-                        "windows, the one (29) gives (step 3's K, the loop's block of V an unknown) is not")  # fmt: skip
-    return s5j
-
-
 def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
     """Step 5 under the larger bounds of :data:`KAPPA_LADDER` where (46) is infeasible under the default one: the
     first feasible, said so; else ``exc``, saying that no bound up to the ladder's end made it feasible."""
@@ -218,7 +184,7 @@ def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
             s5 = at(dict(params, kappa=kappa))
         except InfeasibleDesignError:
             continue
-        s5.notes.insert(0, f"step 5: kappa = {kappa:g}: (46) is infeasible with cond(Pbar) <= {base:g} (the bound "
+        s5.notes.insert(0, f"step 5: kappa = {kappa:g}: ({exc.refusal.lmi}) is infeasible with cond(Pbar) <= {base:g} (the bound "
                            f"binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
         return s5
     r = exc.refusal
@@ -231,13 +197,37 @@ def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
 
 
 def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3):
-    """``(s3, s5)``: step 5 at step 3's loop. A faster loop asks more of the observer ((46)'s ``-sigma P^2`` block
+    """``(s3, s5)``: step 5 at step 3's loop (:func:`_loops`), by (46); where (46) gives no observer at any loop tried
+    (infeasible, too slow for the fault windows, or not at the sample time), the same by Theorem 1's (29)
+    (:func:`step5` with ``joint``), which (45)-(46) imply but which also holds where they do not (docs/method.md).
+    A design (46) certifies is therefore the one it always was; a refusal by both names both."""
+    try:
+        return _loops(ts, st, options, resolved, s3, joint=False)
+    except InfeasibleDesignError as exc:
+        first = exc
+    try:
+        s3j, s5j = _loops(ts, st, options, resolved, s3, joint=True)
+    except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:
+        also = (
+            f"; and Theorem 1's (29) at step 3's K fails too: {shorten(str(jexc), 240, placeholder=' ...')}"
+        )
+        raise InfeasibleDesignError(
+            dataclasses.replace(first.refusal, statement=first.refusal.statement.rstrip(".") + also),
+            first.result,
+        ) from None
+    s5j.notes.insert(0, f"step 5: certified by Theorem 1's (29): (45)-(46) give no observer ({shorten(str(first), 200, placeholder=' ...')}); "
+                        "(29) at step 3's K, with the loop's block of V an unknown, does")  # fmt: skip
+    return s3j, s5j
+
+
+def _loops(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3, joint: bool):
+    """``(s3, s5)``: step 5 at step 3's loop, by (46) or, with ``joint``, by (29). A faster loop asks more of the observer ((46)'s ``-sigma P^2`` block
     must dominate its coupling with the loop, ``P B K``): where the loop's DEFAULT rate (posed in step 3) asks an
     observer that step 5 cannot give (infeasible, too slow for the fault windows, or not at the sample time),
     the loop is designed again at the default's lower rate, then with the smallest gain of (45) alone, and the
     first whose observer step 5 gives is kept, said so. A rate the user gave is kept (its failure raised)."""
     try:
-        return s3, step5(ts, st, options, resolved, s3)
+        return s3, step5(ts, st, options, resolved, s3, joint=joint)
     except (InfeasibleDesignError, conditioned.SolverFailedError) as exc:
         if resolved.beta is not None or not getattr(s3, "posed", False):
             raise
@@ -248,7 +238,7 @@ def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resol
                f"{shorten(str(first), 240, placeholder=' ...')}), so the loop is designed {what}")  # fmt: skip
         s3b = conditioned.step3(st.aug, resolved.params, options.solver, beta=b, why=why)
         try:
-            s5 = step5(ts, st, options, resolved, s3b)
+            s5 = step5(ts, st, options, resolved, s3b, joint=joint)
         except (InfeasibleDesignError, conditioned.SolverFailedError):
             continue
         if (
