@@ -47,6 +47,7 @@ def test_a_design_certified_by_theorem_1_says_so_and_recertifies_on_load(by_theo
     assert all(lam[k] < -eps[k] for k in ("29", "decay", "55", "64"))
     assert lam["46"] > 0  # (46) does not hold: the design exists only by (29)
     assert "certified by Theorem 1's LMI (29)" in design_summary(d)
+    assert design_summary(d).splitlines()[0].endswith("CERTIFIED (by Theorem 1's (29))")
     path = tmp_path / "d.json"
     d.save(path)
     loaded = Design.load(path)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .core._certify import certified_by
-from .core._lmis import LMIS, routes
+from .core._lmis import LMIS, THEOREM1, routes
 
 __all__ = []  # public: docs/api.md
 
@@ -54,7 +54,8 @@ def design_summary(d) -> str:
     obs = d.observer
     lines = [
         f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
-        f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
+        f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}"
+        + (" (by Theorem 1's (29))" if d.certified and c.get("certified_by") == THEOREM1 else ""),
         "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.to_dict().items()),
         "  largest eigenvalue of each LMI at the returned point, balanced (D L D, D = diag(|L_kk|^-1/2): the same "
         "definiteness; it holds below minus its round-off): "
