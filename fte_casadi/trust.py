@@ -101,15 +101,9 @@ def with_plant(d: Design, plant: Plant, spec: str | None = None) -> Design:
             "FILE`), or name the plant it was made for with --plant"
         )
     sched, sources = scheduling_from_measurements(ts)
-    names = {
-        "states": list(plant.state_names),
-        "inputs": list(plant.input_names),
-        "outputs": list(plant.output_names),
-        "faults": list(plant.fault_names),
-        "state_units": list(plant.state_units),
-        "output_units": list(plant.output_units),
-        "scheduling_sources": sources,
-    }  # the plant's names, not the document's: names are data, and the plant is the one the user trusts
+    names = plant.names(
+        sources
+    )  # the plant's names, not the document's: names are data, and the plant is the one the user trusts
     return dataclasses.replace(d, plant=plant.name, names=names, scheduling_ops=write_tape(sched))
 
 

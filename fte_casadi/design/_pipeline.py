@@ -343,15 +343,7 @@ def finish(
         scheduling=sched,  # the record keeps it as data (scheduling_ops) and, for older readers, serialised
         plant_hash=plant_fingerprint(plant),
         vertices=ts.vertices,
-        names={
-            "states": list(plant.state_names),
-            "inputs": list(plant.input_names),
-            "outputs": list(plant.output_names),
-            "faults": list(plant.fault_names),
-            "state_units": list(plant.state_units),
-            "output_units": list(plant.output_units),
-            "scheduling_sources": sources,
-        },  # fmt: skip
+        names=plant.names(sources),
         certified=False,
         status=status,
         solves={"step3": int(s3.solves), "step5": int(s5.solves), "total": int(s3.solves + s5.solves)},

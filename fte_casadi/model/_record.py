@@ -85,6 +85,19 @@ class Plant:
     def p(self) -> int:
         return self.C.shape[0]
 
+    def names(self, scheduling_sources) -> dict:
+        """The names a design document keeps (``Design.names``): the plant's states, inputs, outputs, faults and
+        units, with ``scheduling_sources`` (what each premise is computed from)."""
+        return {
+            "states": list(self.state_names),
+            "inputs": list(self.input_names),
+            "outputs": list(self.output_names),
+            "faults": list(self.fault_names),
+            "state_units": list(self.state_units),
+            "output_units": list(self.output_units),
+            "scheduling_sources": scheduling_sources,
+        }
+
     def nonlinear_drift(self) -> ca.SX:
         """Drift with the scheduling symbols replaced by their expressions in x."""
         return ca.substitute(self.drift_z, self.z, self.z_exprs)

@@ -20,7 +20,7 @@ extern "C" {
 
 #include <math.h>
 #include "fte_manipulator_casadi.h"
-#if FTE_MANIPULATOR_CASADI_SET != 0x360824f7UL
+#if FTE_MANIPULATOR_CASADI_SET != 0x2fb0b9afUL
 #error "fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -216,7 +216,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a18=(a05*a18);
   a16=(a16+a18);
   a18=casadi_fabs(a15);
-  a26=2.3250110266088642e-02;
+  a26=1.7967458990570888e-02;
   a27=1.4060012881530757e+00;
   a25=casadi_fabs(a17);
   a27=(a27*a25);

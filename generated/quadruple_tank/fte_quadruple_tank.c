@@ -4,7 +4,7 @@
 #include "fte_quadruple_tank.h"
 #include "fte_quadruple_tank_casadi.h"
 
-#if FTE_QUADRUPLE_TANK_SET != 0xa103f04aUL || FTE_QUADRUPLE_TANK_CASADI_SET != 0xa103f04aUL
+#if FTE_QUADRUPLE_TANK_SET != 0x7a24f342UL || FTE_QUADRUPLE_TANK_CASADI_SET != 0x7a24f342UL
 #error "fte_quadruple_tank.h or fte_quadruple_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 

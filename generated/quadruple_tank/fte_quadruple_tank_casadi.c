@@ -20,7 +20,7 @@ extern "C" {
 
 #include <math.h>
 #include "fte_quadruple_tank_casadi.h"
-#if FTE_QUADRUPLE_TANK_CASADI_SET != 0xa103f04aUL
+#if FTE_QUADRUPLE_TANK_CASADI_SET != 0x7a24f342UL
 #error "fte_quadruple_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -476,7 +476,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a28=-9.9999999999999989e-01;
   a34=1.;
   a32=casadi_fabs(a27);
-  a31=2.6616269451891609e-02;
+  a31=2.6631674682620662e-02;
   a09=5.1961258091637874e-01;
   a21=casadi_fabs(a29);
   a09=(a09*a21);
