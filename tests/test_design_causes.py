@@ -27,9 +27,14 @@ pytestmark = pytest.mark.slow
 NUMBER = r"([0-9]+(?:\.[0-9]+)?(?:e[+-]?[0-9]+)?)"
 
 
+#: the stiffness's noise the test refuses: the plant's 0.1 % designs since Theorem 1's (29) is a route (it tolerates
+#: 28x that, where (45)-(46) alone tolerated 8.1 %: docs/design.md); 5 % is beyond what (29) tolerates too
+NOISY = 0.05
+
+
 @pytest.fixture(scope="module")
 def noisy():
-    return derive(fjoint(0.001), fidelity_samples=300)
+    return derive(fjoint(NOISY), fidelity_samples=300)
 
 
 @pytest.fixture(scope="module")
@@ -42,8 +47,8 @@ def test_a_diffusion_that_blocks_the_design_is_named_with_the_fraction_it_tolera
         design(noisy)
     msg = " ".join(str(info.value).split())
     m = re.search(
-        rf"tolerates {NUMBER} % of it .*feasible at s = {NUMBER} and infeasible at s = {NUMBER}, where \((4[56])\) "
-        rf"fails.* at sigma = {NUMBER}, gamma = {NUMBER}, gamma1 = {NUMBER}",
+        rf"tolerates {NUMBER} % of it .*feasible at s = {NUMBER} and infeasible at s = {NUMBER}, where \((4[56])\)"
+        rf"(?: and \(29\))? fails?.* at sigma = {NUMBER}, gamma = {NUMBER}, gamma1 = {NUMBER}",
         msg,
     )
     assert m, msg

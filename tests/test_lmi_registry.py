@@ -12,7 +12,7 @@ import pytest
 
 from fte_casadi._report import _design_rows
 from fte_casadi.design import Design, design, design_summary, recertify
-from fte_casadi.design.core._lmis import LMI, LMIS, block_sizes, register, unregister
+from fte_casadi.design.core._lmis import LMI, LMIS, block_sizes, register, routes, unregister
 from fte_casadi.errors import InfeasibleDesignError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,8 +32,11 @@ def toy(request):
 
 
 def test_the_paper_lmis_are_registered_in_order():
-    assert list(LMIS) == ["45", "decay", "46", "55", "64"]
-    assert [e.theorem5 for e in LMIS.values()] == ["78", None, "79", "80", "81"]
+    assert list(LMIS) == ["45", "decay", "46", "29", "55", "64"]
+    assert [e.theorem5 for e in LMIS.values()] == ["78", None, "79", None, "80", "81"]
+    # two certificates: Theorem 3's (45)-(46) first (the default), Theorem 1's (29) where they do not hold
+    assert routes() == {"Theorem 3": ["45", "46"], "Theorem 1": ["29"]}
+    assert [k for k, e in LMIS.items() if not e.route] == ["decay", "55", "64"]
     assert LMIS["46"].name(3) == "LMI (46)" and LMIS["46"].name(5) == "LMI (79)"
     with pytest.raises(ValueError, match="registered already"):
         register(LMI("45", None, "again", LMIS["45"].matrices, LMIS["45"].blocks))

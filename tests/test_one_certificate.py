@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from fte_casadi import PlantBuilder
 from fte_casadi.design import Design, design, design_summary, recertify
 from fte_casadi.design.core import LMIS
+from fte_casadi.design.core._lmis import routes
 from fte_casadi.errors import FteError
 from fte_casadi.trust import check_loaded
 from fte_casadi.ts import derive
@@ -48,9 +49,14 @@ def _certified_loads(d: Design, tmp_path: Path) -> None:
     assert d.certified
     line = next(s for s in design_summary(d).splitlines() if "largest eigenvalue of each LMI" in s)
     assert "CERTIFIED" in design_summary(d).splitlines()[0]
-    for k in LMIS:
+    # every LMI the certificate relies on: those of no route and those of the route it names ((45)-(46), or (29))
+    held = d.checks["certified_by"]
+    relied = [k for k, e in LMIS.items() if not e.route or k in routes()[held]]
+    assert held in routes() and {"decay", "55", "64"} <= set(relied)
+    for k in relied:
         assert d.checks["lmi_max_eig"][k] < -d.checks["lmi_roundoff"][k], (k, d.checks["lmi_max_eig"][k])
         assert f"({k}) -" in line, line  # the number printed is the negative one decided on
+    assert f"certified by {held}'s" in design_summary(d)
     path = tmp_path / "d.json"
     d.save(path)
     loaded = Design.load(path)

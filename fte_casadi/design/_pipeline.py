@@ -116,9 +116,14 @@ def slowest_rate(st: Structure, s5) -> float:
     )
 
 
-def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3) -> conditioned.Step5:
+def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3, *,
+          joint: bool = False) -> conditioned.Step5:  # fmt: skip
     """Step 5, conditioned: Pbar, Q_i, N, theta from (46), (55), (64) at the resolved decay rate (a rate from
     the plant's defaults gives way, as a default, where it is infeasible or the sample time needs it).
+
+    ``joint``: Theorem 1's (29) in place of (46) (the closed loop's own certificate at step 3's K, with the loop's
+    block of V an unknown), with the same search of kappa and the same settling window; :func:`loop_then_observer`
+    asks for it only where (46) gives no observer at any loop it tries.
 
     With ``options.settle_window`` (the scenario's shortest fault window), the observer must settle in it:
     :data:`SETTLE` of its slowest time constants at most that long. Where the default decay rate is too slow for
@@ -129,11 +134,14 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     rate or a kappa the user gave is kept as given (then only a warning)."""
     K = [s3.K] * st.aug.r
     view = _closed_loop_view(ts, st.T, K, st.r5doc) if resolved.params.get("bound_weight") else None
+    window = options.settle_window
+    settle = bool(window) and resolved.alpha_source != "user" and "kappa" not in resolved.params
+    need = SETTLE / float(window) if settle else 0.0
 
     def at(params):
         return conditioned.step5(st.aug, params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
                                  sample_time=options.sample_time, bound_view=view,
-                                 alpha_is_default=resolved.alpha_source == "plant")  # fmt: skip
+                                 alpha_is_default=resolved.alpha_source == "plant", joint=joint)  # fmt: skip
 
     try:
         s5 = at(resolved.params)
@@ -141,14 +149,12 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
         if (
             not options.diagnose
             or "kappa" in resolved.params
-            or not (exc.refusal.lmi == "46" and exc.refusal.bounded)
+            or not (exc.refusal.lmi in ("46", "29") and exc.refusal.bounded)
         ):
             raise
         s5 = _kappa_for_46(at, resolved.params, exc)
-    window = options.settle_window
-    if not window or resolved.alpha_source == "user" or "kappa" in resolved.params:
+    if not settle:
         return s5
-    need = SETTLE / float(window)
     rate = slowest_rate(st, s5)
     if rate >= need:
         return s5
@@ -178,7 +184,7 @@ def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
             s5 = at(dict(params, kappa=kappa))
         except InfeasibleDesignError:
             continue
-        s5.notes.insert(0, f"step 5: kappa = {kappa:g}: (46) is infeasible with cond(Pbar) <= {base:g} (the bound "
+        s5.notes.insert(0, f"step 5: kappa = {kappa:g}: ({exc.refusal.lmi}) is infeasible with cond(Pbar) <= {base:g} (the bound "
                            f"binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
         return s5
     r = exc.refusal
@@ -191,13 +197,37 @@ def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
 
 
 def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3):
-    """``(s3, s5)``: step 5 at step 3's loop. A faster loop asks more of the observer ((46)'s ``-sigma P^2`` block
+    """``(s3, s5)``: step 5 at step 3's loop (:func:`_loops`), by (46); where (46) gives no observer at any loop tried
+    (infeasible, too slow for the fault windows, or not at the sample time), the same by Theorem 1's (29)
+    (:func:`step5` with ``joint``), which (45)-(46) imply but which also holds where they do not (docs/method.md).
+    A design (46) certifies is therefore the one it always was; a refusal by both names both."""
+    try:
+        return _loops(ts, st, options, resolved, s3, joint=False)
+    except InfeasibleDesignError as exc:
+        first = exc
+    try:
+        s3j, s5j = _loops(ts, st, options, resolved, s3, joint=True)
+    except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:
+        also = (
+            f"; and Theorem 1's (29) at step 3's K fails too: {shorten(str(jexc), 240, placeholder=' ...')}"
+        )
+        raise InfeasibleDesignError(
+            dataclasses.replace(first.refusal, statement=first.refusal.statement.rstrip(".") + also),
+            first.result,
+        ) from None
+    s5j.notes.insert(0, f"step 5: certified by Theorem 1's (29): (45)-(46) give no observer ({shorten(str(first), 200, placeholder=' ...')}); "
+                        "(29) at step 3's K, with the loop's block of V an unknown, does")  # fmt: skip
+    return s3j, s5j
+
+
+def _loops(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved, s3, joint: bool):
+    """``(s3, s5)``: step 5 at step 3's loop, by (46) or, with ``joint``, by (29). A faster loop asks more of the observer ((46)'s ``-sigma P^2`` block
     must dominate its coupling with the loop, ``P B K``): where the loop's DEFAULT rate (posed in step 3) asks an
     observer that step 5 cannot give (infeasible, too slow for the fault windows, or not at the sample time),
     the loop is designed again at the default's lower rate, then with the smallest gain of (45) alone, and the
     first whose observer step 5 gives is kept, said so. A rate the user gave is kept (its failure raised)."""
     try:
-        return s3, step5(ts, st, options, resolved, s3)
+        return s3, step5(ts, st, options, resolved, s3, joint=joint)
     except (InfeasibleDesignError, conditioned.SolverFailedError) as exc:
         if resolved.beta is not None or not getattr(s3, "posed", False):
             raise
@@ -208,7 +238,7 @@ def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resol
                f"{shorten(str(first), 240, placeholder=' ...')}), so the loop is designed {what}")  # fmt: skip
         s3b = conditioned.step3(st.aug, resolved.params, options.solver, beta=b, why=why)
         try:
-            s5 = step5(ts, st, options, resolved, s3b)
+            s5 = step5(ts, st, options, resolved, s3b, joint=joint)
         except (InfeasibleDesignError, conditioned.SolverFailedError):
             continue
         if (
@@ -321,6 +351,7 @@ def finish(
         input_limits=None if plant.input_limits is None else np.array(plant.input_limits, dtype=float),
         x0=resolved.x0,
         remark5=st.r5doc,
+        P29=getattr(s5, "P29", None),
     )
     # the certificate at the numbers the record holds, by the very function a loaded document is judged with
     checks = certify(d)

@@ -44,7 +44,8 @@ def _stored_point(d, aug) -> dict:
     L1 = [np.asarray(M) for M in d.L1]
     R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
     return dict(X=np.asarray(d.X), K=[np.asarray(M) for M in d.K], P=np.asarray(d.P), T=T, Pbar=Pbar,
-                Q=[Pbar @ M for M in L1], N=np.asarray(d.N), theta=float(d.theta), R=R, L1=L1)  # fmt: skip
+                Q=[Pbar @ M for M in L1], N=np.asarray(d.N), theta=float(d.theta), R=R, L1=L1,
+                P29=None if getattr(d, "P29", None) is None else np.asarray(d.P29))  # fmt: skip
 
 
 def certify(d) -> dict:

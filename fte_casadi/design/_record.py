@@ -149,6 +149,10 @@ class Design:
     #: re-derives the plant's model with it. None: the derivation's default (a document older than the key, or a
     #: model of operating points)
     vertices: str | None = None
+    #: the x block of the Lyapunov function ``V = x^T P29 x + e^T Pbar e`` of Theorem 1's (29), for a design that
+    #: (29) certifies where (45)-(46) do not (docs/design.md, "When the diffusion is the cause"); None: the design
+    #: is certified by (45)-(46) (and (29), which they imply, is evaluated at ``P = X^-1``)
+    P29: np.ndarray | None = None
     #: how a loaded document read (not a document key): {"source", "schema", "certified"}, the last as the
     #: document wrote it (None: absent); empty for a design made in this process
     loaded: dict = field(default_factory=dict, compare=False, repr=False)
@@ -305,6 +309,8 @@ class Design:
         out["schema"] = SCHEMA
         if self.vertices is not None:
             out["vertices"] = self.vertices
+        if self.P29 is not None:
+            out["P29"] = _arr(self.P29).tolist()
         if self.plant_hash:
             out["plant_hash"] = dict(self.plant_hash)
         if self.accommodation is not None:
@@ -438,6 +444,7 @@ class Design:
             scheduling_ops=ops,
             plant_hash=dict(doc.get("plant_hash") or {}),
             vertices=doc.get("vertices"),
+            P29=_p29(source, doc.get("P29"), int(dims.n)),
             accommodation=_accommodation(source, doc.get("accommodation"), int(dims.lf)),
             loaded={"source": source, "schema": int(doc.get("schema", 1)), "certified": doc.get("certified")},
             names=dict(doc.get("names", {})),
@@ -459,6 +466,20 @@ class Design:
         p = Path(path)
         doc = read_document(p)
         return cls.from_dict(doc, source=f"design file {str(p)!r}")
+
+
+def _p29(source: str, value, n: int) -> np.ndarray | None:
+    """The document's ``P29`` (Theorem 1's x block of V): None, or an n x n matrix of finite numbers."""
+    if value is None:
+        return None
+    try:
+        a = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if a.shape != (n, n):
+        raise DesignFileError(f"{source}: 'P29' must be a {n} x {n} matrix of finite numbers (Theorem 1's x block of "
+                              f"V); got shape {a.shape}")  # fmt: skip
+    return _finite(source, "P29", a)
 
 
 def _accommodation(source: str, value, lf: int) -> dict | None:

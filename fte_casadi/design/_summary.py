@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core._lmis import LMIS
+from .core._certify import certified_by
+from .core._lmis import LMIS, THEOREM1, routes
 
 __all__ = []  # public: docs/api.md
 
@@ -19,6 +20,31 @@ def _lmi_keys(checks: dict) -> list[str]:
     return keys
 
 
+def _certified_by(checks: dict) -> str:
+    """Which certificate holds (:func:`~.core._certify.certified_by`): Theorem 3's (45)-(46), or Theorem 1's (29)
+    where they do not (then (46) is shown above but not required)."""
+    held = (
+        checks["certified_by"] if "certified_by" in checks else certified_by(checks)
+    )  # older documents: computed
+    theorem = checks.get("theorem")
+    offered = routes()
+    if held is None or held not in offered:
+        return (
+            "  certificate: no route of "
+            + " or ".join(
+                "(" + ", ".join(LMIS[k].name(theorem) for k in keys) + ")" for keys in offered.values()
+            )
+            + " holds"
+        )
+    names = ", ".join(LMIS[k].name(theorem) for k in offered[held])
+    common = ", ".join(lmi.name(theorem) for lmi in LMIS.values() if not lmi.route)
+    first = next(iter(offered))
+    lam, eps = checks["lmi_max_eig"], checks.get("lmi_roundoff", {})
+    failed = [LMIS[k].name(theorem) for k in offered[first] if not lam.get(k, 0.0) < -eps.get(k, 0.0)]
+    rest = "" if held == first or not failed else f" ({', '.join(failed)}: not required, and not holding)"
+    return f"  certified by {held}'s {names}, with {common}{rest}"
+
+
 def design_summary(d) -> str:
     """The summary of the Design ``d`` that ``fte design`` prints (one string, lines joined)."""
     c = d.checks
@@ -28,7 +54,8 @@ def design_summary(d) -> str:
     obs = d.observer
     lines = [
         f"design of {d.plant}: variant {d.variant}, solver {d.solver}, "
-        f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}",
+        f"{'CERTIFIED' if d.certified else 'NOT CERTIFIED'}"
+        + (" (by Theorem 1's (29))" if d.certified and c.get("certified_by") == THEOREM1 else ""),
         "  params: " + ", ".join(f"{k} = {v:g}" for k, v in d.params.to_dict().items()),
         "  largest eigenvalue of each LMI at the returned point, balanced (D L D, D = diag(|L_kk|^-1/2): the same "
         "definiteness; it holds below minus its round-off): "
@@ -39,6 +66,7 @@ def design_summary(d) -> str:
             if c.get("lmi_roundoff")
             else ""
         ),
+        _certified_by(c),
         f"  theta = {d.theta:.3g}, cond(Pbar) = {c['cond_Pbar']:.3g}, max|L1| = {c['max_abs_L1']:.3g}, max|K| = {K:.3g}",
         f"  observer: max Re eig(R_i) = {c['R_max_real_eig']:.4g}; closed loop: max Re eig(A_i + B_i K_j) = "
         f"{c['closed_loop_max_real_eig']:.4g}; discrete observer stable for Ts < {c['ts_max']:.4g}",

@@ -4,8 +4,11 @@ barrier centring (:mod:`._sdp`, :mod:`._barrier`), the two formulations of steps
 :mod:`._bound_objective`), the feasibility bounds (:mod:`._diagnose`) and the a-posteriori certificate
 (:mod:`._certify`). Nothing here retries, searches parameters or builds a Design record."""
 
+from ._conditioned import step3 as step3
 from ._lmis import LMI as LMI
 from ._lmis import LMIS as LMIS
+from ._lmis import lmi45 as lmi45
+from ._lmis import lmi46_terms as lmi46_terms
 from ._lmis import register as register
 from ._lmis import unregister as unregister
 

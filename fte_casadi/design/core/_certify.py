@@ -12,10 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._linalg import sym as _sym
-from ._lmis import LMIS, distinct
+from ._lmis import LMIS, THEOREM1, distinct, routes
 
 __all__ = ["certificate", "ts_max", "lyapunov_ts_max", "discrete_certificate", "balanced", "eig_roundoff",
-           "failures", "failed", "Failure"]  # fmt: skip
+           "failures", "failed", "Failure", "certified_by"]  # fmt: skip
 
 
 def _maxeig(L: np.ndarray) -> float:
@@ -122,7 +122,8 @@ def lmi_matrices(aug, d: dict, params: dict):
 
 
 def certificate(aug, d: dict, params: dict) -> dict:
-    """Recompute every registered LMI at the design point ``d`` (X, K, P, T, Pbar, Q, N, theta, R, L1).
+    """Recompute every registered LMI at the design point ``d`` (X, K, P, T, Pbar, Q, N, theta, R, L1, and P29 for
+    a design certified by Theorem 1's (29): None or absent otherwise).
 
     Returns the ``checks`` dictionary of the design document. Each LMI is judged in ONE form, its balanced
     one (:func:`balanced`: ``D L D``, the same definiteness, every diagonal entry -1 or +1), whose largest
@@ -138,8 +139,10 @@ def certificate(aug, d: dict, params: dict) -> dict:
     blocks = {k: [-np.inf] * len(v) for k, v in sizes.items()}
     roundoff = dict.fromkeys(lm, 0.0)
     lm_bal, roundoff_bal = dict(lm), dict(roundoff)
+    evaluated = set()
     for lmi, L in lmi_matrices(aug, d, params):
         key = lmi.key
+        evaluated.add(key)
         eig = (lambda M, lmi=lmi, key=key: lmi.max_eig(M, sizes[key])) if lmi.max_eig is not None else _maxeig
         lm[key] = max(lm[key], eig(L))
         roundoff[key] = max(roundoff[key], eig_roundoff(L))
@@ -147,6 +150,10 @@ def certificate(aug, d: dict, params: dict) -> dict:
         lm_bal[key] = max(lm_bal[key], eig(Lb))
         roundoff_bal[key] = max(roundoff_bal[key], eig_roundoff(Lb))
         blocks[key] = [max(a, b) for a, b in zip(blocks[key], _block_max(L, sizes[key]))]
+    # an LMI with no left side at this point (Theorem 1's (29) of a design without P29) is not in the certificate
+    for table in (lm, blocks, roundoff, lm_bal, roundoff_bal):
+        for key in [k for k in table if k not in evaluated]:
+            del table[key]
     r, js = aug.r, distinct(K)
     cl = max(float(np.max(np.linalg.eigvals(aug.Abar[i][: aug.n, : aug.n] + aug.Bbar[i][: aug.n] @ K[j]).real))
              for i in range(r) for j in js)  # fmt: skip
@@ -171,6 +178,8 @@ def certificate(aug, d: dict, params: dict) -> dict:
         "theta": float(theta),
         "ts_max": ts_max(R),
     }
+    if d.get("P29") is not None:
+        checks["P29_min_eig"] = float(np.linalg.eigvalsh(_sym(d["P29"]))[0])
     if any(np.any(G) for G in aug.Gbar) or any(np.any(G) for G in aug.Gfbar) or aug.Mbar[0].shape[1]:
         checks["theorem"] = 5
         for a, b in ((lmi.key, lmi.theorem5) for lmi in LMIS.values() if lmi.theorem5):
@@ -180,7 +189,29 @@ def certificate(aug, d: dict, params: dict) -> dict:
                 checks[key][b] = src[a]
     else:
         checks["theorem"] = 3
+    checks["certified_by"] = certified_by(checks)
     return checks
+
+
+def _holds(checks: dict, key: str) -> bool:
+    lam = checks["lmi_max_eig"].get(key)
+    return lam is not None and lam < -checks.get("lmi_roundoff", {}).get(key, 0.0)
+
+
+def _offered(checks: dict, route: str) -> bool:
+    """Can ``route`` certify the design of ``checks``? Theorem 1's only where the design holds its point P29."""
+    return route != THEOREM1 or "P29_min_eig" in checks
+
+
+def certified_by(checks: dict) -> str | None:
+    """The first certificate (:func:`~._lmis.routes`, in the order registered) whose every LMI holds in ``checks``,
+    or None. Theorem 1's counts only for a design that holds its own point, ``P29`` (``P29_min_eig`` in ``checks``):
+    a design made by (45)-(46) is judged by them, as it always was, and (29) at ``P = X^-1`` (which they imply) is
+    reported beside them, not relied on. Documents older than the routes have Theorem 3's only."""
+    for route, keys in routes().items():
+        if _offered(checks, route) and all(_holds(checks, k) for k in keys):
+            return route
+    return None
 
 
 @dataclass(frozen=True)
@@ -202,7 +233,11 @@ def failed(checks: dict) -> list[Failure]:
     bad = []
     theorem = checks.get("theorem")
     roundoff = checks.get("lmi_roundoff", {})
+    # the LMIs of one certificate (route) need not hold where another's all do: (45)-(46), else (29)
+    held = certified_by(checks)
     for k, lmi in LMIS.items():
+        if lmi.route and (held is not None or not _offered(checks, lmi.route)):
+            continue
         v = lmi.name(theorem)
         if k not in checks["lmi_max_eig"]:
             bad.append(Failure(k, f"{v} (not in the certificate)"))
@@ -220,6 +255,8 @@ def failed(checks: dict) -> list[Failure]:
         bad.append(Failure("X", f"X > 0 (smallest eigenvalue {checks['X_min_eig']:.3g})"))
     if not checks["Pbar_min_eig"] > 0:
         bad.append(Failure("Pbar", f"Pbar > 0 (smallest eigenvalue {checks['Pbar_min_eig']:.3g})"))
+    if "P29_min_eig" in checks and not checks["P29_min_eig"] > 0:
+        bad.append(Failure("P29", f"P29 > 0 (smallest eigenvalue {checks['P29_min_eig']:.3g})"))
     if not checks["R_max_real_eig"] < 0:
         bad.append(Failure("R", f"R_i Hurwitz (largest real part {checks['R_max_real_eig']:.3g})"))
     if not checks["closed_loop_max_real_eig"] < 0:

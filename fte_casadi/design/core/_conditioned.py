@@ -70,6 +70,7 @@ from ._decay import ALPHA_RTOL as ALPHA_RTOL
 from ._decay import TS_FACTOR, alpha_max, cap_for_sample_time, loop_decay_target
 from ._lmis import (
     diffusion_coupling,
+    lmi29,
     lmi45,
     lmi45_kron,
     lmi46,
@@ -144,6 +145,8 @@ class Step5:
     bound: dict | None = None
     #: the bound on cond(Pbar) this observer was designed under
     kappa: float = KAPPA
+    #: Theorem 1's loop block of V where the observer was designed by (29) (``joint``), else None
+    P29: np.ndarray | None = None
 
 
 def input_scaling(aug: Augmented) -> np.ndarray:
@@ -574,14 +577,19 @@ def _step3_result(aug, params, Su, layout, cen, prob, res, solver, b, why) -> St
 
 
 # -- step 5 ----------------------------------------------------------------------------------
-def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
-    """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule."""
-    n, ld, nbar, r, lf = aug.n, aug.ld, aug.nbar, aug.r, aug.ns  # ns = lf (+ Remark 5's directions)
+def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True, joint: bool = False):
+    """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule.
+
+    ``joint``: Theorem 1's (29) instead of (46) (:func:`~._lmis.lmi29`), with the loop's Lyapunov matrix an unknown
+    too (``P29 = P1t / s``) instead of step 3's ``P = X^-1`` and without sigma; the feasibility part then also holds
+    ``0 < P1t <= P1_CAP kappa I`` (bounded for phase 1)."""
+    if joint:
+        return _step5_joint(aug, params, K, T, rest=rest)
+    n, ld, nbar, r = aug.n, aug.ld, aug.nbar, aug.r
     sg, g1 = params["sigma"], params["gamma1"]
     g2 = params.get("gamma2", params["gamma"])
     P = np.linalg.inv(X)
     Cb = aug.Cbar
-    Cp = np.linalg.pinv(Cb)
     layout = Layout(Var("Pt", (nbar, nbar), True), Var("s", ()), Var("rho", (r,)), Var("tau", ()))
     l2 = aug.Mbar[0].shape[1]
     k46 = n + ld + nbar + l2
@@ -620,16 +628,79 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
     feas += _normalisation(layout, "Pt", nbar, _kappa(params))
     if not rest:  # the feasibility solve needs (46) and the normalisation only
         return layout, feas, [], None
+    return (layout, feas) + _sliding_part(aug, T, layout)
+
+
+#: phase 1 bounds the loop's block of Theorem 1's V by P1t <= P1_CAP kappa I (Pt, the observer's, lies in [I, kappa I])
+P1_CAP = 1e6
+
+
+def _step5_joint(aug: Augmented, params: dict, K, T, *, rest: bool = True):
+    """Theorem 1's (29) per rule at the gain K, in ``(P1t, Pt, s, rho)`` (``P29 = P1t / s``, ``Pbar = Pt / s``,
+    ``Q_i = rho_i Cbar^T / (2 s)``: homogenised as (46)), the normalisation of Pt and ``0 < P1t <= P1_CAP kappa I``,
+    then (55), (64) per rule, and ``s > 0``. Margins per block: ``P1t / tau`` in x (a decay rate of the loop's part of V relative
+    to the plant's rate ``1 / tau``), ``gamma^2 s`` in d, I in e (as (46)), ``gamma2^2 s`` in d2."""
+    n, ld, nbar, r = aug.n, aug.ld, aug.nbar, aug.r
+    g = params["gamma"]
+    g2 = params.get("gamma2", g)
+    kappa = _kappa(params)
+    rate = 1.0 / time_scale(aug)
+    layout = Layout(Var("Pt", (nbar, nbar), True), Var("P1", (n, n), True), Var("s", ()), Var("rho", (r,)),
+                    Var("tau", ()))  # fmt: skip
+    l2 = aug.Mbar[0].shape[1]
+    k = n + ld + nbar + l2
+
+    def b29(i):
+        def f(Pt, P1, s, rho, tau):
+            return lmi29(aug, i, K, P1, T, Pt, rho[i] * aug.Cbar.T / 2, g, g2, const=s)
+
+        return f
+
+    def m29(Pt, P1, s, rho, tau):
+        M = _diag([n, ld, nbar, l2], [0.0, g**2 * s, 1.0, g2**2 * s])
+        M[:n, :n] = rate * P1
+        return M
+
+    def decay(Pt, P1, s, rho, tau):
+        M = np.zeros((k, k))
+        M[n + ld : n + ld + nbar, n + ld : n + ld + nbar] = 2 * Pt
+        return M
+
+    Ee = np.eye(k)[n + ld : n + ld + nbar]
+    feas = [margin_lmi(f"(29) rule {i + 1}", layout, b29(i), decay, m29,
+                       support=layout.support("Pt", "P1", "s", ("rho", i)),
+                       kron=("Pt", lmi46_kron(aug, i, K, T)), kron_param=("Pt", [(Ee, Ee)]))
+            for i in range(r)]  # fmt: skip
+    feas += _normalisation(layout, "Pt", nbar, kappa)
+    eye = np.eye(n)
+    cap = P1_CAP * kappa
+    # s > 0 (Pbar = Pt / s > 0): without unknown inputs nothing else in (29) asks it (in (46) the x block's -sigma s I does)
+    feas += [margin_lmi("s > 0", layout, lambda **u: -u["s"] * np.eye(1), support=layout.support("s"))]
+    feas += [
+        margin_lmi("P1t > 0", layout, lambda **u: -u["P1"], margin=lambda **u: eye, support=layout.support("P1")),
+        margin_lmi(f"P1t <= {cap:g} I", layout, lambda **u: u["P1"] - cap * eye, margin=lambda **u: cap * eye,
+                   support=layout.support("P1")),
+    ]  # fmt: skip
+    if not rest:
+        return layout, feas, [], None
+    return (layout, feas) + _sliding_part(aug, T, layout)
+
+
+def _sliding_part(aug: Augmented, T, layout: Layout):
+    """(55) and (64) per rule in ``(Pt, tau)`` and step 5's objective: ``(others, c)``."""
+    n, nbar, r, lf = aug.n, aug.nbar, aug.r, aug.ns  # ns = lf (+ Remark 5's directions)
+    Cb = aug.Cbar
+    Cp = np.linalg.pinv(Cb)
 
     def N_of(Pt):
         return aug.Js.T @ T.T @ Pt @ Cp
 
-    others = [margin_lmi("(55)", layout, lambda Pt, s, rho, tau: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
-                       margin=lambda Pt, s, rho, tau: _balanced_margin(tau, nbar, lf), support=layout.support("Pt", "tau"),
+    others = [margin_lmi("(55)", layout, lambda Pt, tau, **_: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
+                       margin=lambda Pt, tau, **_: _balanced_margin(tau, nbar, lf), support=layout.support("Pt", "tau"),
                        kron=("Pt", sliding_kron(aug, T, np.eye(nbar) - Cp @ Cb)))]  # fmt: skip
     others += [margin_lmi(f"(64) rule {i + 1}", layout,
-                        lambda Pt, s, rho, tau, i=i: _balanced(diffusion_coupling(aug, i, T, Pt), tau),
-                        margin=lambda Pt, s, rho, tau: _balanced_margin(tau, n, lf), support=layout.support("Pt", "tau"),
+                        lambda Pt, tau, i=i, **_: _balanced(diffusion_coupling(aug, i, T, Pt), tau),
+                        margin=lambda Pt, tau, **_: _balanced_margin(tau, n, lf), support=layout.support("Pt", "tau"),
                         kron=("Pt", sliding_kron(aug, T, T @ aug.Wbar[i])))
              for i in range(r)]  # fmt: skip
     c = np.zeros(layout.size)
@@ -639,7 +710,7 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True):
     # depend on the outputs' units (sy = 1 for every built-in plant: their designs are unchanged)
     c[layout.index("rho")] = output_scale(aug) ** 2
     c[layout.index("tau")] = 1.0
-    return layout, feas, others, c
+    return others, c
 
 
 class _Step5:
@@ -655,10 +726,11 @@ class _Step5:
     alpha is a strictly feasible start for the centring at every smaller alpha.
     """
 
-    def __init__(self, aug, params, X, K, T, solver):
+    def __init__(self, aug, params, X, K, T, solver, joint: bool = False):
         self.aug, self.T, self.solver, self.kappa = aug, T, solver, _kappa(params)
         self.params, self.X, self.K, self.tau = params, X, K, time_scale(aug)
-        self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T)
+        self.joint = joint  # Theorem 1's (29) with P29 an unknown, instead of (46) at step 3's P
+        self.layout, feas, rest, self.c = _step5_problem(aug, params, X, K, T, joint=joint)
         r = aug.r
         self.feas = self.feas0 = ConicProblem(self.layout, [L.at(2 * MARGIN) for L in feas])
         self.soft = [L.at(MARGIN) for L in feas[:r]]  # (46) per rule: depends on alpha
@@ -703,20 +775,26 @@ class _Step5:
         if self.feas.layout is self.layout:  # not built in the scaled time yet
             aug_s = time_scaled(self.aug, tau)
             params_s = dict(self.params, sigma=self.params["sigma"] * tau**2)
-            layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T, rest=False)
+            layout_s, feas_s, _, _ = _step5_problem(aug_s, params_s, tau * self.X, self.K, self.T, rest=False,
+                                                    joint=self.joint)  # fmt: skip
             self.feas = ConicProblem(layout_s, [L.at(2 * MARGIN) for L in feas_s])
         layout_s = self.feas.layout
         res = self.feas.solve(self.solver, 0.0)
         if res.v is None or not np.all(np.isfinite(res.v)):
             return res
         u = layout_s.unpack(res.v)
-        v = self.layout.pack(Pt=u["Pt"], s=u["s"] / tau, rho=u["rho"] / tau, tau=0.0)
+        # (29) of the scaled data at (P1t, Pt, tau s, tau rho) is tau times (29) at (P1t, Pt, s, rho): the same map
+        loop = {"P1": u["P1"]} if self.joint else {}
+        v = self.layout.pack(Pt=u["Pt"], s=u["s"] / tau, rho=u["rho"] / tau, tau=0.0, **loop)
         return replace(res, v=v)
 
     def _numpy(self) -> SolveResult | None:
         """The feasibility of (46) at alpha = 0 by phase 1 in numpy (:func:`~._barrier.numpy_first`): (46) per rule
         soft, the normalisation and the gain caps hard, from ``Pt = sqrt(kappa) I``, ``s = rho_i = 1``."""
-        v0 = self.layout.pack(Pt=np.sqrt(self.kappa) * np.eye(self.aug.nbar), s=1.0, rho=np.ones(self.aug.r))
+        loop = {"P1": np.sqrt(self.kappa) * np.eye(self.aug.n)} if self.joint else {}
+        v0 = self.layout.pack(
+            Pt=np.sqrt(self.kappa) * np.eye(self.aug.nbar), s=1.0, rho=np.ones(self.aug.r), **loop
+        )
         res = numpy_first(self.feas0, self.aug.r, v0, self.caps)
         if res is not None and self.feas0 is not self.feas:  # the time-scaled problem keeps the account
             self.feas.seconds += res.seconds
@@ -840,30 +918,45 @@ class _Step5:
         L1 = [np.linalg.solve(Pbar, Qi) for Qi in Q]
         R = [T @ aug.Abar[i] - L1[i] @ aug.Cbar for i in range(aug.r)]
         return dict(Pbar=Pbar, Q=Q, N=N, theta=float((u["tau"] / s) ** 2), R=R, ts_max=ts_max(R),
-                    ts_cert=lyapunov_ts_max(R, Pbar), bound=info)  # fmt: skip
+                    ts_cert=lyapunov_ts_max(R, Pbar), bound=info, P29=u["P1"] / s if self.joint else None)  # fmt: skip
 
 
 def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | None = None,
-          sample_time: float | None = None, bound_view=None, alpha_is_default: bool = False) -> Step5:  # fmt: skip
+          sample_time: float | None = None, bound_view=None, alpha_is_default: bool = False,
+          joint: bool = False) -> Step5:  # fmt: skip
     """Step 5 (conditioned): Pbar, Q_i, N, theta from (46), (55), (64) with the observer decay rate.
 
     With ``params["bound_weight"] > 0``, the closed loop's fault-error bound is a term of the objective
     (:mod:`fte_casadi.design.core._bound_objective`; ``bound_view`` the closed loop's data without R).
     ``alpha_is_default``: ``alpha`` is the plant's recorded default (``fte tune``'s), not the user's: like the
-    rate found by default, it is lowered when the sample time needs it."""
-    prob = _Step5(aug, params, X, K, T, solver)
-    prob.bound, why_not = bound_term(
-        prob.layout, aug, T, np.linalg.inv(X), bound_view, params.get("bound_weight")
-    )
+    rate found by default, it is lowered when the sample time needs it. ``joint``: Theorem 1's (29) in place of
+    (46), the loop's block of V (``P29``) an unknown as well (:func:`_step5_joint`; no bound term)."""
+    prob = _Step5(aug, params, X, K, T, solver, joint=joint)
+    lmi = "(29)" if joint else "(46)"
+    if joint:
+        why_not = (
+            "the fault-error bound is not in the objective of (29)" if params.get("bound_weight") else ""
+        )
+    else:
+        prob.bound, why_not = bound_term(
+            prob.layout, aug, T, np.linalg.inv(X), bound_view, params.get("bound_weight")
+        )
     if why_not:
         prob.notes.append(f"step 5: {why_not}")
     res0 = prob.first()
     if not prob.points:
         l2 = aug.Mbar[0].shape[1]
-        names = {aug.n + aug.nbar + l2: [("x", aug.n), ("e", aug.nbar)] + ([("d2", l2)] if l2 else [])}
-        raise _fail(f"LMI (46) with cond(Pbar) <= {prob.kappa:g}", res0, solver,
-                    "its -sigma P^2 block must dominate the observer's coupling with the loop and the diffusion",
-                    worst_block(prob.feas.lmis, names), lmi="46")  # fmt: skip
+        if joint:
+            names = {aug.n + aug.ld + aug.nbar + l2: [("x", aug.n), ("d", aug.ld), ("e", aug.nbar)]
+                     + ([("d2", l2)] if l2 else [])}  # fmt: skip
+            hint = "the loop's own decay must dominate its coupling with the observer and the diffusion"
+        else:
+            names = {aug.n + aug.nbar + l2: [("x", aug.n), ("e", aug.nbar)] + ([("d2", l2)] if l2 else [])}
+            hint = (
+                "its -sigma P^2 block must dominate the observer's coupling with the loop and the diffusion"
+            )
+        raise _fail(f"LMI {lmi} with cond(Pbar) <= {prob.kappa:g}", res0, solver, hint,
+                    worst_block(prob.feas.lmis, names), lmi=lmi.strip("()"))  # fmt: skip
     n = aug.n
     decays = [
         -float(np.max(np.linalg.eigvals(aug.Abar[i][:n, :n] + aug.Bbar[i][:n] @ K).real))
@@ -875,7 +968,7 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         lo, hi = alpha_max(prob, start)
         a = ALPHA_FRACTION * lo if np.isfinite(hi) else lo
         observer.update(alpha_max=lo, alpha_max_upper=hi)
-        why = (f"{ALPHA_FRACTION:g} x the largest decay rate for which (46) is feasible with cond(Pbar) <= {prob.kappa:g} "
+        why = (f"{ALPHA_FRACTION:g} x the largest decay rate for which {lmi} is feasible with cond(Pbar) <= {prob.kappa:g} "
                f"(alpha_max in [{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
     else:
         a = float(alpha)
@@ -888,13 +981,13 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         observer.update(alpha_max=lo, alpha_max_upper=hi)
         a = ALPHA_FRACTION * lo if np.isfinite(hi) else lo
         why = (f"the plant's default alpha = {float(alpha):g} is infeasible at these parameters: {ALPHA_FRACTION:g} x the "
-               f"largest decay rate for which (46) is feasible with cond(Pbar) <= {prob.kappa:g} (alpha_max in "
+               f"largest decay rate for which {lmi} is feasible with cond(Pbar) <= {prob.kappa:g} (alpha_max in "
                f"[{lo:.4g}, {hi:.4g}], by bisection)")  # fmt: skip
         pt = prob.design(a)
     elif pt is None and alpha is not None:
         lo, hi = alpha_max(prob, start)
         raise InfeasibleDesignError(
-            f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which (46) is "
+            f"step 5 at the observer decay rate alpha = {a:g} is infeasible: the largest alpha for which {lmi} is "
             f"feasible with cond(Pbar) <= {prob.kappa:g} is about {lo:.4g}; lower alpha to <= "
             f"{nice_floor(ALPHA_FRACTION * lo):g} (or leave it unset for the default)",
             kind=Refused.DECAY_RATE,
@@ -934,7 +1027,9 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
     elif prob.bound is not None:
         prob.notes += [f"step 5: {x}" for x in prob.bound.notes[-1:]]
     notes = [
-        f"step 5: Q_i = rho_i Cbar^T / 2 (Finsler), N = J1^T T^T Pbar Cbar^+, Pbar = Pt/s with I <= Pt <= {prob.kappa:g} I, "
+        ("step 5: Theorem 1's (29) in place of (46): V = x^T P29 x + e^T Pbar e at step 3's K, P29 = P1t/s an unknown "
+         "as well (no sigma, no gamma1); " if joint else "step 5: ")
+        + f"Q_i = rho_i Cbar^T / 2 (Finsler), N = J1^T T^T Pbar Cbar^+, Pbar = Pt/s with I <= Pt <= {prob.kappa:g} I, "
         f"min sum rho_i + tau; observer decay rate alpha = {a:.4g} ({why}); {prob.solves} conic solve "
         f"({res0.status}" + (", on rescaled data" if res0.rescaled else "") + f") at alpha = 0, then "
         f"{prob.decisions} phase-1 decisions and {prob.newton} centring steps in numpy"
@@ -952,4 +1047,5 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         notes,
         pt["bound"],
         prob.kappa,
+        pt["P29"],
     )

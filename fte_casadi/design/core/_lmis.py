@@ -33,7 +33,7 @@ from ._linalg import sym as _sym
 
 __all__ = ["LMI", "LMIS", "register", "unregister", "block_sizes", "distinct", "theta_lmi_max_eig",
            "lmi45", "lmi_decay", "lmi_decay_kron", "loop_decay", "lmi46", "lmi55", "lmi64", "lmi45_kron", "lmi46_kron", "lmi46_terms", "sliding_kron",
-           "sliding_mismatch", "diffusion_coupling"]  # fmt: skip
+           "sliding_mismatch", "diffusion_coupling", "lmi29", "routes", "THEOREM3", "THEOREM1"]  # fmt: skip
 
 
 def _parts(aug: Augmented, i: int):
@@ -197,6 +197,50 @@ def lmi46(aug, i, K, P, T, Pbar, Q, sigma, gamma1, gamma2=1.0, alpha=0.0, const=
     return _sym(np.block(rows))
 
 
+def lmi29(aug, i, K, P1, T, Pbar, Q, gamma, gamma2=1.0, alpha=0.0, const=1.0):
+    """Left side of Theorem 1's (29) for rule i, gain ``K = K_j``, observer ``Q_i``: the closed loop (27) with the
+    Lyapunov function ``V = x^T P1 x + e^T Pbar e``, in blocks ``x, d, e`` (and ``d2``), without Theorem 2's split
+    of its x block into ``-sigma P^2`` and (41). With the diffusion of Theorem 5 (``(W_i + G_i K) x - G_ei e +
+    M_i d2`` in x, ``T`` times the augmented one in e; :func:`lmi46_terms`)::
+
+        11: P1 (A_i + B_i K) + (A_i + B_i K)^T P1 + Wk^T P1 Wk + Wbk^T T^T Pbar T Wbk + C^T C
+        12: P1 Bd_i        13: -P1 Be_ij - Wk^T P1 Ge_ij - Wbk^T T^T Pbar T Gbe_ij + C^T De
+        22: -gamma^2 I     33: Phi_i33 + Ge_ij^T P1 Ge_ij + Gbe_ij^T T^T Pbar T Gbe_ij  (+ 2 alpha Pbar)
+
+    (and the d2 row as in (79)). It is linear in ``(P1, Pbar, Q_i)`` at a fixed K. At ``P1 = X^-1`` it is the sum of
+    (46) and (45) before its congruence (Theorem 2's proof, (44)), so (45) and (46) imply it; it also holds where
+    they do not. ``const`` multiplies every term free of P1, Pbar and Q (the module docstring)."""
+    t = lmi46_terms(aug, i, K)
+    A, B, _, _, _, _, _ = _parts(aug, i)
+    Bd = aug.Bdbar[i][: aug.n]
+    Ab, Cb = aug.Abar[i], aug.Cbar
+    TPT = T.T @ Pbar @ T
+    C, De, Be, Ge, Wk, Wbk, Gbe, M, Mb = (
+        t[k] for k in ("C", "De", "Be", "Ge", "Wk", "Wbk", "Gbe", "M", "Mb")
+    )
+    ld, nbar, l2 = aug.ld, aug.nbar, M.shape[1]
+    Acl = A + B @ K
+    T11 = P1 @ Acl + Acl.T @ P1 + Wk.T @ P1 @ Wk + Wbk.T @ TPT @ Wbk + const * C.T @ C
+    T13 = -P1 @ Be - Wk.T @ P1 @ Ge - Wbk.T @ TPT @ Gbe + const * C.T @ De
+    T33 = (Pbar @ T @ Ab + Ab.T @ T.T @ Pbar - Q @ Cb - Cb.T @ Q.T + Ge.T @ P1 @ Ge + Gbe.T @ TPT @ Gbe
+           + const * De.T @ De + 2 * alpha * Pbar)  # fmt: skip
+    Z = np.zeros
+    rows = [
+        [T11, P1 @ Bd, T13],
+        [Bd.T @ P1, -const * gamma**2 * np.eye(ld), Z((ld, nbar))],
+        [T13.T, Z((nbar, ld)), T33],
+    ]
+    if l2:
+        T14 = Wk.T @ P1 @ M + Wbk.T @ TPT @ Mb
+        T34 = -Ge.T @ P1 @ M - Gbe.T @ TPT @ Mb
+        T44 = M.T @ P1 @ M + Mb.T @ TPT @ Mb - const * gamma2**2 * np.eye(l2)
+        rows[0].append(T14)
+        rows[1].append(Z((ld, l2)))
+        rows[2].append(T34)
+        rows.append([T14.T, Z((l2, ld)), T34.T, T44])
+    return _sym(np.block(rows))
+
+
 def sliding_mismatch(aug: Augmented, T: np.ndarray, Pbar: np.ndarray, N: np.ndarray) -> np.ndarray:
     """``J1^T T^T Pbar - N Cbar``: how far the sliding surface (20) is from holding (the E of (55)).
 
@@ -261,7 +305,8 @@ class LMI:
     design point (every one must be negative definite; ``point`` holds X, K, P, T, Pbar, Q, N, theta, R, L1 and
     ``params`` the design's parameters); ``blocks(aug)``: the sizes of its diagonal blocks;
     ``max_eig(L, blocks)``: its largest eigenvalue where a formula is more exact than ``eigvalsh`` (None:
-    ``eigvalsh``)."""
+    ``eigvalsh``); ``route``: "" when every certificate needs it, else the name of the certificate it belongs to
+    (:func:`routes`: a design is certified when every LMI of one route holds, with those of no route)."""
 
     key: str
     theorem5: str | None
@@ -269,6 +314,7 @@ class LMI:
     matrices: Callable[[Augmented, dict, dict], Iterable[np.ndarray]]
     blocks: Callable[[Augmented], list]
     max_eig: Callable[[np.ndarray, list], float] | None = None
+    route: str = ""
 
     def number(self, theorem: int | None = 3) -> str:
         """Its number in ``theorem`` (3 or 5): ``"45"`` or ``"78"``."""
@@ -294,6 +340,16 @@ def register(lmi: LMI) -> LMI:
 def unregister(key: str) -> None:
     """Remove the LMI ``key`` from :data:`LMIS`."""
     del LMIS[key]
+
+
+def routes() -> dict[str, list[str]]:
+    """The certificates the registered LMIs offer, in the order registered: ``{route: [its LMI keys]}``
+    (Theorem 3's (45), (46) first: the default; Theorem 1's (29) where they do not hold)."""
+    out: dict[str, list[str]] = {}
+    for k, lmi in LMIS.items():
+        if lmi.route:
+            out.setdefault(lmi.route, []).append(k)
+    return out
 
 
 def block_sizes(aug: Augmented) -> dict:
@@ -329,6 +385,19 @@ def _at_46(aug, d: dict, params: dict):
             yield lmi46(aug, i, K[j], d["P"], d["T"], d["Pbar"], d["Q"][i], s, g1, g2)
 
 
+def _at_29(aug, d: dict, params: dict):
+    """(29) at the design's ``P29``; nothing for a design without one (made by (45)-(46), which imply (29) at
+    ``P = X^-1``, Theorem 2): its certificate then has no key "29", as documents older than it."""
+    P1 = d.get("P29")
+    if P1 is None:
+        return
+    _, g, _, g2 = _parameters(params)
+    K = d["K"]
+    for i in range(aug.r):
+        for j in distinct(K):
+            yield lmi29(aug, i, K[j], P1, d["T"], d["Pbar"], d["Q"][i], g, g2)
+
+
 def _at_55(aug, d: dict, params: dict):
     yield lmi55(aug, d["T"], d["Pbar"], d["N"], d["theta"])
 
@@ -342,12 +411,21 @@ def _theta_max_eig(L: np.ndarray, blocks) -> float:
     return theta_lmi_max_eig(L, blocks[0])
 
 
+def _blocks_46(aug):
+    return [aug.n, aug.ld, aug.nbar] + ([aug.Mbar[0].shape[1]] if aug.Mbar[0].shape[1] else [])
+
+
+#: the two certificates (routes) a design can have: the paper's (45)-(46), and Theorem 1's (29) where they do not hold
+THEOREM3, THEOREM1 = "Theorem 3", "Theorem 1"
 register(LMI("45", "78", "the state-feedback loop: X, K_j, the attenuation gamma of d (step 3)", _at_45,
-             lambda aug: [aug.n, aug.n, aug.p, aug.ld]))  # fmt: skip
+             lambda aug: [aug.n, aug.n, aug.p, aug.ld], route=THEOREM3))  # fmt: skip
 register(LMI("decay", None, "the closed loop's decay rate beta (params.beta, 0 when absent): A_i X + X A_i^T + "
              "B_i Y_j + Y_j^T B_i^T + 2 beta X < 0 (step 3; not in the paper)", _at_decay, lambda aug: [aug.n]))  # fmt: skip
 register(LMI("46", "79", "the observer: Pbar, Q_i at the loop's K_j, the attenuation gamma1 (step 5)", _at_46,
-             lambda aug: [aug.n, aug.ld, aug.nbar] + ([aug.Mbar[0].shape[1]] if aug.Mbar[0].shape[1] else [])))  # fmt: skip
+             _blocks_46, route=THEOREM3))  # fmt: skip
+register(LMI("29", None, "the closed loop (27) with V = x^T P29 x + e^T Pbar e at the loop's K: mean-square "
+             "stability and the attenuation gamma (Theorem 1; where (45)-(46) do not hold)", _at_29, _blocks_46,
+             route=THEOREM1))  # fmt: skip
 register(LMI("55", "80", "the sliding surface (20): ||J1^T T^T Pbar - N Cbar||^2 <= theta", _at_55,
              lambda aug: [aug.nbar, aug.ns], _theta_max_eig))  # fmt: skip
 register(LMI("64", "81", "the diffusion the sliding variable sees: ||J1^T T^T Pbar T Wbar_i||^2 <= theta", _at_64,

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from ..._text import shorten
 from ...errors import InfeasibleDesignError
 from . import _diffusion as diffusion
+from . import _necessary as necessary
 from . import _separability as separability
 from ._other_cover import other_cover
 from ._parameters import Attempt, Trial, try_design
@@ -32,17 +33,28 @@ DECIDING_SOLVER = "CLARABEL"
 class Diffusion:
     """The cause a refusal names: the plant's diffusion (``tolerance``: the fraction of it the design tolerates)
     at the parameters ``at``; ``scaled``: whether the whole design is certified with the diffusion scaled to the
-    fraction found feasible (None: not run), and ``why`` not, where it is not."""
+    fraction found feasible (None: not run), and ``why`` not, where it is not; ``plant``: the rules that are not
+    mean-square stabilisable or detectable with the plant's diffusion (:func:`~._necessary.limits`: no design of
+    any structure can do better; empty where every rule is both, or it was not decided)."""
 
     tolerance: diffusion.Tolerance
     at: Mapping[str, float]
     scaled: bool | None = None
     why: str = ""
+    plant: tuple[necessary.Limit, ...] = ()
+
+    @property
+    def the_plant(self) -> bool:
+        """Is it the plant, not the method: does a necessary condition of any design fail at its diffusion?"""
+        return bool(self.plant)
 
     def render(self) -> str:
         """The sentence a refusal carries (and ``explore``'s cause, where the scaled design is not run)."""
         where = ", ".join(f"{k} = {v:g}" for k, v in self.at.items())
         text = f"{self.tolerance.text()} at {where}"
+        if self.plant:
+            text += (f". It is the plant, not the method: {necessary.describe(list(self.plant))} (a necessary "
+                     "condition for any design; docs/method.md, \"What no observer can do\")")  # fmt: skip
         s = self.tolerance.feasible
         if self.scaled is None:
             return text
@@ -64,7 +76,9 @@ def blocking_diffusion(aug, T, params: dict, at: Mapping[str, float]) -> Diffusi
     """The plant's diffusion as the cause of a refusal at ``params`` (decided with :data:`DECIDING_SOLVER`), or
     None where the design is infeasible without it too, or the plant has none."""
     tol = diffusion.tolerance(aug, T, params, DECIDING_SOLVER)
-    return Diffusion(tol, dict(at)) if tol is not None and tol.blocks else None
+    if tol is None or not tol.blocks:
+        return None
+    return Diffusion(tol, dict(at), plant=tuple(necessary.limits(aug, DECIDING_SOLVER)))
 
 
 def weak_faults(ts, params: dict, at: Mapping[str, float]) -> separability.Faults | None:

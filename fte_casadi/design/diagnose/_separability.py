@@ -87,7 +87,7 @@ def _separation(models, C, Df) -> tuple[float, int]:
 
 def blocking(ts, params: dict, solver: str) -> list[Blocking]:
     """The faults of ``ts`` without which the design's LMIs are feasible at ``params`` (each decided by
-    :func:`~._diffusion.feasible`); empty with fewer than two faults (without its only fault there is no
+    :func:`~._diffusion.feasible`: (45), then (46) or (29)); empty with fewer than two faults (without its only fault there is no
     observer to design), when the LMIs are feasible with every fault (the refusal has another cause), when
     the outputs tell the faults apart well (separation >= :data:`~.._limits.WEAK_SEPARATION`) or when no
     single fault is the cause."""
@@ -96,7 +96,7 @@ def blocking(ts, params: dict, solver: str) -> list[Blocking]:
     if Df.shape[1] < 2:
         return []
     whole = augment(models, C, Df)
-    if feasible(whole, uio_gain(whole)[1], params, solver, strict=True) not in ("45", "46"):
+    if feasible(whole, uio_gain(whole)[1], params, solver, strict=True) not in ("45", "46", "29"):
         return []  # feasible with every fault (what failed is not (45)-(46) at alpha = 0, e.g. the sample time),
         # or not decided: no claim
     with_it, rule = _separation(models, C, Df)
