@@ -33,7 +33,8 @@ def pendulum(tmp_path_factory):
                           capture_output=True, text=True, cwd=ROOT)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     d = Design.load(out)
-    assert d.accommodation["rule"] == "explain"  # fte design writes its gate (its faults' estimates cross-talk)
+    # fte design writes its gate (its faults' estimates cross-talk)
+    assert d.accommodation["rule"] == "explain"
     # the paper's policy, every estimate compensated always: what the gates are measured against
     return dataclasses.replace(d, accommodation=None), load_plant(PENDULUM), load_scenario(PENDULUM)
 
