@@ -126,7 +126,13 @@ def test_pmsm_design_is_the_same_up_to_the_state_and_rule_permutation(pmsm_both)
     a, b = pmsm_both
     da, db = design(a, sample_time=1e-4), design(b, sample_time=1e-4)
     assert da.certified and db.certified
-    assert da.params.to_dict() == db.params.to_dict()
+    pa, pb = da.params.to_dict(), db.params.to_dict()
+    # the parameters the search chooses are the same values; beta, the loop's decay rate its X certifies, is
+    # computed from the (permuted) solution and agrees to its round-off
+    assert pa.keys() == pb.keys() and {k: pa[k] for k in pa if k != "beta"} == {
+        k: pb[k] for k in pb if k != "beta"
+    }
+    assert pa.get("beta") == pytest.approx(pb.get("beta"), rel=1e-9)
     va = [(c["name"], c["holds"]) for c in da.checks["assumptions"]]
     assert va == [(c["name"], c["holds"]) for c in db.checks["assumptions"]]
     perm = [a.plant.state_names.index(nm) for nm in b.plant.state_names]  # b's state k is a's perm[k]

@@ -46,14 +46,14 @@ class _StepResponse:
         if np.linalg.cond(V) < 1e8:
             self.Vi = np.linalg.inv(V)
 
-    def delta(self, e0: np.ndarray, ts: np.ndarray) -> np.ndarray:
+    def delta(self, e0: np.ndarray, times: np.ndarray) -> np.ndarray:
         if self.Vi is not None:
-            return np.real((self.V[None, :, :] * np.expm1(np.outer(ts, self.w))[:, None, :]) @ (self.Vi @ e0))
-        return np.array([_phi_step(self.R, t) @ e0 for t in ts])
+            return np.real((self.V[None, :, :] * np.expm1(np.outer(times, self.w))[:, None, :]) @ (self.Vi @ e0))
+        return np.array([_phi_step(self.R, t) @ e0 for t in times])
 
-    def ratios(self, e0: np.ndarray, own: int, other: int, ts: np.ndarray) -> np.ndarray:
+    def ratios(self, e0: np.ndarray, own: int, other: int, times: np.ndarray) -> np.ndarray:
         """``|fhat_other(t)| / |fhat_own(t)|`` after a unit step of the fault at ``own``."""
-        D = self.delta(e0, ts)
+        D = self.delta(e0, times)
         f_own = np.abs((1.0 - e0[own]) - D[:, own])
         f_other = np.abs(e0[other] + D[:, other])
         with np.errstate(divide="ignore", invalid="ignore"):
