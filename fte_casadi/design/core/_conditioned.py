@@ -543,6 +543,12 @@ def _step3_at(aug, params, solver, Su, tau, target: float, why: str, v_low, *, r
     return out
 
 
+#: the Newton budget of step 3's centring: a start from phase 1 in numpy near (45)'s boundary (the 64-rule chain at
+#: 0.8-0.9 of its sigma_max) needs more than 400 damped steps, and converges within this; a converging centring stops
+#: at its fixed point, so only a failing one spends it all
+CENTRE3_STEPS = 2000
+
+
 def _centre3(aug: Augmented, layout: Layout, family: list, c: np.ndarray, res: SolveResult, v0: np.ndarray):
     """The centred point of step 3 from the strictly feasible ``v0``."""
     v0 = v0.copy()  # t starts well above ||Y'||: the epigraph is then strictly feasible
@@ -550,7 +556,7 @@ def _centre3(aug: Augmented, layout: Layout, family: list, c: np.ndarray, res: S
     lmis = [L.at(MARGIN) for L in family]
     floor = 0.01 * max(np.linalg.norm(A[: aug.n, : aug.n], 2) for A in aug.Abar)
     try:
-        return centre(lmis, c, v0, eta=ETA, floor=floor)
+        return centre(lmis, c, v0, eta=ETA, floor=floor, max_steps=CENTRE3_STEPS)
     except CentringError as exc:
         raise SolverFailedError(
             f"step 3: the centring of the solver's point failed ({exc}); try the other solver"
