@@ -165,9 +165,12 @@ def test_explore_returns_the_best_certified_design_or_the_cause_within_its_budge
     assert certified and info["best"] is not None and info["best"].certified and info["cause"] is None
     assert info["best"].observer.alpha == pytest.approx(max(pt.alpha for pt in certified), rel=1e-12)
     assert [pt.sigma for pt in points] == sorted(pt.sigma for pt in points)
+    # the flexible joint at 5 % noise is refused at its defaults (the test above); explore's smaller sigmas find
+    # designs, certified by Theorem 1's (29) where (45)-(46) cannot tolerate the noise
     points, info = explore(noisy, count=3, budget=None)
-    assert not any(pt.certified for pt in points) and info["best"] is None
-    assert "tolerates" in info["cause"] and "diffusion is the cause" in info["cause"]
+    certified = [pt for pt in points if pt.certified]
+    assert certified and info["best"] is not None and info["best"].certified and info["cause"] is None
+    assert info["best"].checks["certified_by"] in ("Theorem 1", "Theorem 3")
     points, info = explore(calm, count=3, budget=0.0)  # nothing fits in no time: every sigma said not tried
     assert info["skipped"] == 3 and all("budget ran out" in pt.note for pt in points)
 

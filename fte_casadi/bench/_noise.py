@@ -30,6 +30,8 @@ import time
 
 import numpy as np
 
+from fte_casadi._text import shorten
+
 __all__ = ["measure"]
 
 EPS = 1e-7
@@ -197,7 +199,7 @@ def measure(spec: str, params: dict | None = None, log=print) -> dict:
         d = design(ts, **options, **(params or {}))
     except FteError as exc:
         d = None
-        log(f"design at the defaults refused: {' '.join(str(exc).split())[:300]}")
+        log(f"design at the defaults refused: {shorten(exc, 300)}")
     log(f"design at the defaults: {'certified by ' + str(d.checks['certified_by']) if d else 'refused'} "
         f"({time.perf_counter() - t0:.1f} s)")  # fmt: skip
     p = d.params.to_dict() if d is not None else dict(params or {})

@@ -48,7 +48,9 @@ class _StepResponse:
 
     def delta(self, e0: np.ndarray, times: np.ndarray) -> np.ndarray:
         if self.Vi is not None:
-            return np.real((self.V[None, :, :] * np.expm1(np.outer(times, self.w))[:, None, :]) @ (self.Vi @ e0))
+            return np.real(
+                (self.V[None, :, :] * np.expm1(np.outer(times, self.w))[:, None, :]) @ (self.Vi @ e0)
+            )
         return np.array([_phi_step(self.R, t) @ e0 for t in times])
 
     def ratios(self, e0: np.ndarray, own: int, other: int, times: np.ndarray) -> np.ndarray:
