@@ -95,3 +95,60 @@ def test_the_documents_list_the_registered_lmis():
     assert [re.match(r"\| \((\w+)\) \| (?:\((\w+)\)|-)", r).groups() for r in rows] == [
         (k, e.theorem5) for k, e in LMIS.items()
     ]
+
+
+#: the toy's bound on cond(X): the manipulator's design at the defaults has cond(X) = 66 (measured; 50 is beyond
+#: what step 3 finds at the parameters the search starts from)
+COND = 60.0
+
+
+def _posed_toy() -> LMI:
+    """``cond(X) < COND`` as one entry: its check at a design point (``X / lambda_min(X) - COND I < 0``) and its
+    posing in step 3, where ``X' >= I`` is normalised: ``X' <= (1 - m) COND I`` (soft, as every LMI of step 3)."""
+    from fte_casadi.design.core._lmis import STEP3, Posing
+    from fte_casadi.design.core._sdp import margin_lmi
+
+    def check(aug, d, params):
+        X = 0.5 * (np.asarray(d["X"]) + np.asarray(d["X"]).T)
+        return [X / np.linalg.eigvalsh(X)[0] - COND * np.eye(X.shape[0])]
+
+    def pose(at):
+        eye = np.eye(at.aug.n)
+        lay = at.layout
+        return [margin_lmi("cond(X)", lay, lambda X, Y, s, t: X - COND * eye, margin=lambda X, Y, s, t: COND * eye,
+                           support=lay.support("X"), kron=("X", [(eye, 0.5 * eye)]))]  # fmt: skip
+
+    return LMI("cond", None, f"a toy: cond(X) < {COND:g}", check, lambda aug: [aug.n],
+               pose={STEP3: Posing(pose, soft=True)})  # fmt: skip
+
+
+def test_a_registered_lmi_is_posed_solved_certified_and_recertified(ts_models, tmp_path):
+    """One entry, with its posing: the design solves for it (the default design has cond(X) = 66 > 60), the
+    certificate holds it, the summary prints it, and the written document re-certifies with it on load."""
+    ts = ts_models["manipulator"]
+    assert np.linalg.cond(design(ts, sample_time=1e-3).X) > COND
+    register(_posed_toy())
+    try:
+        d = design(ts, sample_time=1e-3)
+        assert np.linalg.cond(d.X) < COND and d.certified
+        assert d.checks["lmi_max_eig"]["cond"] < 0
+        line = next(s for s in design_summary(d).splitlines() if "largest eigenvalue of each LMI" in s)
+        assert re.search(r"\(cond\) -[0-9.e+-]+", line), line
+        d.save(tmp_path / "d.json")
+        loaded = Design.load(tmp_path / "d.json")
+        assert recertify(loaded) == [] and loaded.checks["lmi_max_eig"]["cond"] < 0
+    finally:
+        unregister("cond")
+
+
+def test_registering_checks_where_an_lmi_is_posed():
+    from fte_casadi.design.core._lmis import STEP3, Posing
+
+    def entry(**pose):
+        return LMI("bad", None, "bad", LMIS["45"].matrices, LMIS["45"].blocks, pose=pose)
+
+    with pytest.raises(ValueError, match="the problems are step 3, step 5"):
+        register(entry(**{"step 4": Posing(lambda at: [])}))
+    with pytest.raises(ValueError, match="posed in step 3 is soft"):
+        register(entry(**{STEP3: Posing(lambda at: [])}))
+    assert "bad" not in LMIS

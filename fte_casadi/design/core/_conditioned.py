@@ -69,16 +69,15 @@ from ._certify import lyapunov_ts_max, ts_max
 from ._decay import ALPHA_RTOL as ALPHA_RTOL
 from ._decay import TS_FACTOR, alpha_max, cap_for_sample_time, loop_decay_target
 from ._lmis import (
+    JOINT,
+    STEP3,
+    STEP5,
+    Posed,
+    balanced,
+    balanced_margin,
     diffusion_coupling,
-    lmi29,
-    lmi45,
-    lmi45_kron,
-    lmi46,
-    lmi46_kron,
-    lmi_decay,
-    lmi_decay_kron,
     loop_decay,
-    sliding_kron,
+    posed,
     sliding_mismatch,
 )
 from ._sdp import (
@@ -155,10 +154,6 @@ def input_scaling(aug: Augmented) -> np.ndarray:
     return np.diag(np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0))
 
 
-def _diag(sizes, values) -> np.ndarray:
-    return np.diag(np.concatenate([np.full(k, float(v)) for k, v in zip(sizes, values)]))
-
-
 def _normalisation(layout: Layout, name: str, size: int, kappa: float = KAPPA) -> list[MarginLMI]:
     eye = np.eye(size)
     return [
@@ -167,17 +162,6 @@ def _normalisation(layout: Layout, name: str, size: int, kappa: float = KAPPA) -
         margin_lmi(f"{name} <= {kappa:g} I", layout, lambda **u: u[name] - kappa * eye,
                    margin=lambda **u: kappa * eye, support=layout.support(name), kron=(name, [(eye, 0.5 * eye)])),
     ]  # fmt: skip
-
-
-def _balanced(E: np.ndarray, tau) -> np.ndarray:
-    """``[[-tau I, E^T], [E, -tau I]] <= 0``, i.e. ``||E||_2 <= tau``."""
-    a, b = E.shape[1], E.shape[0]
-    return np.block([[-tau * np.eye(a), E.T], [E, -tau * np.eye(b)]])
-
-
-def _balanced_margin(tau, a: int, b: int) -> np.ndarray:
-    """The relative margin of :func:`_balanced`: ``||E||_2 <= (1 - m) tau``."""
-    return tau * np.eye(a + b)
 
 
 def _accept(res: SolveResult, lmis, p: float) -> bool:
@@ -274,37 +258,23 @@ def _fail(
 
 # -- step 3 ----------------------------------------------------------------------------------
 def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
-    n, m, p, ld = aug.n, aug.m, aug.p, aug.ld
-    sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
-    beta = float(params.get("beta", 0.0))  # the closed loop's decay rate asked (2 beta X in the (1,1) block)
+    """Step 3's LMIs in ``(X', Y', s, t)``: the registered ones posed in it (:func:`~._lmis.posed`: (45) and the
+    decay LMI per rule, soft, first), the normalisation of X', then the epigraph of ``t`` (``min t``)."""
+    n, m = aug.n, aug.m
     layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("s", ()), Var("t", ()))
-    D = _diag([n, n, p, ld], [sg, 0.0, 1.0, g**2 - g1**2])
-    lmis = [
-        margin_lmi(f"(45) rule {i + 1}", layout, lambda X, Y, s, t, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
-                   margin=lambda X, Y, s, t: s * D, support=layout.support("X", "Y", "s"),
-                   kron=("X", lmi45_kron(aug, i)))
-        for i in range(aug.r)
-    ]  # fmt: skip
-    if beta > 0:  # homogeneous in (X', Y'); its margin relative to the rate: <= -2 beta m I (X' >= I)
-        eye = np.eye(n)
-        lmis += [
-            margin_lmi(f"decay rule {i + 1}", layout, lambda X, Y, s, t, i=i: lmi_decay(aug, i, X, Su @ Y, beta),
-                       margin=lambda X, Y, s, t: 2 * beta * eye, support=layout.support("X", "Y"),
-                       kron=("X", lmi_decay_kron(aug, i, beta)))
-            for i in range(aug.r)
-        ]  # fmt: skip
+    lmis, _ = posed(STEP3, Posed(aug, params, layout, Su=Su))
     lmis += _normalisation(layout, "X", n, _kappa(params))
-    lmis.append(margin_lmi("||Y'|| <= t", layout, lambda X, Y, s, t: _balanced(Y, t),
-                           margin=lambda X, Y, s, t: _balanced_margin(t, m, n)))  # fmt: skip
+    lmis.append(margin_lmi("||Y'|| <= t", layout, lambda X, Y, s, t: balanced(Y, t),
+                           margin=lambda X, Y, s, t: balanced_margin(t, m, n)))  # fmt: skip
     c = np.zeros(layout.size)
     c[layout.index("t")] = 1.0
     return layout, lmis, c
 
 
 def _soft(family) -> int:
-    """How many of step 3's LMIs (:func:`_step3_problem`) are soft: (45) and the decay LMI per rule; the two of
-    the normalisation of X' follow, then the epigraph of t."""
-    return sum(1 for L in family if getattr(L, "base", L).name.startswith(("(45)", "decay")))
+    """How many of step 3's LMIs (:func:`_step3_problem`) are soft: the registered ones posed in it (every one of
+    them is, :func:`~._lmis.register`), first; the two of the normalisation of X' and the epigraph of t follow."""
+    return len(family) - 3
 
 
 def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: Layout, Su: np.ndarray):
@@ -375,7 +345,7 @@ def _step3_caps(aug: Augmented, params: dict, layout: Layout) -> list[AffineLMI]
     ycap = RHO_CAP * kappa * max(a, sg, 1e-300)
     scap = ycap * max(1.0, 1.0 / max(sg, 1e-300), np.linalg.norm(aug.Cbar[:, :n], 2) ** 2)
     ycap_lmi = affine_lmi(
-        "||Y'|| <= cap", layout, lambda X, Y, s, t: _balanced(Y, ycap), support=layout.support("Y")
+        "||Y'|| <= cap", layout, lambda X, Y, s, t: balanced(Y, ycap), support=layout.support("Y")
     )
     return [ycap_lmi] + _scalar_cap(layout, "s", scap)
 
@@ -584,57 +554,20 @@ def _step3_result(aug, params, Su, layout, cen, prob, res, solver, b, why) -> St
 
 # -- step 5 ----------------------------------------------------------------------------------
 def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True, joint: bool = False):
-    """(46) per rule and the normalisation (the feasibility part), then (55), (64) per rule.
+    """The registered LMIs posed in step 5 (:func:`~._lmis.posed`: (46) per rule) and the normalisation (the
+    feasibility part), then those of its rest ((55), (64) per rule) and the objective.
 
     ``joint``: Theorem 1's (29) instead of (46) (:func:`~._lmis.lmi29`), with the loop's Lyapunov matrix an unknown
     too (``P29 = P1t / s``) instead of step 3's ``P = X^-1`` and without sigma; the feasibility part then also holds
     ``0 < P1t <= P1_CAP kappa I`` (bounded for phase 1)."""
     if joint:
         return _step5_joint(aug, params, K, T, rest=rest)
-    n, ld, nbar, r = aug.n, aug.ld, aug.nbar, aug.r
-    sg, g1 = params["sigma"], params["gamma1"]
-    g2 = params.get("gamma2", params["gamma"])
-    P = np.linalg.inv(X)
-    Cb = aug.Cbar
-    layout = Layout(Var("Pt", (nbar, nbar), True), Var("s", ()), Var("rho", (r,)), Var("tau", ()))
-    l2 = aug.Mbar[0].shape[1]
-    k46 = n + ld + nbar + l2
-    Dx = np.eye(k46)
-    Dx[:n, :n] = X
-    # The d block of (46)/(79) is decoupled (-gamma1^2 I, zero off its diagonal): it holds iff
-    # s > 0, which the x block already demands; the solve leaves it out (-1e-4 for the
-    # manipulator, it only made the problem badly scaled), the certificate keeps it.
-    keep = np.r_[0:n, n + ld : k46]
-    sub = np.ix_(keep, keep)
-
-    def b46(i):
-        def f(Pt, s, rho, tau):
-            return (Dx @ lmi46(aug, i, K, P, T, Pt, rho[i] * Cb.T / 2, sg, g1, g2, const=s) @ Dx)[sub]
-
-        return f
-
-    def m46(Pt, s, rho, tau):
-        return _diag([n, nbar, l2], [sg * s, 1.0, g2**2 * s])
-
-    def decay(Pt, s, rho, tau):
-        M = np.zeros((n + nbar + l2, n + nbar + l2))
-        M[n : n + nbar, n : n + nbar] = 2 * Pt
-        return M
-
-    def k46(i):  # the Kron terms of (46) after the congruence by Dx, without the d rows
-        return (
-            "Pt",
-            [(U @ Dx[:, keep], None if V is None else V @ Dx[:, keep]) for U, V in lmi46_kron(aug, i, K, T)],
-        )
-
-    Ee = np.eye(n + ld + nbar + l2)[n + ld : n + ld + nbar][:, keep]
-    feas = [margin_lmi(f"(46) rule {i + 1}", layout, b46(i), decay, m46, support=layout.support("Pt", "s", ("rho", i)),
-                       kron=k46(i), kron_param=("Pt", [(Ee, Ee)]))
-            for i in range(r)]  # fmt: skip
-    feas += _normalisation(layout, "Pt", nbar, _kappa(params))
+    layout = Layout(Var("Pt", (aug.nbar, aug.nbar), True), Var("s", ()), Var("rho", (aug.r,)), Var("tau", ()))
+    at = Posed(aug, params, layout, K=K, T=T, X=X)
+    feas = posed(STEP5, at)[0] + _normalisation(layout, "Pt", aug.nbar, _kappa(params))
     if not rest:  # the feasibility solve needs (46) and the normalisation only
         return layout, feas, [], None
-    return (layout, feas) + _sliding_part(aug, T, layout)
+    return layout, feas, posed(STEP5, at, "rest")[0], _objective(aug, layout)
 
 
 #: phase 1 bounds the loop's block of Theorem 1's V by P1t <= P1_CAP kappa I (Pt, the observer's, lies in [I, kappa I])
@@ -643,41 +576,14 @@ P1_CAP = 1e6
 
 def _step5_joint(aug: Augmented, params: dict, K, T, *, rest: bool = True):
     """Theorem 1's (29) per rule at the gain K, in ``(P1t, Pt, s, rho)`` (``P29 = P1t / s``, ``Pbar = Pt / s``,
-    ``Q_i = rho_i Cbar^T / (2 s)``: homogenised as (46)), the normalisation of Pt and ``0 < P1t <= P1_CAP kappa I``,
-    then (55), (64) per rule, and ``s > 0``. Margins per block: ``P1t / tau`` in x (a decay rate of the loop's part of V relative
-    to the plant's rate ``1 / tau``), ``gamma^2 s`` in d, I in e (as (46)), ``gamma2^2 s`` in d2."""
-    n, ld, nbar, r = aug.n, aug.ld, aug.nbar, aug.r
-    g = params["gamma"]
-    g2 = params.get("gamma2", g)
+    ``Q_i = rho_i Cbar^T / (2 s)``: homogenised as (46); :func:`~._lmis.posed`), the normalisation of Pt and
+    ``0 < P1t <= P1_CAP kappa I``, then (55), (64) per rule, and ``s > 0``."""
+    n, nbar, r = aug.n, aug.nbar, aug.r
     kappa = _kappa(params)
-    rate = 1.0 / time_scale(aug)
     layout = Layout(Var("Pt", (nbar, nbar), True), Var("P1", (n, n), True), Var("s", ()), Var("rho", (r,)),
                     Var("tau", ()))  # fmt: skip
-    l2 = aug.Mbar[0].shape[1]
-    k = n + ld + nbar + l2
-
-    def b29(i):
-        def f(Pt, P1, s, rho, tau):
-            return lmi29(aug, i, K, P1, T, Pt, rho[i] * aug.Cbar.T / 2, g, g2, const=s)
-
-        return f
-
-    def m29(Pt, P1, s, rho, tau):
-        M = _diag([n, ld, nbar, l2], [0.0, g**2 * s, 1.0, g2**2 * s])
-        M[:n, :n] = rate * P1
-        return M
-
-    def decay(Pt, P1, s, rho, tau):
-        M = np.zeros((k, k))
-        M[n + ld : n + ld + nbar, n + ld : n + ld + nbar] = 2 * Pt
-        return M
-
-    Ee = np.eye(k)[n + ld : n + ld + nbar]
-    feas = [margin_lmi(f"(29) rule {i + 1}", layout, b29(i), decay, m29,
-                       support=layout.support("Pt", "P1", "s", ("rho", i)),
-                       kron=("Pt", lmi46_kron(aug, i, K, T)), kron_param=("Pt", [(Ee, Ee)]))
-            for i in range(r)]  # fmt: skip
-    feas += _normalisation(layout, "Pt", nbar, kappa)
+    at = Posed(aug, params, layout, K=K, T=T)
+    feas = posed(JOINT, at)[0] + _normalisation(layout, "Pt", nbar, kappa)
     eye = np.eye(n)
     cap = P1_CAP * kappa
     # s > 0 (Pbar = Pt / s > 0): without unknown inputs nothing else in (29) asks it (in (46) the x block's -sigma s I does)
@@ -689,26 +595,11 @@ def _step5_joint(aug: Augmented, params: dict, K, T, *, rest: bool = True):
     ]  # fmt: skip
     if not rest:
         return layout, feas, [], None
-    return (layout, feas) + _sliding_part(aug, T, layout)
+    return layout, feas, posed(JOINT, at, "rest")[0], _objective(aug, layout)
 
 
-def _sliding_part(aug: Augmented, T, layout: Layout):
-    """(55) and (64) per rule in ``(Pt, tau)`` and step 5's objective: ``(others, c)``."""
-    n, nbar, r, lf = aug.n, aug.nbar, aug.r, aug.ns  # ns = lf (+ Remark 5's directions)
-    Cb = aug.Cbar
-    Cp = np.linalg.pinv(Cb)
-
-    def N_of(Pt):
-        return aug.Js.T @ T.T @ Pt @ Cp
-
-    others = [margin_lmi("(55)", layout, lambda Pt, tau, **_: _balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
-                       margin=lambda Pt, tau, **_: _balanced_margin(tau, nbar, lf), support=layout.support("Pt", "tau"),
-                       kron=("Pt", sliding_kron(aug, T, np.eye(nbar) - Cp @ Cb)))]  # fmt: skip
-    others += [margin_lmi(f"(64) rule {i + 1}", layout,
-                        lambda Pt, tau, i=i, **_: _balanced(diffusion_coupling(aug, i, T, Pt), tau),
-                        margin=lambda Pt, tau, **_: _balanced_margin(tau, n, lf), support=layout.support("Pt", "tau"),
-                        kron=("Pt", sliding_kron(aug, T, T @ aug.Wbar[i])))
-             for i in range(r)]  # fmt: skip
+def _objective(aug: Augmented, layout: Layout) -> np.ndarray:
+    """Step 5's objective ``min sy^2 sum_i rho_i + tau``."""
     c = np.zeros(layout.size)
     # rho_i enters as rho_i Cbar^T Cbar: outputs sy times larger (mm for m) give the same observer at rho_i / sy^2,
     # and an unweighted sum rho_i + tau then weighs the gains sy^2 times less (a slow 4-state plant in mm needed a
@@ -716,7 +607,7 @@ def _sliding_part(aug: Augmented, T, layout: Layout):
     # depend on the outputs' units (sy = 1 for every built-in plant: their designs are unchanged)
     c[layout.index("rho")] = output_scale(aug) ** 2
     c[layout.index("tau")] = 1.0
-    return others, c
+    return c
 
 
 class _Step5:

@@ -15,25 +15,31 @@ unscaled point. With the default ``const = 1`` they are the printed LMIs, which 
 evaluates.
 
 :data:`LMIS` registers each LMI once: its key in the design document (``checks["lmi_max_eig"]["45"]``), its
-Theorem 5 number, what it certifies, its block sizes and how its left sides are built at a design point.
-The certificate (:func:`~fte_casadi.design.core._certify.certificate`), its failures, the re-certification of
-a loaded document, ``fte design``'s summary and ``fte reproduce``'s table read it; a new LMI is one
-:class:`LMI` given to :func:`register` (with its builder).
+Theorem 5 number, what it certifies, its block sizes, how its left sides are built at a design point, and how it
+is posed in each problem that solves for it (``pose``, by the names of :data:`PROBLEMS`; :func:`posed` gathers
+them for a problem, which adds only its own scaffolding). The certificate
+(:func:`~fte_casadi.design.core._certify.certificate`), its failures, the re-certification of a loaded document,
+``fte design``'s summary and ``fte reproduce``'s table read it; a new LMI is one :class:`LMI` given to
+:func:`register` (with its builder, and its posings where the design solves for it).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from .._augment import Augmented
 from ._linalg import sym as _sym
+from ._sdp import Layout, affine_lmi, margin_lmi
 
 __all__ = ["LMI", "LMIS", "register", "unregister", "block_sizes", "distinct", "theta_lmi_max_eig",
            "lmi45", "lmi_decay", "lmi_decay_kron", "loop_decay", "lmi46", "lmi55", "lmi64", "lmi45_kron", "lmi46_kron", "lmi46_terms", "sliding_kron",
-           "sliding_mismatch", "diffusion_coupling", "lmi29", "routes", "THEOREM3", "THEOREM1"]  # fmt: skip
+           "sliding_mismatch", "diffusion_coupling", "lmi29", "routes", "THEOREM3", "THEOREM1", "Posed", "Posing", "posed",
+           "PROBLEMS", "STEP3", "STEP5", "JOINT", "PAPER3", "PAPER5", "STRICT", "balanced", "balanced_margin",
+           "diag_blocks"]  # fmt: skip
 
 
 def _parts(aug: Augmented, i: int):
@@ -292,6 +298,243 @@ def distinct(K) -> list[int]:
     return out
 
 
+# -- how the LMIs are posed -------------------------------------------------------------------------------
+
+#: the problems that solve for the registered LMIs, by the name an LMI's ``pose`` uses: the conditioned
+#: variant's step 3 (X', Y', s, t) and step 5 by (46) (Pt, s, rho, tau) or by Theorem 1's (29) (Pt, P1, s, rho,
+#: tau) (:mod:`._conditioned`), and the paper variant's two solves as printed (:mod:`._paper`)
+STEP3, STEP5, JOINT, PAPER3, PAPER5 = "step 3", "step 5", "step 5 by (29)", "paper step 3", "paper step 5"
+PROBLEMS = (STEP3, STEP5, JOINT, PAPER3, PAPER5)
+#: the paper variant's strict LMIs are imposed as ``<= -STRICT I``
+STRICT = 1e-7
+
+
+@dataclass(frozen=True)
+class Posed:
+    """What a problem gives the LMIs it poses: the augmented plant, the design's parameters, the problem's
+    unknowns (``layout``) and what is fixed there: the input scaling ``Su`` (step 3), the loop's gain ``K``
+    (one matrix, or the paper's list of ``K_j``), ``T`` and step 3's ``X`` (step 5)."""
+
+    aug: Augmented
+    params: dict
+    layout: Layout
+    Su: np.ndarray | None = None
+    K: Any = None
+    T: np.ndarray | None = None
+    X: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Posing:
+    """How one LMI is posed in one problem: ``build(posed)`` returns its constraints there (``MarginLMI`` in the
+    conditioned variant, ``AffineLMI`` in the paper's; none when it does not apply, e.g. no decay rate asked);
+    ``part``: ``"feasibility"`` (in the solve that finds a first point) or ``"rest"`` (added after it: step 5's
+    (55), (64)); ``soft``: relaxed by phase 1's slack (step 3's (45) and the decay LMI), posed before the hard
+    ones."""
+
+    build: Callable[[Posed], list]
+    part: str = "feasibility"
+    soft: bool = False
+
+
+def posed(problem: str, at: Posed, part: str = "feasibility") -> tuple[list, int]:
+    """The constraints of every registered LMI posed in ``problem`` (its ``pose``) for ``part``, in the order
+    registered, the soft ones first; and how many are soft."""
+    if problem not in PROBLEMS:
+        raise ValueError(f"no problem {problem!r}; the problems are {', '.join(PROBLEMS)}")
+    chosen = [e.pose[problem] for e in LMIS.values() if problem in e.pose and e.pose[problem].part == part]
+    soft = [L for p in chosen if p.soft for L in p.build(at)]
+    return soft + [L for p in chosen if not p.soft for L in p.build(at)], len(soft)
+
+
+def diag_blocks(sizes, values) -> np.ndarray:
+    """The block-diagonal matrix with ``values[k] I`` in a block of ``sizes[k]``."""
+    return np.diag(np.concatenate([np.full(k, float(v)) for k, v in zip(sizes, values)]))
+
+
+def balanced(E: np.ndarray, tau) -> np.ndarray:
+    """``[[-tau I, E^T], [E, -tau I]] <= 0``, i.e. ``||E||_2 <= tau``."""
+    a, b = E.shape[1], E.shape[0]
+    return np.block([[-tau * np.eye(a), E.T], [E, -tau * np.eye(b)]])
+
+
+def balanced_margin(tau, a: int, b: int) -> np.ndarray:
+    """The relative margin of :func:`balanced`: ``||E||_2 <= (1 - m) tau``."""
+    return tau * np.eye(a + b)
+
+
+def _pose45(at: Posed) -> list:
+    """(45) per rule in ``(X', Y', s, t)``, one common gain ``K = Su Y' X'^-1``; margin relative to each block."""
+    aug, lay, Su = at.aug, at.layout, at.Su
+    sg, g, g1 = at.params["sigma"], at.params["gamma"], at.params["gamma1"]
+    D = diag_blocks([aug.n, aug.n, aug.p, aug.ld], [sg, 0.0, 1.0, g**2 - g1**2])
+    return [margin_lmi(f"(45) rule {i + 1}", lay, lambda X, Y, s, t, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
+                       margin=lambda X, Y, s, t: s * D, support=lay.support("X", "Y", "s"),
+                       kron=("X", lmi45_kron(aug, i)))
+            for i in range(aug.r)]  # fmt: skip
+
+
+def _pose_decay(at: Posed) -> list:
+    """The decay LMI per rule where a rate is asked (``params["beta"] > 0``): homogeneous in ``(X', Y')``, its
+    margin relative to the rate, ``<= -2 beta m I`` (``X' >= I``)."""
+    aug, lay, Su = at.aug, at.layout, at.Su
+    beta = float(at.params.get("beta", 0.0))
+    if beta <= 0:
+        return []
+    eye = np.eye(aug.n)
+    return [margin_lmi(f"decay rule {i + 1}", lay, lambda X, Y, s, t, i=i: lmi_decay(aug, i, X, Su @ Y, beta),
+                       margin=lambda X, Y, s, t: 2 * beta * eye, support=lay.support("X", "Y"),
+                       kron=("X", lmi_decay_kron(aug, i, beta)))
+            for i in range(aug.r)]  # fmt: skip
+
+
+def _pose46(at: Posed) -> list:
+    """(46) per rule in ``(Pt, s, rho, tau)`` after the congruence by ``diag(X, I)``, ``Q_i = rho_i Cbar^T / 2``,
+    without its d rows (decoupled: ``-gamma1^2 s I`` holds iff ``s > 0``, which the x block demands; posed, it only
+    made the problem badly scaled; the certificate keeps it); the decay term ``2 alpha Pt`` its parameter."""
+    aug, lay, K, T, X = at.aug, at.layout, at.K, at.T, at.X
+    n, ld, nbar, r = aug.n, aug.ld, aug.nbar, aug.r
+    sg, g1 = at.params["sigma"], at.params["gamma1"]
+    g2 = at.params.get("gamma2", at.params["gamma"])
+    P = np.linalg.inv(X)
+    Cb = aug.Cbar
+    l2 = aug.Mbar[0].shape[1]
+    k = n + ld + nbar + l2
+    Dx = np.eye(k)
+    Dx[:n, :n] = X
+    keep = np.r_[0:n, n + ld : k]
+    sub = np.ix_(keep, keep)
+
+    def b46(i):
+        def f(Pt, s, rho, tau):
+            return (Dx @ lmi46(aug, i, K, P, T, Pt, rho[i] * Cb.T / 2, sg, g1, g2, const=s) @ Dx)[sub]
+
+        return f
+
+    def m46(Pt, s, rho, tau):
+        return diag_blocks([n, nbar, l2], [sg * s, 1.0, g2**2 * s])
+
+    def decay(Pt, s, rho, tau):
+        M = np.zeros((n + nbar + l2, n + nbar + l2))
+        M[n : n + nbar, n : n + nbar] = 2 * Pt
+        return M
+
+    def k46(i):  # the Kron terms of (46) after the congruence by Dx, without the d rows
+        return "Pt", [
+            (U @ Dx[:, keep], None if V is None else V @ Dx[:, keep]) for U, V in lmi46_kron(aug, i, K, T)
+        ]
+
+    Ee = np.eye(k)[n + ld : n + ld + nbar][:, keep]
+    return [margin_lmi(f"(46) rule {i + 1}", lay, b46(i), decay, m46, support=lay.support("Pt", "s", ("rho", i)),
+                       kron=k46(i), kron_param=("Pt", [(Ee, Ee)]))
+            for i in range(r)]  # fmt: skip
+
+
+def _pose29(at: Posed) -> list:
+    """Theorem 1's (29) per rule in ``(P1t, Pt, s, rho)`` (``P29 = P1t / s``, homogenised as (46)); margins per
+    block: ``P1t / tau`` in x (a decay rate of the loop's part of V relative to the plant's rate ``1 / tau``),
+    ``gamma^2 s`` in d, I in e, ``gamma2^2 s`` in d2; the decay term ``2 alpha Pt`` its parameter."""
+    from .._augment import time_scale
+
+    aug, lay, K, T = at.aug, at.layout, at.K, at.T
+    n, ld, nbar, r = aug.n, aug.ld, aug.nbar, aug.r
+    g = at.params["gamma"]
+    g2 = at.params.get("gamma2", g)
+    rate = 1.0 / time_scale(aug)
+    l2 = aug.Mbar[0].shape[1]
+    k = n + ld + nbar + l2
+
+    def b29(i):
+        def f(Pt, P1, s, rho, tau):
+            return lmi29(aug, i, K, P1, T, Pt, rho[i] * aug.Cbar.T / 2, g, g2, const=s)
+
+        return f
+
+    def m29(Pt, P1, s, rho, tau):
+        M = diag_blocks([n, ld, nbar, l2], [0.0, g**2 * s, 1.0, g2**2 * s])
+        M[:n, :n] = rate * P1
+        return M
+
+    def decay(Pt, P1, s, rho, tau):
+        M = np.zeros((k, k))
+        M[n + ld : n + ld + nbar, n + ld : n + ld + nbar] = 2 * Pt
+        return M
+
+    Ee = np.eye(k)[n + ld : n + ld + nbar]
+    return [margin_lmi(f"(29) rule {i + 1}", lay, b29(i), decay, m29,
+                       support=lay.support("Pt", "P1", "s", ("rho", i)),
+                       kron=("Pt", lmi46_kron(aug, i, K, T)), kron_param=("Pt", [(Ee, Ee)]))
+            for i in range(r)]  # fmt: skip
+
+
+def _pose55(at: Posed) -> list:
+    """(55) in ``(Pt, tau)`` with N eliminated (``N = Js^T T^T Pt Cbar^+``, the exact minimiser of the mismatch),
+    in the balanced form ``||E(Pt)|| <= tau``."""
+    aug, lay, T = at.aug, at.layout, at.T
+    nbar, lf = aug.nbar, aug.ns  # ns = lf (+ Remark 5's directions)
+    Cb = aug.Cbar
+    Cp = np.linalg.pinv(Cb)
+
+    def N_of(Pt):
+        return aug.Js.T @ T.T @ Pt @ Cp
+
+    return [margin_lmi("(55)", lay, lambda Pt, tau, **_: balanced(sliding_mismatch(aug, T, Pt, N_of(Pt)), tau),
+                       margin=lambda Pt, tau, **_: balanced_margin(tau, nbar, lf), support=lay.support("Pt", "tau"),
+                       kron=("Pt", sliding_kron(aug, T, np.eye(nbar) - Cp @ Cb)))]  # fmt: skip
+
+
+def _pose64(at: Posed) -> list:
+    """(64) per rule in ``(Pt, tau)``, in the balanced form ``||E_i(Pt)|| <= tau``."""
+    aug, lay, T = at.aug, at.layout, at.T
+    n, lf = aug.n, aug.ns
+    return [margin_lmi(f"(64) rule {i + 1}", lay,
+                       lambda Pt, tau, i=i, **_: balanced(diffusion_coupling(aug, i, T, Pt), tau),
+                       margin=lambda Pt, tau, **_: balanced_margin(tau, n, lf), support=lay.support("Pt", "tau"),
+                       kron=("Pt", sliding_kron(aug, T, T @ aug.Wbar[i])))
+            for i in range(aug.r)]  # fmt: skip
+
+
+def _paper45(at: Posed) -> list:
+    """(45) as printed for every rule i and gain ``Y_j`` (the paper's one gain per rule), ``<= -STRICT I``."""
+    aug, p = at.aug, at.params
+    sg, g, g1, r = p["sigma"], p["gamma"], p["gamma1"], aug.r
+    k = 2 * aug.n + aug.p + aug.ld
+    return [affine_lmi(f"(45) rule {i + 1}, gain {j + 1}", at.layout,
+                       lambda i=i, j=j, **u: lmi45(aug, i, u["X"], u[f"Y{j}"], sg, g, g1) + STRICT * np.eye(k))
+            for i in range(r) for j in range(r)]  # fmt: skip
+
+
+def _paper46(at: Posed) -> list:
+    """(46) as printed for every rule i and gain ``K_j`` at ``P = X^-1``, ``Q_i`` free, ``<= -STRICT I``."""
+    aug, p, K, T = at.aug, at.params, at.K, at.T
+    sg, g1, g2, r = p["sigma"], p["gamma1"], p.get("gamma2", p["gamma"]), aug.r
+    P = np.linalg.inv(at.X)
+    k = aug.n + aug.ld + aug.nbar + aug.Mbar[0].shape[1]
+    return [affine_lmi(f"(46) rule {i + 1}, gain {j + 1}", at.layout,
+                       lambda i=i, j=j, **u: lmi46(aug, i, K[j], P, T, u["Pbar"], u[f"Q{i}"], sg, g1, g2) + STRICT * np.eye(k))
+            for i in range(r) for j in range(r)]  # fmt: skip
+
+
+def _schur(L0: np.ndarray, theta, a: int, b: int) -> np.ndarray:
+    """(55)/(64) built at theta = 0, with ``-theta I`` in the first block and the strictness margin."""
+    M = L0.copy()
+    M[:a, :a] -= theta * np.eye(a)
+    return M + STRICT * np.eye(a + b)
+
+
+def _paper55(at: Posed) -> list:
+    aug, T = at.aug, at.T
+    return [affine_lmi("(55)", at.layout,
+                       lambda **u: _schur(lmi55(aug, T, u["Pbar"], u["N"], 0.0), u["theta"], aug.nbar, aug.ns))]  # fmt: skip
+
+
+def _paper64(at: Posed) -> list:
+    aug, T = at.aug, at.T
+    return [affine_lmi(f"(64) rule {i + 1}", at.layout,
+                       lambda i=i, **u: _schur(lmi64(aug, i, T, u["Pbar"], 0.0), u["theta"], aug.n, aug.ns))
+            for i in range(aug.r)]  # fmt: skip
+
+
 # -- the registry -----------------------------------------------------------------------------------------
 
 
@@ -315,6 +558,7 @@ class LMI:
     blocks: Callable[[Augmented], list]
     max_eig: Callable[[np.ndarray, list], float] | None = None
     route: str = ""
+    pose: Mapping[str, Posing] = field(default_factory=dict)
 
     def number(self, theorem: int | None = 3) -> str:
         """Its number in ``theorem`` (3 or 5): ``"45"`` or ``"78"``."""
@@ -330,9 +574,17 @@ LMIS: dict[str, LMI] = {}
 
 
 def register(lmi: LMI) -> LMI:
-    """Add ``lmi`` to :data:`LMIS` (a key already there is refused); returns it."""
+    """Add ``lmi`` to :data:`LMIS` (a key already there is refused, as a problem it cannot be posed in, and a
+    posing in step 3 that is not soft: phase 1 relaxes every LMI of step 3 but the normalisation); returns it."""
     if lmi.key in LMIS:
         raise ValueError(f"an LMI with the key {lmi.key!r} is registered already ({LMIS[lmi.key].what})")
+    unknown = sorted(set(lmi.pose) - set(PROBLEMS))
+    if unknown:
+        raise ValueError(
+            f"LMI {lmi.key!r} is posed in {', '.join(unknown)}: the problems are {', '.join(PROBLEMS)}"
+        )
+    if STEP3 in lmi.pose and not (lmi.pose[STEP3].soft and lmi.pose[STEP3].part == "feasibility"):
+        raise ValueError(f"LMI {lmi.key!r}: an LMI posed in step 3 is soft and in its feasibility part")
     LMIS[lmi.key] = lmi
     return lmi
 
@@ -418,15 +670,19 @@ def _blocks_46(aug):
 #: the two certificates (routes) a design can have: the paper's (45)-(46), and Theorem 1's (29) where they do not hold
 THEOREM3, THEOREM1 = "Theorem 3", "Theorem 1"
 register(LMI("45", "78", "the state-feedback loop: X, K_j, the attenuation gamma of d (step 3)", _at_45,
-             lambda aug: [aug.n, aug.n, aug.p, aug.ld], route=THEOREM3))  # fmt: skip
+             lambda aug: [aug.n, aug.n, aug.p, aug.ld], route=THEOREM3,
+             pose={STEP3: Posing(_pose45, soft=True), PAPER3: Posing(_paper45)}))  # fmt: skip
 register(LMI("decay", None, "the closed loop's decay rate beta (params.beta, 0 when absent): A_i X + X A_i^T + "
-             "B_i Y_j + Y_j^T B_i^T + 2 beta X < 0 (step 3; not in the paper)", _at_decay, lambda aug: [aug.n]))  # fmt: skip
+             "B_i Y_j + Y_j^T B_i^T + 2 beta X < 0 (step 3; not in the paper)", _at_decay, lambda aug: [aug.n],
+             pose={STEP3: Posing(_pose_decay, soft=True)}))  # fmt: skip
 register(LMI("46", "79", "the observer: Pbar, Q_i at the loop's K_j, the attenuation gamma1 (step 5)", _at_46,
-             _blocks_46, route=THEOREM3))  # fmt: skip
+             _blocks_46, route=THEOREM3, pose={STEP5: Posing(_pose46), PAPER5: Posing(_paper46)}))  # fmt: skip
 register(LMI("29", None, "the closed loop (27) with V = x^T P29 x + e^T Pbar e at the loop's K: mean-square "
              "stability and the attenuation gamma (Theorem 1; where (45)-(46) do not hold)", _at_29, _blocks_46,
-             route=THEOREM1))  # fmt: skip
+             route=THEOREM1, pose={JOINT: Posing(_pose29)}))  # fmt: skip
 register(LMI("55", "80", "the sliding surface (20): ||J1^T T^T Pbar - N Cbar||^2 <= theta", _at_55,
-             lambda aug: [aug.nbar, aug.ns], _theta_max_eig))  # fmt: skip
+             lambda aug: [aug.nbar, aug.ns], _theta_max_eig,
+             pose={STEP5: Posing(_pose55, "rest"), JOINT: Posing(_pose55, "rest"), PAPER5: Posing(_paper55)}))  # fmt: skip
 register(LMI("64", "81", "the diffusion the sliding variable sees: ||J1^T T^T Pbar T Wbar_i||^2 <= theta", _at_64,
-             lambda aug: [aug.n, aug.ns], _theta_max_eig))  # fmt: skip
+             lambda aug: [aug.n, aug.ns], _theta_max_eig,
+             pose={STEP5: Posing(_pose64, "rest"), JOINT: Posing(_pose64, "rest"), PAPER5: Posing(_paper64)}))  # fmt: skip

@@ -16,13 +16,10 @@ import numpy as np
 from ...errors import InfeasibleDesignError
 from .._augment import Augmented
 from ._conditioned import Step3, Step5
-from ._lmis import lmi45, lmi46, lmi55, lmi64
+from ._lmis import PAPER3, PAPER5, STRICT, Posed, posed
 from ._sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
 __all__ = ["step3", "step5", "STRICT"]
-
-#: strict LMIs are imposed as ``<= -STRICT I``
-STRICT = 1e-7
 
 
 def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.ndarray]]:
@@ -30,9 +27,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.nda
     n, m, r = aug.n, aug.m, aug.r
     sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
     layout = Layout(Var("X", (n, n), True), *[Var(f"Y{j}", (m, n)) for j in range(r)])
-    lmis = [affine_lmi(f"(45) rule {i + 1}, gain {j + 1}", layout,
-                       lambda i=i, j=j, **u: lmi45(aug, i, u["X"], u[f"Y{j}"], sg, g, g1) + STRICT * np.eye(2 * n + aug.p + aug.ld))
-            for i in range(r) for j in range(r)]  # fmt: skip
+    lmis, _ = posed(PAPER3, Posed(aug, params, layout))  # (45) for every rule i and gain j
     lmis.append(affine_lmi("X > 0", layout, lambda **u: STRICT * np.eye(n) - u["X"]))
     prob = ConicProblem(layout, lmis)
     res = prob.solve(solver)
@@ -53,26 +48,10 @@ def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.nda
 
 def step5(aug: Augmented, params: dict, X, K: list, T, solver: str) -> Step5:
     """``min theta`` s.t. (46) for every (i, j), (55), (64), Pbar > 0 (Q_i, N free)."""
-    n, p, nbar, lf, r = aug.n, aug.p, aug.nbar, aug.ns, aug.r  # ns = lf (+ Remark 5's directions)
-    sg, g1 = params["sigma"], params["gamma1"]
-    g2 = params.get("gamma2", params["gamma"])
-    P = np.linalg.inv(X)
+    p, nbar, lf, r = aug.p, aug.nbar, aug.ns, aug.r  # ns = lf (+ Remark 5's directions)
     layout = Layout(Var("Pbar", (nbar, nbar), True), *[Var(f"Q{i}", (nbar, p)) for i in range(r)],
                     Var("N", (lf, p)), Var("theta", ()))  # fmt: skip
-    lmis = []
-    for i in range(r):
-        for j in range(r):
-            k46 = lmi46(aug, i, K[j], P, T, np.eye(nbar), np.zeros((nbar, p)), sg, g1, g2).shape[0]
-            lmis.append(affine_lmi(f"(46) rule {i + 1}, gain {j + 1}", layout,
-                                   lambda i=i, j=j, k=k46, **u: lmi46(aug, i, K[j], P, T, u["Pbar"], u[f"Q{i}"], sg, g1, g2)
-                                   + STRICT * np.eye(k)))  # fmt: skip
-        lmis.append(affine_lmi(f"(64) rule {i + 1}", layout,
-                               lambda i=i, **u: _schur(lmi64(aug, i, T, u["Pbar"], 0.0), u["theta"], n, lf)))  # fmt: skip
-    lmis.append(
-        affine_lmi(
-            "(55)", layout, lambda **u: _schur(lmi55(aug, T, u["Pbar"], u["N"], 0.0), u["theta"], nbar, lf)
-        )
-    )
+    lmis, _ = posed(PAPER5, Posed(aug, params, layout, K=K, T=T, X=X))  # (46) for every (i, j), (55), (64)
     lmis.append(affine_lmi("Pbar > 0", layout, lambda **u: STRICT * np.eye(nbar) - u["Pbar"]))
     c = np.zeros(layout.size)
     c[layout.index("theta")] = 1.0
@@ -90,10 +69,3 @@ def step5(aug: Augmented, params: dict, X, K: list, T, solver: str) -> Step5:
     ]
     return Step5(u["Pbar"], [u[f"Q{i}"] for i in range(r)], u["N"], float(u["theta"]), 0.0, res.status,
                  prob.solves, prob.seconds, {"alpha": 0.0, "why": "the paper variant imposes no decay rate"}, notes)  # fmt: skip
-
-
-def _schur(L0: np.ndarray, theta: float, a: int, b: int) -> np.ndarray:
-    """(55)/(64) built at theta = 0, with ``-theta I`` in the first block and a strictness margin."""
-    M = L0.copy()
-    M[:a, :a] -= theta * np.eye(a)
-    return M + STRICT * np.eye(a + b)
