@@ -22,3 +22,5 @@ from .sim import simulate as simulate
 from .step import step_function as step_function
 from .ts import TSModel as TSModel
 from .ts import derive as derive
+
+_interrupt.loaded()  # Python's Ctrl-C handler again; an interrupt swallowed while the modules loaded ends here

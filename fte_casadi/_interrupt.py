@@ -9,7 +9,10 @@ folder), refuses to write one after the interrupt. A library user's process is n
 installed unless the command runs, and :func:`pending` is False outside it.
 
 :func:`quiet_loading` covers the instant before the command runs: a Ctrl-C while the package's modules load
-ends the process with status 130 and one line, not a traceback.
+ends the process with status 130 and one line, not a traceback, also where a library swallows it or turns it into
+another error while it loads (scipy's HiGHS extension reports "ImportError: initialization failed"): the SIGINT is
+recorded while the modules load, and :func:`loaded`, at the end of the package's ``__init__``, restores Python's
+handler and raises the interrupt that was swallowed.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ import signal
 import sys
 import threading
 
-__all__ = ["handling", "pending", "check", "interrupted", "quiet_loading"]
+__all__ = ["handling", "pending", "check", "interrupted", "quiet_loading", "loaded"]
 
 
 class _State:
@@ -28,6 +31,8 @@ class _State:
 
     seen = False
     active = False
+    #: a SIGINT came while the package's modules loaded (:func:`quiet_loading`)
+    loading = False
 
 
 def pending() -> bool:
@@ -83,7 +88,7 @@ def _while_loading(previous):
             code = t.tb_frame.f_code
             loading |= code.co_name == "<module>" and os.path.abspath(code.co_filename).startswith(package)
             t = t.tb_next
-        if issubclass(kind, KeyboardInterrupt) and loading:
+        if loading and (issubclass(kind, KeyboardInterrupt) or _State.loading):
             with contextlib.suppress(Exception):
                 sys.stderr.write("fte: interrupted while loading; nothing was written\n")
                 sys.stderr.flush()
@@ -94,10 +99,32 @@ def _while_loading(previous):
     return hook
 
 
+def _on_sigint_loading(signum, frame) -> None:
+    _State.loading = True
+    raise KeyboardInterrupt
+
+
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
 def quiet_loading() -> None:
-    """Make a Ctrl-C while the package loads end the process quietly (:func:`_while_loading`); once."""
+    """Make a Ctrl-C while the package loads end the process quietly (:func:`_while_loading`; once), and record
+    it (where Python's own handler is in force, in the main thread) until :func:`loaded`."""
     if not getattr(sys.excepthook, "fte_loading", False):
         sys.excepthook = _while_loading(sys.excepthook)
+    if _main_thread() and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _on_sigint_loading)
+
+
+def loaded() -> None:
+    """The modules are loaded: Python's handler again, and an interrupt that came while they loaded and that a
+    library swallowed is raised now (the hook of :func:`quiet_loading` ends the process with status 130)."""
+    if _main_thread() and signal.getsignal(signal.SIGINT) is _on_sigint_loading:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if _State.loading:
+        _State.loading = False
+        raise KeyboardInterrupt
 
 
 quiet_loading()  # imported first by fte_casadi/__init__.py: in force while the rest of the package loads
