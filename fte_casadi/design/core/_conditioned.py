@@ -272,9 +272,9 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
 
 
 def _soft(family) -> int:
-    """How many of step 3's LMIs (:func:`_step3_problem`) are soft: the registered ones posed in it (every one of
-    them is, :func:`~._lmis.register`), first; the two of the normalisation of X' and the epigraph of t follow."""
-    return len(family) - 3
+    """How many of step 3's LMIs (:func:`_step3_problem`, with or without its epigraph) are soft: the registered
+    ones posed in it (every one of them is, :func:`~._lmis.register`), all before the normalisation of X'."""
+    return [getattr(L, "base", L).name for L in family].index("X >= I")
 
 
 def _step3_conic(aug: Augmented, params: dict, solver: str, tau: float, layout: Layout, Su: np.ndarray):
