@@ -32,11 +32,18 @@ def _files(folder: Path) -> dict[str, bytes]:
     return {str(f.relative_to(folder)): f.read_bytes() for f in sorted(folder.rglob("*")) if f.is_file()}
 
 
+def _interruptible() -> None:
+    """In the child, before Python starts: Ctrl-C as a terminal gives it. A suite started in the background of a
+    non-interactive shell (``pytest &``) ignores SIGINT, the children inherit that, and Python then installs no
+    handler: the signals these tests send would be ignored, as they should be for such a process."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _fte(*args: str, **kw) -> subprocess.Popen:
-    """``python -m fte_casadi ARGS`` from this checkout, in its own process."""
+    """``python -m fte_casadi ARGS`` from this checkout, in its own process, interruptible."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     return subprocess.Popen([sys.executable, "-m", "fte_casadi", *args], cwd=ROOT, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, **kw)  # fmt: skip
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_interruptible, **kw)  # fmt: skip
 
 
 def _said(r) -> str:
@@ -397,7 +404,7 @@ def test_ctrl_c_while_the_modules_load_is_one_line():
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     code = "import sys; sys.stderr.write('go\\n'); sys.stderr.flush(); import fte_casadi.cli"
     p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE)  # fmt: skip
+                         stderr=subprocess.PIPE, preexec_fn=_interruptible)  # fmt: skip
     assert p.stderr.readline() == b"go\n"  # Python is up; fte_casadi's modules load now (about 2 s)
     time.sleep(0.2)
     p.send_signal(signal.SIGINT)
