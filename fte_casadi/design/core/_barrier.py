@@ -76,6 +76,7 @@ class _Barrier:
         self.hess = []  # per group, how its Hessian terms are gathered and added (fixed by the supports)
         self.krons = []  # per group, (start, n, A, B) of its Kron terms, or None
         self._gather: dict = {}  # per Kron unknown, where its Hessian entries are gathered (_kron_finish)
+        self._cross: dict = {}  # per group's Kron terms, where its cross terms are gathered (_kron_derivatives)
 
         def sig(L):
             return None if L.kron is None else (L.kron.start, L.kron.n, L.kron.A.shape[0])
@@ -192,12 +193,19 @@ class _Barrier:
             AW = Am[:, None] @ W  # (g, nd, H n, k): A_h W_l
             AW = AW.reshape(g, -1, H, n, k).transpose(0, 1, 3, 2, 4).reshape(g, -1, n, H * k)
             C = AW @ np.swapaxes(B, 2, 3).reshape(g, 1, H * k, n)  # sum_h A_h W_l B_h^T, (g, nd, n, n)
-            iu, ju = np.triu_indices(n)
-            w = np.where(iu == ju, 0.5, 1.0)
-            X = ((C[:, :, iu, ju] + C[:, :, ju, iu]) * w).ravel()  # (g, nd, n(n+1)/2)
-            rows = self.pos[start : start + len(iu)]
             nf = Hm.shape[0]
-            at = (ip[:, :, None] * nf + rows[None, None, :]).ravel()
+            key = id(kr)  # the group's Kron terms: where its cross terms go is fixed for the barrier's life
+            if key not in self._cross:
+                iu, ju = np.triu_indices(n)
+                rows = self.pos[start : start + len(iu)]
+                self._cross[key] = (
+                    iu,
+                    ju,
+                    np.where(iu == ju, 0.5, 1.0),
+                    (ip[:, :, None] * nf + rows[None, None, :]).ravel(),
+                )
+            iu, ju, w, at = self._cross[key]
+            X = ((C[:, :, iu, ju] + C[:, :, ju, iu]) * w).ravel()  # (g, nd, n(n+1)/2)
             Hx = np.bincount(at, weights=X, minlength=nf * nf).reshape(nf, nf)
             Hm += Hx + Hx.T
 
