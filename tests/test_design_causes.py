@@ -91,6 +91,7 @@ def _counting(monkeypatch):
     return count
 
 
+@pytest.mark.heavy  # the cost of the parameter search on 64 rules: a benchmark (fte bench's growth family)
 def test_a_64_rule_chain_designs_at_its_defaults_within_one_and_a_half_designs_of_work(monkeypatch):
     ts = derive(chainfar(), fidelity_samples=300)
     assert ts.r == 64 and not ts.plant.design_defaults

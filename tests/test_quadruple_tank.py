@@ -53,6 +53,7 @@ def test_designs_at_its_own_parameters(ts):
 
 
 @pytest.mark.slow
+@pytest.mark.heavy  # test_design.py::test_clarabel_and_scs_give_the_same_design checks it on two plants in seconds
 def test_certifies_with_scs_too(ts, committed):
     """The same parameters with the other solver: certified, and the same observer up to the solvers'
     tolerance (the centred point is unique; only where it is found from differs)."""
