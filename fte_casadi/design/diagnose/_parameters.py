@@ -38,6 +38,9 @@ class Trial:
 
     change: dict
     error: FteError | None
+    #: ``(id(ts), id(options))`` of the attempt: the same change asked again of the same model and options is not
+    #: made again (:func:`try_design`; the parameter search and the refusal's explanation try some of the same)
+    of: tuple = ()
 
     @property
     def lmi(self) -> str | None:
@@ -61,15 +64,19 @@ def try_design(
 ) -> Design | None:
     """The whole design with ``options`` changed by ``change`` (without diagnosis unless ``change`` asks for it,
     a certificate required), or None when it does not give a certified design (then its :class:`Trial` is
-    appended to ``refused``)."""
+    appended to ``refused``; a change already refused there for the same ``ts`` and ``options`` is not tried again:
+    a design is a function of them)."""
+    of = (id(ts), id(options))
+    if refused is not None and any(t.of == of and t.change == change for t in refused):
+        return None
     try:
         d = attempt(ts, options.replace(**{"diagnose": False, "allow_uncertified": False, **change}))
     except FteError as exc:
         if refused is not None:
-            refused.append(Trial(change, exc))
+            refused.append(Trial(change, exc, of))
         return None
     if not d.certified and refused is not None:
-        refused.append(Trial(change, None))
+        refused.append(Trial(change, None, of))
     return d if d.certified else None
 
 
