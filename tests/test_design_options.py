@@ -11,6 +11,7 @@ import pytest
 from fte_casadi.design import DesignOptions, design
 from fte_casadi.design._options import resolve
 from fte_casadi.design.core import _conditioned as cond
+from fte_casadi.design.core import _step5
 from fte_casadi.errors import ParameterError
 from fte_casadi.plants import SCENARIOS
 
@@ -66,14 +67,14 @@ def test_a_retry_keeps_the_plants_alpha_a_default(ts_models, monkeypatch):
     ts = ts_models["three-tank"]
     dt = SCENARIOS["three-tank"]().dt
     direct = design(ts, sample_time=dt, solver="SCS")
-    step5 = cond.step5
+    step5 = _step5.step5
 
     def clarabel_fails(aug, params, X, K, T, solver, **kw):
         if solver == "CLARABEL":
             raise cond.SolverFailedError("numerical trouble (made by the test)")
         return step5(aug, params, X, K, T, solver, **kw)
 
-    monkeypatch.setattr(cond, "step5", clarabel_fails)
+    monkeypatch.setattr(_step5, "step5", clarabel_fails)
     retried = design(ts, sample_time=dt)
     assert retried.solver == "SCS" and retried.status[0].startswith("CLARABEL failed numerically in step 5")
     assert retried.observer.why == direct.observer.why == "the plant's design defaults (fte tune's choice)"

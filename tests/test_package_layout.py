@@ -458,7 +458,7 @@ LONG_FUNCTIONS = {
     "design/_pipeline.py:finish": "design/ is rewritten on another branch now; split with it",
     "design/_docchecks.py:check_document": "design/ is rewritten on another branch now; split with it",
     "design/_record.py:Design.from_dict": "design/ is rewritten on another branch now; split with it",
-    "design/core/_conditioned.py:step5": "step 5's SDP (LMIs (46), (55), (64)); design/ is rewritten on another "
+    "design/core/_step5.py:step5": "step 5's SDP (LMIs (46), (55), (64)); design/ is rewritten on another "
     "branch now (the registry that poses the LMIs replaces its hand-assembled constraints)",
 }
 

@@ -205,7 +205,7 @@ def _generic_scale(ts: TSModel, given: dict) -> tuple[tuple[float, float], dict]
     both. Outputs: the generic 1 asks a plant measured in mm for 1000 times the attenuation it asks of the
     same plant measured in m. (45) with outputs ``y / sy`` at ``(sigma, gamma, gamma1)`` is (45) with y at
     ``(sigma / sy^2, gamma sy, gamma1 sy)`` (:func:`~fte_casadi.design._augment.units_params`), and (46),
-    (55), (64) and step 5's objective follow (:func:`~fte_casadi.design.core._conditioned._step5_problem`):
+    (55), (64) and step 5's objective follow (:func:`~fte_casadi.design.core._step5._step5_problem`):
     Pbar scaled by ``sy^2``, the gains L_i1 by ``1 / sy``, the same K, decay rate and largest sample time
     (``tests/test_slow_plant.py``). Unknown inputs: with ``d' = c d`` (``Bd' = Bd / c``) the d block
     ``[.., Bd; Bd^T, (gamma1^2 - gamma^2) I]`` of (45) is congruent, by ``diag(I, I, I, c I)``, to the one at

@@ -31,6 +31,7 @@ from ._remark5 import record as remark5_record
 from ._uio import check_assumptions, enforce, uio_gain
 from .core import _conditioned as conditioned
 from .core import _paper as paper
+from .core import _step5
 from .core._certify import failed
 from .core._lmis import LMIS, loop_decay
 
@@ -139,7 +140,7 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     need = SETTLE / float(window) if settle else 0.0
 
     def at(params):
-        return conditioned.step5(st.aug, params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
+        return _step5.step5(st.aug, params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
                                  sample_time=options.sample_time, bound_view=view,
                                  alpha_is_default=resolved.alpha_source == "plant", joint=joint)  # fmt: skip
 

@@ -1,6 +1,6 @@
 """The numerical core of the design: the LMIs and their registry (:mod:`._lmis`), the conic problems and their
-barrier centring (:mod:`._sdp`, :mod:`._barrier`), the two formulations of steps 3 and 5 (:mod:`._conditioned`,
-:mod:`._paper`) with the decay-rate search (:mod:`._decay`) and the fault-error bound (:mod:`._bounds`,
+barrier centring (:mod:`._sdp`, :mod:`._barrier`), the two formulations of steps 3 and 5 (:mod:`._conditioned` with
+:mod:`._step5`, :mod:`._paper`) with the decay-rate search (:mod:`._decay`) and the fault-error bound (:mod:`._bounds`,
 :mod:`._bound_objective`), the feasibility bounds (:mod:`._diagnose`) and the a-posteriori certificate
 (:mod:`._certify`). Nothing here retries, searches parameters or builds a Design record."""
 

@@ -1,7 +1,7 @@
 """The observer's decay rate in step 5 (conditioned variant): the largest feasible one, and the one the
 sample time allows.
 
-``prob`` is step 5's problem (:class:`fte_casadi.design.core._conditioned._Step5`): ``prob.feasible(alpha)`` decides
+``prob`` is step 5's problem (:class:`fte_casadi.design.core._step5._Step5`): ``prob.feasible(alpha)`` decides
 whether (46) with the normalisation is feasible at ``alpha``, ``prob.design(alpha)`` returns the centred design
 there (or None)."""
 

@@ -302,7 +302,7 @@ def distinct(K) -> list[int]:
 
 #: the problems that solve for the registered LMIs, by the name an LMI's ``pose`` uses: the conditioned
 #: variant's step 3 (X', Y', s, t) and step 5 by (46) (Pt, s, rho, tau) or by Theorem 1's (29) (Pt, P1, s, rho,
-#: tau) (:mod:`._conditioned`), and the paper variant's two solves as printed (:mod:`._paper`)
+#: tau) (:mod:`._conditioned`, :mod:`._step5`), and the paper variant's two solves as printed (:mod:`._paper`)
 STEP3, STEP5, JOINT, PAPER3, PAPER5 = "step 3", "step 5", "step 5 by (29)", "paper step 3", "paper step 5"
 PROBLEMS = (STEP3, STEP5, JOINT, PAPER3, PAPER5)
 #: the paper variant's strict LMIs are imposed as ``<= -STRICT I``

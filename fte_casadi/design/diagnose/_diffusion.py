@@ -25,6 +25,7 @@ import numpy as np
 from ...errors import FteError
 from .._augment import Augmented
 from ..core import _conditioned as conditioned
+from ..core import _step5
 
 __all__ = ["tolerance"]
 
@@ -103,7 +104,7 @@ def feasible(
     why = None
     for lmi in routes:
         try:
-            prob = conditioned._Step5(aug, params, s3.X, s3.K, T, solver, joint=lmi == "29")
+            prob = _step5._Step5(aug, params, s3.X, s3.K, T, solver, joint=lmi == "29")
             prob.first()
         except conditioned.SolverFailedError:
             why = "undecided" if strict else lmi
