@@ -61,7 +61,9 @@ def saturate(u: ca.SX, limits) -> ca.SX:
     return ca.vertcat(*out)
 
 
-def accommodation_gate(fhat: ca.SX, acc: dict, latch: ca.SX | None = None) -> ca.SX:
+def accommodation_gate(
+    fhat: ca.SX, acc: dict, latch: ca.SX | None = None, memory: ca.SX | None = None
+) -> ca.SX:
     """Per fault, 1 while its estimate is compensated in ``u``, else 0.
 
     Rule ``"explain"`` (what ``fte design`` writes for a plant whose faults' estimates cross-talk):
@@ -77,7 +79,7 @@ def accommodation_gate(fhat: ca.SX, acc: dict, latch: ca.SX | None = None) -> ca
     thr = [float(v) for v in acc["thresholds"]]
     lf = len(thr)
     if acc.get("rule") == "explain":
-        return _explained_gate(fhat, acc, thr, latch)
+        return _explained_gate(fhat, acc, thr, latch, memory)
     rr = [ca.fabs(fhat[j]) / thr[j] for j in range(lf)]
     on = []
     for j in range(lf):
@@ -99,23 +101,31 @@ def accommodation_gate(fhat: ca.SX, acc: dict, latch: ca.SX | None = None) -> ca
     return ca.vertcat(*gates)
 
 
-def _explained_gate(fhat: ca.SX, acc: dict, thr: list, latch: ca.SX | None) -> ca.SX:
+def _explained_gate(
+    fhat: ca.SX, acc: dict, thr: list, latch: ca.SX | None, memory: ca.SX | None = None
+) -> ca.SX:
     """The gate of rule ``"explain"`` (:mod:`fte_casadi.design._isolation`): fault j is compensated while
-    ``r_j = |fhat_j| / (threshold_j + sum_q crosstalk[j][q] |fhat_q|) >= 1``, i.e. detected and larger than the
-    other faults' estimates can explain; with a release ratio ``rho < 1`` and ``latch``, it stays on while
+    ``r_j = |fhat_j| / (threshold_j + sum_q crosstalk[j][q] |fhat_q| + overshoot_j m_j) >= 1``, i.e. detected and
+    larger than the other faults' estimates and its own fault's end can explain (``m_j``, with ``memory``: the
+    held extreme of the other sign than ``fhat_j``'s; the estimate of a fault that has just ended swings past
+    zero by up to ``overshoot_j`` of it); with a release ratio ``rho < 1`` and ``latch``, it stays on while
     ``r_j >= rho``. A fault that no other fault's estimate explains (its row of ``crosstalk`` zero: a plant with
     one fault) is compensated always, as in the paper: a gate would only delay it."""
     ct = np.asarray(acc["crosstalk"], dtype=float)
     lf = len(thr)
+    ov = acc.get("overshoot")
     gates = []
     for j in range(lf):
         sources = [q for q in range(lf) if q != j and ct[j, q] > 0]
-        if not sources:
+        if not sources and not (memory is not None and ov[j] > 0):
             gates.append(ca.SX(1.0))
             continue
         b = thr[j]
         for q in sources:
             b = b + float(ct[j, q]) * ca.fabs(fhat[q])
+        if memory is not None and ov[j] > 0:  # its own swing past the other sign's recent extreme
+            other = ca.if_else(fhat[j] >= 0, memory[lf + j], memory[j])
+            b = b + float(ov[j]) * other
         r = ca.fabs(fhat[j]) / b
         on = r >= 1.0
         if latch is not None:
@@ -135,8 +145,11 @@ def step_function(
     """Build the step ``(z, y) -> (z_next, u, xbarhat, yc, s)`` of a design at ``sample_time``.
 
     ``z`` has ``design.nz`` values: the observer state (nbar), then, for an accommodation gate with a
-    release ratio below 1 (``design.latched``), the gate's latches, one per fault (0 or 1; ``z_next`` ends
-    with the gates this sample applied).
+    release ratio below 1 (``design.latched``), the gate's latches, one per fault (0 or 1; ``z_next`` holds
+    the gates this sample applied), then, for a gate of rule ``"explain"`` with ``overshoot``
+    (``design.remembers``), its memories: per fault the largest positive estimate, then per fault the largest
+    negative one (as a magnitude), each the larger of the estimate now and the held one times
+    ``exp(-Ts / memory_time)``.
 
     Parameters
     ----------
@@ -163,7 +176,9 @@ def step_function(
     n, m, p, lf, r, nbar = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.r, dims.nbar))
     latched = design.latched  # the gate's latches follow z in the step's state
     zz = ca.SX.sym("z", design.nz)
-    z, latch = (zz[:nbar], zz[nbar:]) if latched else (zz, None)
+    nl = lf if latched else 0
+    z, latch = zz[:nbar], (zz[nbar : nbar + nl] if latched else None)
+    memory = zz[nbar + nl :] if design.remembers else None
     y = ca.SX.sym("y", p)
 
     xbh = z + ca.mtimes(_dm(design.H), y)
@@ -184,7 +199,11 @@ def step_function(
     for j in range(r):
         uj = ca.mtimes(_dm(design.K[j]), xhat)
         u = u + h[j] * uj
-    gate = None if design.accommodation is None else accommodation_gate(fhat, design.accommodation, latch)
+    gate = (
+        None
+        if design.accommodation is None
+        else accommodation_gate(fhat, design.accommodation, latch, memory)
+    )
     fcomp = fhat if gate is None else fhat * gate
     if tolerant and design.Kf_rules is not None:  # Kf(h) = sum_i h_i Kf_i where the rules' Kf_i differ
         for i in range(r):
@@ -213,4 +232,9 @@ def step_function(
     z_next = z + float(sample_time) * rhs
     if latched:  # the gates of this sample are the next sample's latches
         z_next = ca.vertcat(z_next, gate)
+    if memory is not None:  # each estimate's largest and smallest, decaying with memory_time
+        k = float(np.exp(-float(sample_time) / float(design.accommodation["memory_time"])))
+        hi = [ca.fmax(ca.fmax(fhat[j], 0.0), k * memory[j]) for j in range(lf)]
+        lo = [ca.fmax(ca.fmax(-fhat[j], 0.0), k * memory[lf + j]) for j in range(lf)]
+        z_next = ca.vertcat(z_next, *hi, *lo)
     return ca.Function(name, [zz, y], [z_next, u, xbh, yc, s], list(STEP_INPUTS), list(STEP_OUTPUTS))

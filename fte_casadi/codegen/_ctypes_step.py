@@ -30,7 +30,10 @@ class CStep:
         self.real = real
         self.dtype = _NP[real]
         self.nbar, self.p, self.m = int(design.dims.nbar), int(design.dims.p), int(design.dims.m)
-        self.nz = design.nz  # z, then a latched accommodation gate's latches
+        self.nz = (
+            design.nz
+        )  # z, then a latched accommodation gate's latches, then a remembering gate's memories
+        self.lf, self.latched = int(design.dims.lf), design.latched
         name = c_name(design.plant)
         self._init = getattr(self.lib, f"fte_{name}_init")
         self._step = getattr(self.lib, f"fte_{name}_step")
@@ -69,8 +72,9 @@ class CStep:
 
     @property
     def gate(self) -> np.ndarray:
-        """A latched accommodation gate's latches: the gates the last step applied (empty without latches)."""
-        return self.z[self.nbar :]
+        """A latched accommodation gate's latches: the gates the last step applied (empty without latches; the
+        memories of a remembering gate follow them in :attr:`z`)."""
+        return self.z[self.nbar : self.nbar + (self.lf if self.latched else 0)]
 
     def step(self, y) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
         yy = np.ascontiguousarray(y, dtype=self.dtype)

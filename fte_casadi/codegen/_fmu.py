@@ -162,10 +162,10 @@ def _dependencies(design: Design, sample_time: float, boundary_layer) -> list[li
     united. A gate, piecewise constant in y, takes the dependencies of the fault estimates it compares."""
     fn = step_function(design, sample_time, boundary_layer=boundary_layer)
     nbar, p, lf = int(design.dims.nbar), int(design.dims.p), int(design.dims.lf)
-    latches = design.nz - nbar
+    latches = lf if design.latched else 0
     z, y = ca.SX.sym("z", design.nz), ca.SX.sym("y", p)
-    z0 = ca.vertcat(
-        ca.DM(design.xbar0) - ca.mtimes(ca.DM(np.asarray(design.H, float)), y), ca.DM.zeros(latches)
+    z0 = ca.vertcat(  # the gate's latches and memories start at 0, as init sets them
+        ca.DM(design.xbar0) - ca.mtimes(ca.DM(np.asarray(design.H, float)), y), ca.DM.zeros(design.nz - nbar)
     )
     deps = None
     for zz in (z, z0):
@@ -455,7 +455,7 @@ def fmu_member(
                 ny_last=p - 1,
                 nvar_last=len(variables) - 1,
                 sample_time_text=repr(sample_time),
-                ngate=design.nz - int(design.dims.nbar),
+                ngate=int(design.dims.lf) if design.latched else 0,
                 gate_names=", gate" if design.latched else "",
                 gate_out="  for (i = 0; i < NGATE; ++i) out[NU + NXBAR + NY + i] = (fmi2Real)st->z[NXBAR + i];\n"
                 if design.latched

@@ -413,10 +413,32 @@ def _gate_texts(design: Design, NAME: str) -> dict:
         ct = "; ".join(", ".join(f"{v:.4g}" for v in row) for row in acc["crosstalk"])
         rule = (f"fault j is compensated in u (the Kf fhat term) while |fhat_j| >= threshold_j + sum_q crosstalk[j][q] "
                 f"|fhat_q| (thresholds {thr}; crosstalk rows {ct}), a fault no other one cross-talks into always")  # fmt: skip
+        if design.remembers:
+            ov = ", ".join(f"{v:.4g}" for v in acc["overshoot"])
+            rule += (f", and more than its own overshoot explains: + overshoot_j m_j (overshoot {ov}), m_j the "
+                     f"largest estimate of the other sign, held and decaying by exp(-Ts / {acc['memory_time']:.6g})")  # fmt: skip
     else:
         rule = (f"fault j is compensated in u (the Kf fhat term) when |fhat_j| >= threshold_j and |fhat_j| / "
                 f"threshold_j is the largest (thresholds {thr})")  # fmt: skip
+    if design.remembers:
+        nf = f"FTE_{NAME}_NF"
+        mem = (f"z[FTE_{NAME}_NXBAR{' + ' + nf if design.latched else ''} + j] and z[... + {nf} + j] hold fault j's "
+               "largest positive and negative estimates, decaying (init and init_from_y set them to 0)")  # fmt: skip
+        out["z_len"] = f"FTE_{NAME}_NXBAR + {'3' if design.latched else '2'} * {nf}"
+        out["z_gate_text"] = (
+            ", then the gate's latches" if design.latched else ""
+        ) + ", then the gate's memories"
+        out["gate_init"] = (
+            f"  for (i = FTE_{NAME}_NXBAR; i < {out['z_len']}; ++i) s->z[i] = s->z_next[i] = (fte_real)0;\n"
+        )
     if not design.latched:
+        if design.remembers:
+            doc = f"Accommodation after detection: {rule}. {mem}."
+            out["gate_doc"] = "\n/* " + "\n * ".join(textwrap.wrap(doc, 100)) + " */\n"
+            out["accommodation_text"] = (
+                f"\nAccommodation after detection: {rule}; its memories follow `z`: {mem}."
+            )
+            return out
         out["accommodation_text"] = (
             f"\nAccommodation after detection: {rule}, in each sample anew (no memory)."
         )
@@ -438,6 +460,14 @@ def _gate_texts(design: Design, NAME: str) -> dict:
     out["gate_init"] = (
         f"  for (i = FTE_{NAME}_NXBAR; i < FTE_{NAME}_NXBAR + FTE_{NAME}_NF; ++i) s->z[i] = s->z_next[i] = (fte_real)0;\n"
     )
+    if design.remembers:  # the memories follow the latches
+        out["z_len"] = f"FTE_{NAME}_NXBAR + 3 * FTE_{NAME}_NF"
+        out["z_gate_text"] = ", then the gate's latches, then its memories"
+        out["gate_init"] = (
+            f"  for (i = FTE_{NAME}_NXBAR; i < {out['z_len']}; ++i) s->z[i] = s->z_next[i] = (fte_real)0;\n"
+        )
+        out["gate_doc"] = "\n/* " + "\n * ".join(textwrap.wrap(f"{doc} {mem}.", 100)) + " */\n"
+        out["accommodation_text"] += f" Then its memories: {mem}."
     return out
 
 

@@ -102,3 +102,37 @@ def crosstalk(R, T, n: int, lf: int) -> np.ndarray:
                 top = max(float(ratio[k]), float(np.max(steps.ratios(e0, n + lf + q, n + lf + j, fine))))
                 kappa[j, q] = max(kappa[j, q], min(top * (1 + REFINE_MARGIN), KAPPA_CAP))
     return kappa
+
+
+def overshoot(R, T, n: int, lf: int) -> tuple[np.ndarray, float]:
+    """``(ov, tau)``: how far each fault's own estimate swings past a unit step of that fault, weighted so that a
+    memory decaying with time constant ``tau`` covers it: ``ov_j = sup_t max(0, fhat_j(t) - 1) exp(t / tau)``
+    over the rules, ``tau = 2 / (slowest decay rate over the rules)``. At a fault's end the estimate swings the
+    other way by as much (the error dynamics are linear), so ``ov_j`` times the estimate's recent extreme of one
+    sign, decayed, bounds what its swing to the other sign can be after that fault ends."""
+    T = np.asarray(T, dtype=float)
+    ov = np.zeros(lf)
+    slows = []
+    for Ri in R:
+        lam = np.linalg.eigvals(np.asarray(Ri, dtype=float))
+        if np.all(lam.real < 0):
+            slows.append(float(np.min(-lam.real)))
+    if not slows:
+        return ov, float("inf")
+    tau = 2.0 / min(slows)
+    for Ri in R:
+        Ri = np.asarray(Ri, dtype=float)
+        lam = np.linalg.eigvals(Ri)
+        if not np.all(lam.real < 0):
+            continue
+        slow, fast = float(np.min(-lam.real)), float(np.max(np.abs(lam)))
+        ts = np.geomspace(1e-6 / fast, 30.0 / slow, POINTS)
+        steps = _StepResponse(Ri)
+        for j in range(lf):
+            e0 = T[:, n + lf + j]
+            own = n + lf + j
+            fh = (1.0 - e0[own]) - steps.delta(e0, ts)[:, own]
+            ov[j] = max(
+                ov[j], float(np.max(np.maximum(fh - 1.0, 0.0) * np.exp(ts / tau))) * (1 + REFINE_MARGIN)
+            )
+    return ov, tau

@@ -115,6 +115,15 @@ def recertify(d) -> list[str]:
         if not gap <= _REL:
             out.append(f"accommodation.crosstalk is not the observer's cross-talk (off by {gap:.3g} relative; "
                        f"recomputed {np.round(made, 4).tolist()})")  # fmt: skip
+        if "overshoot" in acc:  # and its overshoot and memory time the observer's own
+            from ._isolation import overshoot
+
+            ov, tau = overshoot(R, T, aug.n, aug.lf)
+            gap = max(_far(np.asarray(acc["overshoot"], dtype=float), ov),
+                      _far(np.array([float(acc.get("memory_time", np.nan))]), np.array([tau])))  # fmt: skip
+            if not gap <= _REL:
+                out.append(f"accommodation.overshoot and memory_time are not the observer's (off by {gap:.3g} "
+                           f"relative; recomputed {np.round(ov, 4).tolist()}, {tau:.6g})")  # fmt: skip
     try:
         checks = certify(d)
     except np.linalg.LinAlgError as exc:

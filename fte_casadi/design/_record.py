@@ -139,8 +139,9 @@ class Design:
     plant_hash: dict = field(default_factory=dict)
     #: accommodation after detection (:mod:`fte_casadi.sim._accommodate`): {"rule": "explain", "thresholds": [one
     #: per fault], "crosstalk": lf x lf, "release": ratio, ...}: fault j is compensated in u while |fhat_j| >=
-    #: threshold_j + sum_q crosstalk[j][q] |fhat_q| (what ``fte design`` writes where the faults' estimates
-    #: cross-talk); or {"rule": "isolate", ...}: fault j switches on when |fhat_j| >= threshold_j and its normalised
+    #: threshold_j + sum_q crosstalk[j][q] |fhat_q| (+ overshoot_j m_j with "overshoot": per fault, and
+    #: "memory_time": the gate then holds each estimate's recent extremes, :attr:`remembers`) (what ``fte design``
+    #: writes where the faults' estimates cross-talk); or {"rule": "isolate", ...}: fault j switches on when |fhat_j| >= threshold_j and its normalised
     #: residual |fhat_j| / threshold_j is the largest (``fte simulate --accommodate``); with a release ratio below
     #: 1 either stays on until that ratio falls below it (:func:`fte_casadi.step.accommodation_gate`; no "release":
     #: 1, the memoryless gate); None: every estimate is compensated always (the paper)
@@ -194,9 +195,16 @@ class Design:
         return self.accommodation is not None and float(self.accommodation.get("release", 1.0)) < 1.0
 
     @property
+    def remembers(self) -> bool:
+        """True when the gate holds each estimate's recent extremes (rule ``explain`` with ``overshoot``)."""
+        return self.accommodation is not None and "overshoot" in self.accommodation
+
+    @property
     def nz(self) -> int:
-        """Length of the step's state: ``z`` (nbar), then with a latched gate one latch (0 or 1) per fault."""
-        return self.nbar + (int(self.dims.lf) if self.latched else 0)
+        """Length of the step's state: ``z`` (nbar), then with a latched gate one latch (0 or 1) per fault, then
+        with a remembering gate two memories per fault (its estimate's recent largest and smallest, decaying)."""
+        lf = int(self.dims.lf)
+        return self.nbar + (lf if self.latched else 0) + (2 * lf if self.remembers else 0)
 
     def sliding_gain(self) -> np.ndarray:
         """The gain of each sliding variable: Remark 5's per-direction gains for the undecoupled part of d

@@ -8,14 +8,17 @@ outputs worse than none. :func:`accommodated` returns the design with the gate o
 calibrated on fault-free paths of the scenario:
 
 - rule ``"explain"`` (:func:`protected`, what ``fte design`` writes): fault j is compensated while
-  ``|fhat_j| >= threshold_j + sum_q kappa[j, q] |fhat_q|``, ``kappa`` the observer's cross-talk
-  (:func:`fte_casadi.design._isolation.crosstalk`): detected, and more than the other faults can explain;
+  ``|fhat_j| >= threshold_j + sum_q kappa[j, q] |fhat_q| + overshoot_j m_j``, ``kappa`` the observer's cross-talk
+  (:func:`fte_casadi.design._isolation.crosstalk`), ``overshoot_j`` how far its own estimate swings past a step of
+  its fault and ``m_j`` the estimate's recent extreme of the other sign, decaying
+  (:func:`fte_casadi.design._isolation.overshoot`): detected, and more than the other faults and its own fault's
+  end can explain (the estimate of a fault that has just ended swings to the other sign: not compensated);
 - rule ``"isolate"`` (``fte simulate --accommodate``): fault j switches on when ``|fhat_j|`` reaches its
   threshold and its normalised residual ``r_j = |fhat_j| / threshold_j`` is the largest, and stays on
   (hysteresis) until ``r_j`` falls below the release ratio (default :data:`RELEASE`) or another fault switches
   on with a larger ratio; ``release=1`` is the memoryless gate.
 
-The latches are state: they follow the observer state ``z`` in the step (``Design.nz``), so that the Python
+The latches and the memories are state: they follow the observer state ``z`` in the step (``Design.nz``), so that the Python
 step, the generated C and the FMU carry the same ones. The gate turns the closed loop into a switched system:
 Theorems 1/5 certify the observer and each local controller, not the switching; only the Monte Carlo
 measures it.
@@ -77,10 +80,18 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
             f"held until |fhat| / threshold < {float(release):g} or another fault switches on")  # fmt: skip
     if rule == "explain":
         acc["crosstalk"] = _crosstalk(design).tolist()
+        ov, tau = _overshoot(design)
+        acc["overshoot"], acc["memory_time"] = [float(v) for v in ov], float(tau)
         held = "memoryless" if release >= 1 else f"held until that ratio < {float(release):g}"
         what = (
-            "while detected and more than the other faults' estimates explain (|fhat_j| >= threshold_j + "
-            "sum_q crosstalk[j][q] |fhat_q|; crosstalk " + _ratios(design, acc["crosstalk"]) + ")"
+            "while detected and more than the other faults' estimates and its own overshoot explain (|fhat_j| >= "
+            "threshold_j + sum_q crosstalk[j][q] |fhat_q| + overshoot_j m_j, m_j its estimate's recent extreme of the "
+            "other sign, decaying in "
+            + f"{acc['memory_time']:.3g}; crosstalk "
+            + _ratios(design, acc["crosstalk"])
+            + "; overshoot "
+            + ", ".join(f"{v:.3g}" for v in acc["overshoot"])
+            + ")"
         )
     else:
         what = "only while detected and isolated"
@@ -93,6 +104,12 @@ def _crosstalk(design: Design):
     from ..design import crosstalk
 
     return crosstalk(design.R, design.T, int(design.dims.n), int(design.dims.lf))
+
+
+def _overshoot(design: Design):
+    from ..design import overshoot
+
+    return overshoot(design.R, design.T, int(design.dims.n), int(design.dims.lf))
 
 
 def _ratios(design: Design, ct) -> str:

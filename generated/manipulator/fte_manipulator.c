@@ -4,7 +4,7 @@
 #include "fte_manipulator.h"
 #include "fte_manipulator_casadi.h"
 
-#if FTE_MANIPULATOR_SET != 0x2fb0b9afUL || FTE_MANIPULATOR_CASADI_SET != 0x2fb0b9afUL
+#if FTE_MANIPULATOR_SET != 0x33e7e078UL || FTE_MANIPULATOR_CASADI_SET != 0x33e7e078UL
 #error "fte_manipulator.h or fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -84,6 +84,7 @@ static void fte_manipulator_set(fte_manipulator_state *s, const fte_real *z0) {
     s->z[i] = z0 ? z0[i] : (fte_real)0;
     s->z_next[i] = s->z[i];
   }
+  for (i = FTE_MANIPULATOR_NXBAR; i < FTE_MANIPULATOR_NXBAR + 2 * FTE_MANIPULATOR_NF; ++i) s->z[i] = s->z_next[i] = (fte_real)0;
 }
 
 int fte_manipulator_init(fte_manipulator_state *s, const fte_real *z0) {
@@ -131,12 +132,12 @@ int fte_manipulator_step(fte_manipulator_state *s, const fte_real *y,
   res[3] = yc;
   res[4] = 0; /* s: not exported */
   if (fte_manipulator_casadi_step(arg, res, 0, 0, 0) != 0) return 2;
-  for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) {
+  for (i = 0; i < FTE_MANIPULATOR_NXBAR + 2 * FTE_MANIPULATOR_NF; ++i) {
     if (fte_manipulator_not_finite(s->z_next[i])) return 4;
   }
   for (i = 0; u != 0 && i < FTE_MANIPULATOR_NU; ++i) {
     if (fte_manipulator_not_finite(u[i])) return 4;
   }
-  for (i = 0; i < FTE_MANIPULATOR_NXBAR; ++i) s->z[i] = s->z_next[i];
+  for (i = 0; i < FTE_MANIPULATOR_NXBAR + 2 * FTE_MANIPULATOR_NF; ++i) s->z[i] = s->z_next[i];
   return 0;
 }

@@ -26,7 +26,7 @@ typedef double fte_real;
 
 /* The set these files belong to: each .c file stops the compilation with an #error when a header is of
  * another run of fte codegen (a mix of two sets never builds). */
-#define FTE_MANIPULATOR_SET 0x2fb0b9afUL
+#define FTE_MANIPULATOR_SET 0x33e7e078UL
 
 /* The accepted range of each measurement (see above); a y outside it is refused with return 3. */
 extern const fte_real fte_manipulator_Y_MIN[3];
@@ -42,9 +42,17 @@ extern const fte_real fte_manipulator_Y_MAX[3];
 
 /* All memory the step needs: the observer state z and CasADi's work arrays. */
 typedef struct {
-  fte_real z[FTE_MANIPULATOR_NXBAR];      /* observer state z_k */
-  fte_real z_next[FTE_MANIPULATOR_NXBAR]; /* scratch for z_{k+1} (state stays unchanged on error) */
+  fte_real z[FTE_MANIPULATOR_NXBAR + 2 * FTE_MANIPULATOR_NF];      /* observer state z_k, then the gate's memories */
+  fte_real z_next[FTE_MANIPULATOR_NXBAR + 2 * FTE_MANIPULATOR_NF]; /* scratch for z_{k+1} (state stays unchanged on error) */
 } fte_manipulator_state;
+
+/* Accommodation after detection: fault j is compensated in u (the Kf fhat term) while |fhat_j| >=
+ * threshold_j + sum_q crosstalk[j][q] |fhat_q| (thresholds 0.0179675, 0.00774552; crosstalk rows 0,
+ * 1.406; 0.2492, 0), a fault no other one cross-talks into always, and more than its own overshoot
+ * explains: + overshoot_j m_j (overshoot 0.4696, 0.56), m_j the largest estimate of the other sign,
+ * held and decaying by exp(-Ts / 0.948137). z[FTE_MANIPULATOR_NXBAR + j] and z[... +
+ * FTE_MANIPULATOR_NF + j] hold fault j's largest positive and negative estimates, decaying (init and
+ * init_from_y set them to 0). */
 
 /* The unknown-input gain H (FTE_MANIPULATOR_NXBAR x FTE_MANIPULATOR_NY, row-major): xbarhat = z + H y. */
 extern const fte_real fte_manipulator_H[FTE_MANIPULATOR_NXBAR * FTE_MANIPULATOR_NY];

@@ -20,7 +20,7 @@ extern "C" {
 
 #include <math.h>
 #include "fte_manipulator_casadi.h"
-#if FTE_MANIPULATOR_CASADI_SET != 0x2fb0b9afUL
+#if FTE_MANIPULATOR_CASADI_SET != 0x33e7e078UL
 #error "fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -41,6 +41,7 @@ extern "C" {
 #define casadi_s1 CASADI_PREFIX(s1)
 #define casadi_s2 CASADI_PREFIX(s2)
 #define casadi_s3 CASADI_PREFIX(s3)
+#define casadi_s4 CASADI_PREFIX(s4)
 #define casadi_sign CASADI_PREFIX(sign)
 #define casadi_sq CASADI_PREFIX(sq)
 
@@ -84,19 +85,20 @@ void fte_manipulator_cs_casadi_version(int* major, int* minor, int* patch) {
 int fte_manipulator_cs_casadi_int_size(void) { return (int) sizeof(casadi_int); }
 int fte_manipulator_cs_casadi_real_size(void) { return (int) sizeof(casadi_real); }
 
-static const casadi_int casadi_s0[3] = {8, 1, 1};
+static const casadi_int casadi_s0[3] = {12, 1, 1};
 static const casadi_int casadi_s1[3] = {3, 1, 1};
 static const casadi_int casadi_s2[3] = {1, 1, 1};
-static const casadi_int casadi_s3[3] = {2, 1, 1};
+static const casadi_int casadi_s3[3] = {8, 1, 1};
+static const casadi_int casadi_s4[3] = {2, 1, 1};
 
-/* fte_manipulator_casadi_step:(z[8],y[3])->(z_next[8],u,xbarhat[8],yc[3],s[2]) */
+/* fte_manipulator_casadi_step:(z[12],y[3])->(z_next[12],u,xbarhat[8],yc[3],s[2]) */
 static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw, casadi_real* w, int mem) {
   (void)iw;
   (void)w;
   (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28, a29, a30;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31;
   a00=arg[0]? arg[0][0] : 0;
   a01=1.0000000000000000e-03;
   a02=arg[1]? arg[1][2] : 0;
@@ -220,6 +222,17 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a27=1.4060012881530757e+00;
   a25=casadi_fabs(a17);
   a27=(a27*a25);
+  a26=(a26+a27);
+  a27=4.6964057239856066e-01;
+  a25=0.;
+  a03=(a25<=a15);
+  a24=arg[0]? arg[0][10] : 0;
+  a30=(a03?a24:0);
+  a03=(!a03);
+  a31=arg[0]? arg[0][8] : 0;
+  a03=(a03?a31:0);
+  a30=(a30+a03);
+  a27=(a27*a30);
   a26=(a26+a27);
   a18=(a18/a26);
   a04=(a04<=a18);
@@ -671,6 +684,27 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a01=(a01*a06);
   a01=(a17+a01);
   if (res[0]!=0) res[0][7]=a01;
+  a01=casadi_fmax(a15,a25);
+  a06=9.9894585587042162e-01;
+  a31=(a06*a31);
+  a01=casadi_fmax(a01,a31);
+  if (res[0]!=0) res[0][8]=a01;
+  a01=casadi_fmax(a17,a25);
+  a31=arg[0]? arg[0][9] : 0;
+  a31=(a06*a31);
+  a01=casadi_fmax(a01,a31);
+  if (res[0]!=0) res[0][9]=a01;
+  a01=(-a15);
+  a01=casadi_fmax(a01,a25);
+  a24=(a06*a24);
+  a01=casadi_fmax(a01,a24);
+  if (res[0]!=0) res[0][10]=a01;
+  a01=(-a17);
+  a01=casadi_fmax(a01,a25);
+  a25=arg[0]? arg[0][11] : 0;
+  a06=(a06*a25);
+  a01=casadi_fmax(a01,a06);
+  if (res[0]!=0) res[0][11]=a01;
   if (res[1]!=0) res[1][0]=a16;
   if (res[2]!=0) res[2][0]=a19;
   if (res[2]!=0) res[2][1]=a21;
@@ -748,9 +782,9 @@ const casadi_int* fte_manipulator_casadi_step_sparsity_out(casadi_int i) {
   switch (i) {
     case 0: return casadi_s0;
     case 1: return casadi_s2;
-    case 2: return casadi_s0;
+    case 2: return casadi_s3;
     case 3: return casadi_s1;
-    case 4: return casadi_s3;
+    case 4: return casadi_s4;
     default: return 0;
   }
 }

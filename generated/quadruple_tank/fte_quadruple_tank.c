@@ -4,7 +4,7 @@
 #include "fte_quadruple_tank.h"
 #include "fte_quadruple_tank_casadi.h"
 
-#if FTE_QUADRUPLE_TANK_SET != 0x7a24f342UL || FTE_QUADRUPLE_TANK_CASADI_SET != 0x7a24f342UL
+#if FTE_QUADRUPLE_TANK_SET != 0x075851dcUL || FTE_QUADRUPLE_TANK_CASADI_SET != 0x075851dcUL
 #error "fte_quadruple_tank.h or fte_quadruple_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -86,6 +86,7 @@ static void fte_quadruple_tank_set(fte_quadruple_tank_state *s, const fte_real *
     s->z[i] = z0 ? z0[i] : (fte_real)0;
     s->z_next[i] = s->z[i];
   }
+  for (i = FTE_QUADRUPLE_TANK_NXBAR; i < FTE_QUADRUPLE_TANK_NXBAR + 2 * FTE_QUADRUPLE_TANK_NF; ++i) s->z[i] = s->z_next[i] = (fte_real)0;
 }
 
 int fte_quadruple_tank_init(fte_quadruple_tank_state *s, const fte_real *z0) {
@@ -133,12 +134,12 @@ int fte_quadruple_tank_step(fte_quadruple_tank_state *s, const fte_real *y,
   res[3] = yc;
   res[4] = 0; /* s: not exported */
   if (fte_quadruple_tank_casadi_step(arg, res, 0, 0, 0) != 0) return 2;
-  for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR; ++i) {
+  for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR + 2 * FTE_QUADRUPLE_TANK_NF; ++i) {
     if (fte_quadruple_tank_not_finite(s->z_next[i])) return 4;
   }
   for (i = 0; u != 0 && i < FTE_QUADRUPLE_TANK_NU; ++i) {
     if (fte_quadruple_tank_not_finite(u[i])) return 4;
   }
-  for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR; ++i) s->z[i] = s->z_next[i];
+  for (i = 0; i < FTE_QUADRUPLE_TANK_NXBAR + 2 * FTE_QUADRUPLE_TANK_NF; ++i) s->z[i] = s->z_next[i];
   return 0;
 }
