@@ -126,13 +126,13 @@ def overshoot(R, T, n: int, lf: int) -> tuple[np.ndarray, float]:
         if not np.all(lam.real < 0):
             continue
         slow, fast = float(np.min(-lam.real)), float(np.max(np.abs(lam)))
-        ts = np.geomspace(1e-6 / fast, 30.0 / slow, POINTS)
+        times = np.geomspace(1e-6 / fast, 30.0 / slow, POINTS)
         steps = _StepResponse(Ri)
         for j in range(lf):
             e0 = T[:, n + lf + j]
             own = n + lf + j
-            fh = (1.0 - e0[own]) - steps.delta(e0, ts)[:, own]
+            fh = (1.0 - e0[own]) - steps.delta(e0, times)[:, own]
             ov[j] = max(
-                ov[j], float(np.max(np.maximum(fh - 1.0, 0.0) * np.exp(ts / tau))) * (1 + REFINE_MARGIN)
+                ov[j], float(np.max(np.maximum(fh - 1.0, 0.0) * np.exp(times / tau))) * (1 + REFINE_MARGIN)
             )
     return ov, tau
