@@ -74,6 +74,17 @@ def _phi_step(R: np.ndarray, t: float) -> np.ndarray:
     return (R * t) @ phi
 
 
+def _decaying(R):
+    """Per rule whose observer decays: its logarithmic time grid, from 1e-6 of its fastest mode's time constant to
+    30 of its slowest's, its step responses (:class:`_StepResponse`) and its slowest decay rate."""
+    for Ri in R:
+        Ri = np.asarray(Ri, dtype=float)
+        lam = np.linalg.eigvals(Ri)
+        if np.all(lam.real < 0):
+            slow, fast = float(np.min(-lam.real)), float(np.max(np.abs(lam)))
+            yield np.geomspace(1e-6 / fast, 30.0 / slow, POINTS), _StepResponse(Ri), slow
+
+
 def crosstalk(R, T, n: int, lf: int) -> np.ndarray:
     """``kappa`` (lf x lf, zero diagonal): the largest ratio ``|fhat_j(t)| / |fhat_q(t)|`` after a unit step of
     fault q alone, over the rules ``R`` (each ``T Abar_i - L1_i Cbar``) and a logarithmic time grid; see the
@@ -82,14 +93,7 @@ def crosstalk(R, T, n: int, lf: int) -> np.ndarray:
     kappa = np.zeros((lf, lf))
     if lf < 2:
         return kappa
-    for Ri in R:
-        Ri = np.asarray(Ri, dtype=float)
-        lam = np.linalg.eigvals(Ri)
-        if not np.all(lam.real < 0):
-            continue
-        slow, fast = float(np.min(-lam.real)), float(np.max(np.abs(lam)))
-        ts = np.geomspace(1e-6 / fast, 30.0 / slow, POINTS)
-        steps = _StepResponse(Ri)
+    for ts, steps, _ in _decaying(R):
         for q in range(lf):
             e0 = T[:, n + lf + q]
             for j in range(lf):
@@ -112,22 +116,11 @@ def overshoot(R, T, n: int, lf: int) -> tuple[np.ndarray, float]:
     sign, decayed, bounds what its swing to the other sign can be after that fault ends."""
     T = np.asarray(T, dtype=float)
     ov = np.zeros(lf)
-    slows = []
-    for Ri in R:
-        lam = np.linalg.eigvals(np.asarray(Ri, dtype=float))
-        if np.all(lam.real < 0):
-            slows.append(float(np.min(-lam.real)))
-    if not slows:
+    rules = list(_decaying(R))
+    if not rules:
         return ov, float("inf")
-    tau = 2.0 / min(slows)
-    for Ri in R:
-        Ri = np.asarray(Ri, dtype=float)
-        lam = np.linalg.eigvals(Ri)
-        if not np.all(lam.real < 0):
-            continue
-        slow, fast = float(np.min(-lam.real)), float(np.max(np.abs(lam)))
-        times = np.geomspace(1e-6 / fast, 30.0 / slow, POINTS)
-        steps = _StepResponse(Ri)
+    tau = 2.0 / min(slow for _, _, slow in rules)
+    for times, steps, _ in rules:
         for j in range(lf):
             e0 = T[:, n + lf + j]
             own = n + lf + j
