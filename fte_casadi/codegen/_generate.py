@@ -420,17 +420,20 @@ def _gate_texts(design: Design, NAME: str) -> dict:
     else:
         rule = (f"fault j is compensated in u (the Kf fhat term) when |fhat_j| >= threshold_j and |fhat_j| / "
                 f"threshold_j is the largest (thresholds {thr})")  # fmt: skip
-    if design.remembers:
-        nf = f"FTE_{NAME}_NF"
-        mem = (f"z[FTE_{NAME}_NXBAR{' + ' + nf if design.latched else ''} + j] and z[... + {nf} + j] hold fault j's "
-               "largest positive and negative estimates, decaying (init and init_from_y set them to 0)")  # fmt: skip
-        out["z_len"] = f"FTE_{NAME}_NXBAR + {'3' if design.latched else '2'} * {nf}"
-        out["z_gate_text"] = (
-            ", then the gate's latches" if design.latched else ""
-        ) + ", then the gate's memories"
+    nf = f"FTE_{NAME}_NF"
+    k = (1 if design.latched else 0) + (2 if design.remembers else 0)  # the state after z, in blocks of nf
+    if k:
+        out["z_len"] = f"FTE_{NAME}_NXBAR + {nf}" if k == 1 else f"FTE_{NAME}_NXBAR + {k} * {nf}"
+        out["z_gate_text"] = (", then the gate's latches" if design.latched else "") + (
+            (", then its memories" if design.latched else ", then the gate's memories")
+            if design.remembers
+            else ""
+        )
         out["gate_init"] = (
             f"  for (i = FTE_{NAME}_NXBAR; i < {out['z_len']}; ++i) s->z[i] = s->z_next[i] = (fte_real)0;\n"
         )
+    mem = (f"z[FTE_{NAME}_NXBAR{' + ' + nf if design.latched else ''} + j] and z[... + {nf} + j] hold fault j's "
+           "largest positive and negative estimates, decaying (init and init_from_y set them to 0)")  # fmt: skip
     if not design.latched:
         if design.remembers:
             doc = f"Accommodation after detection: {rule}. {mem}."
@@ -438,36 +441,25 @@ def _gate_texts(design: Design, NAME: str) -> dict:
             out["accommodation_text"] = (
                 f"\nAccommodation after detection: {rule}; its memories follow `z`: {mem}."
             )
-            return out
-        out["accommodation_text"] = (
-            f"\nAccommodation after detection: {rule}, in each sample anew (no memory)."
-        )
+        else:
+            out["accommodation_text"] = (
+                f"\nAccommodation after detection: {rule}, in each sample anew (no memory)."
+            )
         return out
     rho = float(acc["release"])
     held = (f"and stays compensated while |fhat_j| / threshold_j >= {rho:g}, unless another fault switches on "
             "with a larger ratio")  # fmt: skip
     if acc.get("rule") == "explain":
         held = f"and stays compensated while that ratio >= {rho:g}"
+    then = f" Then its memories: {mem}." if design.remembers else ""
     out["accommodation_text"] = (
         f"\nAccommodation after detection: {rule}, {held}. The latches (1: compensated in the last sample) follow "
-        f"the observer state in `z`, from `z[FTE_{NAME}_NXBAR]` on; `init` and `init_from_y` set them to 0."
+        f"the observer state in `z`, from `z[FTE_{NAME}_NXBAR]` on; `init` and `init_from_y` set them to 0.{then}"
     )
-    out["z_len"] = f"FTE_{NAME}_NXBAR + FTE_{NAME}_NF"
-    out["z_gate_text"] = ", then the gate's latches"
     doc = (f"Accommodation after detection: {rule}, {held}. z[FTE_{NAME}_NXBAR + j] is fault j's latch (1: "
            "compensated in the last sample's u, 0: not); init and init_from_y set the latches to 0.")  # fmt: skip
+    doc += f" {mem}." if design.remembers else ""
     out["gate_doc"] = "\n/* " + "\n * ".join(textwrap.wrap(doc, 100)) + " */\n"
-    out["gate_init"] = (
-        f"  for (i = FTE_{NAME}_NXBAR; i < FTE_{NAME}_NXBAR + FTE_{NAME}_NF; ++i) s->z[i] = s->z_next[i] = (fte_real)0;\n"
-    )
-    if design.remembers:  # the memories follow the latches
-        out["z_len"] = f"FTE_{NAME}_NXBAR + 3 * FTE_{NAME}_NF"
-        out["z_gate_text"] = ", then the gate's latches, then its memories"
-        out["gate_init"] = (
-            f"  for (i = FTE_{NAME}_NXBAR; i < {out['z_len']}; ++i) s->z[i] = s->z_next[i] = (fte_real)0;\n"
-        )
-        out["gate_doc"] = "\n/* " + "\n * ".join(textwrap.wrap(f"{doc} {mem}.", 100)) + " */\n"
-        out["accommodation_text"] += f" Then its memories: {mem}."
     return out
 
 

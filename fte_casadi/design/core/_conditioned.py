@@ -254,7 +254,7 @@ def _step3_problem(aug: Augmented, params: dict, Su: np.ndarray):
     decay LMI per rule, soft, first), the normalisation of X', then the epigraph of ``t`` (``min t``)."""
     n, m = aug.n, aug.m
     layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("s", ()), Var("t", ()))
-    lmis, _ = posed(STEP3, Posed(aug, params, layout, Su=Su))
+    lmis = posed(STEP3, Posed(aug, params, layout, Su=Su))
     lmis += _normalisation(layout, "X", n, _kappa(params))
     lmis.append(margin_lmi("||Y'|| <= t", layout, lambda X, Y, s, t: balanced(Y, t),
                            margin=lambda X, Y, s, t: balanced_margin(t, m, n)))  # fmt: skip

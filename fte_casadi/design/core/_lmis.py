@@ -337,14 +337,15 @@ class Posing:
     soft: bool = False
 
 
-def posed(problem: str, at: Posed, part: str = "feasibility") -> tuple[list, int]:
+def posed(problem: str, at: Posed, part: str = "feasibility") -> list:
     """The constraints of every registered LMI posed in ``problem`` (its ``pose``) for ``part``, in the order
-    registered, the soft ones first; and how many are soft."""
+    registered, the soft ones first."""
     if problem not in PROBLEMS:
         raise ValueError(f"no problem {problem!r}; the problems are {', '.join(PROBLEMS)}")
     chosen = [e.pose[problem] for e in LMIS.values() if problem in e.pose and e.pose[problem].part == part]
-    soft = [L for p in chosen if p.soft for L in p.build(at)]
-    return soft + [L for p in chosen if not p.soft for L in p.build(at)], len(soft)
+    return [L for p in chosen if p.soft for L in p.build(at)] + [
+        L for p in chosen if not p.soft for L in p.build(at)
+    ]
 
 
 def diag_blocks(sizes, values) -> np.ndarray:

@@ -27,7 +27,7 @@ def step3(aug: Augmented, params: dict, solver: str) -> tuple[Step3, list[np.nda
     n, m, r = aug.n, aug.m, aug.r
     sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
     layout = Layout(Var("X", (n, n), True), *[Var(f"Y{j}", (m, n)) for j in range(r)])
-    lmis, _ = posed(PAPER3, Posed(aug, params, layout))  # (45) for every rule i and gain j
+    lmis = posed(PAPER3, Posed(aug, params, layout))  # (45) for every rule i and gain j
     lmis.append(affine_lmi("X > 0", layout, lambda **u: STRICT * np.eye(n) - u["X"]))
     prob = ConicProblem(layout, lmis)
     res = prob.solve(solver)
@@ -51,7 +51,7 @@ def step5(aug: Augmented, params: dict, X, K: list, T, solver: str) -> Step5:
     p, nbar, lf, r = aug.p, aug.nbar, aug.ns, aug.r  # ns = lf (+ Remark 5's directions)
     layout = Layout(Var("Pbar", (nbar, nbar), True), *[Var(f"Q{i}", (nbar, p)) for i in range(r)],
                     Var("N", (lf, p)), Var("theta", ()))  # fmt: skip
-    lmis, _ = posed(PAPER5, Posed(aug, params, layout, K=K, T=T, X=X))  # (46) for every (i, j), (55), (64)
+    lmis = posed(PAPER5, Posed(aug, params, layout, K=K, T=T, X=X))  # (46) for every (i, j), (55), (64)
     lmis.append(affine_lmi("Pbar > 0", layout, lambda **u: STRICT * np.eye(nbar) - u["Pbar"]))
     c = np.zeros(layout.size)
     c[layout.index("theta")] = 1.0

@@ -68,10 +68,10 @@ def _step5_problem(aug: Augmented, params: dict, X, K, T, *, rest: bool = True, 
         return _step5_joint(aug, params, K, T, rest=rest)
     layout = Layout(Var("Pt", (aug.nbar, aug.nbar), True), Var("s", ()), Var("rho", (aug.r,)), Var("tau", ()))
     at = Posed(aug, params, layout, K=K, T=T, X=X)
-    feas = posed(STEP5, at)[0] + _normalisation(layout, "Pt", aug.nbar, _kappa(params))
+    feas = posed(STEP5, at) + _normalisation(layout, "Pt", aug.nbar, _kappa(params))
     if not rest:  # the feasibility solve needs (46) and the normalisation only
         return layout, feas, [], None
-    return layout, feas, posed(STEP5, at, "rest")[0], _objective(aug, layout)
+    return layout, feas, posed(STEP5, at, "rest"), _objective(aug, layout)
 
 
 #: phase 1 bounds the loop's block of Theorem 1's V by P1t <= P1_CAP kappa I (Pt, the observer's, lies in [I, kappa I])
@@ -87,7 +87,7 @@ def _step5_joint(aug: Augmented, params: dict, K, T, *, rest: bool = True):
     layout = Layout(Var("Pt", (nbar, nbar), True), Var("P1", (n, n), True), Var("s", ()), Var("rho", (r,)),
                     Var("tau", ()))  # fmt: skip
     at = Posed(aug, params, layout, K=K, T=T)
-    feas = posed(JOINT, at)[0] + _normalisation(layout, "Pt", nbar, kappa)
+    feas = posed(JOINT, at) + _normalisation(layout, "Pt", nbar, kappa)
     eye = np.eye(n)
     cap = P1_CAP * kappa
     # s > 0 (Pbar = Pt / s > 0): without unknown inputs nothing else in (29) asks it (in (46) the x block's -sigma s I does)
@@ -99,7 +99,7 @@ def _step5_joint(aug: Augmented, params: dict, K, T, *, rest: bool = True):
     ]  # fmt: skip
     if not rest:
         return layout, feas, [], None
-    return layout, feas, posed(JOINT, at, "rest")[0], _objective(aug, layout)
+    return layout, feas, posed(JOINT, at, "rest"), _objective(aug, layout)
 
 
 def _objective(aug: Augmented, layout: Layout) -> np.ndarray:
