@@ -68,6 +68,7 @@ def test_derive_table_and_example_file_plant():
 
 
 def _bad(tmp_path, args, needle):
+    """A real process: a non-zero exit, the message on stderr, no traceback."""
     p = fte(*args, cwd=tmp_path)
     assert p.returncode != 0
     assert "Traceback" not in p.stderr
@@ -75,19 +76,32 @@ def _bad(tmp_path, args, needle):
     return p
 
 
+def _refused(args, needle):
+    """The same in process (CliRunner, the working directory set by the caller): the command ended by its own exit
+    status, not by an exception it let through, and said ``needle``."""
+    from click.testing import CliRunner
+
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code not in (0, None) and (r.exception is None or isinstance(r.exception, SystemExit)), (
+        r.exception
+    )
+    assert "Traceback" not in r.output and needle in r.output.replace("\n", " "), r.output
+
+
 @pytest.mark.slow
-def test_errors_are_clear(tmp_path):
-    """Each bad plant gives a non-zero exit and its message, never a traceback (asserted in _bad)."""
-    assert _bad(tmp_path, ["derive", "manipulatr"], "unknown plant").returncode == 2
-    _bad(tmp_path, ["derive", "manipulatr"], "unknown plant 'manipulatr'")
-    _bad(tmp_path, ["derive", "missing.py:f"], "does not exist")
+def test_errors_are_clear(tmp_path, monkeypatch):
+    """Each bad plant gives a non-zero exit and its message, never a traceback: once as a process (status 2), the
+    others in process (a process each took 2 s of imports)."""
+    assert _bad(tmp_path, ["derive", "manipulatr"], "unknown plant 'manipulatr'").returncode == 2
+    monkeypatch.chdir(tmp_path)
+    _refused(["derive", "missing.py:f"], "does not exist")
     (tmp_path / "syn.py").write_text("def f(:\n    pass\n")
-    _bad(tmp_path, ["derive", "syn.py:f"], "syntax error at line 1")
+    _refused(["derive", "syn.py:f"], "syntax error at line 1")
     (tmp_path / "boom.py").write_text("def f():\n    raise RuntimeError('no coefficients')\n")
-    _bad(tmp_path, ["derive", "boom.py:f"], "raised RuntimeError: no coefficients")
+    _refused(["derive", "boom.py:f"], "raised RuntimeError: no coefficients")
     (tmp_path / "notplant.py").write_text("def f():\n    return 42\n")
-    _bad(tmp_path, ["derive", "notplant.py:f"], "not a Plant")
-    _bad(tmp_path, ["derive", "notplant.py:g"], "has no function 'g'")
+    _refused(["derive", "notplant.py:f"], "not a Plant")
+    _refused(["derive", "notplant.py:g"], "has no function 'g'")
     (tmp_path / "dims.py").write_text(
         textwrap.dedent(
             """
@@ -103,7 +117,7 @@ def test_errors_are_clear(tmp_path):
             """
         )
     )
-    _bad(tmp_path, ["derive", "dims.py:f"], "expected 2 instead of 1")
+    _refused(["derive", "dims.py:f"], "expected 2 instead of 1")
     (tmp_path / "unb.py").write_text(
         textwrap.dedent(
             """
@@ -121,7 +135,7 @@ def test_errors_are_clear(tmp_path):
             """
         )
     )
-    _bad(tmp_path, ["derive", "unb.py:f"], "no bounds")
+    _refused(["derive", "unb.py:f"], "no bounds")
 
 
 @pytest.mark.slow

@@ -253,5 +253,5 @@ def test_a_cover_whose_vertices_block_the_design_is_named_and_the_other_cover_ce
     assert np.isclose(float(m[3]), far.max(), rtol=0.05)
     # the grouped cover's design at the defaults is the refusal's "(checked)", and tests/test_ts_groups.py's
     # test_arm_designs_certified_at_the_defaults: not made a third time here
-    grouped = derive(arm(), vertices="grouped", fidelity_samples=300)
+    grouped = derive(ts.plant, vertices="grouped", fidelity_samples=300)  # the same premises: found once
     assert grouped.r == int(m[4])

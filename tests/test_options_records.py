@@ -1,10 +1,10 @@
 """The options records of simulate() and tune() (issue #41 item 3): a bad field is refused with a message naming
-it, and a run through the keywords and through the record gives the same metrics."""
+it, and a run through the keywords and through the record gives the same metrics (tune's: in
+tests/test_tune.py::test_reproducible_for_a_seed)."""
 
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import pytest
 
@@ -71,22 +71,3 @@ def test_simulate_refuses_options_of_another_kind(lqr_designs):
     d, plant = lqr_designs["manipulator"], load_plant("manipulator")
     with pytest.raises(ParameterError, match="SimulateOptions"):
         simulate(d, plant, SCENARIOS["manipulator"](), paths=1, seed=0, options={"dt": 1e-3})
-
-
-SPEC = f"{Path(__file__).parent / 'plant_tune.py'}:plant"
-
-
-@pytest.mark.slow
-def test_tune_through_keywords_and_through_the_record_gives_the_same_front():
-    pytest.importorskip("optuna")
-    from fte_casadi.design import design
-    from fte_casadi.plants import load_scenario
-    from fte_casadi.ts import derive
-    from fte_casadi.tune import tune
-
-    plant, scenario = load_plant(SPEC), load_scenario(SPEC)
-    base = design(derive(plant), sample_time=scenario.dt, initial_state=scenario.x0, plant_spec=SPEC)
-    by_kw = tune(base, plant, scenario, trials=3, seed=2, paths=2)
-    by_record = tune(base, plant, scenario, options=TuneOptions(trials=3, seed=2, paths=2))
-    assert by_record.front == by_kw.front and by_record.chosen == by_kw.chosen
-    assert [r.values for r in by_record.records] == [r.values for r in by_kw.records]

@@ -22,6 +22,7 @@ pytest.importorskip("optuna")
 
 from fte_casadi.tune import (  # noqa: E402
     Record,  # noqa: E402
+    TuneOptions,
     choose,
     pareto_front,
     tune,
@@ -82,8 +83,18 @@ def test_objectives_are_the_metrics(result):
 
 
 def test_reproducible_for_a_seed(small, result):
+    """The same seed gives the same trials, front and choice: run again through the options record
+    (``TuneOptions``, not keywords) on a Dask cluster (one worker, in this process), against the module's run by
+    keywords in process. Another seed gives other trials."""
+    distributed = pytest.importorskip("distributed")
     plant, scenario, _, base = small
-    again = tune(base, plant, scenario, trials=10, seed=3, paths=2)
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+    ) as c:
+        with distributed.Client(c) as client:
+            again = tune(
+                base, plant, scenario, options=TuneOptions(trials=10, seed=3, paths=2, scheduler=client)
+            )
     assert [r.values for r in again.records] == [r.values for r in result.records]
     assert [r.knobs for r in again.records] == [r.knobs for r in result.records]
     assert again.front == result.front and again.chosen == result.chosen
@@ -233,18 +244,6 @@ def test_boundary_layer_of_the_design_is_the_step_s(small):
     assert all(np.array_equal(a, b) for a, b in zip(own, asked))
     assert not all(np.array_equal(a, b) for a, b in zip(own, sgn))
     assert Design.from_dict(json.loads(d.to_json())).params.boundary_layer == phi
-
-
-def test_cluster_gives_the_in_process_front(small, result):
-    distributed = pytest.importorskip("distributed")
-    plant, scenario, _, base = small
-    with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
-    ) as c:
-        with distributed.Client(c) as client:
-            on = tune(base, plant, scenario, trials=10, seed=3, paths=2, scheduler=client)
-    assert [r.values for r in on.records] == [r.values for r in result.records]
-    assert on.front == result.front and on.chosen == result.chosen
 
 
 def test_trial_zero_of_a_design_file_is_that_design(small, tmp_path):

@@ -40,6 +40,7 @@ keeping ``M(q)`` on the left.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import dataclass
@@ -225,10 +226,26 @@ def _simplex_vertices(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
     return V
 
 
-def _log_volume(V: np.ndarray) -> float:
-    D = V[1:] - V[0]
-    sign, logdet = np.linalg.slogdet(D)
-    return logdet if sign != 0 else np.inf
+def _facets_log_volume(A: np.ndarray, b: np.ndarray) -> float:
+    """``log(r! vol)`` of the simplex ``{y : A y <= b}`` (r + 1 facets in r dimensions) from its facets alone:
+    ``vol = |det [A b]|^r / (r! prod_i |det A_-i|)`` (A_-i: A without row i), the search's objective, with
+    no vertex solved for. It is bounded when the cofactors ``(-1)^i det A_-i`` (the weights with
+    ``lam^T A = 0``) share one sign; 1e6 where it is unbounded or degenerate (as :func:`_simplex_vertices`
+    says None), inf where it has no volume."""
+    m = A.shape[0]
+    rows, alternate = _without_each_row(m)
+    signs, logs = np.linalg.slogdet(A[rows])
+    size = np.exp(logs - logs.max())  # |lam_i| / max |lam|
+    if abs(float(np.sum(signs * alternate))) != m or size.min() <= 1e-9 * np.sqrt(size @ size):
+        return 1e6
+    sign, logdet = np.linalg.slogdet(np.hstack((A, b[:, None])))
+    return (m - 1) * logdet - float(np.sum(logs)) if sign != 0 else np.inf
+
+
+@functools.cache
+def _without_each_row(m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The row indices of A_-i for i < m, and the cofactors' signs (-1)^i."""
+    return np.array([[k for k in range(m) if k != i] for i in range(m)]), (-1.0) ** np.arange(m)
 
 
 def _regular_normals(r: int) -> np.ndarray:
@@ -250,9 +267,7 @@ def _small_simplex(Y: np.ndarray, rng) -> np.ndarray:
     def objective(a):
         A = a.reshape(r + 1, r)
         A = A / np.linalg.norm(A, axis=1, keepdims=True)
-        b = np.max(A @ Y, axis=1)
-        V = _simplex_vertices(A, b)
-        return 1e6 if V is None else _log_volume(V)
+        return _facets_log_volume(A, np.max(A @ Y, axis=1))
 
     if r >= LARGE_IMAGE:
         return _large_simplex(Y, rng)
@@ -306,8 +321,7 @@ def _large_simplex(Y: np.ndarray, rng) -> np.ndarray:
     def objective(a):
         A = a.reshape(r + 1, r)
         A = A / np.linalg.norm(A, axis=1, keepdims=True)
-        V = _simplex_vertices(A, np.max(A @ ext, axis=1))
-        return 1e6 if V is None else _log_volume(V)
+        return _facets_log_volume(A, np.max(A @ ext, axis=1))
 
     A0 = min(starts, key=lambda A: objective(A.ravel()))
     res = minimize(objective, A0.ravel(), method="Powell",
