@@ -213,15 +213,22 @@ def test_faults_the_outputs_tell_apart_only_weakly_are_named_and_the_advice_cert
     assert "--explore" not in msg
 
 
-def test_a_heavy_bound_asked_of_scs_is_bisected_by_phase_1_and_agrees_with_clarabel_and_the_design():
+@pytest.mark.parametrize("n", [4, pytest.param(6, marks=pytest.mark.heavy)])
+def test_a_heavy_bound_asked_of_scs_is_bisected_by_phase_1_and_agrees_with_clarabel_and_the_design(
+    n, monkeypatch
+):
     """The 64-rule chain's sigma_max with SCS: phase 1's bisection in numpy, not a conic solve of 13 000 rows
     of PSD cones (minutes); within 10 % of Clarabel's conic bound, and the design's own step 3 ((45) alone, no
-    decay rate asked: the bound is (45)'s) agrees with it: feasible a little below, infeasible a little above."""
+    decay rate asked: the bound is (45)'s) agrees with it: feasible a little below, infeasible a little above.
+    The same on the 16-rule chain (n = 4), counted heavy at any size: the route and the agreement, in seconds;
+    the 64-rule one, the scale, with ``pytest -m heavy``."""
     from fte_casadi.design import augment
     from fte_casadi.design.core import _conditioned as conditioned
-    from fte_casadi.design.core import _diagnose
+    from fte_casadi.design.core import _diagnose, _sdp
 
-    ts = derive(chainfar(), fidelity_samples=300)
+    if n < 6:
+        monkeypatch.setattr(_sdp, "HEAVY_CONES", 0)
+    ts = derive(chainfar(n), fidelity_samples=300)
     aug = augment(ts.local_models, ts.C, ts.Df)
     _diagnose._MEMO.clear()
     smax, status = _diagnose.sigma_max(aug, 1.0, 0.5, "SCS")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-from scipy.integrate import LSODA, RK45
 
 from ..errors import IntegrationStopped
 from ._model import Fidelity
@@ -174,6 +173,8 @@ def _trajectory(fun, start, horizon, points, lo, hi, max_evaluations=MAX_EVALUAT
     """The open-loop trajectory by RK45 (as ``solve_ivp`` would), and by LSODA, which switches to a
     stiff method, where RK45 spends a third of the budget (see :func:`_integrate`; the built-in plants
     and examples take 300-4300 evaluations)."""
+    from scipy.integrate import LSODA, RK45  # here: loading fte_casadi does not wait for scipy.integrate
+
     spent = [0]
     X, T, stop = _integrate(RK45, fun, start, horizon, points, lo, hi, max_evaluations // 3, spent)
     if spent[0] > max_evaluations // 3:  # RK45 spent its budget: stiff

@@ -68,14 +68,21 @@ def cap_for_sample_time(prob, a: float, pt: dict, why: str, sample_time: float):
     found that runs at that rate, and the error names the fastest sample time found and what limits it.
     """
     target = TS_FACTOR * sample_time
-    tried = [(a, pt)] + [(f * a, prob.design(f * a)) for f in CAP_GRID]
-    tried = [(al, p) for al, p in tried if p is not None]
-    for need, how in ((target, f">= {TS_FACTOR:g} x"), (sample_time, "above")):
-        for al, p in tried:
-            if p["ts_cert"] >= need:
-                why += (f"; lowered to {al:.4g} so that the discrete step is proven stable for Ts < {p['ts_cert']:.3g} "
-                        f"({how} the sample time {sample_time:g})")  # fmt: skip
-                return al, p, why
+
+    def lowered(al, p, how):
+        return al, p, why + (f"; lowered to {al:.4g} so that the discrete step is proven stable for Ts < "
+                             f"{p['ts_cert']:.3g} ({how} the sample time {sample_time:g})")  # fmt: skip
+
+    tried = []  # designed in the grid's order, only as far as the first that reaches the target
+    for k, al in enumerate([a] + [f * a for f in CAP_GRID]):
+        p = pt if k == 0 else prob.design(al)
+        if p is not None:
+            tried.append((al, p))
+            if p["ts_cert"] >= target:
+                return lowered(al, p, f">= {TS_FACTOR:g} x")
+    for al, p in tried:  # none reached the target: every alpha of the grid was designed
+        if p["ts_cert"] >= sample_time:
+            return lowered(al, p, "above")
     al, best = max(tried, key=lambda t: t[1]["ts_cert"]) if tried else (None, None)
     fastest = 0.0 if best is None else best["ts_cert"]
     limit = ""

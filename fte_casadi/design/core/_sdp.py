@@ -20,7 +20,6 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
-import cvxpy as cp
 import numpy as np
 
 from ..._text import shorten
@@ -445,6 +444,8 @@ class ConicProblem:
         self._built: dict[bool, tuple] = {}
 
     def _build(self, rescale: bool):
+        import cvxpy as cp  # here, not at the module's import: a command that solves nothing starts without it
+
         if rescale in self._built:
             return self._built[rescale]
         nv = self.layout.size
@@ -467,6 +468,8 @@ class ConicProblem:
         return self._built[rescale]
 
     def _solve_once(self, solver: str, p: float, rescale: bool, settings: dict | None = None) -> SolveResult:
+        import cvxpy as cp
+
         prob, w, par, d = self._build(rescale)
         par.value = float(p)
         w.value = None
