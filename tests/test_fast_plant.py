@@ -5,6 +5,7 @@ come out near 8e23), and its certified fault-error bound is found where the coni
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from fte_casadi.design._limits import channel_zeros
 
@@ -32,21 +33,24 @@ def test_a_zero_of_a_fast_channel_is_still_found():
     assert np.allclose(z, [1e4], rtol=1e-8)
 
 
-def test_a_fast_plants_fault_error_bound_is_found_and_holds():
-    """The PMSM with a speed-sensor fault: Clarabel failed numerically on its fault-error analysis LMI (on the
-    development machine); phase 1 and centring in numpy then find the bound. Whichever finds it, the LMI
-    holds at its point (eigenvalues here)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
+@pytest.fixture(scope="module")
+def speed_sensor():
+    """The PMSM with a speed-sensor fault, designed at its defaults (both tests below ask this design)."""
     from plant_pmsm_sensor import pmsm_speed_sensor
 
     from fte_casadi.design import design
-    from fte_casadi.design.core._bounds import _lmi, _posed, channel_names, gain_diag
     from fte_casadi.ts import derive
 
-    d = design(derive(pmsm_speed_sensor(), fidelity_samples=300), sample_time=1e-4)
+    return design(derive(pmsm_speed_sensor(), fidelity_samples=300), sample_time=1e-4)
+
+
+def test_a_fast_plants_fault_error_bound_is_found_and_holds(speed_sensor):
+    """The PMSM with a speed-sensor fault: Clarabel failed numerically on its fault-error analysis LMI (on the
+    development machine); phase 1 and centring in numpy then find the bound. Whichever finds it, the LMI
+    holds at its point (eigenvalues here)."""
+    from fte_casadi.design.core._bounds import _lmi, _posed, channel_names, gain_diag
+
+    d = speed_sensor
     assert d.certified  # the issue's motor, which never certified, at its defaults
     b = d.bounds["fault_error"]
     assert b["holds"], b
@@ -59,18 +63,14 @@ def test_a_fast_plants_fault_error_bound_is_found_and_holds():
         assert np.linalg.eigvalsh(_lmi(Ac, np.hstack([ch[c] for c in names]), Wc, Cz, P, G))[-1] < 0
 
 
-def test_the_stable_motor_gets_a_loop_that_acts_and_an_idle_one_is_named():
+def test_the_stable_motor_gets_a_loop_that_acts_and_an_idle_one_is_named(speed_sensor):
     """With the bias on the i_d sensor the smallest gain of (45) alone is zero for this stable motor. By default
     the loop is asked to be faster than the open loop: here 2x its slowest rate asks an observer beyond the
     sample time, so the loop is designed at the lower default rate, 1.25x, and acts (the rate the LMI 'decay'
     certifies, recomputed here from X and K). Asked for no rate (beta = 0) the gain is zero again, and the
     verdict's "why" says the controller does not act, with max ||B_i K_j|| recomputed here; with the speed
     sensor's bias the loop acts and nothing is said."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from plant_pmsm_sensor import pmsm_id_sensor, pmsm_speed_sensor
+    from plant_pmsm_sensor import pmsm_id_sensor
 
     from fte_casadi.design import design
     from fte_casadi.design._limits import explain_metrics, loop_idle
@@ -100,5 +100,4 @@ def test_the_stable_motor_gets_a_loop_that_acts_and_an_idle_one_is_named():
     assert f"max ||B_i K_j|| = {bk:.2g}" in text and "a ratio of 1 is a tie" in text
     metrics = {"windows": [{"fault": "i_d_bias", "start": 0.5, "stop": 1.0, "ftc_true_ratio": 1.0}]}
     assert "the controller does not act" in explain_metrics(d, metrics)[0]
-    acting = design(derive(pmsm_speed_sensor(), fidelity_samples=300), sample_time=1e-4)
-    assert loop_idle(acting) == ""
+    assert loop_idle(speed_sensor) == ""

@@ -90,9 +90,12 @@ def test_cli_scheduler_equals_in_process(cluster):
 
 
 @pytest.mark.slow
-def test_unreachable_scheduler_is_a_clear_error(plants, real_designs):
+def test_unreachable_scheduler_is_a_clear_error(plants, real_designs, monkeypatch):
     from fte_casadi.errors import SimulationError
     from fte_casadi.plants import SCENARIOS
+    from fte_casadi.sim import _cluster
+
+    monkeypatch.setattr(_cluster, "CONNECT_TIMEOUT", 1.0)  # the same refusal, after 1 s of retries, not 10
 
     with pytest.raises(SimulationError, match="cannot reach the dask scheduler"):
         simulate(real_designs["manipulator"], plants["manipulator"], SCENARIOS["manipulator"](), paths=4, seed=0,

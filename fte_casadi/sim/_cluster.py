@@ -34,11 +34,18 @@ def _require():
     return distributed
 
 
-def client_for(address: str, timeout: float = 10.0):
-    """A client of the scheduler at ``address``, or a clear error."""
+#: seconds a client waits for the scheduler (distributed retries a refused connection until then: one starting up)
+CONNECT_TIMEOUT = 10.0
+
+
+def client_for(address: str, timeout: float | None = None):
+    """A client of the scheduler at ``address`` (waiting up to ``timeout``, default :data:`CONNECT_TIMEOUT`
+    seconds), or a clear error."""
     distributed = _require()
     try:
-        return distributed.Client(address, timeout=timeout, set_as_default=False)
+        return distributed.Client(
+            address, timeout=CONNECT_TIMEOUT if timeout is None else timeout, set_as_default=False
+        )
     except (OSError, TimeoutError) as exc:
         raise SimulationError(
             f"cannot reach the dask scheduler at {address!r} ({exc}); start one (`dask scheduler`, then "
