@@ -47,10 +47,11 @@ def test_designs_at_its_1_ms_step_with_the_discrete_step_proven(ts, tmp_path):
     assert "#define FTE_CARTPOLE_TS (0.001)" in (tmp_path / "c" / "fte_cartpole.h").read_text()
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_a_rate_too_slow_is_refused_naming_one_that_works(ts):
     """At 100 ms no certified design of this plant runs: the refusal names a sample time that works, and a
-    design at that sample time is certified. (At 50 ms Theorem 1's (29) certifies one, where (46) does not.)"""
+    design at that sample time is certified. (At 50 ms Theorem 1's (29) certifies one, where (46) does not.)
+    The manipulator's tests/test_sample_time.py checks the same in 7 s, this one takes 17: `pytest -m heavy`."""
     with pytest.raises(InfeasibleDesignError) as err:
         design(ts, sample_time=0.1, sigma=0.79)
     msg = " ".join(str(err.value).split())

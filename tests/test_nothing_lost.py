@@ -287,26 +287,26 @@ def test_tune_interrupted_keeps_its_trials_and_resumes(tmp_path, monkeypatch):
         return real(task)
 
     monkeypatch.setattr(search, "evaluate", interrupted_third)
-    r = _tune(out, "--trials", "5")
+    r = _tune(out, "--trials", "4")
     assert r.exit_code == 130, r.output
     work = tmp_path / "t.partial"
     assert "the finished trials (1) are kept in" in _said(r) and "--resume" in _said(r), _said(r)
     assert f"each file complete: {work / 'optuna.db'};" in _said(r)  # written, and said
     assert _files(out) == earlier
 
-    r = _tune(out, "--trials", "5")
+    r = _tune(out, "--trials", "4")
     assert r.exit_code == 2 and "--resume" in r.stderr  # a fresh run would drop the kept trials
-    r = _tune(out, "--trials", "5", "--resume", "--seed", "3")  # the last --seed counts
+    r = _tune(out, "--trials", "4", "--resume", "--seed", "3")  # the last --seed counts
     assert r.exit_code == 2 and "differs from this one in seed (it was run with 2)" in _said(r), _said(r)
     rerun = []
     monkeypatch.setattr(search, "evaluate", lambda task: rerun.append(1) or real(task))
-    r = _tune(out, "--trials", "5", "--resume")
+    r = _tune(out, "--trials", "4", "--resume")
     assert r.exit_code == 0, r.output
     assert sorted(f.name for f in tmp_path.iterdir()) == ["t"]  # no DIR.partial, no old set aside
     resumed = _trials(out)
-    assert len(resumed) == 5 and len(rerun) == 4  # trial 0 kept, not run again
+    assert len(resumed) == 4 and len(rerun) == 3  # trial 0 kept, not run again
 
-    r = _tune(tmp_path / "u", "--trials", "5")
+    r = _tune(tmp_path / "u", "--trials", "4")
     assert r.exit_code == 0, r.output
     assert resumed == _trials(tmp_path / "u")
 
