@@ -99,8 +99,9 @@ class _Sampled(NamedTuple):
     hi: np.ndarray
     per: int  # grid points per axis
 
-    @classmethod
-    def of(cls, expr: ca.SX, x: ca.SX, idx: tuple[int, ...], lo: np.ndarray, hi: np.ndarray, samples: int):
+    @staticmethod
+    def function(expr: ca.SX, x: ca.SX, idx: tuple[int, ...]) -> ca.Function:
+        """``expr`` and its gradient as a function of the states it uses (the others set to 0)."""
         xs = ca.vertcat(*[x[j] for j in idx])
         others = [j for j in range(x.numel()) if j not in idx]
         e = (
@@ -108,7 +109,10 @@ class _Sampled(NamedTuple):
             if others
             else expr
         )
-        FG = ca.Function("FG", [xs], [e, ca.gradient(e, xs)])
+        return ca.Function("FG", [xs], [e, ca.gradient(e, xs)])
+
+    @classmethod
+    def of(cls, FG: ca.Function, idx: tuple[int, ...], lo: np.ndarray, hi: np.ndarray, samples: int):
         k = len(idx)
         per = max(3, int(round(samples ** (1.0 / k))))
         lo_s, hi_s = lo[list(idx)], hi[list(idx)]
@@ -116,6 +120,11 @@ class _Sampled(NamedTuple):
         points = np.array(np.meshgrid(*axes, indexing="ij")).reshape(k, -1)
         f, g = FG.map(points.shape[1])(points)  # one mapped call for both
         return cls(FG, points, np.array(f).ravel(), np.array(g).reshape(k, -1), lo_s, hi_s, per)
+
+    def first_not_finite(self) -> np.ndarray | None:
+        """The first grid point where the expression is not finite, or None."""
+        bad = np.flatnonzero(~np.isfinite(self.vals))
+        return self.points[:, bad[0]] if bad.size else None
 
     def extrema(self, signs: tuple[float, ...], max_searches: int) -> list[tuple[float, float]]:
         """``(value, gap)`` of :func:`_extremum` for each sign (1: the minimum, -1: the maximum)."""
@@ -148,10 +157,8 @@ def premise_bounds(
     if not idx:
         val = float(ca.Function("c", [x], [expr])(np.zeros(x.numel())))
         return val, val, idx, 0.0
-    grid = _Sampled.of(expr, x, idx, lo, hi, _SAMPLES)
-    bad = ~np.isfinite(grid.vals)
-    if np.any(bad):
-        pt = grid.points[:, np.flatnonzero(bad)[0]]
+    pt, found = _searched(expr, x, idx, lo, hi, _SAMPLES, (1.0, -1.0), max_searches)
+    if pt is not None:
         where = ", ".join(f"{state_names[j]} = {v:g}" for j, v in zip(idx, pt))
         raise BoundsError(
             f"premise {name!r} is not finite at {where}: define it there (e.g. with casadi.if_else for a "
@@ -159,7 +166,7 @@ def premise_bounds(
             "not finite",
             where,
         )
-    (mn, gap1), (mx, gap2) = grid.extrema((1.0, -1.0), max_searches)
+    (mn, gap1), (mx, gap2) = found
     if not (np.isfinite(mn) and np.isfinite(mx)):
         raise BoundsError(f"premise {name!r} is unbounded over the region; shrink the region", "unbounded")
     if mx - mn < 1e-12 and not allow_constant:
@@ -181,5 +188,29 @@ def certified_max(
     idx = _states_used(expr, x)
     if not idx:
         return float(ca.Function("c", [x], [expr])(np.zeros(x.numel())))
-    ((mx, _),) = _Sampled.of(expr, x, idx, lo, hi, samples).extrema((-1.0,), max_searches)
+    _, ((mx, _),) = _searched(expr, x, idx, lo, hi, samples, (-1.0,), max_searches)
     return float(mx)
+
+
+def _searched(expr, x, idx, lo, hi, samples, signs, max_searches):
+    """``(first point not finite or None, extrema)`` of :meth:`_Sampled.extrema` (no search where a point is not
+    finite). A function of the expression (as CasADi serialises it: exact), the box, the grid and the searches
+    alone: found once per process for the last few hundred (a plant derived again, or its other covers, asks the
+    same bounds)."""
+    FG = _Sampled.function(expr, x, idx)
+    key = (FG.serialize(), np.asarray(lo, float)[list(idx)].tobytes(), np.asarray(hi, float)[list(idx)].tobytes(),
+           samples, signs, max_searches)  # fmt: skip
+    if key in _FOUND:
+        return _FOUND[key]
+    grid = _Sampled.of(FG, idx, lo, hi, samples)
+    pt = grid.first_not_finite()
+    out = (pt, None if pt is not None else grid.extrema(signs, max_searches))
+    _FOUND[key] = out
+    while len(_FOUND) > _FOUND_KEPT:
+        _FOUND.pop(next(iter(_FOUND)))
+    return out
+
+
+#: the searches' answers in this process, oldest first (:func:`_searched`)
+_FOUND: dict = {}
+_FOUND_KEPT = 512
