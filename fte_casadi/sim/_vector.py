@@ -64,8 +64,12 @@ def auto_chunk(paths: int, threads: int) -> int:
 
 
 #: compiler flags: IEEE semantics kept (no -ffast-math); -ffp-contract=off: no fused multiply-adds, so
-#: every operation rounds as in CasADi's own C and the numbers do not depend on whether a CPU has FMA
-FLAGS = ("-O3", "-fno-trapping-math", "-fno-math-errno", "-ffp-contract=off", "-march=native", "-shared", "-fPIC")  # fmt: skip
+#: every operation rounds as in CasADi's own C and the numbers do not depend on whether a CPU has FMA.
+#: -O1, not -O3: gcc 12 compiled the manipulator's engine (61 kB of C) in 4.0 s against 11.2 s at -O3 (-O2 7.7 s),
+#: and the engine then ran as fast (128 paths of its scenario: 0.61 s against 0.60 s; the quadruple tank's 64
+#: paths 0.75 s against 0.83 s; the best of three, 2-core Zen 3) with the same numbers to the bit (no reassociation
+#: at any level): a new design's first run waits for the compiler, and it waits less
+FLAGS = ("-O1", "-fno-trapping-math", "-fno-math-errno", "-ffp-contract=off", "-march=native", "-shared", "-fPIC")  # fmt: skip
 #: the fast mode's flags (``exact=False``): the same, with contraction into fused multiply-adds allowed;
 #: still no -ffast-math (no reassociation, NaN and infinities kept: the divergence check relies on them)
 FAST_FLAGS = tuple("-ffp-contract=fast" if f == "-ffp-contract=off" else f for f in FLAGS)
