@@ -161,3 +161,21 @@ def test_the_0_1_design_is_a_baseline_outside_the_wheel_that_fte_bench_runs_from
     assert "speedup_vs_0.1" not in out
     line = summary_lines({"design": {"manipulator": out}})[1]
     assert "design_0.1: not run (source checkout only)" in line and "faster than 0.1" not in line
+
+
+@pytest.mark.slow
+def test_the_c_step_bench_runs_a_gate_that_remembers():
+    """`fte reproduce`'s C section times the committed manipulator design, whose gate holds latches and memories
+    after z (nz > nbar): the CasADi step is called with the whole state (it was called with z alone and raised)."""
+    from pathlib import Path
+
+    from fte_casadi.bench._cstep import bench_c_step
+    from fte_casadi.codegen import find_compiler
+    from fte_casadi.design import Design
+
+    d = Design.load(Path(__file__).resolve().parents[1] / "generated" / "manipulator" / "design.json")
+    assert d.remembers and d.nz > d.nbar
+    b = bench_c_step(d, iters=200, reps=1)
+    assert b["casadi_us"] > 0
+    if find_compiler() is not None:
+        assert b["c_ns"] > 0 and b["sizeof_state"] >= 8 * d.nz

@@ -240,7 +240,7 @@ def bench_c_step(
         "plant": design.plant,
         "ts": sample_time,  # the bench document's key (kept)
         "real": real,
-        "casadi_us": _casadi_call_s(fn, np.zeros(design.nbar), y0) * 1e6,
+        "casadi_us": _casadi_call_s(fn, np.zeros(design.nz), y0) * 1e6,  # z and the gate's state
         **memory_report(design, sample_time=sample_time, real=real),
     }
     if cc is None:
