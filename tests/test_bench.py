@@ -169,7 +169,7 @@ def test_the_c_step_bench_runs_a_gate_that_remembers():
     after z (nz > nbar): the CasADi step is called with the whole state (it was called with z alone and raised)."""
     from pathlib import Path
 
-    from fte_casadi.bench._cstep import bench_c_step
+    from fte_casadi.bench import bench_c_step
     from fte_casadi.codegen import find_compiler
     from fte_casadi.design import Design
 

@@ -52,6 +52,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import threading
 import warnings
 import weakref
 
@@ -439,9 +440,10 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
         form = hit[1]
     else:
         form = _premise_form(plant, seed)
-        _FORMS[key] = (weakref.ref(plant), form)
-        while len(_FORMS) > _FORMS_KEPT:
-            _FORMS.pop(next(iter(_FORMS)))
+        with _FORMS_LOCK:  # derives in threads (a cluster's in-process workers) evict one at a time
+            _FORMS[key] = (weakref.ref(plant), form)
+            while len(_FORMS) > _FORMS_KEPT:
+                _FORMS.pop(next(iter(_FORMS)))
     q = len(form.bounds)
     if q > WARN_PREMISES:
         warnings.warn(
@@ -457,6 +459,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
 #: premise forms found in this process, by (id of the plant, seed): the plant (weakly, to tell a reused id) and form
 _FORMS: dict[tuple[int, int], tuple[weakref.ref, PremiseForm]] = {}
 _FORMS_KEPT = 4
+_FORMS_LOCK = threading.Lock()
 
 
 def _premise_form(plant: Plant, seed: int) -> PremiseForm:

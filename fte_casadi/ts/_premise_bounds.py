@@ -12,6 +12,8 @@ neighbouring cell, not missed.
 
 from __future__ import annotations
 
+import hashlib
+import threading
 from typing import NamedTuple
 
 import casadi as ca
@@ -194,23 +196,25 @@ def certified_max(
 
 def _searched(expr, x, idx, lo, hi, samples, signs, max_searches):
     """``(first point not finite or None, extrema)`` of :meth:`_Sampled.extrema` (no search where a point is not
-    finite). A function of the expression (as CasADi serialises it: exact), the box, the grid and the searches
-    alone: found once per process for the last few hundred (a plant derived again, or its other covers, asks the
-    same bounds)."""
+    finite). A function of the expression (as CasADi serialises it: exact; kept as its SHA-256), the box, the grid
+    and the searches alone: found once per process for the last few hundred (a plant derived again, or its other
+    covers, asks the same bounds)."""
     FG = _Sampled.function(expr, x, idx)
-    key = (FG.serialize(), np.asarray(lo, float)[list(idx)].tobytes(), np.asarray(hi, float)[list(idx)].tobytes(),
-           samples, signs, max_searches)  # fmt: skip
+    key = (hashlib.sha256(FG.serialize().encode()).digest(), np.asarray(lo, float)[list(idx)].tobytes(),
+           np.asarray(hi, float)[list(idx)].tobytes(), samples, signs, max_searches)  # fmt: skip
     if key in _FOUND:
         return _FOUND[key]
     grid = _Sampled.of(FG, idx, lo, hi, samples)
     pt = grid.first_not_finite()
     out = (pt, None if pt is not None else grid.extrema(signs, max_searches))
-    _FOUND[key] = out
-    while len(_FOUND) > _FOUND_KEPT:
-        _FOUND.pop(next(iter(_FOUND)))
+    with _FOUND_LOCK:  # searches in threads evict one at a time
+        _FOUND[key] = out
+        while len(_FOUND) > _FOUND_KEPT:
+            _FOUND.pop(next(iter(_FOUND)))
     return out
 
 
 #: the searches' answers in this process, oldest first (:func:`_searched`)
 _FOUND: dict = {}
 _FOUND_KEPT = 512
+_FOUND_LOCK = threading.Lock()
