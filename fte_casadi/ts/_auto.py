@@ -52,9 +52,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-import threading
 import warnings
-import weakref
 
 import casadi as ca
 import numpy as np
@@ -430,39 +428,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     A plant without any nonlinear term gets no premise: one rule. Raises
     :class:`~fte_casadi.errors.DerivationError` naming the term that cannot be written so, or
     listing the premises when more than :data:`MAX_PREMISES` would be needed.
-
-    The form of the same plant object and seed is found once per process (a refusal's diagnosis derives the
-    plant's other covers from the same premises; a :class:`Plant` is frozen): the last few are kept.
     """
-    key = (id(plant), seed)
-    hit = _FORMS.get(key)
-    if hit is not None and hit[0]() is plant:
-        form = hit[1]
-    else:
-        form = _premise_form(plant, seed)
-        with _FORMS_LOCK:  # derives in threads (a cluster's in-process workers) evict one at a time
-            _FORMS[key] = (weakref.ref(plant), form)
-            while len(_FORMS) > _FORMS_KEPT:
-                _FORMS.pop(next(iter(_FORMS)))
-    q = len(form.bounds)
-    if q > WARN_PREMISES:
-        warnings.warn(
-            f"the automatic sector method found {q} premises ({2**q} rules as one box each, fewer where premises "
-            f"that depend on the same states are covered together): {'; '.join(form.plant.z_texts)}; the design may "
-            "be slow and conservative: consider declaring premises yourself, narrowing the region, or linearising",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-    return form
-
-
-#: premise forms found in this process, by (id of the plant, seed): the plant (weakly, to tell a reused id) and form
-_FORMS: dict[tuple[int, int], tuple[weakref.ref, PremiseForm]] = {}
-_FORMS_KEPT = 4
-_FORMS_LOCK = threading.Lock()
-
-
-def _premise_form(plant: Plant, seed: int) -> PremiseForm:
     rng = np.random.default_rng(seed)
     inputs_f, terms_f, off_f = _split(plant, "drift")
     inputs_g, terms_g, off_g = _split(plant, "diffusion")
@@ -490,6 +456,14 @@ def _premise_form(plant: Plant, seed: int) -> PremiseForm:
     q = len(live)
     names = tuple(f"z{k + 1}" for k in range(q))
     texts = tuple(cand[r].text if sign[r] > 0 else f"-({cand[r].text})" for r in live)
+    if q > WARN_PREMISES:
+        warnings.warn(
+            f"the automatic sector method found {q} premises ({2**q} rules as one box each, fewer where premises "
+            f"that depend on the same states are covered together): {'; '.join(texts)}; the design may be slow and "
+            "conservative: consider declaring premises yourself, narrowing the region, or linearising",
+            RuntimeWarning,
+            stacklevel=3,
+        )
     z = ca.SX.sym("z", q)
     mats, uses = _matrices(plant, pieces, coef, rep_of, value, sign, live, z)
     x, u, d, f, d2 = plant.x, plant.u, plant.d, plant.f, plant.d2
