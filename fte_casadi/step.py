@@ -31,7 +31,7 @@ import numpy as np
 from .design import Design
 from .errors import ParameterError
 
-__all__ = ["step_function", "saturate", "STEP_INPUTS", "STEP_OUTPUTS"]
+__all__ = ["step_function", "saturate", "StepParameters", "STEP_INPUTS", "STEP_OUTPUTS"]
 
 STEP_INPUTS = ("z", "y")
 STEP_OUTPUTS = ("z_next", "u", "xbarhat", "yc", "s")
@@ -39,6 +39,78 @@ STEP_OUTPUTS = ("z_next", "u", "xbarhat", "yc", "s")
 
 def _dm(a: np.ndarray) -> ca.DM:
     return ca.DM(np.asarray(a, dtype=float))
+
+
+class _Folded:
+    """The design's numbers folded into the step as constants (the default: the generated C)."""
+
+    def matrix(self, name: str, a) -> ca.DM:
+        return _dm(a)
+
+    def scalar(self, name: str, v) -> float:
+        return float(v)
+
+
+class StepParameters:
+    """The design's numbers as the entries of one parameter vector, not constants: a step built with it
+    computes the same numbers, and its Function's structure depends on the design's shapes, its zeros and
+    which of its numbers are equal, not on their values (the simulation compiles one engine per structure,
+    not per design: ``fte tune``'s trials share one).
+
+    One symbol per distinct value (an observer's rules share most of their entries, and the products that
+    constants would share stay shared); zeros and ones stay constants (``0 * x`` and ``1 * x`` are
+    simplified away as they are with constants). A name asked again gets the same matrix (the tolerant and
+    the plain step of one closed loop). :attr:`symbols`: the vector of the symbols (a Function's input),
+    :attr:`values`: its value. The numbers computed are those of the step with constants, to the bit."""
+
+    def __init__(self):
+        self._symbols: list[ca.SX] = []
+        self._values: list[float] = []
+        self._by_value: dict[float, ca.SX] = {}
+        self._made: dict[str, tuple[object, np.ndarray]] = {}
+
+    def _entry(self, v: float):
+        if v in (0.0, 1.0, -1.0):
+            return v
+        sym = self._by_value.get(v)
+        if sym is None:
+            sym = self._by_value[v] = ca.SX.sym(f"p{len(self._symbols)}")
+            self._symbols.append(sym)
+            self._values.append(v)
+        return sym
+
+    def _memo(self, name: str, a: np.ndarray):
+        made = self._made.get(name)
+        if made is not None and not np.array_equal(made[1], a):
+            raise ValueError(f"step parameter {name!r} given two different values")
+        return None if made is None else made[0]
+
+    def matrix(self, name: str, a) -> ca.SX:
+        a = np.asarray(a, dtype=float)
+        a = a.reshape(-1, 1) if a.ndim < 2 else a
+        out = self._memo(name, a)
+        if out is None:
+            out = ca.SX.zeros(a.shape[0], a.shape[1])  # dense, as a DM of the matrix is: zeros are constants
+            for i, j in zip(*np.nonzero(a)):
+                out[int(i), int(j)] = self._entry(float(a[i, j]))
+            self._made[name] = (out, a)
+        return out
+
+    def scalar(self, name: str, v) -> ca.SX:
+        a = np.array([[float(v)]])
+        out = self._memo(name, a)
+        if out is None:
+            out = ca.SX(self._entry(float(v)))
+            self._made[name] = (out, a)
+        return out
+
+    @property
+    def symbols(self) -> ca.SX:
+        return ca.vertcat(*self._symbols) if self._symbols else ca.SX(0, 1)
+
+    @property
+    def values(self) -> np.ndarray:
+        return np.array(self._values, dtype=float)
 
 
 def saturate(u: ca.SX, limits) -> ca.SX:
@@ -62,7 +134,7 @@ def saturate(u: ca.SX, limits) -> ca.SX:
 
 
 def accommodation_gate(
-    fhat: ca.SX, acc: dict, latch: ca.SX | None = None, memory: ca.SX | None = None
+    fhat: ca.SX, acc: dict, latch: ca.SX | None = None, memory: ca.SX | None = None, numbers=None
 ) -> ca.SX:
     """Per fault, 1 while its estimate is compensated in ``u``, else 0.
 
@@ -75,11 +147,12 @@ def accommodation_gate(
     unless another fault q switches on with ``r_q > r_j`` (isolation while latched: at most one fault is
     compensated, ties aside). With ``rho = 1`` this is the memoryless gate exactly: a latched fault with
     ``r_j >= 1`` and no larger ratio switches on anyway, and a larger ratio >= 1 means the largest one
-    switches on."""
-    thr = [float(v) for v in acc["thresholds"]]
+    switches on. ``numbers``: where the gate's numbers come from (:func:`step_function`)."""
+    numbers = _Folded() if numbers is None else numbers
+    thr = [numbers.scalar(f"threshold_{j}", v) for j, v in enumerate(acc["thresholds"])]
     lf = len(thr)
     if acc.get("rule") == "explain":
-        return _explained_gate(fhat, acc, thr, latch, memory)
+        return _explained_gate(fhat, acc, thr, latch, memory, numbers)
     rr = [ca.fabs(fhat[j]) / thr[j] for j in range(lf)]
     on = []
     for j in range(lf):
@@ -90,7 +163,7 @@ def accommodation_gate(
         on.append(g)
     if latch is None:
         return ca.vertcat(*on)
-    rho = float(acc["release"])
+    rho = numbers.scalar("release", acc["release"])
     gates = []
     for j in range(lf):
         hold = (latch[j] > 0.5) * (rr[j] >= rho)
@@ -102,7 +175,7 @@ def accommodation_gate(
 
 
 def _explained_gate(
-    fhat: ca.SX, acc: dict, thr: list, latch: ca.SX | None, memory: ca.SX | None = None
+    fhat: ca.SX, acc: dict, thr: list, latch: ca.SX | None, memory: ca.SX | None = None, numbers=None
 ) -> ca.SX:
     """The gate of rule ``"explain"`` (:mod:`fte_casadi.design._isolation`): fault j is compensated while
     ``r_j = |fhat_j| / (threshold_j + sum_q crosstalk[j][q] |fhat_q| + overshoot_j m_j) >= 1``, i.e. detected and
@@ -122,14 +195,14 @@ def _explained_gate(
             continue
         b = thr[j]
         for q in sources:
-            b = b + float(ct[j, q]) * ca.fabs(fhat[q])
+            b = b + numbers.scalar(f"crosstalk_{j}_{q}", ct[j, q]) * ca.fabs(fhat[q])
         if memory is not None and ov[j] > 0:  # its own swing past the other sign's recent extreme
             other = ca.if_else(fhat[j] >= 0, memory[lf + j], memory[j])
-            b = b + float(ov[j]) * other
+            b = b + numbers.scalar(f"overshoot_{j}", ov[j]) * other
         r = ca.fabs(fhat[j]) / b
         on = r >= 1.0
         if latch is not None:
-            on = ca.fmax(on, (latch[j] > 0.5) * (r >= float(acc["release"])))
+            on = ca.fmax(on, (latch[j] > 0.5) * (r >= numbers.scalar("release", acc["release"])))
         gates.append(on)
     return ca.vertcat(*gates)
 
@@ -141,6 +214,7 @@ def step_function(
     tolerant: bool = True,
     boundary_layer: float | None = None,
     name: str = "fte_step",
+    numbers: StepParameters | None = None,
 ) -> ca.Function:
     """Build the step ``(z, y) -> (z_next, u, xbarhat, yc, s)`` of a design at ``sample_time``.
 
@@ -163,6 +237,10 @@ def step_function(
     boundary_layer : float, optional
         Replace ``sgn(s)`` by ``sat(s / phi)``; ``None``: the design's ``params.boundary_layer``
         when it has one, else the discontinuous ``sgn`` with ``sgn(0) = 0``.
+    numbers : StepParameters, optional
+        Where the design's numbers come from: ``None`` folds them into the Function as constants (the C
+        generator's step); a :class:`StepParameters` makes them symbols, which the Function then reads as free
+        variables (the caller builds a Function with ``numbers.symbols`` as an input).
     """
     if not (isinstance(sample_time, (int, float)) and np.isfinite(sample_time) and sample_time > 0):
         raise ParameterError(f"sample time must be a positive number; got {sample_time!r}")
@@ -172,6 +250,7 @@ def step_function(
         boundary_layer = design.params.boundary_layer
     if boundary_layer is not None and not (np.isfinite(boundary_layer) and boundary_layer > 0):
         raise ParameterError(f"boundary layer must be a positive number; got {boundary_layer!r}")
+    c = _Folded() if numbers is None else numbers
     dims = design.dims
     n, m, p, lf, r, nbar = (int(v) for v in (dims.n, dims.m, dims.p, dims.lf, dims.r, dims.nbar))
     latched = design.latched  # the gate's latches follow z in the step's state
@@ -181,43 +260,45 @@ def step_function(
     memory = zz[nbar + nl :] if design.remembers else None
     y = ca.SX.sym("y", p)
 
-    xbh = z + ca.mtimes(_dm(design.H), y)
+    xbh = z + ca.mtimes(c.matrix("H", design.H), y)
     xhat = xbh[:n]
     fhat = xbh[n + lf :]
     h = design.scheduling_function()(y, xhat)
 
+    # C and Df are the plant's (their ones and zeros stay constants: 1 * x is x), not the design's numbers
     Cbar = np.hstack([design.C, np.zeros((p, lf)), design.Df])
-    s = ca.mtimes(_dm(design.N), y - ca.mtimes(_dm(Cbar), xbh))
+    s = ca.mtimes(c.matrix("N", design.N), y - ca.mtimes(_dm(Cbar), xbh))
     g = design.sliding_gain()  # delta + eps per fault; with Remark 5 first one gain per undecoupled direction
-    gain = float(g[0]) if np.all(g == g[0]) else _dm(g)
+    gain = c.scalar("sliding_gain", g[0]) if np.all(g == g[0]) else c.matrix("sliding_gains", g)
     if boundary_layer is None:
         us = gain * ca.sign(s)
     else:
-        us = gain * ca.fmin(ca.fmax(s / float(boundary_layer), -1.0), 1.0)
+        us = gain * ca.fmin(ca.fmax(s / c.scalar("boundary_layer", boundary_layer), -1.0), 1.0)
 
-    u = _dm(design.u_ref)
+    u = c.matrix("u_ref", design.u_ref)
     for j in range(r):
-        uj = ca.mtimes(_dm(design.K[j]), xhat)
+        uj = ca.mtimes(c.matrix(f"K_{j}", design.K[j]), xhat)
         u = u + h[j] * uj
     gate = (
         None
         if design.accommodation is None
-        else accommodation_gate(fhat, design.accommodation, latch, memory)
+        else accommodation_gate(fhat, design.accommodation, latch, memory, c)
     )
     fcomp = fhat if gate is None else fhat * gate
     if tolerant and design.Kf_rules is not None:  # Kf(h) = sum_i h_i Kf_i where the rules' Kf_i differ
         for i in range(r):
-            u = u + h[i] * ca.mtimes(_dm(design.Kf_rules[i]), fcomp)
+            u = u + h[i] * ca.mtimes(c.matrix(f"Kf_{i}", design.Kf_rules[i]), fcomp)
         yc = y - ca.mtimes(_dm(design.Df), fhat)
     elif tolerant:
-        u = u + ca.mtimes(_dm(design.Kf), fcomp)
+        u = u + ca.mtimes(c.matrix("Kf", design.Kf), fcomp)
         yc = y - ca.mtimes(_dm(design.Df), fhat)
     else:
         yc = y
     u = saturate(u, design.input_limits)
 
     T = np.asarray(design.T)
-    rhs = ca.mtimes(_dm(design.Ls), us)  # Ls = T J1 (T [Bdbar_u J1]) for every rule, and sum_i h_i = 1
+    # Ls = T J1 (T [Bdbar_u J1]) for every rule, and sum_i h_i = 1
+    rhs = ca.mtimes(c.matrix("Ls", design.Ls), us)
     for i in range(r):
         lm = design.local_models[i]
         Bbar = np.vstack([lm.B, np.zeros((2 * lf, m))])
@@ -225,16 +306,23 @@ def step_function(
         TB = T @ Bbar
         Ly = np.asarray(design.L1[i]) + np.asarray(design.L2[i])
         Ta = T @ abar
-        term = ca.mtimes(_dm(design.R[i]), z) + ca.mtimes(_dm(TB), u) + ca.mtimes(_dm(Ly), y)
+        term = (
+            ca.mtimes(c.matrix(f"R_{i}", design.R[i]), z)
+            + ca.mtimes(c.matrix(f"TB_{i}", TB), u)
+            + ca.mtimes(c.matrix(f"Ly_{i}", Ly), y)
+        )
         if np.any(Ta):
-            term = term + _dm(Ta)
+            term = term + c.matrix(f"Ta_{i}", Ta)
         rhs = rhs + h[i] * term
-    z_next = z + float(sample_time) * rhs
+    z_next = z + c.scalar("sample_time", sample_time) * rhs
     if latched:  # the gates of this sample are the next sample's latches
         z_next = ca.vertcat(z_next, gate)
     if memory is not None:  # each estimate's largest and smallest, decaying with memory_time
-        k = float(np.exp(-float(sample_time) / float(design.accommodation["memory_time"])))
+        k = c.scalar("memory_decay", np.exp(-float(sample_time) / float(design.accommodation["memory_time"])))
         hi = [ca.fmax(ca.fmax(fhat[j], 0.0), k * memory[j]) for j in range(lf)]
         lo = [ca.fmax(ca.fmax(-fhat[j], 0.0), k * memory[lf + j]) for j in range(lf)]
         z_next = ca.vertcat(z_next, *hi, *lo)
-    return ca.Function(name, [zz, y], [z_next, u, xbh, yc, s], list(STEP_INPUTS), list(STEP_OUTPUTS))
+    # with symbols for the design's numbers, they are the Function's free variables: the caller's Function has them
+    # as an input (numbers.symbols)
+    opts = {} if numbers is None else {"allow_free": True}
+    return ca.Function(name, [zz, y], [z_next, u, xbh, yc, s], list(STEP_INPUTS), list(STEP_OUTPUTS), opts)

@@ -112,7 +112,7 @@ def libm_share(prep, paths: int = 256, seed: int = 0, repeats: int = 3) -> dict:
     library calls on ``paths`` paths in one thread, best of ``repeats``: nanoseconds per path-step."""
     F = prep.engine_function
     xs = [r * prep.lay.run_state + j for r in range(3) for j in range(prep.lay.n)]
-    bare = VectorEngine(F, xs, name="fte_mc_nolibm", source_filter=_no_libm)
+    bare = VectorEngine(F, xs, name="fte_mc_nolibm", source_filter=_no_libm, par=prep.par)
     S0 = prep.initial_states(np.arange(paths), seed)
     steps = paths * prep.SH.shape[0]
 

@@ -58,6 +58,7 @@ def _statements(F: ca.Function) -> list[str]:
         if op == ca.OP_INPUT:
             i, nz = ins
             src = f"S[{nz}][p]" if i == 0 else ("dw" if nz == 0 else f"dd{nz - 1}") if i == 1 else f"sh[{nz}]"
+            src = f"par[{nz}]" if i == 3 else src
             out.append(f"w{outs[0]} = {src};")
         elif op == ca.OP_CONST:
             v = float(F.instruction_constant(k))
@@ -80,7 +81,7 @@ def _statements(F: ca.Function) -> list[str]:
 
 
 def hand_loop_c(F: ca.Function, x_slots: list[int], block: int) -> str:
-    """C of ``hand_mc`` (the engine's C interface without recording) for ``F: (state, w, sh) -> (next, rec,
+    """C of ``hand_mc`` (the engine's C interface without recording) for ``F: (state, w, sh[, par]) -> (next, rec,
     incr)``: blocks of ``block`` paths, samples outer, paths innermost in one ``omp simd`` loop."""
     ns, nw, nsh, ninc = F.size1_in(0), F.size1_in(1), F.size1_in(2), F.size1_out(2)
     ld = nw - 1
@@ -105,7 +106,7 @@ def hand_loop_c(F: ca.Function, x_slots: list[int], block: int) -> str:
 {simd}
 {rng.C_SOURCE}
 void hand_mc(long npaths, long path0, uint64_t seed, long nsamp, const double *SH, double sqdt, double damp,
-             const double *S0, double *S1, double *ACC, long *DIV, double bound) {{
+             const double *S0, double *S1, double *ACC, long *DIV, double bound, const double *par) {{
   static double SA[{ns}][B] __attribute__((aligned(64))), SB[{ns}][B] __attribute__((aligned(64)));
   static double A[{max(ninc, 1)}][B] __attribute__((aligned(64)));
   static uint64_t key[B] __attribute__((aligned(64)));
@@ -186,8 +187,8 @@ def bench_fast(prep, paths: int = 64, seed: int = 0, repeats: int = 15, blocks=(
     check may miss a NaN). ``ratio_fast_vs_hand`` = the hand loop's time / the fast engine's (1: as fast)."""
     F = prep.engine_function
     xs = [r * prep.lay.run_state + j for r in range(3) for j in range(prep.lay.n)]
-    fast = VectorEngine(F, xs, name="fte_mc", exact=False)
-    exact = prep.engine if prep.engine.exact else VectorEngine(F, xs, name="fte_mc")
+    fast = VectorEngine(F, xs, name="fte_mc", exact=False, par=prep.par)
+    exact = prep.engine if prep.engine.exact else VectorEngine(F, xs, name="fte_mc", par=prep.par)
     S0 = prep.initial_states(np.arange(paths), seed)
     nsamp = prep.SH.shape[0]
     steps = paths * nsamp
@@ -209,7 +210,8 @@ def bench_fast(prep, paths: int = 64, seed: int = 0, repeats: int = 15, blocks=(
             lib.hand_mc(ctypes.c_long(paths), ctypes.c_long(0), ctypes.c_uint64(seed), ctypes.c_long(nsamp),
                         prep.SH.ctypes.data_as(dp), ctypes.c_double(prep.sqdt), ctypes.c_double(prep.damp),
                         S0.ctypes.data_as(dp), S1.ctypes.data_as(dp), ACC.ctypes.data_as(dp),
-                        DIV.ctypes.data_as(ctypes.POINTER(ctypes.c_long)), ctypes.c_double(bound))  # fmt: skip
+                        DIV.ctypes.data_as(ctypes.POINTER(ctypes.c_long)), ctypes.c_double(bound),
+                        fast.par.ctypes.data_as(dp))  # fmt: skip
             return S1, ACC
 
         def run_engine(eng):

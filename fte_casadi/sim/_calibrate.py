@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..step import step_function
+from ..step import StepParameters, step_function
 
 __all__ = []  # public: docs/api.md
 
@@ -69,7 +69,10 @@ class CalibrationEngine:
         n, lf, ld, p = plant.n, plant.lf, plant.ld, plant.p
         nz = design.nz
         nv = prep.lay.nv
-        step = step_function(design, dt, tolerant=True)
+        # the design's numbers as parameters: one engine per structure (as Prepared's)
+        numbers = StepParameters()
+        step = step_function(design, dt, tolerant=True, numbers=numbers)
+        dt_ = numbers.scalar("sample_time", dt)
         drift, diff = plant.drift_function(), plant.diffusion_function()
         C = ca.DM(np.asarray(plant.C, float))
         ns = n + nz + 2 * lf
@@ -86,7 +89,7 @@ class CalibrationEngine:
         z_next, u, xbh, _yc, _s = step(z, y)
         f0 = ca.DM.zeros(lf)
         d2 = ca.DM.zeros(plant.d2.numel())
-        x_next = x + drift(x, u, d, f0) * dt + diff(x, u, f0, d2) * dW
+        x_next = x + drift(x, u, d, f0) * dt_ + diff(x, u, f0, d2) * dW
         a = ca.fabs(xbh[n + lf :])
         closed = ca.fmax(cur, after * a)
         cur_next = ca.if_else(reset, ca.DM.zeros(lf), closed)
@@ -94,13 +97,15 @@ class CalibrationEngine:
         al_next = after * ca.if_else(al != 0, a >= HYSTERESIS * thr, a >= thr)
         F = ca.Function(
             "fte_cal",
-            [S, w, sh],
+            [S, w, sh, numbers.symbols],
             [ca.vertcat(x_next, z_next, cur_next, al_next), closed, raised],
             {"cse": True},
         ).expand()
         self.function = F
         self.ns, self.n, self.nz, self.lf, self.ld, self.nv = ns, n, nz, lf, ld, nv
-        self.engine = VectorEngine(F, list(range(n)), name="fte_cal", exact=prep.exact, nv=nv)
+        self.engine = VectorEngine(
+            F, list(range(n)), name="fte_cal", exact=prep.exact, nv=nv, par=numbers.values
+        )
 
 
 def shared_inputs(prep, E: int, thresholds: np.ndarray | None = None) -> np.ndarray:

@@ -41,7 +41,7 @@ from .._rounding import series_floor
 from ..design import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
-from ..step import step_function
+from ..step import StepParameters, step_function
 from ._cluster import plant_from_bytes, run_on_cluster
 from ._detect import default_rate
 from ._options import SCALES as SCALES
@@ -91,13 +91,16 @@ class PathLayout:
 
 
 def closed_loop_sample(
-    design: Design, plant: Plant, dt: float, sched: FaultSchedule, noise: bool = False
-) -> tuple[ca.Function, PathLayout]:
+    design: Design, plant: Plant, dt: float, sched: FaultSchedule, noise: bool = False,
+    numbers: StepParameters | None = None,
+) -> tuple[ca.Function, PathLayout]:  # fmt: skip
     """``(state, w, fp) -> (state_next, record)``: one sample of all three runs for one path.
 
     ``w = [dW; d]``, or with ``noise`` ``[dW; d; v]`` (``v``: the measurement noise of each output, added
     to ``y``; the three runs share it), ``fp`` the fault coefficients of this sample
     (:meth:`FaultSchedule.stacked`). A stuck sensor freezes the reading it had, noise included.
+    With ``numbers`` (:class:`fte_casadi.step.StepParameters`), ``(state, w, fp, par) -> ...``: the design's
+    numbers and the step ``dt`` are read from ``par`` (``numbers.values``), not folded in as constants.
     """
     n, m, p, lf, ld = plant.n, plant.m, plant.p, plant.lf, plant.ld
     nbar = int(design.dims.nbar)
@@ -106,9 +109,10 @@ def closed_loop_sample(
     drift = plant.drift_function()
     diff = plant.diffusion_function()
     steps = {
-        "ftc": step_function(design, dt, tolerant=True),
-        "no_ftc": step_function(design, dt, tolerant=False),
+        "ftc": step_function(design, dt, tolerant=True, numbers=numbers),
+        "no_ftc": step_function(design, dt, tolerant=False, numbers=numbers),
     }
+    dt_ = dt if numbers is None else numbers.scalar("sample_time", dt)
     C, Df = np.asarray(plant.C, float), np.asarray(plant.Df, float)
     S = ca.SX.sym("state", lay.ns)
     w = ca.SX.sym("w", lay.nw)
@@ -146,16 +150,12 @@ def closed_loop_sample(
             i = sched.input_index[j]
             f_all.append(f_pre[j] + lu[j] * u[i] if (faulty and i >= 0) else f_pre[j])
         f = ca.vertcat(*f_all) if lf else ca.SX(0, 1)
-        x_next = x + drift(x, u, d, f) * dt + diff(x, u, f, d2) * dW
+        x_next = x + drift(x, u, d, f) * dt_ + diff(x, u, f, d2) * dW
         nexts += [x_next, z_next, ca.vertcat(*mem_next) if lf else ca.SX(0, 1)]
         recs += [x, xbh, f, u, y, yc]
-    fn = ca.Function(
-        "fte_cl_sample",
-        [S, w, fp],
-        [ca.vertcat(*nexts), ca.vertcat(*recs)],
-        ["state", "w", "fp"],
-        ["next", "rec"],
-    )
+    ins = [S, w, fp] if numbers is None else [S, w, fp, numbers.symbols]
+    names = ["state", "w", "fp", "par"][: len(ins)]
+    fn = ca.Function("fte_cl_sample", ins, [ca.vertcat(*nexts), ca.vertcat(*recs)], names, ["next", "rec"])
     return fn, lay
 
 
@@ -299,7 +299,11 @@ class Prepared:
         self.t = np.arange(nsamp) * dt
         sched = plant_schedule(design, plant, scenario, self.t, dt)
         noise = scenario.measurement_noise is not None
-        sample, lay = closed_loop_sample(design, plant, dt, sched, noise=noise)
+        # the design's numbers are the engine's parameters, not constants in its C: one compiled engine serves every
+        # design of the same structure (fte tune's trials, a design made again)
+        numbers = StepParameters()
+        sample, lay = closed_loop_sample(design, plant, dt, sched, noise=noise, numbers=numbers)
+        self.par = numbers.values
         self.lay = lay
         FP = sched.stacked()  # (4 lf, samples): rows a, lu, st, la
         lf, ld = plant.lf, plant.ld
@@ -329,26 +333,28 @@ class Prepared:
         self.names = self.monitor.names
         F = self.engine_function = self._engine_function(sample, ld, lf)
         xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
-        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv)
+        self.engine = VectorEngine(F, xs, name="fte_mc", exact=self.exact, nv=lay.nv, par=self.par)
         self.notes = (self.engine.note,) if self.engine.note else ()
 
     def _engine_function(self, sample: ca.Function, ld: int, lf: int) -> ca.Function:
-        """``(state + monitor, w, sh) -> (next, rec, incr, pm)``: the closed loop's sample followed by the monitor,
-        the unknown input and the measurement noise completed from the shared inputs ``sh``."""
+        """``(state + monitor, w, sh, par) -> (next, rec, incr, pm)``: the closed loop's sample followed by the
+        monitor, the unknown input and the measurement noise completed from the shared inputs ``sh``; ``par``: the
+        design's numbers (:attr:`par`)."""
         lay, c = self.lay, self.cols
         S = ca.SX.sym("state", lay.ns + self.monitor.nmon)
         w = ca.SX.sym("w", lay.nw)
         sh = ca.SX.sym("sh", self.SH.shape[1])
+        par = ca.SX.sym("par", self.par.size)
         # an empty slice of an SX column can come out 1x0: a plant without unknown inputs (or without measurement
         # noise) gets an explicit 0x1 block
         d_part = w[1 : 1 + ld] + sh[c["d"][0] : c["d"][1]] if ld else ca.SX(0, 1)
         v_part = w[1 + ld :] * sh[c["vstd"][0] : c["vstd"][1]] if lay.nv else ca.SX(0, 1)
         wd = ca.vertcat(w[0], d_part, v_part)
-        nxt, rec = sample(S[: lay.ns], wd, sh[: 4 * lf])
+        nxt, rec = sample(S[: lay.ns], wd, sh[: 4 * lf], par)
         mon_next, inc, pm = self.monitor.fn(rec, S[lay.ns :], sh[c["mask"][0] : c["thr"][1]])
         # cse: CasADi merges repeated subexpressions (the sin of a premise that the plant also uses)
         return ca.Function(
-            "fte_cl", [S, w, sh], [ca.vertcat(nxt, mon_next), rec, inc, pm], {"cse": True}
+            "fte_cl", [S, w, sh, par], [ca.vertcat(nxt, mon_next), rec, inc, pm], {"cse": True}
         ).expand()
 
     def calibration_engine(self):

@@ -222,8 +222,10 @@ def _body(F: ca.Function, exact: bool = True, ld: int | None = None) -> list[str
                     if nz == 0
                     else (f"FTE_LD(dd[{nz - 1}])" if nz <= ld else f"FTE_LD(dv[{nz - 1 - ld}])")
                 )
-            else:
+            elif i == 2:
                 src = f"FTE_BC(sh[{nz}])"
+            else:
+                src = f"par[{nz}]"
             lines.append(f"  w{outs[0]} = {src};")
         elif op == ca.OP_CONST:
             lines.append(f"  w{outs[0]} = FTE_BC({_c_double(float(F.instruction_constant(k)))});")
@@ -250,18 +252,20 @@ def _body(F: ca.Function, exact: bool = True, ld: int | None = None) -> list[str
 def _casadi_body(F: ca.Function, ld: int) -> tuple[str, list[str]]:
     """CasADi's own C of ``F`` and the statements that call it lane by lane (the fallback)."""
     cg = ca.CodeGenerator("fte_cl_lane.c", {"with_header": False, "prefix": "fte_lane_"})
-    G = ca.Function("fte_lane_f", [F.sx_in(i) for i in range(3)], F.call([F.sx_in(i) for i in range(3)]))
+    nin = F.n_in()
+    G = ca.Function("fte_lane_f", [F.sx_in(i) for i in range(nin)], F.call([F.sx_in(i) for i in range(nin)]))
     cg.add(G)
     nout = G.n_out()
     ns, nw, nrec, ninc = F.size1_in(0), F.size1_in(1), F.size1_out(1), F.size1_out(2)
     npm = F.size1_out(3) if nout > 3 else 0
     lines = [
-        f"  const double *arg[{max(G.sz_arg(), 3)}]; double *res[{max(G.sz_res(), 4)}];",
+        f"  const double *arg[{max(G.sz_arg(), 4)}]; double *res[{max(G.sz_res(), 4)}];",
         f"  long long iw[{max(G.sz_iw(), 1)}]; double wk[{max(G.sz_w(), 1)}];",
         f"  double a0[{max(ns, 1)}], a1[{max(nw, 1)}], r0[{max(ns, 1)}], r1[{max(nrec, 1)}], r2[{max(ninc, 1)}], "
-        f"r3[{max(npm, 1)}];",
+        f"r3[{max(npm, 1)}], pa[{max(F.nnz_in(3) if nin > 3 else 0, 1)}];",
         "  int l, j;",
-        "  arg[0] = a0; arg[1] = a1; arg[2] = sh; res[0] = r0; res[1] = r1; res[2] = r2; res[3] = r3;",
+        f"  for (j = 0; j < {F.nnz_in(3) if nin > 3 else 0}; ++j) pa[j] = par[j][0];",
+        "  arg[0] = a0; arg[1] = a1; arg[2] = sh; arg[3] = pa; res[0] = r0; res[1] = r1; res[2] = r2; res[3] = r3;",
         "  for (l = 0; l < V; ++l) {",
         f"    for (j = 0; j < {ns}; ++j) a0[j] = st[j][l];",
         "    a1[0] = dw[l];",
@@ -382,9 +386,10 @@ def _driver(exact: bool, ld: int, nv: int = 0) -> dict[str, str]:
 
 def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool = False, exact: bool = True,
          vmath: bool = True, lanes: int = LANES, nv: int = 0) -> str:  # fmt: skip
-    """C source of the lane engine of ``F: (state, w, sh) -> (next, rec, incr[, pm])``.
+    """C source of the lane engine of ``F: (state, w, sh[, par]) -> (next, rec, incr[, pm])``.
 
     ``w = [dW; d; v]``: ``v`` the last ``nv`` entries, standard normals of the measurement noise.
+    ``par`` (optional): numbers fixed for the whole run (a design's), read by the engine, not compiled in.
     ``pm`` (optional): per-sample values summed over the paths (``PM``, samples x npm), in path order.
 
     ``x_slots``: the entries of ``state`` that are plant states (checked for divergence).
@@ -398,6 +403,7 @@ def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: 
     ns, nw, nsh = F.size1_in(0), F.size1_in(1), F.size1_in(2)
     nrec, ninc = F.size1_out(1), F.size1_out(2)
     npm = F.size1_out(3) if F.n_out() > 3 else 0
+    npar = F.nnz_in(3) if F.n_in() > 3 else 0
     ld = nw - 1 - nv
     head, body = _casadi_body(F, ld) if casadi_c else ("", _body(F, exact, ld))
     vm = ""
@@ -425,29 +431,33 @@ def emit(F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: 
 #define LD {max(ld, 1)}
 #define NV {max(nv, 1)}
 #define NPM {max(npm, 1)}
+#define NPAR {max(npar, 1)}
 #define FTE_AL __attribute__((aligned({8 * lanes})))
 {_prelude(lanes)}{vm}
 {rng.C_SOURCE}
 static const int XS[] = {{{xs}}};
 static void fte_sample(double st[NS][V], double nx[NS][V], double acc[NINC][V], double rb[NREC][V],
                        double pm[NPM][V], const double *sh, const double *dw, double dd[LD][V], double dv[NV][V],
-                       int recnow) {{
+                       int recnow, const fte_vd *restrict par) {{
 {chr(10).join(body)}
 }}
 
 /* paths [path0, path0 + npaths): state S0 (npaths x NS) -> S1; sums ACC (npaths x NINC) over samples
    0 .. nsamp - 1; REC (npaths x nrs x NREC) every `every` samples when REC is not NULL; DIV: first
    diverging sample or -1. SH: (nsamp x NSH) shared inputs. PM (nsamp x NPM, when not NULL): each per-sample
-   value added up over the paths, in path order (the caller initialises it). Random numbers: _rng.py. */
+   value added up over the paths, in path order (the caller initialises it). PAR: the parameters (a design's
+   numbers). Random numbers: _rng.py. */
 void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH, double sqdt, double damp,
             const double *S0, double *S1, double *ACC, long every, double *REC, long *DIV, double bound,
-            double *PM) {{
+            double *PM, const double *PAR) {{
 {drv["decl"]}
   uint64_t key[V];
   long div[V];
   long nrs = every > 0 ? (nsamp - 1) / every + 1 : 0;
   long c0, k;
   int l, j;
+  fte_vd pv[NPAR];  /* the parameters, each broadcast to a lane vector once */
+  for (j = 0; j < NPAR; ++j) pv[j] = FTE_BC(PAR[j]);
   for (c0 = 0; c0 < npaths; c0 += V) {{
     int nl = (npaths - c0) < V ? (int)(npaths - c0) : V;
     for (l = 0; l < V; ++l) {{
@@ -463,7 +473,7 @@ void {name}(long npaths, long path0, uint64_t seed, long nsamp, const double *SH
       const double *sh = SH + k * NSH;
       int recnow = REC != 0 && k % every == 0;
       uint64_t cb = (uint64_t)k * {nslot};
-{drv["rand"]}      fte_sample(st, nx, acc, rb, pm, sh, dw, dd, dv, recnow);
+{drv["rand"]}      fte_sample(st, nx, acc, rb, pm, sh, dw, dd, dv, recnow, pv);
       if (PM != 0 && {npm} > 0) {{
         for (j = 0; j < {npm}; ++j)
           for (l = 0; l < nl; ++l)
@@ -533,12 +543,18 @@ class VectorEngine:
     (``note`` says which; ``casadi_c=True`` asks for it); no C compiler, or a failed compile, raises
     :class:`UnsupportedOperation`. ``source_filter(str) -> str`` edits the C before it is compiled
     (for measurements only). ``exact=False``: the fast mode (:func:`emit`, :data:`FAST_FLAGS`; ``vmath``
-    says whether it found glibc's vector math library)."""
+    says whether it found glibc's vector math library). ``par``: the values of ``F``'s fourth input, when it has
+    one (numbers fixed for a run: the same compiled engine serves other values)."""
 
     def __init__(self, F: ca.Function, x_slots: list[int], name: str = "fte_mc", *, casadi_c: bool | None = None,
-                 source_filter=None, exact: bool = True, lanes: int = LANES, nv: int = 0):  # fmt: skip
+                 source_filter=None, exact: bool = True, lanes: int = LANES, nv: int = 0, par=None):  # fmt: skip
         if not F.is_a("SXFunction"):
             F = F.expand()
+        npar = F.nnz_in(3) if F.n_in() > 3 else 0
+        par = np.zeros(0) if par is None else np.asarray(par, dtype=np.float64).ravel()
+        if par.size != npar:
+            raise ValueError(f"the engine's Function reads {npar} parameters; {par.size} given")
+        self.par = np.ascontiguousarray(np.concatenate([par, [0.0]]))  # never empty: a valid pointer
         missing = unsupported(F)
         self.note = None
         self.exact = bool(exact)
@@ -579,7 +595,7 @@ class VectorEngine:
         dp = ctypes.POINTER(ctypes.c_double)
         lp = ctypes.POINTER(ctypes.c_long)
         self.fn.argtypes = [ctypes.c_long, ctypes.c_long, ctypes.c_uint64, ctypes.c_long, dp, ctypes.c_double,
-                            ctypes.c_double, dp, dp, dp, ctypes.c_long, dp, lp, ctypes.c_double, dp]  # fmt: skip
+                            ctypes.c_double, dp, dp, dp, ctypes.c_long, dp, lp, ctypes.c_double, dp, dp]  # fmt: skip
         self.fn.restype = None
         self.ns, self.nrec, self.ninc, self.nsh = F.size1_in(0), F.size1_out(1), F.size1_out(2), F.size1_in(2)
         self.npm = F.size1_out(3) if F.n_out() > 3 else 0
@@ -604,7 +620,7 @@ class VectorEngine:
                 float(sqdt), float(damp), S0.ctypes.data_as(dp), S1.ctypes.data_as(dp), ACC.ctypes.data_as(dp),
                 int(every), REC.ctypes.data_as(dp) if REC is not None else None,
                 DIV.ctypes.data_as(ctypes.POINTER(ctypes.c_long)), float(bound),
-                PM.ctypes.data_as(dp) if PM is not None else None)  # fmt: skip
+                PM.ctypes.data_as(dp) if PM is not None else None, self.par.ctypes.data_as(dp))  # fmt: skip
         if pm:
             return S1, ACC, DIV, REC, PM
         return S1, ACC, DIV, REC
