@@ -27,6 +27,6 @@ def shorten(text: object, limit: int) -> str:
     head = s[: room + 1]  # one more character: a word that ends exactly at the cut is kept whole
     cut = head.rsplit(" ", 1)[0] if " " in head else ""
     cut = cut.rstrip(" ,;:(")
-    if not cut:  # no word boundary before the limit: cut inside the word
-        return s[: max(limit - 3, 0)] + "..."
+    if not cut:  # no word boundary before the limit (or only punctuation before it): cut inside the word
+        return s[: max(limit - 3, 0)].rstrip() + "..."
     return cut + ELLIPSIS

@@ -45,6 +45,8 @@ def test_the_examples_of_the_issue():
     )
     assert shorten(ValueError("a   b\n c"), 10) == "a b c"  # an exception's text, on one line
     assert shorten("sin(x1)*cos(x2)*tanh(x3)", 12) == "sin(x1)*c..."  # no word boundary: cut inside the word
+    # found by the property test: only punctuation before the boundary; the cut leaves no space before the dots
+    assert shorten(": 0 0 0", 5) == ":..."
 
 
 #: slices that do not cut a message: hashes, and the first parts of a split (a list)
