@@ -66,7 +66,10 @@ def _case(name, tmp_path):
     return design, plant, scenario, rate
 
 
-@pytest.mark.parametrize("name", list(CASES))
+#: the pendulum (11 s) checks the promise as the user's noisy plant does, without the noise: `pytest -m heavy`
+@pytest.mark.parametrize(
+    "name", [pytest.param(k, marks=pytest.mark.heavy) if k == "pendulum" else k for k in CASES]
+)
 def test_fresh_paths_raise_the_alarms_the_calibration_promises(name, tmp_path, monkeypatch):
     monkeypatch.delenv("FTE_CALIBRATION_BUDGET", raising=False)  # the calibration as a user's run makes it
     design, plant, scenario, rate = _case(name, tmp_path)

@@ -58,8 +58,10 @@ def test_the_bounds_find_a_sigma_four_orders_below_the_defaults(ts):
     assert sup is not None and 1e-13 < sup < 1e-9, (sup, status)
 
 
-@pytest.mark.slow
+@pytest.mark.heavy
 def test_the_refusal_names_the_sample_time_and_that_one_certifies(ts):
+    """40 s on the 2-core machine: tests/test_sample_time.py checks the same route on the manipulator in 6 s, and
+    test_generic_values_follow_the_outputs_size (below) the sigma in the outputs' own size: `pytest -m heavy`."""
     with pytest.raises(InfeasibleDesignError) as exc:
         design(ts, sample_time=1.0)
     msg = " ".join(str(exc.value).split())
