@@ -45,7 +45,7 @@ def small():
 @pytest.fixture(scope="module")
 def result(small):
     plant, scenario, _, base = small
-    return tune(base, plant, scenario, trials=10, seed=3, paths=2)
+    return tune(base, plant, scenario, trials=7, seed=3, paths=2)
 
 
 def _dominates(a, b) -> bool:
@@ -56,7 +56,7 @@ def _dominates(a, b) -> bool:
 def test_front_is_non_dominated_and_certified(result):
     done = [r for r in result.records if r.state == "ok"]
     assert result.records[0].number == 0 and result.records[0].state == "ok"  # the base design is trial 0
-    assert len(result.records) == 10 and len(done) >= 3
+    assert len(result.records) == 7 and len(done) >= 3
     front = [result.record(k) for k in result.front]
     for f in front:
         assert not any(_dominates(r.values, f.values) for r in done)
@@ -93,7 +93,7 @@ def test_reproducible_for_a_seed(small, result):
     ) as c:
         with distributed.Client(c) as client:
             again = tune(
-                base, plant, scenario, options=TuneOptions(trials=10, seed=3, paths=2, scheduler=client)
+                base, plant, scenario, options=TuneOptions(trials=7, seed=3, paths=2, scheduler=client)
             )
     assert [r.values for r in again.records] == [r.values for r in result.records]
     assert [r.knobs for r in again.records] == [r.knobs for r in result.records]
