@@ -5,11 +5,18 @@ written once; one class per name."""
 from __future__ import annotations
 
 import ast
+import functools
 import pathlib
 
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1] / "fte_casadi"
+
+
+@functools.cache
+def _parsed(path: pathlib.Path) -> ast.Module:
+    """A file's syntax tree, parsed once for the whole module (read only: import_graph parses its own to edit)."""
+    return ast.parse(path.read_text())
 
 
 def _modules() -> dict[str, pathlib.Path]:
@@ -148,7 +155,7 @@ def _where(pred) -> list[str]:
     for path in sorted(ROOT.rglob("*.py")):
         if path.relative_to(ROOT).as_posix().startswith(BASELINES):
             continue
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(_parsed(path)):
             if pred(node):
                 out.append(f"{path.relative_to(ROOT).as_posix()}:{node.lineno}")
     return out
@@ -197,7 +204,7 @@ def test_one_class_per_name():
     seen: dict[str, list[str]] = {}
     for place in _where(lambda n: isinstance(n, ast.ClassDef)):
         path, line = place.split(":")
-        tree = ast.parse((ROOT / path).read_text())
+        tree = _parsed(ROOT / path)
         name = next(n.name for n in ast.walk(tree) if isinstance(n, ast.ClassDef) and n.lineno == int(line))
         seen.setdefault(name, []).append(place)
     assert {k: v for k, v in seen.items() if len(v) > 1} == {}
@@ -412,7 +419,7 @@ def _room_imports_of_face_names(path: pathlib.Path) -> list[str]:
     import importlib
 
     out = []
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(_parsed(path)):
         if not (isinstance(node, ast.ImportFrom) and node.module and not node.level):
             continue
         parts = node.module.split(".")
@@ -476,7 +483,7 @@ def long_functions(limit: int = LONG) -> dict[str, int]:
                 visit(child, f"{name}.", rel)
 
     for path in sorted(ROOT.rglob("*.py")):
-        visit(ast.parse(path.read_text()), "", path.relative_to(ROOT).as_posix())
+        visit(_parsed(path), "", path.relative_to(ROOT).as_posix())
     return out
 
 
