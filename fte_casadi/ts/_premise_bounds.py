@@ -18,7 +18,6 @@ from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
-from scipy.optimize import minimize
 
 from ..errors import BoundsError
 
@@ -69,7 +68,7 @@ def _extremum(FG, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_
         if cell_lb[k] >= best - tol and k not in top:
             continue  # the best value found since cannot be beaten in this cell: nothing to search
         searched.add(int(k))
-        res = minimize(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+        res = _minimize()(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
         if np.isfinite(res.fun) and res.fun < best:
             best = float(res.fun)
     rest = [c for c in cand if int(c) not in searched and cell_lb[c] < best - tol]
@@ -218,3 +217,11 @@ def _searched(expr, x, idx, lo, hi, samples, signs, max_searches):
 _FOUND: dict = {}
 _FOUND_KEPT = 512
 _FOUND_LOCK = threading.Lock()
+
+
+def _minimize():
+    """scipy.optimize.minimize, imported when a premise's bounds are first searched (``import fte_casadi`` does not
+    pay the 0.3-0.5 s scipy.optimize takes to load)."""
+    from scipy.optimize import minimize
+
+    return minimize
