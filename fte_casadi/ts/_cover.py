@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ._premise_bounds import _minimize, certified_max
+from ._premise_bounds import certified_max, minimize
 
 __all__ = ["GroupCover", "cover_premises", "VERTEX_CHOICES", "MERGE_ABOVE", "estimate_rules", "plan_groups"]
 
@@ -272,7 +272,7 @@ def _small_simplex(Y: np.ndarray, rng) -> np.ndarray:
         return _large_simplex(Y, rng)
     starts = [base] + [base @ np.linalg.qr(rng.normal(size=(r, r)))[0] for _ in range(4)]
     for A0 in starts:
-        res = _minimize()(objective, A0.ravel(), method="Powell", options={"maxfev": 4000 * r, "xtol": 1e-4})
+        res = minimize(objective, A0.ravel(), method="Powell", options={"maxfev": 4000 * r, "xtol": 1e-4})
         if best is None or res.fun < best[0]:
             best = (res.fun, res.x)
     A = best[1].reshape(r + 1, r)
@@ -323,7 +323,7 @@ def _large_simplex(Y: np.ndarray, rng) -> np.ndarray:
         return _facets_log_volume(A, np.max(A @ ext, axis=1))
 
     A0 = min(starts, key=lambda A: objective(A.ravel()))
-    res = _minimize()(objective, A0.ravel(), method="Powell",
+    res = minimize(objective, A0.ravel(), method="Powell",
                    options={"maxfev": LARGE_BUDGET * r * (r + 1), "xtol": 1e-4})  # fmt: skip
     A = (res.x if res.fun < objective(A0.ravel()) else A0.ravel()).reshape(r + 1, r)
     return A / np.linalg.norm(A, axis=1, keepdims=True)

@@ -68,7 +68,7 @@ def _extremum(FG, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_
         if cell_lb[k] >= best - tol and k not in top:
             continue  # the best value found since cannot be beaten in this cell: nothing to search
         searched.add(int(k))
-        res = _minimize()(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+        res = minimize(fun, grid[:, k], jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
         if np.isfinite(res.fun) and res.fun < best:
             best = float(res.fun)
     rest = [c for c in cand if int(c) not in searched and cell_lb[c] < best - tol]
@@ -219,9 +219,10 @@ _FOUND_KEPT = 512
 _FOUND_LOCK = threading.Lock()
 
 
-def _minimize():
-    """scipy.optimize.minimize, imported when a premise's bounds are first searched (``import fte_casadi`` does not
-    pay the 0.3-0.5 s scipy.optimize takes to load)."""
-    from scipy.optimize import minimize
+def minimize(*args, **kwargs):
+    """scipy.optimize.minimize, imported on the first call (``import fte_casadi`` does not pay the 0.2-0.5 s
+    scipy.optimize takes to load); a module attribute, so a caller can wrap it (tests/test_ts_quadrotor.py counts
+    the searches' work)."""
+    from scipy.optimize import minimize as scipy_minimize
 
-    return minimize
+    return scipy_minimize(*args, **kwargs)
