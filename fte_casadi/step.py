@@ -64,9 +64,7 @@ class StepParameters:
     :attr:`values`: its value. The numbers computed are those of the step with constants, to the bit."""
 
     def __init__(self):
-        self._symbols: list[ca.SX] = []
-        self._values: list[float] = []
-        self._by_value: dict[float, ca.SX] = {}
+        self._by_value: dict[float, ca.SX] = {}  # in order of creation: the parameter vector's entries
         self._made: dict[str, tuple[object, np.ndarray]] = {}
 
     def _entry(self, v: float):
@@ -74,9 +72,7 @@ class StepParameters:
             return v
         sym = self._by_value.get(v)
         if sym is None:
-            sym = self._by_value[v] = ca.SX.sym(f"p{len(self._symbols)}")
-            self._symbols.append(sym)
-            self._values.append(v)
+            sym = self._by_value[v] = ca.SX.sym(f"p{len(self._by_value)}")
         return sym
 
     def _memo(self, name: str, a: np.ndarray):
@@ -106,11 +102,11 @@ class StepParameters:
 
     @property
     def symbols(self) -> ca.SX:
-        return ca.vertcat(*self._symbols) if self._symbols else ca.SX(0, 1)
+        return ca.vertcat(*self._by_value.values()) if self._by_value else ca.SX(0, 1)
 
     @property
     def values(self) -> np.ndarray:
-        return np.array(self._values, dtype=float)
+        return np.array(list(self._by_value), dtype=float)
 
 
 def saturate(u: ca.SX, limits) -> ca.SX:

@@ -253,6 +253,7 @@ def _casadi_body(F: ca.Function, ld: int) -> tuple[str, list[str]]:
     """CasADi's own C of ``F`` and the statements that call it lane by lane (the fallback)."""
     cg = ca.CodeGenerator("fte_cl_lane.c", {"with_header": False, "prefix": "fte_lane_"})
     nin = F.n_in()
+    npar = F.nnz_in(3) if nin > 3 else 0
     G = ca.Function("fte_lane_f", [F.sx_in(i) for i in range(nin)], F.call([F.sx_in(i) for i in range(nin)]))
     cg.add(G)
     nout = G.n_out()
@@ -262,9 +263,9 @@ def _casadi_body(F: ca.Function, ld: int) -> tuple[str, list[str]]:
         f"  const double *arg[{max(G.sz_arg(), 4)}]; double *res[{max(G.sz_res(), 4)}];",
         f"  long long iw[{max(G.sz_iw(), 1)}]; double wk[{max(G.sz_w(), 1)}];",
         f"  double a0[{max(ns, 1)}], a1[{max(nw, 1)}], r0[{max(ns, 1)}], r1[{max(nrec, 1)}], r2[{max(ninc, 1)}], "
-        f"r3[{max(npm, 1)}], pa[{max(F.nnz_in(3) if nin > 3 else 0, 1)}];",
+        f"r3[{max(npm, 1)}], pa[{max(npar, 1)}];",
         "  int l, j;",
-        f"  for (j = 0; j < {F.nnz_in(3) if nin > 3 else 0}; ++j) pa[j] = par[j][0];",
+        f"  for (j = 0; j < {npar}; ++j) pa[j] = par[j][0];",
         "  arg[0] = a0; arg[1] = a1; arg[2] = sh; arg[3] = pa; res[0] = r0; res[1] = r1; res[2] = r2; res[3] = r3;",
         "  for (l = 0; l < V; ++l) {",
         f"    for (j = 0; j < {ns}; ++j) a0[j] = st[j][l];",
