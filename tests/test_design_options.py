@@ -81,3 +81,32 @@ def test_a_retry_keeps_the_plants_alpha_a_default(ts_models, monkeypatch):
     assert "set by the user" not in retried.observer.why
     assert retried.observer.alpha == direct.observer.alpha
     assert np.array_equal(retried.Pbar, direct.Pbar) and retried.status[1:] == direct.status
+
+
+def test_a_fraction_of_the_default_rate_is_the_design_at_that_rate_with_step_3_made_once(monkeypatch):
+    """fte tune's knob alpha_scale: ``design_at_rate_fraction(ts, f)`` is the design at f times the rate the design
+    takes by default, to the bit, and it makes step 3 once for both (the design made twice made it twice)."""
+    from pathlib import Path
+
+    from fte_casadi.design import design_at_rate_fraction
+    from fte_casadi.plants import load_plant, load_scenario
+    from fte_casadi.ts import derive
+
+    spec = f"{Path(__file__).parent / 'plant_tune.py'}:plant"
+    ts, scenario = derive(load_plant(spec)), load_scenario(spec)
+    kw = dict(sample_time=scenario.dt, initial_state=scenario.x0, diagnose=False)
+    calls = []
+    step3 = cond.step3
+    monkeypatch.setattr(cond, "step3", lambda *a, **k: calls.append(1) or step3(*a, **k))
+    a0 = design(ts, **kw).observer.alpha
+    apart = design(ts, alpha=0.4 * a0, **kw)
+    assert len(calls) == 2
+    together = design_at_rate_fraction(ts, 0.4, **kw)
+    assert len(calls) == 3 and together.certified and together.observer.alpha == 0.4 * a0
+    for name in ("Pbar", "N", "X", "T", "H"):
+        np.testing.assert_array_equal(getattr(together, name), getattr(apart, name), err_msg=name)
+    np.testing.assert_array_equal(together.K[0], apart.K[0])
+    assert together.params == apart.params
+    assert together.observer.why == apart.observer.why == "set by the user"
+    assert design_at_rate_fraction(ts, 0.4, **kw).solves == together.solves  # no memory between calls
+    assert len(calls) == 4

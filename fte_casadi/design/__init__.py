@@ -1,6 +1,7 @@
 """Design: augmented system, H and assumption checks, LMIs, certificates, the Design record."""
 
 from ._api import design as design
+from ._api import design_at_rate_fraction as design_at_rate_fraction  # internal: fte tune
 from ._api import explore as explore
 from ._augment import Augmented as Augmented
 from ._augment import augment as augment

@@ -79,6 +79,42 @@ def design(ts: TSModel, options: DesignOptions | None = None, **changes) -> Desi
     return _attempt(as_model(ts, "design()"), options)
 
 
+@_one_blas_thread
+def design_at_rate_fraction(ts: TSModel, fraction: float, options: DesignOptions | None = None,
+                            **changes) -> Design:  # fmt: skip
+    """``design(ts, options, alpha=fraction * a0)``, ``a0`` the observer decay rate ``design(ts, options)`` takes by
+    default (``fte tune``'s knob ``alpha_scale``). ``a0`` is read from steps 1-5 as the design makes them (its
+    kappa, its loop and its sample time included), without the certificate and the bounds of a design that is not
+    kept, and the second design reuses the first's step 3 (:func:`~._pipeline.step3_reused`). Where a step fails
+    at the default rate, the whole design is made there (its other solver, its diagnosis), and raises as it does;
+    a design without a decay rate (the paper variant) is returned as it is."""
+    options = DesignOptions(**changes) if options is None else options.replace(**changes)
+    ts = as_model(ts, "design_at_rate_fraction()")
+    with pipeline.step3_reused():
+        a0 = _default_rate(ts, options)
+        if a0 is None:
+            d = _attempt(ts, options)
+            if d.observer.alpha is None:
+                return d
+            a0 = float(d.observer.alpha)
+        return _attempt(ts, options.replace(alpha=float(fraction) * a0))
+
+
+def _default_rate(ts: TSModel, options: DesignOptions) -> float | None:
+    """The observer decay rate of steps 1-5 at ``options`` (no retry, no search); None where a step fails or the
+    variant has none."""
+    if options.variant == "paper":
+        return None
+    try:
+        res = resolve(ts, options)
+        st = pipeline.structure(ts, options, res)
+        s3 = pipeline.step3(st, res, options.solver)
+        _, s5 = pipeline.loop_then_observer(ts, st, options, res, s3)
+    except FteError:
+        return None
+    return float(s5.alpha)
+
+
 def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) -> Design:
     """One design of ``ts`` with ``options``: the pipeline, and where a stage fails the other solver
     (``retried``: the failure of the first), the parameter search and the diagnosis."""

@@ -8,7 +8,10 @@ what to try next or what to say (:mod:`fte_casadi.design.diagnose`).
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import dataclasses
+import hashlib
 import time
 from dataclasses import dataclass
 from textwrap import shorten
@@ -94,10 +97,43 @@ def paper_steps(st: Structure, resolved: Resolved, solver: str):
     return s3, K, s5
 
 
+#: within :func:`step3_reused`, step 3's results by their inputs (None: outside, every step 3 is made)
+_STEP3: contextvars.ContextVar[dict | None] = contextvars.ContextVar("fte_step3", default=None)
+
+
+@contextlib.contextmanager
+def step3_reused():
+    """Designs made inside share step 3 where its inputs are equal (the augmented system, the parameters, the
+    solver and the loop's rate): a design made again at another observer decay rate makes step 3 once. Step 3
+    does not depend on the observer's rate, so the designs are those made apart."""
+    token = _STEP3.set({})
+    try:
+        yield
+    finally:
+        _STEP3.reset(token)
+
+
+def _step3_key(st: Structure, resolved: Resolved, solver: str) -> str:
+    h = hashlib.sha256(repr((solver, resolved.beta, sorted(resolved.params.items()))).encode())
+    for f in dataclasses.fields(st.aug):
+        v = getattr(st.aug, f.name)
+        for a in v if isinstance(v, tuple) else (v,):
+            h.update(repr(a).encode() if not isinstance(a, np.ndarray) else np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
 def step3(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
     """Step 3, conditioned: the common gain K from (45), the closed loop asked to decay at ``options.beta`` (None:
-    the default of :func:`~fte_casadi.design.core._decay.loop_decay_target`)."""
-    return conditioned.step3(st.aug, resolved.params, solver, beta=resolved.beta)
+    the default of :func:`~fte_casadi.design.core._decay.loop_decay_target`); made once per inputs inside
+    :func:`step3_reused`."""
+    memo = _STEP3.get()
+    if memo is None:
+        return conditioned.step3(st.aug, resolved.params, solver, beta=resolved.beta)
+    key = _step3_key(st, resolved, solver)
+    if key not in memo:
+        memo[key] = conditioned.step3(st.aug, resolved.params, solver, beta=resolved.beta)
+    s3 = memo[key]
+    return dataclasses.replace(s3, notes=list(s3.notes))
 
 
 #: the bounds on cond(Pbar) tried, in order, for an observer too slow for the fault windows it must settle in

@@ -160,7 +160,7 @@ def _candidate(task: dict, ts, knobs: dict):
     with the decay rate scaled and the relative boundary layer applied when the knobs ask for them."""
     import dataclasses
 
-    from ..design import Design
+    from ..design import Design, design_at_rate_fraction
     from ..design import design as run_design
 
     if task.get("design") is not None:
@@ -168,10 +168,11 @@ def _candidate(task: dict, ts, knobs: dict):
     common = dict(variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
                   initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
                   **design_kwargs(knobs))  # fmt: skip
-    d = run_design(ts, **common)
     scale = float(knobs["alpha_scale"])
-    if abs(scale - 1.0) > 1e-12 and d.observer.alpha is not None:
-        d = run_design(ts, alpha=scale * float(d.observer.alpha), **common)
+    if abs(scale - 1.0) > 1e-12:
+        d = design_at_rate_fraction(ts, scale, **common)
+    else:
+        d = run_design(ts, **common)
     if knobs.get("use_boundary_layer") and task.get("e_scale"):
         phi = float(knobs["boundary_layer_rel"]) * float(np.linalg.norm(d.N, 2)) * float(task["e_scale"])
         if phi > 0 and np.isfinite(phi):
