@@ -114,20 +114,25 @@ class Layout:
         self.offsets = np.cumsum([0] + [v.size for v in self.vars])
         self.size = int(self.offsets[-1])
         self._triu = {v.name: np.triu_indices(v.shape[0]) for v in self.vars if v.symmetric}
+        # per unknown: its name, its slice of v, and how it is laid out (unpack is called once per unknown and
+        # builder when an LMI's coefficients are extracted: thousands of times per design)
+        self._slots = tuple((var.name, slice(int(a), int(a) + var.size), var.shape, self._triu.get(var.name))
+                            for var, a in zip(self.vars, self.offsets[:-1]))  # fmt: skip
 
     def unpack(self, v: np.ndarray) -> dict:
+        v = np.asarray(v, dtype=float)
         out = {}
-        for var, a in zip(self.vars, self.offsets[:-1]):
-            chunk = np.asarray(v[a : a + var.size], dtype=float)
-            if var.symmetric:
-                n = var.shape[0]
-                M = np.zeros((n, n))
-                M[self._triu[var.name]] = chunk
-                out[var.name] = M + np.triu(M, 1).T
-            elif var.shape == ():
-                out[var.name] = float(chunk[0])
+        for name, sl, shape, tri in self._slots:
+            chunk = v[sl]
+            if tri is not None:
+                M = np.zeros(shape)
+                M[tri] = chunk
+                M[tri[1], tri[0]] = chunk  # the lower triangle mirrors the upper
+                out[name] = M
+            elif shape == ():
+                out[name] = float(chunk[0])
             else:
-                out[var.name] = chunk.reshape(var.shape)
+                out[name] = chunk.reshape(shape)
         return out
 
     def pack(self, **values) -> np.ndarray:
