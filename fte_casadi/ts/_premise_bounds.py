@@ -20,6 +20,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import BoundsError
+from ._direct import direct
 
 __all__ = ["premise_bounds", "certified_max"]
 
@@ -57,9 +58,11 @@ def _extremum(FG, grid, vals, grads, lo, hi, hw, sign, shape, max_searches=_MAX_
     starts = list(order[:10]) + [c for c in cand if c not in set(order[:10])]  # noqa: C401
     searched = set()
 
+    FGd = direct(FG)
+
     def fun(xx):
-        f, g = FG(xx)
-        return sign * float(f), sign * np.array(g).ravel()
+        f, g = FGd(xx)
+        return sign * float(f[0]), sign * g
 
     top = set(order[:10])
     for k in starts:
