@@ -59,7 +59,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -
     """Write ``path`` through ``write(fh)``, ``fh`` a binary file open on a temporary file beside it,
     then rename that file over ``path``.
 
-    ``write`` may be anything that writes to a binary file object (``np.savez_compressed``,
+    ``write`` may be anything that writes to a binary file object (``np.savez``,
     ``scipy.io.savemat``, ``Figure.savefig``). Any error, ``KeyboardInterrupt`` included, removes the
     temporary file and leaves an existing ``path`` as it was. The new file gets the mode an existing
     ``path`` had, else the mode ``open`` would give.

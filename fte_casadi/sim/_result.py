@@ -1,4 +1,4 @@
-"""Simulation result objects and their compressed ``.npz`` file (scenario and design embedded)."""
+"""Simulation result objects and their ``.npz`` file (scenario and design embedded)."""
 
 from __future__ import annotations
 
@@ -130,7 +130,9 @@ def save_result(result: SimulationResult, path: str | os.PathLike) -> Path:
     arrays["scenario"] = np.array(result.scenario.to_json())
     arrays["design"] = np.array(result.design.to_json())
     try:
-        atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
+        # not compressed: the paths' noisy float64 samples deflate by ~19 % at 12 x the time (the manipulator's
+        # 8 paths: 25.5 MB in 0.10 s against 20.6 MB in 1.2 s); np.load reads either
+        atomic_write(path, lambda fh: np.savez(fh, **arrays))
     except OSError as exc:
         raise SimulationError(f"cannot write the result to {str(path)!r}: {exc.strerror or exc}") from None
     return path
