@@ -114,11 +114,16 @@ def step3_reused():
 
 
 def _step3_key(st: Structure, resolved: Resolved, solver: str) -> str:
+    """What step 3 is a function of: the solver, the loop's rate, the parameters and every field of the augmented
+    system (each array by its shape and bytes)."""
     h = hashlib.sha256(repr((solver, resolved.beta, sorted(resolved.params.items()))).encode())
     for f in dataclasses.fields(st.aug):
         v = getattr(st.aug, f.name)
         for a in v if isinstance(v, tuple) else (v,):
-            h.update(repr(a).encode() if not isinstance(a, np.ndarray) else np.ascontiguousarray(a).tobytes())
+            if isinstance(a, np.ndarray):
+                h.update(repr(a.shape).encode() + np.ascontiguousarray(a, dtype=float).tobytes())
+            else:
+                h.update(repr(a).encode())
     return h.hexdigest()
 
 
