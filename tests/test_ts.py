@@ -177,3 +177,24 @@ def test_premise_squared_refused():
     b.region(x=(-1.0, 1.0))
     with pytest.raises(DerivationError, match="nonlinearly on premise 'm'"):
         derive(b.build())
+
+
+def test_the_direct_call_gives_the_functions_numbers_also_for_a_sparse_output():
+    """ts/_direct.py: the zero-copy call of the fidelity trajectory and the premises' searches gives what the
+    Function gives, to the bit, and densifies an output with structural zeros instead of misreading it."""
+    import casadi as ca
+
+    from fte_casadi.ts._direct import direct
+
+    x = ca.SX.sym("x", 3)
+    f = ca.Function("f", [x], [ca.vertcat(ca.sin(x[1]), x[0] * x[2]), ca.gradient(x[0] ** 2 * x[2], x)])
+    xm = ca.MX.sym("x", 2)
+    g = ca.Function("g", [xm], [ca.vertcat(ca.exp(xm[0]), ca.MX(1, 1), xm[1])])  # a structural zero
+    assert g.nnz_out(0) == 2
+    rng = np.random.default_rng(0)
+    for fun, n in ((f, 3), (g, 2)):
+        call = direct(fun)
+        for _ in range(3):
+            v = rng.standard_normal(n)
+            for got, want in zip(call(v), fun.call([v])):
+                np.testing.assert_array_equal(got, np.array(ca.densify(want)).ravel(order="F"))

@@ -18,13 +18,15 @@ __all__ = ["direct"]
 
 def direct(f: ca.Function) -> Callable[..., tuple[np.ndarray, ...]]:
     """``(*args) -> outputs``: ``f`` evaluated at dense column vectors ``args`` (one per input), each output a new
-    flat array (dense, column-major as CasADi stores it). Not for concurrent use: one buffer per function."""
+    flat array (dense, column-major as CasADi stores it; an output with structural zeros, e.g. a drift with a
+    row that is 0, is densified first). Not for concurrent use: one buffer per function."""
+    if any(f.nnz_in(i) != f.numel_in(i) for i in range(f.n_in())):
+        raise ValueError(f"direct(): {f.name()} has a sparse input; call it as a Function")
+    if any(f.nnz_out(i) != f.numel_out(i) for i in range(f.n_out())):
+        xin = f.sx_in() if f.is_a("SXFunction") else f.mx_in()
+        f = ca.Function(f.name(), xin, [ca.densify(o) for o in f.call(xin)])
     ins = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
     outs = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
-    if any(f.nnz_in(i) != f.numel_in(i) for i in range(f.n_in())) or any(
-        f.nnz_out(i) != f.numel_out(i) for i in range(f.n_out())
-    ):
-        raise ValueError(f"direct(): {f.name()} has a sparse input or output; call it as a Function")
     buf, run = f.buffer()
     for i, a in enumerate(ins):
         buf.set_arg(i, memoryview(a))
