@@ -130,7 +130,50 @@ def _step3_key(st: Structure, resolved: Resolved, solver: str) -> str:
 def step3(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
     """Step 3, conditioned: the common gain K from (45), the closed loop asked to decay at ``options.beta`` (None:
     the default of :func:`~fte_casadi.design.core._decay.loop_decay_target`); made once per inputs inside
-    :func:`step3_reused`."""
+    :func:`step3_reused`.
+
+    Where (45) is infeasible under the default bound on cond(X') and no kappa was given, the larger bounds of
+    :data:`KAPPA_LADDER` are tried (kappa searched, as for the observer), and the first under which it is feasible
+    is kept, said so; the observer is then designed under it too (one kappa, :func:`params_of`). The bound is a
+    matter of units, not of the plant: a state measured in units far from its range (a levitation's gap in m,
+    1e-3 wide, beside its current in A) needs cond(X) ~ 1e7 for the same Lyapunov function."""
+    try:
+        return _step3_once(st, resolved, solver)
+    except InfeasibleDesignError as exc:
+        if (
+            "kappa" in resolved.params
+            or exc.refusal.lmi != "45"
+            or not _within_sigma_max(st, resolved, solver)
+        ):
+            raise
+        first = exc
+    for kappa in KAPPA_LADDER[1:]:
+        try:
+            s3 = _step3_once(
+                st, dataclasses.replace(resolved, params=dict(resolved.params, kappa=kappa)), solver
+            )
+        except InfeasibleDesignError:
+            continue
+        s3.notes.insert(0, f"step 3: kappa = {kappa:g}: LMI (45) is infeasible with cond(X') <= {conditioned.KAPPA:g} "
+                           f"(the bound binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
+        return s3
+    r = first.refusal
+    raise InfeasibleDesignError(dataclasses.replace(
+        r, statement=f"{r.statement.rstrip('.')}; and with cond(X') <= {KAPPA_LADDER[-1]:g} too (the bound is not what "
+                     "binds)", numbers=dict(r.numbers, kappa=KAPPA_LADDER[-1])), first.result) from None  # fmt: skip
+
+
+def _within_sigma_max(st: Structure, resolved: Resolved, solver: str) -> bool:
+    """Does (45) allow this sigma without a bound on cond(X) (:func:`~fte_casadi.design.core._diagnose.sigma_max`,
+    one conic solve, remembered)? Where it does not, no kappa helps."""
+    from .core._diagnose import sigma_max
+
+    p = resolved.params
+    smax, _ = sigma_max(st.aug, p["gamma"], p["gamma1"], solver)
+    return smax is not None and float(p["sigma"]) < smax
+
+
+def _step3_once(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
     memo = _STEP3.get()
     if memo is None:
         return conditioned.step3(st.aug, resolved.params, solver, beta=resolved.beta)
@@ -139,6 +182,15 @@ def step3(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
         memo[key] = conditioned.step3(st.aug, resolved.params, solver, beta=resolved.beta)
     s3 = memo[key]
     return dataclasses.replace(s3, notes=list(s3.notes))
+
+
+def params_of(resolved: Resolved, s3) -> dict:
+    """The parameters the observer is designed with after step 3: ``resolved.params`` with step 3's kappa where
+    :func:`step3` raised it (one bound on cond(X') and cond(Pbar) per design, as ``--kappa`` sets both)."""
+    kappa = getattr(s3, "kappa", conditioned.KAPPA)
+    if "kappa" in resolved.params or kappa == conditioned.KAPPA:
+        return resolved.params
+    return dict(resolved.params, kappa=float(kappa))
 
 
 #: the bounds on cond(Pbar) tried, in order, for an observer too slow for the fault windows it must settle in
@@ -180,13 +232,15 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     settle = bool(window) and resolved.alpha_source != "user" and "kappa" not in resolved.params
     need = SETTLE / float(window) if settle else 0.0
 
+    base = params_of(resolved, s3)
+
     def at(params):
         return _step5.step5(st.aug, params, s3.X, s3.K, st.T, options.solver, alpha=resolved.alpha,
                                  sample_time=options.sample_time, bound_view=view,
                                  alpha_is_default=resolved.alpha_source == "plant", joint=joint)  # fmt: skip
 
     try:
-        s5 = at(resolved.params)
+        s5 = at(base)
     except InfeasibleDesignError as exc:
         if (
             not options.diagnose
@@ -194,7 +248,7 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
             or not (exc.refusal.lmi in ("46", "29") and exc.refusal.bounded)
         ):
             raise
-        s5 = _kappa_for_46(at, resolved.params, exc)
+        s5 = _kappa_for_46(at, base, exc)
     if not settle:
         return s5
     rate = slowest_rate(st, s5)
@@ -203,7 +257,7 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
     tried = [(s5.kappa, rate, s5)]
     for kappa in (k for k in KAPPA_LADDER if k > s5.kappa):
         try:
-            s5k = at(dict(resolved.params, kappa=kappa))
+            s5k = at(dict(base, kappa=kappa))
         except FteError as exc:
             tried.append((kappa, None, exc))
             continue
@@ -251,7 +305,7 @@ def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resol
         s3j, s5j = _loops(ts, st, options, resolved, s3, joint=True)
     except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:
         also = (
-            f"; and Theorem 1's (29) at step 3's K fails too: {shorten(str(jexc), 240, placeholder=' ...')}"
+            f"; and Theorem 1's (29) at step 3's K fails too ({shorten(str(jexc), 480, placeholder=' ...')})"
         )
         raise InfeasibleDesignError(
             dataclasses.replace(first.refusal, statement=first.refusal.statement.rstrip(".") + also),
@@ -278,7 +332,7 @@ def _loops(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolve
         what = f"at the lower rate {b:.4g}" if b > 0 else "with the smallest gain (45) allows (no rate asked)"
         why = (f"{s3.beta_why}; the loop at {s3.beta:.4g} asks an observer that step 5 cannot give ("
                f"{shorten(str(first), 240, placeholder=' ...')}), so the loop is designed {what}")  # fmt: skip
-        s3b = conditioned.step3(st.aug, resolved.params, options.solver, beta=b, why=why)
+        s3b = conditioned.step3(st.aug, params_of(resolved, s3), options.solver, beta=b, why=why)
         try:
             s5 = step5(ts, st, options, resolved, s3b, joint=joint)
         except (InfeasibleDesignError, conditioned.SolverFailedError):

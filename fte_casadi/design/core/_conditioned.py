@@ -118,6 +118,8 @@ class Step3:
     #: True when the rate's LMI was posed (the gain is not the smallest of (45) alone); the default's lower rate
     posed: bool = False
     low: float = 0.0
+    #: the bound on cond(X') this X was designed under
+    kappa: float = KAPPA
 
 
 @dataclass
@@ -371,7 +373,7 @@ def _step3_start(aug: Augmented, params: dict, solver: str, Su: np.ndarray, tau:
         what = "LMI (45)" + (
             f" with the closed loop's decay rate beta = {params['beta']:.4g}" if params.get("beta") else ""
         )
-        raise _fail(what, res, solver, hint, worst_block(prob.lmis, names))
+        raise _fail(what, res, solver, hint, worst_block(prob.lmis, names), lmi="45")
     prob.notes += [f"step 3: {r}" for r in repaired]
     return layout, family, c, prob, res, v0
 
@@ -541,4 +543,6 @@ def _step3_result(aug, params, Su, layout, cen, prob, res, solver, b, why) -> St
     ]  # fmt: skip
     notes += [f"step 3: {solver} warned: {w!r}" for w in res.warned]
     notes += [f"step 3: {x}" if not x.startswith("step 3: ") else x for x in prob.notes]
-    return Step3(X, K, res.status, prob.solves, prob.seconds, notes, beta=b, beta_why=why)
+    return Step3(
+        X, K, res.status, prob.solves, prob.seconds, notes, beta=b, beta_why=why, kappa=_kappa(params)
+    )

@@ -128,24 +128,37 @@ def _bound(aug: Augmented, sigma, gamma, gamma1: float, solver: str, value) -> t
     inaccurate ones (``value`` is oriented so that the smallest is: an inaccurate bound can be off either way),
     else ``(None, status of the first)``. A heavy problem (many PSD rows) takes its first answer."""
     inaccurate, first, sd = [], None, _d_size(aug)
-    for tau, sy, xmin in _units(aug):
+    for tau, sy, xmin0 in _units(aug):
         p = units_params(
             {"sigma": sigma if sigma is not None else 1.0, "gamma": gamma, "gamma1": gamma1}, tau, sy, sd
         )
-        layout, lmis, c = _problem(units_scaled(aug, tau, sy, sd), p["sigma"] if sigma is not None else None,
-                                   p["gamma"], p["gamma1"], xmin)  # fmt: skip
-        prob = ConicProblem(layout, lmis, c)
-        res = prob.solve(solver)
-        first = first or res.status
-        if res.v is None or res.status not in SOLVED:
-            continue
-        v = value(layout.unpack(res.v)["q"], tau, sy, p)
-        if res.status == "optimal" or prob.heavy:  # a heavy problem's second solve costs more than it tells
-            return v, res.status
-        inaccurate.append((v, res.status))
+        for xmin in (xmin0 * f for f in MARGIN_SHRINK):
+            layout, lmis, c = _problem(units_scaled(aug, tau, sy, sd), p["sigma"] if sigma is not None else None,
+                                       p["gamma"], p["gamma1"], xmin)  # fmt: skip
+            prob = ConicProblem(layout, lmis, c)
+            res = prob.solve(solver)
+            first = first or res.status
+            if res.v is None or res.status not in SOLVED:
+                break
+            u = layout.unpack(res.v)
+            v = value(u["q"], tau, sy, p)
+            # the margin excluded every X that allows a sigma > 0 (a state measured in small units): a smaller one
+            if sigma is None and v <= 0 and np.linalg.eigvalsh(u["X"])[0] <= 2.0 * xmin and not prob.heavy:
+                continue
+            if (
+                res.status == "optimal" or prob.heavy
+            ):  # a heavy problem's second solve costs more than it tells
+                return v, res.status
+            inaccurate.append((v, res.status))
+            break
     return min(inaccurate, key=lambda a: a[0]) if inaccurate else (None, first)
 
 
+#: the margins ``X >= xmin I`` the bounds try, as factors of :func:`_units`' own: an absolute margin in the states'
+#: units excludes every X of a plant with a state measured in small units (a levitation's gap in m, 1e-3 wide: X's
+#: smallest eigenvalue 5e-5 where sigma_max = 0.017, and at X >= 1e-3 I the bound said "no sigma > 0"); a smaller
+#: margin is tried only where the larger one left no sigma > 0 and X sits on it
+MARGIN_SHRINK = (1.0, 1e-3, 1e-6)
 #: the status of a bound found by phase 1's bisection in numpy
 PHASE1 = "phase 1 (numpy), bisection"
 #: the statuses of a bound that was decided: a solver's optimum or proof of infeasibility, or phase 1's bisection
