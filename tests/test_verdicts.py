@@ -149,3 +149,20 @@ def test_a_poor_estimate_needs_its_interval_at_or_above_the_limit():
     tie = {**w, "fault_rel_rms_error_interval": [0.47, 0.57]}
     assert [v["verdict"] for v in verdicts.verdicts({"paths": 9, "windows": [poor]})] == ["poor estimate"]
     assert verdicts.verdicts({"paths": 9, "windows": [tie]}) == []
+
+
+def test_a_plant_without_unknown_inputs_is_not_told_about_them():
+    """The rank test of a fault's column is "separation from the unknown inputs" only where the plant has some;
+    without, it says how well the outputs see the fault at all, and the message says that."""
+    from fte_casadi.design._limits import FaultLimits, causes
+
+    weak = dict(fault="fa", rightmost_zero=(None,), separation_inputs=(0.01,), separation_faults=(float("inf"),),
+                slowest_mode=-5.0)  # fmt: skip
+    with_d, seen_d = causes(FaultLimits(**weak), 2.0)
+    without, seen = causes(FaultLimits(**weak, has_unknown_inputs=False), 2.0)
+    assert (
+        any("from the unknown inputs only weakly" in f for f in with_d)
+        and "from the unknown inputs" in seen_d
+    )
+    assert not any("unknown inputs only weakly" in f for f in without) and "unknown inputs 0.01" not in seen
+    assert any("see fa only weakly (the plant has no unknown inputs)" in f and "0.01" in f for f in without)

@@ -107,6 +107,9 @@ class FaultLimits:
     separation_faults: tuple
     #: the largest real part of the eigenvalues of R_i over the rules (the slowest observer mode)
     slowest_mode: float
+    #: whether the plant has unknown inputs (without, ``separation_inputs`` measures how well the outputs see the
+    #: fault at all: the rank test of [[A_i, Bf_j], [C, Df_j]])
+    has_unknown_inputs: bool = True
 
     @property
     def time_constant(self) -> float:
@@ -130,7 +133,7 @@ def fault_limits(design, j: int) -> FaultLimits:
         sep_d.append(separation(A, B, C, D))
         sep_f.append(separation(A, Bf, C, Df) if Bf.shape[1] > 1 else float("inf"))
     slow = max(float(np.max(np.linalg.eigvals(np.asarray(R, float)).real)) for R in design.R)
-    return FaultLimits(names[j], tuple(zeros), tuple(sep_d), tuple(sep_f), slow)
+    return FaultLimits(names[j], tuple(zeros), tuple(sep_d), tuple(sep_f), slow, ld > 0)
 
 
 def _zero_text(z) -> str:
@@ -166,9 +169,13 @@ def causes(lim: FaultLimits, window: float | None) -> tuple[list[str], str]:
                      f"{SETTLE_TAUS:g} time constants = {SETTLE_TAUS * tau:.3g} against the {WINDOW_SETTLE:.0%} of the "
                      f"{window:g}-long window left for settling ({WINDOW_SETTLE * window:.3g})")  # fmt: skip
     k = int(np.argmin(lim.separation_inputs))
-    if lim.separation_inputs[k] < WEAK_SEPARATION:
+    if lim.separation_inputs[k] < WEAK_SEPARATION and lim.has_unknown_inputs:
         found.append(f"the outputs separate {lim.fault} from the unknown inputs only weakly: smallest singular "
                      f"value of the column-normalised rank test [[A_i, Bf, Bd], [C, Df, 0]] is "
+                     f"{lim.separation_inputs[k]:.2g} (rule {k + 1})")  # fmt: skip
+    elif lim.separation_inputs[k] < WEAK_SEPARATION:
+        found.append(f"the outputs see {lim.fault} only weakly (the plant has no unknown inputs): smallest singular "
+                     f"value of the column-normalised rank test [[A_i, Bf], [C, Df]] of {lim.fault} alone is "
                      f"{lim.separation_inputs[k]:.2g} (rule {k + 1})")  # fmt: skip
     kf = int(np.argmin(lim.separation_faults))
     if np.isfinite(lim.separation_faults[kf]) and lim.separation_faults[kf] < WEAK_SEPARATION:
@@ -177,7 +184,9 @@ def causes(lim: FaultLimits, window: float | None) -> tuple[list[str], str]:
                      f"(rule {kf + 1})")  # fmt: skip
     zs = ", ".join(_zero_text(z) for z in lim.rightmost_zero)
     seen = (f"rightmost invariant zero per rule: {zs}; slowest observer mode {lim.slowest_mode:.3g} (time "
-            f"constant {tau:.3g}); separation from the unknown inputs {min(lim.separation_inputs):.2g}"
+            f"constant {tau:.3g}); "
+            + ("separation from the unknown inputs" if lim.has_unknown_inputs else "the fault's own rank test")
+            + f" {min(lim.separation_inputs):.2g}"
             + (f", from the other faults {min(lim.separation_faults):.2g}"
                if np.isfinite(min(lim.separation_faults)) else ""))  # fmt: skip
     return found, seen
