@@ -160,7 +160,7 @@ def step3(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
     r = first.refusal
     raise InfeasibleDesignError(dataclasses.replace(
         r, statement=f"{r.statement.rstrip('.')}; and with cond(X') <= {KAPPA_LADDER[-1]:g} too (the bound is not what "
-                     "binds)", numbers=dict(r.numbers, kappa=KAPPA_LADDER[-1])), first.result) from None  # fmt: skip
+                     "binds)", bounded=False, numbers=dict(r.numbers, kappa=KAPPA_LADDER[-1])), first.result) from None  # fmt: skip
 
 
 def _within_sigma_max(st: Structure, resolved: Resolved, solver: str) -> bool:

@@ -145,9 +145,8 @@ def _bound(aug: Augmented, sigma, gamma, gamma1: float, solver: str, value) -> t
             # the margin excluded every X that allows a sigma > 0 (a state measured in small units): a smaller one
             if sigma is None and v <= 0 and np.linalg.eigvalsh(u["X"])[0] <= 2.0 * xmin and not prob.heavy:
                 continue
-            if (
-                res.status == "optimal" or prob.heavy
-            ):  # a heavy problem's second solve costs more than it tells
+            # a heavy problem's second solve costs more than it tells
+            if res.status == "optimal" or prob.heavy:
                 return v, res.status
             inaccurate.append((v, res.status))
             break
