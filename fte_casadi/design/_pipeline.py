@@ -127,33 +127,45 @@ def _step3_key(st: Structure, resolved: Resolved, solver: str) -> str:
     return h.hexdigest()
 
 
-def step3(st: Structure, resolved: Resolved, solver: str) -> conditioned.Step3:
+def step3(st: Structure, resolved: Resolved, solver: str, *, search: bool = True) -> conditioned.Step3:
     """Step 3, conditioned: the common gain K from (45), the closed loop asked to decay at ``options.beta`` (None:
     the default of :func:`~fte_casadi.design.core._decay.loop_decay_target`); made once per inputs inside
     :func:`step3_reused`.
 
     Where (45) is infeasible under the default bound on cond(X') and no kappa was given, the larger bounds of
     :data:`KAPPA_LADDER` are tried (kappa searched, as for the observer), and the first under which it is feasible
-    is kept, said so; the observer is then designed under it too (one kappa, :func:`params_of`). The bound is a
+    is kept, said so; the observer is then designed under it too (one kappa, :func:`params_of`). Only with
+    ``search`` (the design's ``diagnose``: not in the parameter search's trials or ``--explore``'s grid, as for
+    step 5's bound where (46) is infeasible: there it doubled a refusal's time). The bound is a
     matter of units, not of the plant: a state measured in units far from its range (a levitation's gap in m,
     1e-3 wide, beside its current in A) needs cond(X) ~ 1e7 for the same Lyapunov function."""
     try:
         return _step3_once(st, resolved, solver)
     except InfeasibleDesignError as exc:
         if (
-            "kappa" in resolved.params
+            not search
+            or "kappa" in resolved.params
             or exc.refusal.lmi != "45"
             or not _within_sigma_max(st, resolved, solver)
         ):
             raise
         first = exc
-    for kappa in KAPPA_LADDER[1:]:
+
+    def under(kappa: float):
         try:
-            s3 = _step3_once(
+            return _step3_once(
                 st, dataclasses.replace(resolved, params=dict(resolved.params, kappa=kappa)), solver
             )
         except InfeasibleDesignError:
-            continue
+            return None
+
+    # the ladder's top first: where (45) is infeasible there too (the common case: the cap is not what binds), one
+    # solve decides it; where it is feasible, the smallest bound of the ladder that is
+    top = under(KAPPA_LADDER[-1])
+    if top is not None:
+        kappa, s3 = next(
+            (k, s) for k in KAPPA_LADDER[1:] if (s := top if k == KAPPA_LADDER[-1] else under(k))
+        )
         s3.notes.insert(0, f"step 3: kappa = {kappa:g}: LMI (45) is infeasible with cond(X') <= {conditioned.KAPPA:g} "
                            f"(the bound binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
         return s3
