@@ -139,3 +139,11 @@ def vehicle_calm():
 def vehicle_no_wind():
     """The same vehicle without the wind (no unknown input)."""
     return vehicle(wind=False)
+
+
+def vehicle_no_wind_scenario():
+    """The scenario without the wind, for ``vehicle_no_wind`` (a plant without unknown inputs refuses a scenario
+    that drives them)."""
+    import dataclasses
+
+    return dataclasses.replace(scenario(), unknown_input=None)

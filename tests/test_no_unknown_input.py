@@ -4,6 +4,8 @@ bounds nothing in (45) without a d block; the frontier had called every sigma in
 
 from __future__ import annotations
 
+import dataclasses
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -11,7 +13,8 @@ import pytest
 from fte_casadi import PlantBuilder
 from fte_casadi.design import DesignOptions, augment, design, explore
 from fte_casadi.design.core._diagnose import gamma_min, sigma_max
-from fte_casadi.sim import Bias, LossOfEffectiveness, Scenario, simulate
+from fte_casadi.errors import ParameterError
+from fte_casadi.sim import Bias, LossOfEffectiveness, Scenario, UniformNoise, simulate
 from fte_casadi.ts import derive
 
 
@@ -49,6 +52,12 @@ def test_it_designs_and_simulates(model):
     assert d.certified
     m = simulate(d, plant, _scenario(), paths=2, seed=1, progress=False).metrics
     assert all(np.isfinite(v) for v in m["state_rms_error"]) and len(m["windows"]) == 2
+    # a scenario that drives unknown inputs this plant does not have is refused, not run without them
+    with pytest.raises(
+        ParameterError, match=r"drives unknown inputs \(UniformNoise\) but plant 'pendulum_nod' has"
+    ):
+        simulate(d, plant, dataclasses.replace(_scenario(), unknown_input=UniformNoise(0.1)), paths=2, seed=1,
+                 progress=False)  # fmt: skip
 
 
 def test_gamma_bounds_nothing_and_the_frontier_finds_the_design(model):

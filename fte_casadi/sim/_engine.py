@@ -493,8 +493,8 @@ def calibration_task(design_json: str, plant_blob: bytes, scenario_json: str, dt
 
 
 def check_scenario(plant: Plant, scenario: Scenario) -> None:
-    """Refuse a fault window outside [0, T), measurement noise of the wrong size and an x0 outside the
-    plant's region, each with what to do."""
+    """Refuse a fault window outside [0, T), measurement noise of the wrong size, unknown inputs the plant does not
+    have and an x0 outside the plant's region, each with what to do."""
     for fp in scenario.faults:
         if fp.start < 0 or fp.stop > scenario.T:
             raise ParameterError(
@@ -503,6 +503,11 @@ def check_scenario(plant: Plant, scenario: Scenario) -> None:
             )
     if scenario.measurement_noise is not None:
         scenario.measurement_noise.check(scenario.name, plant.output_names)
+    if scenario.unknown_input is not None and plant.ld == 0:  # it would be dropped without a word
+        raise ParameterError(
+            f"scenario {scenario.name!r}: it drives unknown inputs ({type(scenario.unknown_input).__name__}) but plant "
+            f"{plant.name!r} has none; drop the scenario's unknown_input, or declare the plant's (b.unknown_inputs)"
+        )
     x0 = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
     lo, hi = np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float)
     # a bound that is not a finite number (a region the plant leaves open) does not confine x0
