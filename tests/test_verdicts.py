@@ -166,3 +166,34 @@ def test_a_plant_without_unknown_inputs_is_not_told_about_them():
     )
     assert not any("unknown inputs only weakly" in f for f in without) and "unknown inputs 0.01" not in seen
     assert any("see fa only weakly (the plant has no unknown inputs)" in f and "0.01" in f for f in without)
+
+
+def test_a_saturated_input_is_explained_by_the_noise_through_the_gain_when_it_is():
+    """A window whose input sits at its limits is explained by the measurement noise where the loop's direct path
+    K H alone moves the input by a third of its half-range (the quadruple tank's committed design: pumps of
+    half-range 5 V); a noise that does not reach that, or a run without noise, explains nothing."""
+    import pathlib
+
+    import numpy as np
+
+    from fte_casadi.design import Design
+    from fte_casadi.design._limits import NOISE_SATURATES, noise_saturates
+
+    d = Design.load(
+        pathlib.Path(__file__).resolve().parents[1] / "generated" / "quadruple_tank" / "design.json"
+    )
+    n = int(d.dims.n)
+    gain = np.asarray(d.K[0]) @ np.asarray(d.H)[:n]  # the direct path from each output to each input
+    w = {"input_saturation": [0.9, 0.0]}
+    noise = (
+        2.0 * NOISE_SATURATES * 5.0 / max(np.abs(gain[0]).max(), 1e-300)
+    )  # twice what it takes on one output
+    k = int(np.argmax(np.abs(gain[0])))
+    big = [noise if q == k else 0.0 for q in range(int(d.dims.p))]
+    text = noise_saturates(d, {"measurement_noise": big}, w)
+    assert text.startswith("input dv1 is at a limit 90 % of the window") and "half-range 5" in text
+    assert "dv2" not in text  # not saturated in this window
+    assert (
+        noise_saturates(d, {"measurement_noise": [v / 4 for v in big]}, w) == ""
+    )  # too small to reach the limit
+    assert noise_saturates(d, {"measurement_noise": None}, w) == ""

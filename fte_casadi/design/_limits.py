@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
+from ..verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
 
 __all__ = ["separation", "explain_metrics"]  # public: docs/api.md
 
@@ -234,6 +234,36 @@ def loop_idle(design) -> str:
             "is a tie")  # fmt: skip
 
 
+#: the measurement noise's input, as a standard deviation, that explains a saturated input: a third of its half-range
+#: (three standard deviations reach the limit)
+NOISE_SATURATES = 1.0 / 3.0
+
+
+def noise_saturates(design, metrics: dict, w: dict) -> str:
+    """Why an input is at its limits in window ``w``: the measurement noise alone moves it that far through the
+    loop's direct path ``K_j H`` (``u = K_j xhat`` with ``xhat = z + H y``: a lower bound, the observer's dynamics
+    add to it). "" where the noise does not explain it (or the run has no noise or the plant no limits)."""
+    sat, noise, lims = w.get("input_saturation") or [], metrics.get("measurement_noise"), design.input_limits
+    p, n = int(design.dims.p), int(design.dims.n)
+    if lims is None or not isinstance(noise, (list, tuple)) or len(noise) != p:
+        return ""
+    V = np.diag(np.square(np.asarray(noise, dtype=float)))
+    Hx = np.asarray(design.H, float)[:n]
+    sd = np.max(
+        [np.sqrt(np.diag(k @ Hx @ V @ Hx.T @ k.T)) for k in (np.asarray(k, float) for k in design.K)], axis=0
+    )
+    half = 0.5 * (np.asarray(lims, float)[:, 1] - np.asarray(lims, float)[:, 0])
+    names = list(design.names.get("inputs") or [])
+    p_ = design.params
+    out = [f"input {names[i] if i < len(names) else i} is at a limit {100 * f:.0f} % of the window: the measurement "
+           f"noise alone moves it by {sd[i]:.3g} (standard deviation through the loop's direct path K H, a lower bound) "
+           f"against its half-range {half[i]:.3g}; max |K| = {max(float(np.abs(k).max()) for k in design.K):.3g} is step "
+           f"3's smallest gain at sigma = {p_.sigma:g}, gamma = {p_.gamma:g} (and the loop's decay rate); it is no "
+           "larger at a smaller sigma or a larger gamma, where (45) only admits more (fte tune searches them)"
+           for i, f in enumerate(sat) if i < len(half) and f > SATURATED and sd[i] >= NOISE_SATURATES * half[i]]  # fmt: skip
+    return "; ".join(out)
+
+
 def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list[str]:
     """One sentence per fault window where tolerant control is not better than none (FTC ratio >=
     :data:`~fte_casadi.verdicts.WORSE_THAN_NONE`) and per fault whose false-alarm ratio is >=
@@ -258,6 +288,8 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
             found.insert(0, idle)
         if tie and (kept := gated_out(design, j)):
             found.insert(0, kept)
+        if noisy := noise_saturates(design, metrics, w):
+            found.insert(0, noisy)
         head = (f"in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) (FTC ratio "
                 f"{'n/a' if r is None else format(r, '.3g')})")  # fmt: skip
         out.append(head + (": " + "; ".join(found) if found else ": no structural cause found")
