@@ -14,6 +14,7 @@ from fte_casadi.design import _pipeline as pipeline
 from fte_casadi.design._options import resolve
 from fte_casadi.design.core import _conditioned as conditioned
 from fte_casadi.design.core._diagnose import sigma_max
+from fte_casadi.design.diagnose._explain import _kappa_binds
 from fte_casadi.errors import InfeasibleDesignError
 from fte_casadi.ts import derive
 
@@ -49,6 +50,14 @@ def test_step3_raises_kappa_where_the_default_bound_binds(ts):
     assert np.linalg.cond(s3.X) > conditioned.KAPPA
     assert any(f"kappa = {s3.kappa:g}" in n and "the bound binds" in n for n in s3.notes)
     assert pipeline.params_of(res, s3)["kappa"] == s3.kappa
+    # the refusal at the defaults names it too (the parameter search's trials do not search kappa): at 0.8 x the
+    # largest sigma, feasible only above the default bound, under 1e7
+    smax, _ = sigma_max(st.aug, res.params["gamma"], res.params["gamma1"], "CLARABEL")
+    sg, kappa = _kappa_binds(st.aug, dict(res.params, sigma=1.0), smax, "CLARABEL")
+    assert sg == 0.015 < smax and kappa == s3.kappa  # 0.8 x 0.0193, rounded down: the sigma step 3 had above
+    assert (
+        _kappa_binds(st.aug, dict(res.params, kappa=1e4), smax, "CLARABEL") is None
+    )  # a kappa given: not named
     # a kappa given is kept: no search
     res_k = resolve(ts, DesignOptions(sigma=0.015, kappa=1e4))
     with pytest.raises(InfeasibleDesignError):

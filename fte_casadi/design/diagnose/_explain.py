@@ -11,6 +11,7 @@ from ..._rounding import nice_floor
 from ...errors import InfeasibleDesignError, Refusal, Refused
 from .._limits import reachability
 from .._options import DesignOptions, default_gamma1, gamma_size, round_gamma
+from ..core._conditioned import KAPPA, SolverFailedError, step3
 from ..core._diagnose import DECIDED, gamma_min, sigma_max
 from ._parameters import Attempt, first_of_each_kind, try_design
 
@@ -85,6 +86,13 @@ def explain_45(attempt: Attempt, ts, options: DesignOptions, aug, params: dict,
                 fixes.append(f"lower sigma to <= {cand:g}")
                 numbers["sigma_checked"] = cand
                 break
+    if not fixes and smax is not None and (binds := _kappa_binds(aug, params, smax, solver)) is not None:
+        s_at, k_at = binds
+        numbers.update(sigma_kappa_binds=s_at, kappa_needed=k_at)
+        parts.append(f"at sigma = {s_at:g}, below that bound, (45) is infeasible with cond(X') <= {KAPPA:g} and feasible "
+                     f"with cond(X') <= {k_at:g}: there the bound kappa binds (a state measured in units far from its "
+                     "range needs a large one; --kappa sets it, and the design searches it only at the sigma it is "
+                     "given, e.g. --sigma)")  # fmt: skip
     checked = "each checked: it gives" if len(fixes) > 1 else "checked: it gives"
     advice = (
         (" or ".join(fixes) + f" ({checked} a certified design)")
@@ -102,6 +110,32 @@ def explain_45(attempt: Attempt, ts, options: DesignOptions, aug, params: dict,
             tried=first_of_each_kind(refused or []),
         )
     )
+
+
+def _kappa_binds(aug, params: dict, smax: float, solver: str) -> tuple[float, float] | None:
+    """``(sigma, kappa)`` where the bound on cond(X') is what makes (45) infeasible below ``smax``: at 0.8 x it,
+    infeasible under the default bound and feasible under ``kappa``, the smallest of the ladder that is (step 3's
+    own search, :func:`~fte_casadi.design._pipeline.step3`, which the parameter search's trials leave out); None
+    where a kappa was given, where the default bound is not what binds, or where a solve fails."""
+    if "kappa" in params:
+        return None
+    from .._pipeline import KAPPA_LADDER
+
+    sg = nice_floor(0.8 * smax)
+
+    def feasible(kappa: float) -> bool:
+        try:
+            step3(aug, dict(params, sigma=sg, kappa=kappa), solver)
+        except InfeasibleDesignError:
+            return False
+        return True
+
+    try:
+        if feasible(KAPPA) or not feasible(KAPPA_LADDER[-1]):
+            return None
+        return sg, next(k for k in KAPPA_LADDER[1:] if k == KAPPA_LADDER[-1] or feasible(k))
+    except SolverFailedError:
+        return None
 
 
 def explain_46(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, exc: InfeasibleDesignError,
