@@ -1,5 +1,6 @@
 """Design: augmented system, H and assumption checks, LMIs, certificates, the Design record."""
 
+from ._api import default_observer_rate as default_observer_rate  # internal: fte tune
 from ._api import design as design
 from ._api import design_at_rate_fraction as design_at_rate_fraction  # internal: fte tune
 from ._api import explore as explore

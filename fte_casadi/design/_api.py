@@ -100,6 +100,21 @@ def design_at_rate_fraction(ts: TSModel, fraction: float, options: DesignOptions
         return _attempt(ts, options.replace(alpha=float(fraction) * a0))
 
 
+def default_observer_rate(ts: TSModel, options: DesignOptions | None = None, **changes) -> float | None:
+    """``a0`` of :func:`design_at_rate_fraction`: the observer decay rate the design takes by default, read the same
+    way (steps 1-5, else the whole design); None where the design fails or has no decay rate."""
+    options = DesignOptions(**changes) if options is None else options.replace(**changes)
+    ts = as_model(ts, "default_observer_rate()")
+    a0 = _default_rate(ts, options)
+    if a0 is not None:
+        return a0
+    try:
+        d = _attempt(ts, options)
+    except FteError:
+        return None
+    return None if d.observer.alpha is None else float(d.observer.alpha)
+
+
 def _default_rate(ts: TSModel, options: DesignOptions) -> float | None:
     """The observer decay rate of steps 1-5 at ``options`` (no retry, no search); None where a step fails or the
     variant has none."""

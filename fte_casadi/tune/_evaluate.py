@@ -54,18 +54,15 @@ def _plant_ts(blob_hash: str, blob: bytes, vertices: str | None = None):
 
 def default_alpha(task: dict) -> float | None:
     """The observer decay rate the design takes by default (no alpha given) at ``task["knobs"]``:
-    what the knob ``alpha_scale`` multiplies; None when that design fails."""
-    from ..design import design as run_design
+    what the knob ``alpha_scale`` multiplies, read as the candidates read it
+    (:func:`~fte_casadi.design.default_observer_rate`); None when that design fails."""
+    from ..design import default_observer_rate
 
     blob = task["plant"]
     _, ts = _plant_ts(hashlib.sha256(blob).hexdigest(), blob, task.get("vertices"))
-    try:
-        d = run_design(ts, variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
-                       initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
-                       **design_kwargs(task["knobs"]))  # fmt: skip
-    except FteError:
-        return None
-    return None if d.observer.alpha is None else float(d.observer.alpha)
+    return default_observer_rate(ts, variant=task["variant"], solver=task["solver"], sample_time=task["sample_time"],
+                                 initial_state=task["initial_state"], plant_spec=task["plant_spec"], diagnose=False,
+                                 **design_kwargs(task["knobs"]))  # fmt: skip
 
 
 def design_kwargs(knobs: dict) -> dict:
