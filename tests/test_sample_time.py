@@ -107,3 +107,32 @@ def test_the_plants_tuned_alpha_gives_way_where_it_is_infeasible(ts_models):
     assert f"the plant's default alpha = {plant_alpha:g} is infeasible" in d.observer.why
     with pytest.raises(InfeasibleDesignError, match="lower alpha to"):
         design(ts, sample_time=1e-3, kappa=100.0, alpha=plant_alpha)
+
+
+def test_a_rate_the_sample_time_did_not_lower_is_not_called_lowered():
+    """Where no lower decay rate widens the discrete step's margin (its limit is the gains' fastest mode, not the
+    rate), the rate is kept and said so; the sample time is then not named as what binds a too-slow observer."""
+    from types import SimpleNamespace
+
+    from fte_casadi.design._pipeline import _too_slow
+    from fte_casadi.design.core._decay import cap_for_sample_time
+
+    prob = SimpleNamespace(design=lambda al: {"ts_cert": 1.1e-4})  # no lower rate does better
+    a, pt, why = cap_for_sample_time(prob, 0.25, {"ts_cert": 1.2e-4}, "chosen", 1e-4)
+    assert a == 0.25 and pt["ts_cert"] == 1.2e-4 and "kept" in why and "lowered" not in why
+    prob = SimpleNamespace(design=lambda al: {"ts_cert": 3e-4 if al < 0.2 else 1.1e-4})  # a lower rate does
+    a, _, why = cap_for_sample_time(prob, 0.25, {"ts_cert": 1.2e-4}, "chosen", 1e-4)
+    assert a < 0.2 and "lowered to" in why
+
+    opts = SimpleNamespace(sample_time=1e-4)
+    kept = SimpleNamespace(observer={})
+    lowered = SimpleNamespace(observer={"alpha_before_sample_time": 0.5})
+    tried = [(1e4, None, None), (1e8, 0.416, kept)]
+    r = _too_slow(None, None, opts, None, None, 0.5, 6.0, tried, joint=True)
+    assert (
+        r.lmi == "29"
+        and "sample time" not in r.detail
+        and "(29) itself or kappa: only kappa = 1e+08" in r.detail
+    )
+    r = _too_slow(None, None, opts, None, None, 0.5, 6.0, [(1e8, 0.416, lowered)])
+    assert "What binds is the sample time 0.0001" in r.detail

@@ -280,7 +280,7 @@ def step5(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolved
                                 f"observer settles within the shortest fault window {window:g} ({SETTLE:g} time constants "
                                 f"{SETTLE / rate:.3g}; at kappa = {s5.kappa:g}: {SETTLE / tried[0][1]:.3g})")  # fmt: skip
             return s5k
-    raise InfeasibleDesignError(_too_slow(ts, st, options, resolved, s3, window, need, tried))
+    raise InfeasibleDesignError(_too_slow(ts, st, options, resolved, s3, window, need, tried, joint))
 
 
 def _kappa_for_46(at, params: dict, exc: InfeasibleDesignError):
@@ -357,7 +357,9 @@ def _loops(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolve
     raise first
 
 
-def _too_slow(ts, st, options, resolved, s3, window: float, need: float, tried: list) -> Refusal:
+def _too_slow(
+    ts, st, options, resolved, s3, window: float, need: float, tried: list, joint: bool = False
+) -> Refusal:
     """Why no observer of the kappa ladder settles within ``window``: the limit that binds, with its number."""
     rates = [(k, r) for k, r, _ in tried if r is not None]
     best_k, best_r = max(rates, key=lambda t: t[1]) if rates else (None, None)
@@ -375,13 +377,14 @@ def _too_slow(ts, st, options, resolved, s3, window: float, need: float, tried: 
         limit = (f"What binds is kappa, the bound on cond(Pbar): the rate still grows with it ({rates[-2][1]:.3g} at "
                  f"{rates[-2][0]:g}, {rates[-1][1]:.3g} at {rates[-1][0]:g}); a larger --kappa may reach it, with larger "
                  "observer gains (checked only up to the ladder's end)")  # fmt: skip
-        lmi, bounded = "46", True
+        lmi, bounded = ("29" if joint else "46"), True
     else:
-        limit = (
-            "What binds is (46) itself, not kappa (the rate stopped growing with it): its -sigma P^2 block must "
-            "dominate the observer's coupling with the loop (K) and the diffusion"
-        )
-        lmi, bounded = "46", False
+        lmi, bounded = ("29" if joint else "46"), False
+        why = ("the loop's own decay must dominate its coupling with the observer and the diffusion" if joint else
+               "its -sigma P^2 block must dominate the observer's coupling with the loop (K) and the diffusion")  # fmt: skip
+        limit = (f"What binds is ({lmi}) itself, not kappa (the rate stopped growing with it): {why}" if len(rates) >= 2
+                 else f"What binds is ({lmi}) itself" + (f" or kappa: only kappa = {rates[0][0]:g} gave an observer"
+                                                         if rates else "") + f"; {why}")  # fmt: skip
     return Refusal(Refused.SETTLE, head, lmi=lmi, bounded=bounded, numbers=numbers,
                    detail=limit, advice="To accept a slower observer, design with --settle-within a longer window (0: "
                    "none) or give --alpha")  # fmt: skip

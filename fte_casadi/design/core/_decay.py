@@ -70,6 +70,9 @@ def cap_for_sample_time(prob, a: float, pt: dict, why: str, sample_time: float):
     target = TS_FACTOR * sample_time
 
     def lowered(al, p, how):
+        if al == a:  # no lower rate reached the margin: the rate stays, stable at the sample time with less
+            return al, p, why + (f"; kept: the discrete step is proven stable for Ts < {p['ts_cert']:.3g} ({how} the "
+                                 f"sample time {sample_time:g}; no lower rate tried reaches {TS_FACTOR:g} x it)")  # fmt: skip
         return al, p, why + (f"; lowered to {al:.4g} so that the discrete step is proven stable for Ts < "
                              f"{p['ts_cert']:.3g} ({how} the sample time {sample_time:g})")  # fmt: skip
 

@@ -414,8 +414,12 @@ def step5(aug: Augmented, params: dict, X, K, T, solver: str, *, alpha: float | 
         and sample_time is not None
         and pt["ts_cert"] < TS_FACTOR * sample_time
     ):
-        observer["alpha_before_sample_time"] = a  # the sample time binds the rate
+        a0 = a
         a, pt, why = cap_for_sample_time(prob, a, pt, why, sample_time)
+        if (
+            a < a0
+        ):  # the sample time binds the rate (where no lower rate widens the margin, a is kept: it does not)
+            observer["alpha_before_sample_time"] = a0
     observer.update(alpha=a, why=why)  # ts_max is the certificate's (checks.ts_max)
     if pt["bound"] is not None:
         b = pt["bound"]  # its weight is params.bound_weight
