@@ -91,12 +91,9 @@ def design_at_rate_fraction(ts: TSModel, fraction: float, options: DesignOptions
     options = DesignOptions(**changes) if options is None else options.replace(**changes)
     ts = as_model(ts, "design_at_rate_fraction()")
     with pipeline.step3_reused():
-        a0 = _default_rate(ts, options)
+        a0, d = _rate_or_design(ts, options)
         if a0 is None:
-            d = _attempt(ts, options)
-            if d.observer.alpha is None:
-                return d
-            a0 = float(d.observer.alpha)
+            return d
         return _attempt(ts, options.replace(alpha=float(fraction) * a0))
 
 
@@ -104,15 +101,20 @@ def default_observer_rate(ts: TSModel, options: DesignOptions | None = None, **c
     """``a0`` of :func:`design_at_rate_fraction`: the observer decay rate the design takes by default, read the same
     way (steps 1-5, else the whole design); None where the design fails or has no decay rate."""
     options = DesignOptions(**changes) if options is None else options.replace(**changes)
-    ts = as_model(ts, "default_observer_rate()")
-    a0 = _default_rate(ts, options)
-    if a0 is not None:
-        return a0
     try:
-        d = _attempt(ts, options)
+        return _rate_or_design(as_model(ts, "default_observer_rate()"), options)[0]
     except FteError:
         return None
-    return None if d.observer.alpha is None else float(d.observer.alpha)
+
+
+def _rate_or_design(ts: TSModel, options: DesignOptions) -> tuple[float | None, Design | None]:
+    """``(a0, None)`` with ``a0`` the default observer rate of steps 1-5; where a step fails there, the whole design
+    (its other solver, its diagnosis; raised where it fails) and its rate: ``(alpha or None, design)``."""
+    a0 = _default_rate(ts, options)
+    if a0 is not None:
+        return a0, None
+    d = _attempt(ts, options)
+    return (None if d.observer.alpha is None else float(d.observer.alpha)), d
 
 
 def _default_rate(ts: TSModel, options: DesignOptions) -> float | None:

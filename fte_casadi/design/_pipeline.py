@@ -159,13 +159,9 @@ def step3(st: Structure, resolved: Resolved, solver: str, *, search: bool = True
         except InfeasibleDesignError:
             return None
 
-    # the ladder's top first: where (45) is infeasible there too (the common case: the cap is not what binds), one
-    # solve decides it; where it is feasible, the smallest bound of the ladder that is
-    top = under(KAPPA_LADDER[-1])
-    if top is not None:
-        kappa, s3 = next(
-            (k, s) for k in KAPPA_LADDER[1:] if (s := top if k == KAPPA_LADDER[-1] else under(k))
-        )
+    found = on_ladder(under)
+    if found is not None:
+        kappa, s3 = found
         s3.notes.insert(0, f"step 3: kappa = {kappa:g}: LMI (45) is infeasible with cond(X') <= {conditioned.KAPPA:g} "
                            f"(the bound binds), feasible under {kappa:g}, the smallest of {KAPPA_LADDER} that is")  # fmt: skip
         return s3
@@ -173,6 +169,18 @@ def step3(st: Structure, resolved: Resolved, solver: str, *, search: bool = True
     raise InfeasibleDesignError(dataclasses.replace(
         r, statement=f"{r.statement.rstrip('.')}; and with cond(X') <= {KAPPA_LADDER[-1]:g} too (the bound is not what "
                      "binds)", bounded=False, numbers=dict(r.numbers, kappa=KAPPA_LADDER[-1])), first.result) from None  # fmt: skip
+
+
+def on_ladder(under):
+    """``(kappa, under(kappa))`` for the smallest bound of :data:`KAPPA_LADDER` above the default under which
+    ``under`` gives a result (not None), or None. The ladder's top first: where it gives none there either (the
+    common case: the cap is not what binds), one call decides it."""
+    top = under(KAPPA_LADDER[-1])
+    if top is None:
+        return None
+    return next(
+        (k, s) for k in KAPPA_LADDER[1:] if (s := top if k == KAPPA_LADDER[-1] else under(k)) is not None
+    )
 
 
 def _within_sigma_max(st: Structure, resolved: Resolved, solver: str) -> bool:

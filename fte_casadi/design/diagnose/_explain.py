@@ -119,23 +119,23 @@ def _kappa_binds(aug, params: dict, smax: float, solver: str) -> tuple[float, fl
     where a kappa was given, where the default bound is not what binds, or where a solve fails."""
     if "kappa" in params:
         return None
-    from .._pipeline import KAPPA_LADDER
+    from .._pipeline import on_ladder
 
     sg = nice_floor(0.8 * smax)
 
-    def feasible(kappa: float) -> bool:
+    def feasible(kappa: float) -> bool | None:
         try:
             step3(aug, dict(params, sigma=sg, kappa=kappa), solver)
         except InfeasibleDesignError:
-            return False
+            return None
         return True
 
     try:
-        if feasible(KAPPA) or not feasible(KAPPA_LADDER[-1]):
+        if feasible(KAPPA) or (found := on_ladder(feasible)) is None:
             return None
-        return sg, next(k for k in KAPPA_LADDER[1:] if k == KAPPA_LADDER[-1] or feasible(k))
     except SolverFailedError:
         return None
+    return sg, found[0]
 
 
 def explain_46(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, exc: InfeasibleDesignError,
