@@ -50,6 +50,23 @@ def _crosstalk(w: dict, faults) -> str:
     )
 
 
+def _cause(w: dict, faults) -> str:
+    """What made tolerant control differ from none in window ``w``: where it applied nothing there (its
+    compensation is zero at every sample, ``ftc_compensation_rms``), what the runs carried into the window
+    (``onset_deviation``); else the other faults' cross-talk that it fed into the plant (:func:`_crosstalk`)."""
+    comp, on = w.get("ftc_compensation_rms"), w.get("onset_deviation") or {}
+    if comp and all(v is not None and v == 0 for v in comp):
+        a, b = on.get("ftc"), on.get("no_ftc")
+        entered = ("" if a is None or b is None else
+                   f", the runs entering it at a deviation from the fault-free run of {a:.3g} with tolerant control "
+                   f"and {b:.3g} without (onset_deviation)")  # fmt: skip
+        return (
+            "; tolerant control applied nothing in this window (the compensation it adds to u is zero at every "
+            f"sample, ftc_compensation_rms): the difference was carried into it from before{entered}"
+        )
+    return _crosstalk(w, faults)
+
+
 def _above(value, interval, level: float) -> bool:
     """``value`` is above ``level`` and, where the document gives its interval over the paths, so is the whole
     interval (otherwise the figure ties with ``level``)."""
@@ -126,7 +143,7 @@ def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
         add("worse than none", where, r,
             f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {r:.4g} > "
             f"{WORSE_THAN_NONE:g}{_iv(w.get('ftc_true_ratio_interval'))}; per output {worst})"
-            f"{_crosstalk(w, faults)}")  # fmt: skip
+            f"{_cause(w, faults)}")  # fmt: skip
     elif r is not None:
         rms = w.get("ftc_true_rms_per_output") or {}
         ivs = w.get("ftc_true_ratio_per_output_interval") or []
@@ -141,7 +158,7 @@ def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
                 add("worse than none on an output", f"{where}, {name}", v,
                     f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
                     f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
-                    f"whole are not worse (ftc_true_ratio {r:.3g}){_crosstalk(w, faults)}")  # fmt: skip
+                    f"whole are not worse (ftc_true_ratio {r:.3g}){_cause(w, faults)}")  # fmt: skip
 
 
 def _window_verdicts(m: dict, w: dict, add, inputs) -> None:

@@ -18,6 +18,7 @@ from scipy import stats
 from fte_casadi.design import Design
 from fte_casadi.plants import load_plant, load_scenario
 from fte_casadi.sim import simulate
+from fte_casadi.step import step_function
 
 pytestmark = pytest.mark.slow
 
@@ -114,6 +115,19 @@ def ratio(num, den):
     """sqrt(sum num^2 / sum den^2); None when the denominator vanishes."""
     d = float(np.sum(np.square(den)))
     return None if d == 0.0 else float(np.sqrt(np.sum(np.square(num)) / d))
+
+
+def uncompensated(res, mask):
+    """The inputs the step without tolerant control computes at the FTC run's samples ``mask``: at its observer
+    state ``z = xbarhat - H y`` (a gate's latches and memory, which it does not read, zero) and measurement."""
+    d, ftc = res.design, res.ftc
+    fn = step_function(d, res.dt, tolerant=False)
+    P, S = ftc.y[:, mask].shape[:2]
+    y = ftc.y[:, mask].reshape(P * S, -1)
+    z = ftc.xbarhat[:, mask].reshape(P * S, -1) - y @ np.asarray(d.H).T
+    z = np.hstack([z, np.zeros((P * S, d.nz - z.shape[1]))])
+    u = np.asarray(fn.map(P * S)(z.T, y.T)[1]).T
+    return u.reshape(P, S, -1)
 
 
 def rms(v):
@@ -354,6 +368,14 @@ def test_windows(res):
         y0 = res.free.y[:, inw]
         want = None if zero else ratio(ftc.yc[:, inw] - y0, res.no_ftc.y[:, inw] - y0)
         check(f"{key}.ftc_compensated_ratio", w["ftc_compensated_ratio"], want)
+        # the compensation applied: u less the step without tolerant control at the same z = xbarhat - H y and y
+        u_none = uncompensated(res, inw)
+        check(f"{key}.ftc_compensation_rms", w["ftc_compensation_rms"],
+              np.sqrt(np.mean(np.square(ftc.u[:, inw] - u_none), axis=(0, 1))))  # fmt: skip
+        k0 = np.flatnonzero(inw)[0]
+        for run, x in (("ftc", ftc.x), ("no_ftc", res.no_ftc.x)):
+            dev = (x[:, k0] - res.free.x[:, k0]) @ C.T
+            check(f"{key}.onset_deviation.{run}", w["onset_deviation"][run], rms(np.linalg.norm(dev, axis=1)))
         # settling after a, release after b, both on the path-mean error against the window's size
         E = np.abs(fh - f).mean(axis=0)
         limit = 0.1 * np.abs(f[:, inw]).mean(axis=0).max()

@@ -135,7 +135,15 @@ def test_engine_equals_reference_loop(plants, lqr_designs):
         s = np.asarray(nxt).ravel()
     recs = np.array(recs)
     got = np.concatenate(
-        [res.free.x[q], res.free.xbarhat[q], res.free.f[q], res.free.u[q], res.free.y[q], res.free.yc[q]],
+        [
+            res.free.x[q],
+            res.free.xbarhat[q],
+            res.free.f[q],
+            res.free.u[q],
+            res.free.y[q],
+            res.free.yc[q],
+            res.free.ucomp[q],
+        ],
         axis=1,
     )
     np.testing.assert_allclose(got, recs[:, : lay.run_rec], rtol=0, atol=1e-10)
@@ -266,7 +274,7 @@ def test_vectorised_engine_equals_the_per_path_engine(plants, real_designs, name
         dt=dt,
     )
     got = np.concatenate([getattr(res, run).__dict__[k] for run in ("free", "no_ftc", "ftc")
-                          for k in ("x", "xbarhat", "f", "u", "y", "yc")], axis=2)  # fmt: skip
+                          for k in ("x", "xbarhat", "f", "u", "y", "yc", "ucomp")], axis=2)  # fmt: skip
     assert np.all(np.isfinite(rec)) and np.abs(res.ftc.f).max() > 0  # a fault acted
     np.testing.assert_array_equal(got, rec)
 

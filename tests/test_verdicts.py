@@ -197,3 +197,22 @@ def test_a_saturated_input_is_explained_by_the_noise_through_the_gain_when_it_is
         noise_saturates(d, {"measurement_noise": [v / 4 for v in big]}, w) == ""
     )  # too small to reach the limit
     assert noise_saturates(d, {"measurement_noise": None}, w) == ""
+
+
+@pytest.mark.parametrize("applied", [0.0, 0.02])
+def test_a_window_tolerant_control_left_alone_is_blamed_on_what_it_carried_in(applied):
+    """A window worse than none where the compensation applied is zero at every sample (the gate kept every
+    estimate out of u): the verdict names the carry-over with the runs' deviations at the onset, not the
+    other faults' cross-talk, which did not reach the plant; where compensation was applied, the cross-talk."""
+    w = {"fault": "fs", "start": 8.0, "stop": 11.0, "ftc_true_ratio": 1.0016, "ftc_true_ratio_interval": [1.001, 1.002],
+         "ftc_compensation_rms": [applied], "onset_deviation": {"ftc": 1.16e-5, "no_ftc": 3.32e-5},
+         "crosstalk_peak": [0.52, None], "input_saturation": [0.0]}  # fmt: skip
+    (v,) = [
+        v
+        for v in verdicts.verdicts({"windows": [w]}, faults=["fa", "fs"])
+        if v["verdict"] == "worse than none"
+    ]
+    carried = "applied nothing" in v["text"]
+    assert carried == (applied == 0.0)
+    assert ("1.16e-05" in v["text"] and "3.32e-05" in v["text"]) == carried
+    assert ("cross-talk" in v["text"]) == (not carried)

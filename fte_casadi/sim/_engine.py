@@ -72,7 +72,7 @@ class PathLayout:
         self.nz = nbar if nz is None else int(nz)
         self.run_state = n + self.nz + lf  # x, z (and latches), sensor memory
         self.ns = 3 * self.run_state
-        self.sizes = {"x": n, "xbarhat": nbar, "f": lf, "u": m, "y": p, "yc": p}
+        self.sizes = {"x": n, "xbarhat": nbar, "f": lf, "u": m, "y": p, "yc": p, "ucomp": m}
         self.run_rec = sum(self.sizes.values())
         self.nrec = 3 * self.run_rec
         self.nw = 1 + ld + nv  # dW, d, measurement noise
@@ -145,6 +145,9 @@ def closed_loop_sample(
         f_pre = ca.vertcat(*fs) if lf else ca.SX(0, 1)
         y = Cx + ca.mtimes(ca.DM(Df), f_pre)
         z_next, u, xbh, yc, _s = steps["no_ftc" if run == "no_ftc" else "ftc"](z, y)
+        # the compensation this run's step applies: u less what the step without tolerant control gives at the
+        # same z and y (after saturation; zero in the run without it)
+        ucomp = ca.SX.zeros(m) if run == "no_ftc" else u - steps["no_ftc"](z, y)[1]
         f_all = []
         for j in range(lf):
             i = sched.input_index[j]
@@ -152,7 +155,7 @@ def closed_loop_sample(
         f = ca.vertcat(*f_all) if lf else ca.SX(0, 1)
         x_next = x + drift(x, u, d, f) * dt_ + diff(x, u, f, d2) * dW
         nexts += [x_next, z_next, ca.vertcat(*mem_next) if lf else ca.SX(0, 1)]
-        recs += [x, xbh, f, u, y, yc]
+        recs += [x, xbh, f, u, y, yc, ucomp]
     ins = [S, w, fp] if numbers is None else [S, w, fp, numbers.symbols]
     names = ["state", "w", "fp", "par"][: len(ins)]
     fn = ca.Function("fte_cl_sample", ins, [ca.vertcat(*nexts), ca.vertcat(*recs)], names, ["next", "rec"])

@@ -22,6 +22,7 @@ from ._reduce import (
     _mask,
     allowance_masks,
     allowances,
+    onset_mask,
     outside_mask,
     settling_time,
 )
@@ -292,6 +293,7 @@ def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
     j = list(result.names["faults"]).index(fp.fault)
     w = _mask(t, [(fp.start, fp.stop)])
     ws = _mask(t, [(fp.start, fp.stop)], SETTLE_FRACTION)
+    on = onset_mask(t, fp.start)
     r = _rms_ratio(e[:, w, j], ftc.f[:, w, j])
     size = float(np.max(np.mean(np.abs(ftc.f[:, w, j]), axis=0))) if w.any() else 0.0
     err = np.mean(np.abs(e[:, w, j]), axis=0) if w.any() else np.zeros(0)
@@ -313,6 +315,12 @@ def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
             "no_ftc": [float(np.sqrt(np.mean(dC_no[:, w, k] ** 2))) if w.any() else None for k in range(p)],
         },
         "ftc_compensated_ratio": _rms_ratio(ftc.yc[:, w] - free.y[:, w], no.y[:, w] - free.y[:, w]) if r is not None else None,
+        "ftc_compensation_rms": [float(np.sqrt(np.mean(ftc.ucomp[:, w, i] ** 2))) if w.any() else None
+                                 for i in range(ftc.u.shape[2])] if ftc.ucomp is not None else None,
+        "onset_deviation": {
+            run: float(np.sqrt(np.mean(np.sum(dC[:, on] ** 2, axis=(1, 2))))) if on.any() and w.any() else None
+            for run, dC in (("ftc", dC_ftc), ("no_ftc", dC_no))
+        },
         "crosstalk_peak": [
             None if q == j or not peaks[q] else float(np.max(np.abs(ftc.fhat[:, w, q]))) / peaks[q]
             for q in range(lf)

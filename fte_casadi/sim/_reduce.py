@@ -221,7 +221,7 @@ def _monitor_names(lf: int, nw: int) -> list[str]:
 def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None) -> Monitor:
     """The summands, monitor updates and per-sample maxima of one sample (see :class:`Monitor`).
 
-    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc]``."""
+    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc, ucomp]``."""
     n, lf = lay.n, lay.lf
     C = ca.DM(np.asarray(C, dtype=float))
     rec = ca.SX.sym("rec", lay.nrec)
@@ -247,6 +247,11 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
     s.add("bc", msk[row("union")] * dy[1])
     for w in range(mk.nw):
         _window_terms(s, w, mk, msk, t, thr, fhat, ftc["f"], dC, dy, C.size1())
+    for w in range(mk.nw):  # the compensation applied in each window; both runs' deviation at its onset
+        for i in range(lay.m):
+            s.add(f"cmp{w}_{i}", msk[row("window", w)] * ftc["ucomp"][i] ** 2)
+        s.add(f"ona{w}", msk[row("onset", w)] * ca.sumsqr(dC[0]))
+        s.add(f"onb{w}", msk[row("onset", w)] * ca.sumsqr(dC[1]))
     for w in range(mk.nw):  # cross-talk: the peak of every fault's estimate in each window
         m_w = msk[row("window", w)]
         for j in range(lf):
@@ -570,6 +575,10 @@ def _window(c: _Columns, w: int) -> tuple[dict, list]:
             for run, cc in (("ftc", "at"), ("no_ftc", "bt"))
         },
         "ftc_compensated_ratio": _ratio(_fsum(col[f"acw{w}"]), _fsum(col[f"bcw{w}"])) if rel is not None else None,
+        "ftc_compensation_rms": [math.sqrt(_fsum(col[f"cmp{w}_{i}"]) / (P * nw)) if nw else None
+                                 for i in range(int(c.meta["m"]))],
+        "onset_deviation": {run: math.sqrt(_fsum(col[f"{cc}{w}"]) / P) if nw and P else None
+                            for run, cc in (("ftc", "ona"), ("no_ftc", "onb"))},
         "crosstalk_peak": [
             None if q == j or not float(np.max(mcol[f"pkf{q}"])) else
             float(np.max(mcol[f"xt{w}_{q}"])) / float(np.max(mcol[f"pkf{q}"]))

@@ -25,7 +25,7 @@ RUN_TITLES = {
     "no_ftc": "faulty, no tolerant control",
     "ftc": "faulty, tolerant control",
 }
-_SIGNALS = ("x", "xbarhat", "f", "u", "y", "yc")
+_SIGNALS = ("x", "xbarhat", "f", "u", "y", "yc", "ucomp")
 _FORMAT = 1
 
 
@@ -34,7 +34,10 @@ class RunData:
     """One run over all paths; every array has shape ``(paths, samples, size)``.
 
     ``xbarhat = [xhat; fdothat; fhat]``; ``f`` the true faults; ``y`` the measurement;
-    ``yc`` the reliable output (``y`` itself without tolerant control).
+    ``yc`` the reliable output (``y`` itself without tolerant control); ``ucomp`` the compensation the
+    run's step applied: ``u`` less what the step without tolerant control gives at the same observer state and
+    measurement (after saturation; zero in the run without tolerant control; None in a result saved before
+    it was recorded).
     """
 
     x: np.ndarray
@@ -43,6 +46,7 @@ class RunData:
     u: np.ndarray
     y: np.ndarray
     yc: np.ndarray
+    ucomp: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -109,7 +113,8 @@ def save_result(result: SimulationResult, path: str | os.PathLike) -> Path:
     for run in RUNS:
         rd = result.run(run)
         for sig in _SIGNALS:
-            arrays[f"{run}__{sig}"] = getattr(rd, sig)
+            if getattr(rd, sig) is not None:
+                arrays[f"{run}__{sig}"] = getattr(rd, sig)
     meta = {
         "format": _FORMAT,
         "plant": result.plant,
@@ -155,7 +160,8 @@ def load_result(path: str | os.PathLike) -> SimulationResult:
         meta = json.loads(str(data["meta"]))
         scenario = Scenario.from_dict(json.loads(str(data["scenario"])))
         design = Design.from_dict(json.loads(str(data["design"])), source=f"design embedded in {path}")
-        runs = {run: RunData(**{sig: data[f"{run}__{sig}"] for sig in _SIGNALS}) for run in RUNS}
+        runs = {run: RunData(**{sig: data[f"{run}__{sig}"] for sig in _SIGNALS if sig != "ucomp"},
+                             ucomp=data.get(f"{run}__ucomp")) for run in RUNS}  # fmt: skip
     except (KeyError, ValueError, TypeError) as exc:
         raise SimulationError(f"result file {str(path)!r} is not an fte simulation result ({exc})") from None
     kw = {
