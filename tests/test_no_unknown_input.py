@@ -52,6 +52,10 @@ def test_it_designs_and_simulates(model):
     assert d.certified
     m = simulate(d, plant, _scenario(), paths=2, seed=1, progress=False).metrics
     assert all(np.isfinite(v) for v in m["state_rms_error"]) and len(m["windows"]) == 2
+    # without measurement noise as well: the calibration's engine had added a 1x0 to a 0x1 block for the absent d
+    calm = dataclasses.replace(_scenario(), measurement_noise=None)
+    m = simulate(d, plant, calm, paths=2, seed=1, progress=False, calibration_paths=20).metrics
+    assert all(np.isfinite(e["threshold"]) for e in m["detection"]) and len(m["windows"]) == 2
     # a scenario that drives unknown inputs this plant does not have is refused, not run without them
     with pytest.raises(
         ParameterError, match=r"drives unknown inputs \(UniformNoise\) but plant 'pendulum_nod' has"

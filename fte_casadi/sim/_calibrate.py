@@ -83,7 +83,8 @@ class CalibrationEngine:
         after, reset = sh[0], sh[1]
         thr = sh[2 + ld + nv :]
         dW = w[0]
-        d = w[1 : 1 + ld] + sh[2 : 2 + ld]
+        # (no unknown input: an empty column, since w[1:1] of a 1 x 1 w is 1 x 0 and sh[2:2] is 0 x 1)
+        d = w[1 : 1 + ld] + sh[2 : 2 + ld] if ld else ca.SX(0, 1)
         v = w[1 + ld :] * sh[2 + ld : 2 + ld + nv] if nv else ca.DM.zeros(p)
         y = ca.mtimes(C, x) + v
         z_next, u, xbh, _yc, _s = step(z, y)
