@@ -26,7 +26,7 @@ from ..ts import TSModel, scheduling_from_measurements
 from ._augment import Augmented, augment
 from ._options import DesignOptions, Resolved
 from ._parts import Dims, Observer, Params
-from ._recertify import certify
+from ._recertify import certify, unsaturated
 from ._record import Design
 from ._remark5 import explain_causes, with_remark5
 from ._remark5 import fallback as remark5_fallback
@@ -484,6 +484,10 @@ def finish(
     checks["loop"].update(
         beta=float(getattr(s3, "beta", 0.0)), why=getattr(s3, "beta_why", "as printed (paper variant)")
     )
+    room = unsaturated(X, K, u_ref, x_ref, d.input_limits, {k: [np.nan if v is None else v for v in vs]
+                                                           for k, vs in checks["region"].items()})  # fmt: skip
+    if room is not None:
+        checks["loop"]["unsaturated"] = room
     bad = failed(checks)
     if bad:
         what = "; ".join(f.text for f in bad)

@@ -84,6 +84,39 @@ def loop_record(aug, X, K) -> dict:
             "gain_ratio": nbk / na if na > 0 else float("inf")}  # fmt: skip
 
 
+def unsaturated(X, K, u_ref, x_ref, input_limits, region) -> dict | None:
+    """Where the loop's certificate is not broken by its input limits: the largest level set
+    ``E = {x : (x - x_c)^T X^-1 (x - x_c) <= c}`` of step 3's Lyapunov function (each rule's loop decreases it,
+    (45) and the LMI 'decay' with X common to the rules, so E is invariant for the state feedback ``u = u0 +
+    K_j (x - x_c)``) on which every input stays within its limits: ``c = min_i h_i^2 / max_j K_j,i X K_j,i^T``,
+    ``h_i`` the distance of the input at rest ``u0`` to its nearer limit, ``x_c`` the reference state (0
+    without one). ``extent``: E's reach along each state, ``sqrt(c X_kk)``; ``fraction``: the smallest ratio of
+    that reach to the plant's region's half-width (None where no state has finite bounds). The estimate is taken
+    exact and the disturbances zero: the observer's error and the noise only shrink E. None without input
+    limits; ``{"headroom": ...}`` with a zero ``c`` where the input at rest is at or beyond a limit."""
+    if input_limits is None:
+        return None
+    X = np.asarray(X, dtype=float)
+    Ks = [np.asarray(k, dtype=float) for k in K]
+    lim = np.asarray(input_limits, dtype=float)
+    xc = np.zeros(X.shape[0]) if x_ref is None else np.asarray(x_ref, dtype=float).ravel()
+    u0 = np.asarray(u_ref, dtype=float).ravel() + (Ks[0] @ xc if x_ref is not None else 0.0)
+    head = np.minimum(lim[:, 1] - u0, u0 - lim[:, 0])
+    spread = np.max([np.einsum("ik,kl,il->i", k, X, k) for k in Ks], axis=0)
+    with np.errstate(divide="ignore"):
+        c = float(np.min(np.where(spread > 0, np.maximum(head, 0.0) ** 2 / spread, np.inf)))
+    extent = np.sqrt(c * np.diag(X)) if np.isfinite(c) else np.full(X.shape[0], np.inf)
+    lo, hi = (np.asarray(region.get(side) or [], dtype=float) for side in ("lo", "hi"))
+    half = 0.5 * (hi - lo) if lo.shape == hi.shape == extent.shape else np.full(extent.shape, np.nan)
+    ok = np.isfinite(half) & (half > 0)
+    return {
+        "headroom": head.tolist(),
+        "extent": [float(v) for v in extent],
+        "region_half_width": [float(v) if ok[k] else None for k, v in enumerate(half)],
+        "fraction": float(np.min(extent[ok] / half[ok])) if ok.any() else None,
+    }
+
+
 def recertify(d) -> list[str]:
     """What does not hold at the numbers of the design ``d`` (empty: certified): the stored matrices that are not
     what they are made of, then the certificate's failures (:func:`certify`, :func:`~.core._certify.failures`)."""

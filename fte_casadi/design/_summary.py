@@ -45,6 +45,30 @@ def _certified_by(checks: dict) -> str:
     return f"  certified by {held}'s {names}, with {common}{rest}"
 
 
+#: the input limits hold on less than this fraction of the plant's region: the summary says so as a warning
+SATURATES_EARLY = 0.01
+
+
+def _unsaturated_line(room: dict, states: list) -> str:
+    """The summary's line on where the input limits leave the loop's certificate intact
+    (:func:`~._recertify.unsaturated`)."""
+    names = [states[k] if k < len(states) else f"x{k}" for k in range(len(room["extent"]))]
+    reach = ", ".join(f"{nm} {v:.3g}" + (f" of {h:.3g}" if h is not None else "")
+                      for nm, v, h in zip(names, room["extent"], room["region_half_width"]))  # fmt: skip
+    frac = room.get("fraction")
+    text = (
+        "  input limits: u stays within them, and step 3's V = x' X^-1 x (about x_ref) decreases, on its level set "
+        f"reaching, from x_ref, {reach} (the region's half-width); beyond it an input saturates, which the "
+        "certificate does not cover (estimate exact, no disturbance: noise and estimation errors shrink it)"
+    )
+    if frac is not None and frac < SATURATES_EARLY:
+        text += (
+            f"\n  warning: that is {frac:.2g} of the region: the controller saturates its input for deviations "
+            "that small, and the loop that runs is not the loop certified (docs/design.md, 'Input limits')"
+        )
+    return text
+
+
 def design_summary(d) -> str:
     """The summary of the Design ``d`` that ``fte design`` prints (one string, lines joined)."""
     c = d.checks
@@ -80,6 +104,9 @@ def design_summary(d) -> str:
             f"{loop['open_loop_decay']:.4g}; max ||B_i K|| / max ||A_i|| = {loop['gain_ratio']:.3g}"
             + (f"; {loop['why']}" if loop.get("why") else "")
         )
+    room = (loop or {}).get("unsaturated")
+    if room and room.get("extent"):
+        lines.append(_unsaturated_line(room, (d.names or {}).get("states") or []))
     disc = c.get("discrete")
     if disc:
         lines.append(
