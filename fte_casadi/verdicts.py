@@ -15,6 +15,7 @@ __all__ = [
     "OUTSIDE_REGION",
     "POOR_ESTIMATE",
     "SLOW_OBSERVER",
+    "SATURATES_EARLY",
     "verdicts",
 ]
 
@@ -31,6 +32,9 @@ OUTSIDE_REGION = 0.01
 POOR_ESTIMATE = 0.5
 #: the observer's slowest time constant times this longer than a fault window: it cannot settle inside it
 SLOW_OBSERVER = 3.0
+#: the design's loop keeps its inputs within their limits only on a set reaching less than this fraction of the
+#: plant's region (``checks.loop.unsaturated.fraction``): the controller saturates for small deviations
+SATURATES_EARLY = 0.01
 
 
 def _where(w: dict) -> str:

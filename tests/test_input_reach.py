@@ -81,3 +81,24 @@ def test_the_design_records_and_prints_it(real_designs):
         assert "input limits: u stays within them" in design_summary(d)
     assert "unsaturated" not in real_designs["manipulator"].checks["loop"]  # no input limits
     assert "input limits: u stays" not in design_summary(real_designs["manipulator"])
+
+
+def test_a_saturated_window_is_explained_by_a_reach_that_small(real_designs):
+    import dataclasses
+
+    from fte_casadi.design._limits import explain_metrics
+
+    d = real_designs["three-tank"]
+    room = dict(d.checks["loop"]["unsaturated"])
+    faults = list(d.names["faults"])
+
+    def explained(fraction, saturation):
+        checks = dict(d.checks, loop=dict(d.checks["loop"], unsaturated=dict(room, fraction=fraction)))
+        w = {"fault": faults[0], "start": 300.0, "stop": 400.0, "ftc_true_ratio": 1.0, "fault_rel_rms_error": 0.1,
+             "input_saturation": [saturation, 0.0]}  # fmt: skip
+        text = " ".join(explain_metrics(dataclasses.replace(d, checks=checks), {"windows": [w]}, windows=[0]))
+        return "keeps its inputs within their limits only" in text
+
+    assert explained(1e-4, 0.5)
+    assert not explained(1e-4, 0.0)  # nothing saturated: nothing to explain
+    assert not explained(0.5, 0.5)  # a reach that large is not the cause

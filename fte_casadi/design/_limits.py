@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from ..verdicts import FALSE_ALARM, SATURATED, WORSE_THAN_NONE
+from ..verdicts import FALSE_ALARM, SATURATED, SATURATES_EARLY, WORSE_THAN_NONE
 
 __all__ = ["separation", "explain_metrics"]  # public: docs/api.md
 
@@ -264,6 +264,22 @@ def noise_saturates(design, metrics: dict, w: dict) -> str:
     return "; ".join(out)
 
 
+def saturates_early(design, w: dict) -> str:
+    """Why an input is at its limits in window ``w``: the design's loop keeps its inputs within their limits only
+    on a set far smaller than the plant's region (``checks.loop.unsaturated``, :data:`SATURATES_EARLY`). "" where
+    no input saturates there, the design has no such record or the set is not that small."""
+    room = ((design.checks or {}).get("loop") or {}).get("unsaturated") or {}
+    frac, sat = room.get("fraction"), w.get("input_saturation") or []
+    if frac is None or frac >= SATURATES_EARLY or not any(f > SATURATED for f in sat):
+        return ""
+    k = int(np.argmin([v / h if h else np.inf for v, h in zip(room["extent"], room["region_half_width"])]))
+    names = list(design.names.get("states") or [])
+    return (f"the design's loop keeps its inputs within their limits only while its Lyapunov function stays below "
+            f"a level reaching {frac:.2g} of the plant's region ({names[k] if k < len(names) else k} "
+            f"{room['extent'][k]:.3g} of {room['region_half_width'][k]:.3g}; fte design's 'input limits'): its gain "
+            "saturates the input for deviations that small, and the certificate does not cover the loop that runs")  # fmt: skip
+
+
 def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list[str]:
     """One sentence per fault window where tolerant control is not better than none (FTC ratio >=
     :data:`~fte_casadi.verdicts.WORSE_THAN_NONE`) and per fault whose false-alarm ratio is >=
@@ -290,6 +306,8 @@ def explain_metrics(design, metrics: dict, *, windows=None, faults=None) -> list
             found.insert(0, kept)
         if noisy := noise_saturates(design, metrics, w):
             found.insert(0, noisy)
+        if early := saturates_early(design, w):
+            found.insert(0, early)
         head = (f"in the window of {w['fault']} [{w['start']:g}, {w['stop']:g}) (FTC ratio "
                 f"{'n/a' if r is None else format(r, '.3g')})")  # fmt: skip
         out.append(head + (": " + "; ".join(found) if found else ": no structural cause found")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..verdicts import SATURATES_EARLY
 from .core._certify import certified_by
 from .core._lmis import LMIS, THEOREM1, routes
 
@@ -43,10 +44,6 @@ def _certified_by(checks: dict) -> str:
     failed = [LMIS[k].name(theorem) for k in offered[first] if not lam.get(k, 0.0) < -eps.get(k, 0.0)]
     rest = "" if held == first or not failed else f" ({', '.join(failed)}: not required, and not holding)"
     return f"  certified by {held}'s {names}, with {common}{rest}"
-
-
-#: the input limits hold on less than this fraction of the plant's region: the summary says so as a warning
-SATURATES_EARLY = 0.01
 
 
 def _unsaturated_line(room: dict, states: list) -> str:
