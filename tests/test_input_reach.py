@@ -86,7 +86,7 @@ def test_the_design_records_and_prints_it(real_designs):
 def test_a_saturated_window_is_explained_by_a_reach_that_small(real_designs):
     import dataclasses
 
-    from fte_casadi.design._limits import explain_metrics
+    from fte_casadi.design import explain_metrics
 
     d = real_designs["three-tank"]
     room = dict(d.checks["loop"]["unsaturated"])
