@@ -102,3 +102,34 @@ def test_a_saturated_window_is_explained_by_a_reach_that_small(real_designs):
     assert explained(1e-4, 0.5)
     assert not explained(1e-4, 0.0)  # nothing saturated: nothing to explain
     assert not explained(0.5, 0.5)  # a reach that large is not the cause
+
+
+def test_the_largest_reach_bounds_the_design_s_and_scales_with_the_limits(real_designs):
+    """``reach_max``: the design's own point is feasible for it, so it is at least the design's reach; and its
+    constraints are homogeneous but for the inputs' headroom, so halving every headroom halves it."""
+    from fte_casadi.design import augment
+    from fte_casadi.design.core._diagnose import reach_max
+
+    d = real_designs["three-tank"]
+    room = d.checks["loop"]["unsaturated"]
+    aug = augment(d.local_models, d.C, d.Df)
+    params = {"sigma": d.params.sigma, "gamma": d.params.gamma, "gamma1": d.params.gamma1}
+    best, status = reach_max(aug, params, room["headroom"], room["region_half_width"], "CLARABEL")
+    assert status == "optimal" and best >= room["fraction"] * (1 - 1e-6)
+    half, _ = reach_max(
+        aug, params, [0.5 * h for h in room["headroom"]], room["region_half_width"], "CLARABEL"
+    )
+    assert half == pytest.approx(0.5 * best, rel=1e-4)
+
+
+def test_the_warning_says_whether_the_gain_or_the_region_binds():
+    room = {
+        "headroom": [10.0],
+        "extent": [2.6e-5, 1.9e-3],
+        "region_half_width": [3.0, 250.0],
+        "fraction": 8.7e-6,
+    }
+    assert "the region, not the gain, binds" in _unsaturated_line(dict(room, fraction_max=0.0019), ["e", "v"])
+    assert "a gain with a larger reach exists" in _unsaturated_line(
+        dict(room, fraction_max=0.048), ["e", "v"]
+    )

@@ -23,6 +23,7 @@ import numpy as np
 from ..errors import AssumptionError, FteError, InfeasibleDesignError, Refusal, Refused
 from ..model import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
+from ..verdicts import SATURATES_EARLY
 from ._augment import Augmented, augment
 from ._options import DesignOptions, Resolved
 from ._parts import Dims, Observer, Params
@@ -36,6 +37,7 @@ from .core import _conditioned as conditioned
 from .core import _paper as paper
 from .core import _step5
 from .core._certify import failed
+from .core._diagnose import reach_max
 from .core._lmis import LMIS, loop_decay
 
 __all__ = ["structure", "step3", "step5"]
@@ -487,6 +489,10 @@ def finish(
     room = unsaturated(X, K, u_ref, x_ref, d.input_limits, {k: [np.nan if v is None else v for v in vs]
                                                            for k, vs in checks["region"].items()})  # fmt: skip
     if room is not None:
+        if room["fraction"] is not None and room["fraction"] < SATURATES_EARLY and options.variant != "paper":
+            # a reach that small: is it the gain's (another would do better) or the region's (none does)?
+            room["fraction_max"] = reach_max(aug, params, room["headroom"], room["region_half_width"],
+                                             options.solver)[0]  # fmt: skip
         checks["loop"]["unsaturated"] = room
     bad = failed(checks)
     if bad:

@@ -63,6 +63,16 @@ def _unsaturated_line(room: dict, states: list) -> str:
             f"\n  warning: that is {frac:.2g} of the region: the controller saturates its input for deviations "
             "that small, and the loop that runs is not the loop certified (docs/design.md, 'Input limits')"
         )
+        best = room.get("fraction_max")
+        if best is not None:
+            text += (
+                f"; the largest reach any common gain allows under (45) at these parameters is {best:.2g} of it"
+                + (
+                    ": the region, not the gain, binds (the input limits cannot hold the plant over it)"
+                    if best < SATURATES_EARLY
+                    else ": a gain with a larger reach exists, and step 3 does not weigh the input limits"
+                )
+            )
     return text
 
 

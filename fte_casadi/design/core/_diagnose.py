@@ -293,3 +293,41 @@ class FrontierPoint:
     note: str = ""
     #: the certified design's largest stable sample time (eigenvalues of I + Ts R_i), None without one
     ts_max: float | None = None
+
+
+def reach_max(aug: Augmented, params: dict, headroom, half_width, solver: str) -> tuple[float | None, str]:
+    """The largest reach within the input limits any common gain allows under (45) at ``params``: ``max rho``
+    over ``X, Y`` (one gain ``K = Su Y X^-1``, (45) at sigma, gamma, gamma1) such that on the level set
+    ``x' X^-1 x <= 1`` every input stays within its ``headroom`` (``[[h_i^2, (Su Y)_i], [(Su Y)_i', X]] >= 0``) and
+    that set reaches ``rho`` times ``half_width`` along each state with a finite one (``X_kk >= rho^2 w_k^2``).
+    (45) is posed homogeneous (``const = s``, an unknown scale: the level set is any level), so a design's own
+    reach (:func:`fte_casadi.design._recertify.unsaturated`'s ``fraction``) is a feasible point: the answer is
+    at least it. ``(rho, status)``; ``(None, status)`` where the solver finds no answer."""
+    n, m = aug.n, aug.m
+    Su = input_scaling(aug)
+    sg, g, g1 = params["sigma"], params["gamma"], params["gamma1"]
+    h = np.asarray(headroom, dtype=float)
+    w = np.asarray([np.nan if v is None else v for v in half_width], dtype=float)
+    ok = np.flatnonzero(np.isfinite(w) & (w > 0))
+    if not len(ok) or np.any(h <= 0):
+        return (0.0 if np.any(h <= 0) else None), "no bound"
+    layout = Layout(Var("X", (n, n), True), Var("Y", (m, n)), Var("s", ()), Var("q", ()))
+    lmis = [affine_lmi(f"(45) rule {i + 1}", layout, lambda X, Y, s, q, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
+                       kron=("X", lmi45_kron(aug, i)))
+            for i in range(aug.r)]  # fmt: skip
+    for i in range(m):
+
+        def inp(X, Y, s, q, i=i):
+            row = (Su @ Y)[i : i + 1]
+            return -np.block([[np.array([[h[i] ** 2]]), row], [row.T, X]])
+
+        lmis.append(affine_lmi(f"input {i + 1}", layout, inp))
+    lmis.append(affine_lmi("reach", layout, lambda X, Y, s, q: np.diag(q * w[ok] ** 2 - np.diag(X)[ok])))
+    lmis.append(affine_lmi("s >= 0", layout, lambda X, Y, s, q: -np.array([[s]])))
+    c = np.zeros(layout.size)
+    c[layout.index("q")] = -1.0
+    res = ConicProblem(layout, lmis, c).solve(solver)
+    if res.v is None or res.status not in SOLVED:
+        return None, res.status
+    q = float(layout.unpack(res.v)["q"])
+    return math.sqrt(max(q, 0.0)), res.status
