@@ -113,7 +113,13 @@ def test_the_largest_reach_bounds_the_design_s_and_scales_with_the_limits(real_d
     d = real_designs["three-tank"]
     room = d.checks["loop"]["unsaturated"]
     aug = augment(d.local_models, d.C, d.Df)
-    params = {"sigma": d.params.sigma, "gamma": d.params.gamma, "gamma1": d.params.gamma1}
+    params = {
+        "sigma": d.params.sigma,
+        "gamma": d.params.gamma,
+        "gamma1": d.params.gamma1,
+        "beta": d.params.beta,
+    }
+    assert params["beta"]  # the decay LMI is posed too: the design's point satisfies it at the recorded rate
     best, status = reach_max(aug, params, room["headroom"], room["region_half_width"], "CLARABEL")
     assert status == "optimal" and best >= room["fraction"] * (1 - 1e-6)
     half, _ = reach_max(
@@ -132,4 +138,9 @@ def test_the_warning_says_whether_the_gain_or_the_region_binds():
     assert "the region, not the gain, binds" in _unsaturated_line(dict(room, fraction_max=0.0019), ["e", "v"])
     assert "a gain with a larger reach exists" in _unsaturated_line(
         dict(room, fraction_max=0.048), ["e", "v"]
+    )
+    rate = dict(room, fraction_max=0.0099, fraction_max_without_decay=0.048, beta=5.87)
+    assert "the loop's decay rate leaves the input no room" in _unsaturated_line(rate, ["e", "v"])
+    assert "the region, not the gain, binds" in _unsaturated_line(
+        dict(rate, fraction_max_without_decay=0.002), ["e"]
     )

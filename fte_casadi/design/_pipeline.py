@@ -493,6 +493,10 @@ def finish(
             # a reach that small: is it the gain's (another would do better) or the region's (none does)?
             room["fraction_max"] = reach_max(aug, params, room["headroom"], room["region_half_width"],
                                              options.solver)[0]  # fmt: skip
+            if params.get("beta"):  # and without the loop's decay rate: is it the rate that binds?
+                room["beta"] = float(params["beta"])
+                room["fraction_max_without_decay"] = reach_max(aug, dict(params, beta=0.0), room["headroom"],
+                                                               room["region_half_width"], options.solver)[0]  # fmt: skip
         checks["loop"]["unsaturated"] = room
     bad = failed(checks)
     if bad:

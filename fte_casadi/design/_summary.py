@@ -63,16 +63,16 @@ def _unsaturated_line(room: dict, states: list) -> str:
             f"\n  warning: that is {frac:.2g} of the region: the controller saturates its input for deviations "
             "that small, and the loop that runs is not the loop certified (docs/design.md, 'Input limits')"
         )
-        best = room.get("fraction_max")
+        best, free = room.get("fraction_max"), room.get("fraction_max_without_decay")
         if best is not None:
-            text += (
-                f"; the largest reach any common gain allows under (45) at these parameters is {best:.2g} of it"
-                + (
-                    ": the region, not the gain, binds (the input limits cannot hold the plant over it)"
-                    if best < SATURATES_EARLY
-                    else ": a gain with a larger reach exists, and step 3 does not weigh the input limits"
-                )
-            )
+            rate = f" and the LMI 'decay' at beta = {room['beta']:.4g}" if room.get("beta") else ""
+            text += f"; the largest reach any common gain allows under (45){rate} at these parameters is {best:.2g}"
+            if best >= SATURATES_EARLY:
+                text += ": a gain with a larger reach exists, and step 3 does not weigh the input limits"
+            elif free is not None and free >= SATURATES_EARLY:
+                text += f", under (45) alone {free:.2g}: the loop's decay rate leaves the input no room"
+            else:
+                text += ": the region, not the gain, binds (the input limits cannot hold the plant over it)"
     return text
 
 

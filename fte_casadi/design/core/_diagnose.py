@@ -22,7 +22,7 @@ import numpy as np
 
 from .._augment import Augmented, output_scale, time_scale, units_params, units_scaled, unknown_input_size
 from ._conditioned import MARGIN, _step3_numpy, _step3_problem, input_scaling
-from ._lmis import lmi45, lmi45_kron
+from ._lmis import lmi45, lmi45_kron, lmi_decay, lmi_decay_kron
 from ._sdp import SOLVED, ConicProblem, Layout, Var, affine_lmi
 
 __all__ = ["sigma_max"]  # public: docs/api.md
@@ -296,8 +296,9 @@ class FrontierPoint:
 
 
 def reach_max(aug: Augmented, params: dict, headroom, half_width, solver: str) -> tuple[float | None, str]:
-    """The largest reach within the input limits any common gain allows under (45) at ``params``: ``max rho``
-    over ``X, Y`` (one gain ``K = Su Y X^-1``, (45) at sigma, gamma, gamma1) such that on the level set
+    """The largest reach within the input limits any common gain allows under (45) at ``params`` (and the LMI
+    'decay' at ``params["beta"]`` where the design asked a rate): ``max rho`` over ``X, Y`` (one gain
+    ``K = Su Y X^-1``, (45) at sigma, gamma, gamma1) such that on the level set
     ``x' X^-1 x <= 1`` every input stays within its ``headroom`` (``[[h_i^2, (Su Y)_i], [(Su Y)_i', X]] >= 0``) and
     that set reaches ``rho`` times ``half_width`` along each state with a finite one (``X_kk >= rho^2 w_k^2``).
     (45) is posed homogeneous (``const = s``, an unknown scale: the level set is any level), so a design's own
@@ -315,6 +316,11 @@ def reach_max(aug: Augmented, params: dict, headroom, half_width, solver: str) -
     lmis = [affine_lmi(f"(45) rule {i + 1}", layout, lambda X, Y, s, q, i=i: lmi45(aug, i, X, Su @ Y, sg, g, g1, const=s),
                        kron=("X", lmi45_kron(aug, i)))
             for i in range(aug.r)]  # fmt: skip
+    beta = float(params.get("beta") or 0.0)
+    if beta > 0:  # the loop's decay rate the design asked (and its X certifies): homogeneous in X, Y
+        lmis += [affine_lmi(f"decay rule {i + 1}", layout, lambda X, Y, s, q, i=i: lmi_decay(aug, i, X, Su @ Y, beta),
+                            kron=("X", lmi_decay_kron(aug, i, beta)))
+                 for i in range(aug.r)]  # fmt: skip
     for i in range(m):
 
         def inp(X, Y, s, q, i=i):
