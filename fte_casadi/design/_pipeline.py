@@ -513,7 +513,8 @@ def finish(
                                         lmi="46" if "46" in lmis else next(iter(lmis), None))  # fmt: skip
         status.append("NOT CERTIFIED: " + msg)
     bounds = _bounds(not bad, d.R, K, Kf, Kf_rules, T, ts, u_ref, st.r5doc, getattr(s5, "bound", None))
-    return dataclasses.replace(d, checks=checks, certified=not bad, bounds=bounds, status=status)
+    timings = dict(d.timings, total_s=time.perf_counter() - t0)  # "in all": the certificate and the bounds too
+    return dataclasses.replace(d, checks=checks, certified=not bad, bounds=bounds, status=status, timings=timings)
 
 
 def u_reference(ts: TSModel, K, status: list):
