@@ -29,7 +29,7 @@ def test_it_is_the_largest_level_set_on_which_every_input_stays_within_its_limit
     u0 = u_ref + K[0] @ x_ref
     lim = np.column_stack([u0 - rng.uniform(0.5, 3, m), u0 + rng.uniform(0.5, 3, m)])
     lo, hi = x_ref - 5.0, x_ref + 5.0
-    room = unsaturated(X, K, u_ref, x_ref, lim, {"lo": list(lo), "hi": list(hi)})
+    room = unsaturated(X, K, u0, lim, {"lo": list(lo), "hi": list(hi)})
     head = np.asarray(room["headroom"])
     np.testing.assert_allclose(head, np.minimum(lim[:, 1] - u0, u0 - lim[:, 0]), rtol=1e-12)
     # c from the reach: extent_k = sqrt(c X_kk)
@@ -53,10 +53,10 @@ def test_it_is_the_largest_level_set_on_which_every_input_stays_within_its_limit
 
 def test_no_limits_no_record_and_an_input_at_rest_beyond_a_limit_leaves_nothing():
     X, K = np.eye(2), [np.array([[1.0, 2.0]])]
-    assert unsaturated(X, K, [0.0], None, None, {"lo": [-1, -1], "hi": [1, 1]}) is None
-    room = unsaturated(X, K, [2.0], None, [[-1.0, 1.0]], {"lo": [-1, -1], "hi": [1, 1]})
+    assert unsaturated(X, K, [0.0], None, {"lo": [-1, -1], "hi": [1, 1]}) is None
+    room = unsaturated(X, K, [2.0], [[-1.0, 1.0]], {"lo": [-1, -1], "hi": [1, 1]})
     assert room["extent"] == [0.0, 0.0] and room["fraction"] == 0.0
-    room = unsaturated(X, K, [0.0], None, [[-1.0, 1.0]], {"lo": [None, -1], "hi": [None, 1]})
+    room = unsaturated(X, K, [0.0], [[-1.0, 1.0]], {"lo": [None, -1], "hi": [None, 1]})
     assert room["region_half_width"][0] is None and room["fraction"] == pytest.approx(room["extent"][1])
 
 
@@ -76,7 +76,10 @@ def test_the_design_records_and_prints_it(real_designs):
         d = real_designs[name]
         room = d.checks["loop"]["unsaturated"]
         region = {k: [np.nan if v is None else v for v in vs] for k, vs in d.checks["region"].items()}
-        again = unsaturated(d.X, d.K, d.u_ref, d.x_ref, d.input_limits, region)
+        u0 = (
+            d.u_ref if d.x_ref is None else d.u_ref + np.asarray(d.K[0]) @ np.asarray(d.x_ref)
+        )  # one common K
+        again = unsaturated(d.X, d.K, u0, d.input_limits, region)
         np.testing.assert_allclose(room["extent"], again["extent"], rtol=1e-12)
         assert "input limits: u stays within them" in design_summary(d)
     assert "unsaturated" not in real_designs["manipulator"].checks["loop"]  # no input limits

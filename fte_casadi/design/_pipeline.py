@@ -486,8 +486,10 @@ def finish(
     checks["loop"].update(
         beta=float(getattr(s3, "beta", 0.0)), why=getattr(s3, "beta_why", "as printed (paper variant)")
     )
-    room = unsaturated(X, K, u_ref, x_ref, d.input_limits, {k: [np.nan if v is None else v for v in vs]
-                                                           for k, vs in checks["region"].items()})  # fmt: skip
+    # the input at rest: u_ref + sum_j h_j(x_ref) K_j x_ref (u_eq), or u_ref where the plant gives no x_ref
+    u_rest = u_ref if x_ref is None else u_ref + sum(h * k for h, k in zip(ts.memberships(x_ref), K)) @ x_ref
+    room = unsaturated(X, K, u_rest, d.input_limits, {k: [np.nan if v is None else v for v in vs]
+                                                            for k, vs in checks["region"].items()})  # fmt: skip
     if room is not None:
         if room["fraction"] is not None and room["fraction"] < SATURATES_EARLY and options.variant != "paper":
             # a reach that small: is it the gain's (another would do better) or the region's (none does)?
@@ -513,8 +515,12 @@ def finish(
                                         lmi="46" if "46" in lmis else next(iter(lmis), None))  # fmt: skip
         status.append("NOT CERTIFIED: " + msg)
     bounds = _bounds(not bad, d.R, K, Kf, Kf_rules, T, ts, u_ref, st.r5doc, getattr(s5, "bound", None))
-    timings = dict(d.timings, total_s=time.perf_counter() - t0)  # "in all": the certificate and the bounds too
-    return dataclasses.replace(d, checks=checks, certified=not bad, bounds=bounds, status=status, timings=timings)
+    timings = dict(
+        d.timings, total_s=time.perf_counter() - t0
+    )  # "in all": the certificate and the bounds too
+    return dataclasses.replace(
+        d, checks=checks, certified=not bad, bounds=bounds, status=status, timings=timings
+    )
 
 
 def u_reference(ts: TSModel, K, status: list):

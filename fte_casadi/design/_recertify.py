@@ -84,23 +84,22 @@ def loop_record(aug, X, K) -> dict:
             "gain_ratio": nbk / na if na > 0 else float("inf")}  # fmt: skip
 
 
-def unsaturated(X, K, u_ref, x_ref, input_limits, region) -> dict | None:
+def unsaturated(X, K, u0, input_limits, region) -> dict | None:
     """Where the loop's certificate is not broken by its input limits: the largest level set
     ``E = {x : (x - x_c)^T X^-1 (x - x_c) <= c}`` of step 3's Lyapunov function (each rule's loop decreases it,
     (45) and the LMI 'decay' with X common to the rules, so E is invariant for the state feedback ``u = u0 +
     K_j (x - x_c)``) on which every input stays within its limits: ``c = min_i h_i^2 / max_j K_j,i X K_j,i^T``,
-    ``h_i`` the distance of the input at rest ``u0`` to its nearer limit, ``x_c`` the reference state (0
-    without one). ``extent``: E's reach along each state, ``sqrt(c X_kk)``; ``fraction``: the smallest ratio of
+    ``h_i`` the distance of the input at rest ``u0`` (the input that holds ``x_c``) to its nearer limit, ``x_c``
+    the reference state (0 without one). ``extent``: E's reach along each state, ``sqrt(c X_kk)``; ``fraction``: the smallest ratio of
     that reach to the plant's region's half-width (None where no state has finite bounds). The estimate is taken
-    exact and the disturbances zero: the observer's error and the noise only shrink E. None without input
+    exact and the disturbances zero: the observer's error and the noise are not in it. None without input
     limits; ``{"headroom": ...}`` with a zero ``c`` where the input at rest is at or beyond a limit."""
     if input_limits is None:
         return None
     X = np.asarray(X, dtype=float)
     Ks = [np.asarray(k, dtype=float) for k in K]
     lim = np.asarray(input_limits, dtype=float)
-    xc = np.zeros(X.shape[0]) if x_ref is None else np.asarray(x_ref, dtype=float).ravel()
-    u0 = np.asarray(u_ref, dtype=float).ravel() + (Ks[0] @ xc if x_ref is not None else 0.0)
+    u0 = np.asarray(u0, dtype=float).ravel()
     head = np.minimum(lim[:, 1] - u0, u0 - lim[:, 0])
     spread = np.max([np.einsum("ik,kl,il->i", k, X, k) for k in Ks], axis=0)
     with np.errstate(divide="ignore"):

@@ -56,7 +56,7 @@ def _unsaturated_line(room: dict, states: list) -> str:
     text = (
         "  input limits: u stays within them, and step 3's V = x' X^-1 x (about x_ref) decreases, on its level set "
         f"reaching, from x_ref, {reach} (the region's half-width); beyond it an input saturates, which the "
-        "certificate does not cover (estimate exact, no disturbance: noise and estimation errors shrink it)"
+        "certificate does not cover (with the estimate exact and no disturbance: the observer's error and the noise are not in it)"
     )
     if frac is not None and frac < SATURATES_EARLY:
         text += (
