@@ -126,6 +126,7 @@ def _default_rate(ts: TSModel, options: DesignOptions) -> float | None:
         res = resolve(ts, options)
         st = pipeline.structure(ts, options, res)
         s3 = pipeline.step3(st, res, options.solver, search=options.diagnose)
+        s3 = pipeline.within_limits(ts, st, res, s3, options.solver)
         _, s5 = pipeline.loop_then_observer(ts, st, options, res, s3)
     except FteError:
         return None
@@ -149,6 +150,7 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
             if "sigma" in generic:
                 _refuse_beyond_sigma_max(st.aug, params, solver)
             s3 = pipeline.step3(st, res, solver, search=options.diagnose)
+            s3 = pipeline.within_limits(ts, st, res, s3, solver)
         except conditioned.SolverFailedError as exc:
             beyond = diagnose.beyond_sigma_max(st.aug, params, solver)
             if beyond is None:

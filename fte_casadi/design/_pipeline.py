@@ -486,10 +486,7 @@ def finish(
     checks["loop"].update(
         beta=float(getattr(s3, "beta", 0.0)), why=getattr(s3, "beta_why", "as printed (paper variant)")
     )
-    # the input at rest: u_ref + sum_j h_j(x_ref) K_j x_ref (u_eq), or u_ref where the plant gives no x_ref
-    u_rest = u_ref if x_ref is None else u_ref + sum(h * k for h, k in zip(ts.memberships(x_ref), K)) @ x_ref
-    room = unsaturated(X, K, u_rest, d.input_limits, {k: [np.nan if v is None else v for v in vs]
-                                                            for k, vs in checks["region"].items()})  # fmt: skip
+    room = unsaturated(X, K, input_at_rest(ts, K, u_ref, x_ref), d.input_limits, _region(ts))
     if room is not None:
         if room["fraction"] is not None and room["fraction"] < SATURATES_EARLY and options.variant != "paper":
             # a reach that small: is it the gain's (another would do better) or the region's (none does)?
@@ -521,6 +518,62 @@ def finish(
     return dataclasses.replace(
         d, checks=checks, certified=not bad, bounds=bounds, status=status, timings=timings
     )
+
+
+def input_at_rest(ts: TSModel, K, u_ref=None, x_ref=None) -> np.ndarray:
+    """The input that holds the reference: ``u_ref + sum_j h_j(x_ref) K_j x_ref`` (the ``u_eq`` of
+    :func:`u_reference`, whatever K), or ``u_ref`` where the plant gives no ``x_ref``; ``u_ref, x_ref`` of
+    :func:`u_reference` (found here where not given)."""
+    if u_ref is None:
+        u_ref, x_ref = u_reference(ts, K, [])
+    if x_ref is None:
+        return np.asarray(u_ref, dtype=float)
+    return u_ref + sum(h * np.asarray(k) for h, k in zip(ts.memberships(x_ref), K)) @ x_ref
+
+
+def _region(ts: TSModel) -> dict:
+    """The plant's region as ``{"lo": [..], "hi": [..]}`` (nan: a state without a bound)."""
+    return {"lo": list(ts.plant.region_lo), "hi": list(ts.plant.region_hi)}
+
+
+def within_limits(ts: TSModel, st: Structure, resolved: Resolved, s3, solver: str):
+    """Step 3's loop where its DEFAULT decay rate leaves the inputs no room: where the level set of ``x' X^-1 x``
+    on which no input saturates reaches less than :data:`~fte_casadi.verdicts.SATURATES_EARLY` of the plant's
+    region (:func:`~._recertify.unsaturated`), the loop is designed again at the default's lower rate, then with
+    the smallest gain of (45) alone (as :func:`_loops` does for an observer the rate asks too much of), and the
+    first whose reach is at least that is kept, else the one of the largest reach where it is ten times the
+    default's; said so. A rate the user gave, and a plant without input limits, keep step 3's loop."""
+    plant = ts.plant
+    if plant.input_limits is None or resolved.beta is not None or not getattr(s3, "posed", False):
+        return s3
+    u0 = input_at_rest(ts, [s3.K] * st.aug.r)
+
+    def reach(s):
+        room = unsaturated(s.X, [s.K], u0, plant.input_limits, _region(ts))
+        return None if room is None else room["fraction"]
+
+    first = reach(s3)
+    if first is None or first >= SATURATES_EARLY:
+        return s3
+    best, kept = first, s3
+    for b in (s3.low, 0.0) if s3.low > 0 else (0.0,):
+        what = f"at the lower rate {b:.4g}" if b > 0 else "with the smallest gain (45) allows (no rate asked)"
+        why = (f"{s3.beta_why}; at {s3.beta:.4g} the loop keeps its inputs within their limits only on a set reaching "
+               f"{first:.2g} of the region (docs/design.md, 'Input limits'), so the loop is designed {what}")  # fmt: skip
+        try:
+            s3b = conditioned.step3(st.aug, params_of(resolved, s3), solver, beta=b, why=why)
+        except (InfeasibleDesignError, conditioned.SolverFailedError):
+            continue
+        if (
+            b == 0.0
+        ):  # the rate this loop decays at, for any blending (recorded; the LMI "decay" certifies it)
+            s3b.beta = float(loop_decay(st.aug, s3b.X, [s3b.K])) * (1 - 4 * conditioned.MARGIN)
+        r = reach(s3b)
+        if r is not None and r > best:
+            best, kept = r, s3b
+        if r is not None and r >= SATURATES_EARLY:
+            return s3b
+    return kept if best >= 10 * first else s3
 
 
 def u_reference(ts: TSModel, K, status: list):
