@@ -350,21 +350,32 @@ def _loops(ts: TSModel, st: Structure, options: DesignOptions, resolved: Resolve
         if resolved.beta is not None or not getattr(s3, "posed", False):
             raise
         first = exc
-    for b in (s3.low, 0.0) if s3.low > 0 else (0.0,):
-        what = f"at the lower rate {b:.4g}" if b > 0 else "with the smallest gain (45) allows (no rate asked)"
-        why = (f"{s3.beta_why}; the loop at {s3.beta:.4g} asks an observer that step 5 cannot give ("
-               f"{shorten(str(first), 240, placeholder=' ...')}), so the loop is designed {what}")  # fmt: skip
-        s3b = conditioned.step3(st.aug, params_of(resolved, s3), options.solver, beta=b, why=why)
+    because = (f"the loop at {s3.beta:.4g} asks an observer that step 5 cannot give ("
+               f"{shorten(str(first), 240, placeholder=' ...')})")  # fmt: skip
+    for b in _lower_rates(s3):
+        s3b = _loop_at(st, resolved, s3, options.solver, b, because)
         try:
             s5 = step5(ts, st, options, resolved, s3b, joint=joint)
         except (InfeasibleDesignError, conditioned.SolverFailedError):
             continue
-        if (
-            b == 0.0
-        ):  # the rate this loop decays at, for any blending (recorded; the LMI "decay" certifies it)
-            s3b.beta = float(loop_decay(st.aug, s3b.X, [s3b.K])) * (1 - 4 * conditioned.MARGIN)
         return s3b, s5
     raise first
+
+
+def _lower_rates(s3) -> tuple:
+    """The loop's rates tried below its DEFAULT one: the default's lower rate (where it has one), then none."""
+    return (s3.low, 0.0) if s3.low > 0 else (0.0,)
+
+
+def _loop_at(st: Structure, resolved: Resolved, s3, solver: str, b: float, because: str):
+    """Step 3 again at the lower rate ``b`` (0: the smallest gain of (45) alone), its note saying ``because``; with
+    no rate asked, the rate it decays at for any blending is recorded (the LMI "decay" certifies it)."""
+    what = f"at the lower rate {b:.4g}" if b > 0 else "with the smallest gain (45) allows (no rate asked)"
+    s3b = conditioned.step3(st.aug, params_of(resolved, s3), solver, beta=b,
+                            why=f"{s3.beta_why}; {because}, so the loop is designed {what}")  # fmt: skip
+    if b == 0.0:
+        s3b.beta = float(loop_decay(st.aug, s3b.X, [s3b.K])) * (1 - 4 * conditioned.MARGIN)
+    return s3b
 
 
 def _too_slow(
@@ -556,18 +567,13 @@ def within_limits(ts: TSModel, st: Structure, resolved: Resolved, s3, solver: st
     if first is None or first >= SATURATES_EARLY:
         return s3
     best, kept = first, s3
-    for b in (s3.low, 0.0) if s3.low > 0 else (0.0,):
-        what = f"at the lower rate {b:.4g}" if b > 0 else "with the smallest gain (45) allows (no rate asked)"
-        why = (f"{s3.beta_why}; at {s3.beta:.4g} the loop keeps its inputs within their limits only on a set reaching "
-               f"{first:.2g} of the region (docs/design.md, 'Input limits'), so the loop is designed {what}")  # fmt: skip
+    because = (f"at {s3.beta:.4g} the loop keeps its inputs within their limits only on a set reaching {first:.2g} "
+               "of the region (docs/design.md, 'Input limits')")  # fmt: skip
+    for b in _lower_rates(s3):
         try:
-            s3b = conditioned.step3(st.aug, params_of(resolved, s3), solver, beta=b, why=why)
+            s3b = _loop_at(st, resolved, s3, solver, b, because)
         except (InfeasibleDesignError, conditioned.SolverFailedError):
             continue
-        if (
-            b == 0.0
-        ):  # the rate this loop decays at, for any blending (recorded; the LMI "decay" certifies it)
-            s3b.beta = float(loop_decay(st.aug, s3b.X, [s3b.K])) * (1 - 4 * conditioned.MARGIN)
         r = reach(s3b)
         if r is not None and r > best:
             best, kept = r, s3b
