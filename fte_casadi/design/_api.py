@@ -125,8 +125,7 @@ def _default_rate(ts: TSModel, options: DesignOptions) -> float | None:
     try:
         res = resolve(ts, options)
         st = pipeline.structure(ts, options, res)
-        s3 = pipeline.step3(st, res, options.solver, search=options.diagnose)
-        s3 = pipeline.within_limits(ts, st, res, s3, options.solver)
+        s3 = pipeline.loop(ts, st, res, options.solver, search=options.diagnose)
         _, s5 = pipeline.loop_then_observer(ts, st, options, res, s3)
     except FteError:
         return None
@@ -149,8 +148,7 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
         try:
             if "sigma" in generic:
                 _refuse_beyond_sigma_max(st.aug, params, solver)
-            s3 = pipeline.step3(st, res, solver, search=options.diagnose)
-            s3 = pipeline.within_limits(ts, st, res, s3, solver)
+            s3 = pipeline.loop(ts, st, res, solver, search=options.diagnose)
         except conditioned.SolverFailedError as exc:
             beyond = diagnose.beyond_sigma_max(st.aug, params, solver)
             if beyond is None:

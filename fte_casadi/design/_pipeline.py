@@ -547,6 +547,12 @@ def _region(ts: TSModel) -> dict:
     return {"lo": list(ts.plant.region_lo), "hi": list(ts.plant.region_hi)}
 
 
+def loop(ts: TSModel, st: Structure, resolved: Resolved, solver: str, *, search: bool = True):
+    """Step 3's loop as the design keeps it: :func:`step3` (kappa searched with ``search``), its default rate
+    lowered where it leaves the inputs no room (:func:`within_limits`)."""
+    return within_limits(ts, st, resolved, step3(st, resolved, solver, search=search), solver)
+
+
 def within_limits(ts: TSModel, st: Structure, resolved: Resolved, s3, solver: str):
     """Step 3's loop where its DEFAULT decay rate leaves the inputs no room: where the level set of ``x' X^-1 x``
     on which no input saturates reaches less than :data:`~fte_casadi.verdicts.SATURATES_EARLY` of the plant's
