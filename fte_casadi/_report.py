@@ -507,6 +507,8 @@ def _metrics_table(m: dict, plant) -> list[str]:
         f"| FTC true ratio (C x_FTC vs C x_noFTC, against fault-free) | {_g(m['ftc_true_ratio'])} |",
         f"| compensated ratio (yc_FTC vs y_noFTC, the paper's Figs 8-10: estimation) | {_g(m['ftc_compensated_ratio'])} |",
         f"| samples outside the plant's region | {_g(m['outside_region'])} |",
+        f"| measurements the generated C would refuse (fraction of samples; of paths) | "
+        f"{_g(m.get('outside_c_range'))}; {_g(m.get('outside_c_range_paths'))} |",
         f"| inputs at a limit ({', '.join(plant.input_names)}; fraction of samples, FTC run) | "
         f"{', '.join(_g(v) for v in m['input_saturation'])} |",
         "",

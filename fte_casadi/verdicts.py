@@ -110,7 +110,7 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     """The verdicts on metrics document ``m``: a list of ``{"verdict", "where", "value", "text"}`` with
     ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``,
     ``false-alarm rate``, ``standing alarm``, ``saturated``, ``poor estimate``, ``slow observer``, ``not
-    settled``, ``missed``, ``outside region``. A ratio is worse than none only when its interval over the
+    settled``, ``missed``, ``outside region``, ``C stops``. A ratio is worse than none only when its interval over the
     paths lies above 1 (where the document gives one); a ratio above 1 whose interval holds 1 is a tie. A poor
     estimate likewise needs its interval at or above :data:`POOR_ESTIMATE`."""
     out = []
@@ -132,7 +132,32 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
         add("outside region", "run", frac,
             f"{100 * frac:.1f} % of the samples leave the plant's region, where the T-S model (and the design's "
             "certificate) is not exact")  # fmt: skip
+    _c_range_verdict(m, add, outputs)
     return out
+
+
+def _c_range_verdict(m: dict, add, outputs) -> None:
+    """The generated C would stop: a measurement of the FTC run leaves the range it accepts (on any path)."""
+    share = m.get("outside_c_range_paths")
+    if not share:
+        return
+    rng = m.get("c_accepted_range") or {}
+    lo, hi = rng.get("lo") or [], rng.get("hi") or []
+    per = m.get("outside_c_range_per_output") or []
+    which = ", ".join(
+        f"{outputs[k] if k < len(outputs) else f'output {k}'} outside [{lo[k]:.4g}, {hi[k]:.4g}] on "
+        f"{100 * v:.2g} % of the samples"
+        for k, v in enumerate(per)
+        if v and k < len(lo) and k < len(hi)
+    )
+    first = m.get("outside_c_range_first")
+    when = f", first at t = {first:.6g}" if first is not None else ""
+    add("C stops", "run", share,
+        f"on {100 * share:.3g} % of the paths a measurement leaves the range the generated C accepts ({which}"
+        f"{when}): there `fte codegen`'s step returns 3 and changes nothing, while this simulation's step runs on, "
+        "so the C would not do what this run shows. The range is C x over the plant's region, widened on each side "
+        "by 10 % of its width (100 % on an output with a sensor fault; less where the step is not finite): keep the plant in its region, or widen the region (b.region) "
+        "to where it runs and design again")  # fmt: skip
 
 
 def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:

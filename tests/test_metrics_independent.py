@@ -33,6 +33,10 @@ CASES = {
     "quadruple-tank": dict(spec="quadruple-tank", design="quadruple_tank", T=700.0, paths=3, seed=7),
     "pendulum": dict(spec=PENDULUM, design=None, T=12.0, paths=4, seed=11),
     "manipulator-noise": dict(spec="manipulator", design="manipulator", T=None, paths=4, seed=13, noise=True),
+    # noise on w_m of 2.5 rad/s against the +/- 6 its generated C accepts: some readings it would refuse
+    "manipulator-refused": dict(
+        spec="manipulator", design="manipulator", T=None, paths=3, seed=19, noise=(0.05, 2.5, 0.05)
+    ),  # fmt: skip
     "quadruple-tank-limits": dict(
         spec="quadruple-tank",
         design="quadruple_tank",
@@ -64,7 +68,9 @@ def res(request):
     if case["T"] is not None:
         scenario = dataclasses.replace(scenario, T=case["T"])
     run = dict(paths=case["paths"], seed=case["seed"], record_all=True, record_every=1, progress=False)
-    if case.get("noise"):  # 1 % of each output's span on a noise-free run
+    if isinstance(case.get("noise"), tuple):
+        scenario = dataclasses.replace(scenario, measurement_noise=case["noise"])
+    elif case.get("noise"):  # 1 % of each output's span on a noise-free run
         span = np.ptp(simulate(design, plant, scenario, **run).free.y, axis=(0, 1))
         scenario = dataclasses.replace(scenario, measurement_noise=tuple(float(s) for s in 0.01 * span))
     return simulate(design, plant, scenario, **run)
@@ -336,7 +342,49 @@ def test_global_figures(res):
             out |= np.any((r.x < lo) | (r.x > hi), axis=-1)
         check("outside_region", doc["outside_region"], out.mean())
     check("input_saturation", doc["input_saturation"], at_limit(res, ftc.u).mean(axis=(0, 1)))
+    _check_c_range(res, doc, check)
     check.done()
+
+
+def accepted_by_the_c(res):
+    """The range of y the committed generated C of the case's design accepts (its Y_MIN, Y_MAX arrays, read from
+    the C source), or None for a design without committed C."""
+    import re
+
+    name = res.design.plant.replace("-", "_")
+    src = ROOT / "generated" / name / f"fte_{name}.c"
+    if not src.exists():
+        return None
+    text = src.read_text()
+    out = []
+    for side in ("MIN", "MAX"):
+        body = re.search(rf"_Y_{side}\[\d+\] = \{{([^}}]*)\}}", text).group(1)
+        out.append(np.array([float(v) for v in body.replace("\n", " ").split(",") if v.strip()]))
+    return out
+
+
+def _check_c_range(res, doc, check):
+    """The FTC run's measurements the generated C would refuse: per output and in all, of the samples, of the
+    paths, and the first time; the range against the committed C's own (built-in designs)."""
+    rng = doc["c_accepted_range"]
+    lo, hi = np.asarray(rng["lo"], float), np.asarray(rng["hi"], float)
+    committed = accepted_by_the_c(res)
+    if committed is not None:  # the built-in cases run the committed designs
+        check("c_accepted_range.lo", lo, committed[0])
+        check("c_accepted_range.hi", hi, committed[1])
+    elif res.design.plant != "pendulum":
+        check.errors.append(f"no committed C for {res.design.plant}")
+    out = (res.ftc.y < lo) | (res.ftc.y > hi)
+    hit = out.any(axis=-1)
+    noise = getattr(res.scenario.measurement_noise, "std", None)  # white noise of these deviations
+    if noise is not None and np.any(np.asarray(noise, float) >= 0.2 * (hi - lo)):
+        # noise of a fifth of the range's width: half the width is at most 2.5 standard deviations away
+        assert doc["outside_c_range"] > 0 and doc["outside_c_range_paths"] == 1.0
+    check("outside_c_range", doc["outside_c_range"], hit.mean())
+    check("outside_c_range_per_output", doc["outside_c_range_per_output"], out.mean(axis=(0, 1)))
+    check("outside_c_range_paths", doc["outside_c_range_paths"], hit.any(axis=1).mean())
+    firsts = [res.t[np.argmax(h)] for h in hit if h.any()]
+    check("outside_c_range_first", doc["outside_c_range_first"], min(firsts) if firsts else None)
 
 
 def test_windows(res):

@@ -312,12 +312,15 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
         res = load_result(tmp_path / f"{name}.npz")
         ref, got = metrics_from_arrays(res), res.metrics
         for key in ("state_rms_error", "fault_rel_rms_error", "fault_rel_rms_error_settled", "false_alarm_rel_rms",
-                    "false_alarm_peak", "input_saturation"):  # fmt: skip
+                    "false_alarm_peak", "input_saturation", "outside_c_range_per_output"):  # fmt: skip
             assert [v is None for v in got[key]] == [v is None for v in ref[key]]
             np.testing.assert_allclose([v for v in got[key] if v is not None], [v for v in ref[key] if v is not None],
                                        rtol=1e-12, atol=1e-15)  # fmt: skip
-        for key in ("ftc_true_ratio", "ftc_compensated_ratio", "outside_region", "transient", "settle_after"):
+        for key in ("ftc_true_ratio", "ftc_compensated_ratio", "outside_region", "transient", "settle_after",
+                    "outside_c_range", "outside_c_range_paths"):  # fmt: skip
             assert got[key] == pytest.approx(ref[key], rel=1e-12), key
+        assert got["c_accepted_range"] == ref["c_accepted_range"] and got["outside_c_range_first"] == ref[
+            "outside_c_range_first"]  # fmt: skip
         assert len(got["windows"]) == len(sc.faults) == len(ref["windows"])
         for w, v in zip(got["windows"], ref["windows"]):
             assert (w["fault"], w["start"], w["stop"]) == (v["fault"], v["start"], v["stop"])

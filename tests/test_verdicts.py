@@ -67,10 +67,15 @@ def test_each_verdict_on_its_figure():
          "ftc_true_rms_per_output": {"ftc": [0.12, 0.01], "no_ftc": [0.1, 0.02]},
          "crosstalk_peak": [None, 0.3], "missed_detections": 2, "input_saturation": [0.2]}  # fmt: skip
     m = {"paths": 5, "windows": [w], "false_alarm_peak": [0.1, 0.7], "outside_region": 0.02,
-         "observer_time_constant": 1.0}  # fmt: skip
+         "observer_time_constant": 1.0, "c_accepted_range": {"lo": [-1.0, -2.0], "hi": [1.0, 2.0]},
+         "outside_c_range": 0.003, "outside_c_range_per_output": [0.0, 0.003], "outside_c_range_paths": 0.4,
+         "outside_c_range_first": 1.25}  # fmt: skip
     got = {v["verdict"]: v for v in verdicts.verdicts(m, ["u"], ["fa", "fs"], ["y1", "y2"], ["m", "m"])}
     assert set(got) == {"worse than none on an output", "false alarm", "poor estimate", "slow observer",
-                        "not settled", "missed", "saturated", "outside region"}  # fmt: skip
+                        "not settled", "missed", "saturated", "outside region", "C stops"}  # fmt: skip
+    assert "on 40 % of the paths" in got["C stops"]["text"] and "y2 outside [-2, 2] on 0.3 % of the samples, " \
+        "first at t = 1.25" in got["C stops"]["text"]  # fmt: skip
+    assert not any(v["verdict"] == "C stops" for v in verdicts.verdicts({**m, "outside_c_range_paths": 0.0}))
     assert "0.12 m with it against 0.1 m without" in got["worse than none on an output"]["text"]
     assert "fs 0.3" in got["worse than none on an output"]["text"]  # the cross-talk that causes it
     assert got["false alarm"]["where"] == "fs" and got["missed"]["value"] == 2

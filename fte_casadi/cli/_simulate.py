@@ -125,6 +125,13 @@ def _summary(plant: str, m: dict) -> str:
     if m.get("measurement_noise") is not None:
         lines.append(f"  measurement noise (std per output): {_fmt_list(m['measurement_noise'])}")
     lines.append(f"  samples outside the plant's region: {100 * m['outside_region']:.2g} %")
+    if m.get("outside_c_range_paths") is not None:
+        first = m.get("outside_c_range_first")
+        lines.append(
+            "  measurements outside the range the generated C accepts (there its step returns 3): "
+            f"{100 * m['outside_c_range']:.2g} % of the samples, on {100 * m['outside_c_range_paths']:.3g} % of the paths"
+            + (f", first at t = {first:.6g}" if first is not None else "")
+        )
     lines.append(f"  inputs at a limit (FTC run): {_fmt_list(m['input_saturation'])}")
     return "\n".join(lines)
 

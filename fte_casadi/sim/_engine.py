@@ -42,6 +42,7 @@ from ..design import Design
 from ..errors import ParameterError, SimulationError
 from ..model import Plant
 from ..step import StepParameters, step_function
+from ._c_range import accepted_measurements
 from ._cluster import plant_from_bytes, run_on_cluster
 from ._detect import default_rate
 from ._options import SCALES as SCALES
@@ -332,7 +333,11 @@ class Prepared:
             np.vstack([FP, self.masks.M, self.t[None, :], np.repeat(thr[:, None], nsamp, 1), ddet, vstd]).T
         )
         region = (np.asarray(plant.region_lo, float), np.asarray(plant.region_hi, float))
-        self.monitor = monitor(lay, self.masks, np.asarray(plant.C, float), design.input_limits, region)
+        #: the measurements the generated C accepts at this sample time (outside them its step returns 3)
+        self.y_range = accepted_measurements(design, dt)
+        self.monitor = monitor(
+            lay, self.masks, np.asarray(plant.C, float), design.input_limits, region, self.y_range
+        )
         self.names = self.monitor.names
         F = self.engine_function = self._engine_function(sample, ld, lf)
         xs = [r * lay.run_state + j for r in range(3) for j in range(lay.n)]
@@ -668,7 +673,8 @@ def simulate(design: Design, plant: Plant, scenario: Scenario, *, paths: int, se
     wall = time.perf_counter() - t_wall
     meta = {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed, "wall_s": wall, "m": plant.m,
             "thresholds": [float(v) for v in ran.thresholds], "detection": ran.detection,
-            "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None}  # fmt: skip
+            "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None,
+            "y_range": prep.y_range}  # fmt: skip
     doc = finalize(ran.acc, ran.mon, ran.pm, prep.t, prep.monitor, prep.masks, meta)
     mn = scenario.measurement_noise
     doc["measurement_noise"] = None if mn is None else mn.reported(sc["measurement_noise_scale"])

@@ -182,6 +182,7 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         "windows": windows,
         "outside_region": float(_outside_region(result).mean()),
         "input_saturation": input_saturation(ftc.u, result.design.input_limits),
+        **_outside_c_range(result),
         "wall_s": float(result.wall_s),
     }
 
@@ -340,6 +341,31 @@ def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
     pairs += [(_sq(dC_ftc[:, w, k]), _sq(dC_no[:, w, k])) for k in range(p)]
     pairs += [(_sq(ftc.yc[:, w] - free.y[:, w]), _sq(no.y[:, w] - free.y[:, w]))]
     return entry, pairs
+
+
+def _outside_c_range(result: SimulationResult) -> dict:
+    """The FTC run's measurements outside the range the generated C accepts (``outside_c_range*``; None where the
+    design's step cannot be built for the recorded arrays)."""
+    from ._c_range import accepted_measurements
+
+    y = result.ftc.y
+    try:
+        lo, hi = accepted_measurements(result.design, result.dt)
+    except Exception:  # noqa: BLE001 - arrays made by hand beside a design whose step does not fit them
+        keys = ("c_accepted_range", "outside_c_range", "outside_c_range_per_output", "outside_c_range_paths")
+        return {**dict.fromkeys(keys), "outside_c_range_first": None}
+    out = (y < lo) | (y > hi)  # (paths, samples, outputs)
+    hit = out.any(axis=2)
+    first = [float(result.t[np.flatnonzero(h)[0]]) for h in hit if h.any()]
+    return {
+        "c_accepted_range": {"lo": [float(v) for v in lo], "hi": [float(v) for v in hi]},
+        "outside_c_range": float(hit.mean()) if hit.size else 0.0,
+        "outside_c_range_per_output": [
+            float(np.mean(out[:, :, k])) if hit.size else 0.0 for k in range(y.shape[2])
+        ],
+        "outside_c_range_paths": len(first) / hit.shape[0] if hit.shape[0] else 0.0,
+        "outside_c_range_first": min(first) if first else None,
+    }
 
 
 def _outside_region(result: SimulationResult) -> np.ndarray:

@@ -167,7 +167,8 @@ class Monitor:
     start-up, and after a window's end), the peak ``|f_j|`` in its windows, the alarm states of the
     fault-free and FTC runs (off until ``transient``); per window the first time the FTC run's alarm rose in
     it (-1: not yet), whether the alarm was already on at its onset (a standing alarm), and the other faults'
-    cross-talk peaks."""
+    cross-talk peaks; the first time the FTC run's measurement left the range the generated C accepts (-1:
+    never)."""
 
     fn: ca.Function
     names: list[str]
@@ -180,7 +181,7 @@ class Monitor:
 
     def mon0(self) -> np.ndarray:
         """The monitor state at t = 0 (one path)."""
-        return np.array([-1.0 if nm.startswith("det") else 0.0 for nm in self.mon_names])
+        return np.array([-1.0 if nm.startswith("det") or nm == "cyt" else 0.0 for nm in self.mon_names])
 
 
 class _Terms:
@@ -215,13 +216,16 @@ def _monitor_names(lf: int, nw: int) -> list[str]:
          for j in range(lf)]
         + [f"{k}{w}" for k in ("det", "stw") for w in range(nw)]
         + [f"xt{w}_{j}" for w in range(nw) for j in range(lf)]
+        + ["cyt"]
     )  # fmt: skip
 
 
-def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None) -> Monitor:
+def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None,
+            y_range: tuple[np.ndarray, np.ndarray] | None = None) -> Monitor:  # fmt: skip
     """The summands, monitor updates and per-sample maxima of one sample (see :class:`Monitor`).
 
-    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc, ucomp]``."""
+    ``rec`` is the engine's record of the three runs (free, no_ftc, ftc), each ``[x, xbarhat, f, u, y, yc, ucomp]``;
+    ``y_range`` the measurements the generated C accepts (:mod:`._c_range`), per output ``(lo, hi)``."""
     n, lf = lay.n, lay.lf
     C = ca.DM(np.asarray(C, dtype=float))
     rec = ca.SX.sym("rec", lay.nrec)
@@ -256,6 +260,7 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
         m_w = msk[row("window", w)]
         for j in range(lf):
             s.nxt[f"xt{w}_{j}"] = ca.fmax(s.slot[f"xt{w}_{j}"], m_w * ca.fabs(fhat[j]))
+    _c_range_terms(s, ftc["y"], y_range, lay.p, t)
     mon_next = [s.nxt[k] for k in mon_names]
     _saturation_terms(s, ftc["u"], limits, lay.m, mk, msk)
     s.add("outreg", _outside_region(region, (free, noftc, ftc), n) > 0)
@@ -352,6 +357,20 @@ def _saturation_terms(s: _Terms, u, limits, m: int, mk: Masks, msk) -> None:
         s.add(f"sat{i}", at)
         for w in range(mk.nw):
             s.add(f"satw{w}_{i}", msk[mk.row("window", w)] * at)
+
+
+def _c_range_terms(s: _Terms, y, y_range, p: int, t) -> None:
+    """Per output, the FTC run's measurement outside the range the generated C accepts (where its step returns 3
+    and stops); any of them; the first time it happened (monitor ``cyt``, -1: never)."""
+    any_out = ca.SX(0.0)
+    for k in range(p):
+        out = ca.SX(0.0)
+        if y_range is not None:
+            out = (y[k] < float(y_range[0][k])) + (y[k] > float(y_range[1][k]))
+        s.add(f"cyo{k}", out)
+        any_out = any_out + out
+    s.add("cya", any_out > 0)
+    s.nxt["cyt"] = ca.if_else((s.slot["cyt"] < 0) * (any_out > 0), t, s.slot["cyt"])
 
 
 def _outside_region(region, runs: tuple, n: int):
@@ -488,7 +507,28 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
         "windows": windows,
         "outside_region": _fsum(col["outreg"]) / (P * nsamp),
         "input_saturation": [_fsum(col[f"sat{i}"]) / (P * nsamp) for i in range(int(meta["m"]))],
+        **_c_range(c, nsamp),
         "wall_s": float(meta.get("wall_s", 0.0)),
+    }
+
+
+def _c_range(c: _Columns, nsamp: int) -> dict:
+    """The FTC run's measurements outside the range the generated C accepts: the fraction of samples (any
+    output, and per output), of paths, and the first time (the document's ``outside_c_range*``)."""
+    col, P = c.col, c.P
+    p = sum(1 for nm in c.mo.names if nm.startswith("cyo"))
+    first = c.mcol["cyt"]
+    hit = first >= 0
+    rng = c.meta.get("y_range")
+    accepted = (
+        None if rng is None else {side: [float(v) for v in rng[k]] for k, side in enumerate(("lo", "hi"))}
+    )
+    return {
+        "c_accepted_range": accepted,
+        "outside_c_range": _fsum(col["cya"]) / (P * nsamp) if P else 0.0,
+        "outside_c_range_per_output": [_fsum(col[f"cyo{k}"]) / (P * nsamp) if P else 0.0 for k in range(p)],
+        "outside_c_range_paths": float(hit.sum()) / P if P else 0.0,
+        "outside_c_range_first": float(np.min(first[hit])) if hit.any() else None,
     }
 
 
