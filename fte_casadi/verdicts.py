@@ -17,6 +17,7 @@ __all__ = [
     "SLOW_OBSERVER",
     "SATURATES_EARLY",
     "verdicts",
+    "judged_ftc_ratio",
 ]
 
 #: a window's ``ftc_true_ratio`` above this: tolerant control leaves the TRUE outputs worse than none
@@ -77,6 +78,18 @@ def _above(value, interval, level: float) -> bool:
     if value is None or not value > level:
         return False
     return interval is None or (interval[0] is not None and interval[0] > level)
+
+
+def judged_ftc_ratio(w: dict) -> float | None:
+    """Window ``w``'s ``ftc_true_ratio`` as the verdicts judge it: :data:`WORSE_THAN_NONE` itself (a tie) where
+    the ratio's interval over the paths holds it, else the ratio (None where the window has none). Above
+    :data:`WORSE_THAN_NONE` it is "worse than none", as ``fte simulate`` warns; below it, measurably better."""
+    r, iv = w.get("ftc_true_ratio"), w.get("ftc_true_ratio_interval")
+    if r is None:
+        return None
+    if iv is not None and iv[0] is not None and iv[1] is not None and iv[0] <= WORSE_THAN_NONE <= iv[1]:
+        return WORSE_THAN_NONE
+    return float(r)
 
 
 def _iv(interval) -> str:

@@ -135,6 +135,32 @@ def test_choose_rules():
     assert pareto_front([(1, 2), (2, 1), (2, 2), (1, 2)]) == [0, 1]
 
 
+def test_ftc_rule_judges_ties_as_the_verdicts_do():
+    """A ratio above 1 whose interval holds 1 is a tie (not worse than none), as ``fte simulate`` warns; the
+    ``ftc`` rule compares the windows' judged ratios worst first, so a design whose tolerant control ties in
+    every window (here 0.99999 and 0.99998: it does nothing) is not chosen over the base, which ties in the
+    sensor window and helps in the actuator one (0.709). Judged by the bare worst ratio, it was."""
+    from fte_casadi.tune._search import _admissible
+
+    names = ("fault_error[fa]", "ftc[fa@0.5]", "ftc[fs@1.75]")
+
+    def rec(k, fe, ratios):
+        wins = [{"ftc_true_ratio": r, "ftc_true_ratio_interval": iv} for r, iv in ratios]
+        m = {"windows": wins, "false_alarm_peak": [0.1]}
+        return Record(k, {}, "ok", {}, m, None, (fe, *(r for r, _ in ratios)))
+
+    base = rec(0, 0.24, [(0.709, [0.70, 0.89]), (1.00002, [0.9999, 1.0001])])
+    idle = rec(1, 0.43, [(0.99999, [0.9999, 1.00001]), (0.99998, [0.9999, 1.00001])])
+    assert _admissible(base.metrics) == (True, True)  # the tie above 1 is not worse than none
+    assert choose([base, idle], [0, 1], names, "ftc")[0] == 0
+    # measurably worse (its interval above 1): then it is, and a design that helps everywhere is taken
+    worse = rec(0, 0.24, [(0.709, [0.70, 0.89]), (1.02, [1.01, 1.03])])
+    assert _admissible(worse.metrics) == (False, True)
+    assert choose([worse, idle], [0, 1], names, "ftc")[0] == 1
+    better = rec(2, 0.3, [(0.6, [0.5, 0.7]), (0.99, [0.98, 0.995])])
+    assert choose([base, idle, better], [0, 1, 2], names, "ftc")[0] == 2
+
+
 def test_cli_json_files_and_tuned_design_simulates(tmp_path):
     out = tmp_path / "t"
     r = CliRunner().invoke(main, ["tune", SPEC, "--trials", "4", "--seed", "2", "--paths", "2", "--out", str(out),

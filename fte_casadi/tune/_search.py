@@ -20,9 +20,10 @@ Objectives (all minimised; those the base design leaves undefined are dropped):
   design has none).
 
 The chosen design (:func:`choose`) is a member of the front: among the front members that are
-certified (every completed trial is) and make tolerant control better than none in every window
-(FTC ratio < 1) and keep every false-alarm ratio below 1 — or, when none does, those with every
-FTC ratio < 1, or else all of them — the one with the smallest score of the rule:
+certified (every completed trial is) and make tolerant control no worse than none in any window
+(FTC ratio <= 1, a ratio above 1 whose interval over the paths holds 1 counting as a tie, as the
+verdicts judge it) and keep every false-alarm ratio below 1 — or, when none does, those with no
+window worse than none, or else all of them — the one with the smallest score of the rule:
 
 - ``balanced`` (default): among the members whose input peak stays within :data:`INPUT_PEAK_ALLOWANCE`
   x the base's and whose saturation rises by at most 1 % of the samples, those better than the base on
@@ -32,7 +33,9 @@ FTC ratio < 1, or else all of them — the one with the smallest score of the ru
   smallest (the base itself scores 1). The rule picks a design that dominates the base whenever the
   search found one, and of several such the one that gains most, not the one closest to the base;
 - ``fault-error``: the largest fault error; ``false-alarm``: the largest false-alarm ratio;
-  ``ftc``: the worst window's FTC ratio; ``bound``: the smallest certified bound;
+  ``ftc``: the windows' FTC ratios as judged (a tie counts 1), worst first, compared in turn (a design whose
+  tolerant control ties everywhere is not better than one that ties in one window and helps in another);
+  ``bound``: the smallest certified bound;
 
 ties broken by the balanced score, then by the sum of all objectives relative to the base's (the
 bound among them). The bound is not in the balanced score: that score is the issue's measured table.
@@ -52,7 +55,7 @@ import numpy as np
 
 from .._keywords import with_keywords
 from ..errors import ParameterError
-from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE
+from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE, judged_ftc_ratio
 from ._evaluate import evaluate
 from ._options import RULES as RULES
 from ._options import TuneOptions
@@ -206,14 +209,16 @@ def _within_inputs(values: tuple, base: tuple, names: tuple) -> bool:
 
 
 def _admissible(m: dict) -> tuple[bool, bool]:
-    """(every window's FTC ratio < 1, every false-alarm ratio < 1): the thresholds of :mod:`fte_casadi.verdicts`."""
-    ftc = all(
-        w["ftc_true_ratio"] < WORSE_THAN_NONE
-        for w in m.get("windows") or []
-        if w.get("ftc_true_ratio") is not None
-    )
+    """(no window's tolerant control worse than none, every false-alarm ratio < 1): the thresholds and the rule of
+    :mod:`fte_casadi.verdicts` (a ratio above 1 whose interval over the paths holds 1 is a tie, not worse)."""
+    ftc = all(v <= WORSE_THAN_NONE for v in _judged(m))
     fa = all(v < FALSE_ALARM for v in m.get("false_alarm_peak") or [] if v is not None)
     return ftc, fa
+
+
+def _judged(m: dict) -> list[float]:
+    """Every window's FTC ratio as the verdicts judge it (:func:`fte_casadi.verdicts.judged_ftc_ratio`)."""
+    return [v for v in (judged_ftc_ratio(w) for w in m.get("windows") or []) if v is not None]
 
 
 def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> tuple[int, str]:
@@ -224,8 +229,10 @@ def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> 
     base = records[0].values
     cands = [records[k] for k in front]
     tiers = (
-        ("FTC ratio < 1 in every window and every false-alarm ratio < 1", lambda r: all(_admissible(r.metrics))),
-        ("FTC ratio < 1 in every window (no front member keeps every false-alarm ratio below 1)",
+        ("tolerant control not worse than none in any window and every false-alarm ratio < 1",
+         lambda r: all(_admissible(r.metrics))),
+        ("tolerant control not worse than none in any window (no front member keeps every false-alarm ratio "
+         "below 1)",
          lambda r: _admissible(r.metrics)[0]),
         ("none of the front makes tolerant control better than none in every window", lambda r: True),
     )  # fmt: skip
@@ -254,8 +261,8 @@ def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> 
             main = max((x for n, x in v.items() if n.startswith("false_alarm")), default=bal)
         elif rule == "bound":
             main = v.get("bound[fault_error]", bal)
-        else:
-            main = max((x for n, x in v.items() if n.startswith("ftc")), default=bal)
+        else:  # the windows' judged ratios, worst first: a tie at 1 everywhere is not better than 0.7 and a tie
+            main = tuple(sorted(_judged(r.metrics), reverse=True)) or (bal,)
         return (main, bal, sum(_ratios(r.values, base, names, tuple(FLOORS))), r.number)
 
     return min(pool, key=key).number, tier
