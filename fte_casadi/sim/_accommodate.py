@@ -34,6 +34,9 @@ from ._engine import calibrate_detection
 
 __all__ = ["accommodated", "protected"]
 
+#: the seed offset of the paths :func:`protected` measures the gate on: paths apart from those a run with the
+#: design's own seed draws, so that the choice is not judged on the paths that made it
+SELECTION_SEED = 100
 #: the default release ratio: a compensated fault is released when ``|fhat_j| / threshold_j`` falls below it
 RELEASE = 0.5
 
@@ -100,6 +103,10 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
     return dataclasses.replace(design, accommodation=acc, status=[*design.status, note])
 
 
+def _where(w: dict) -> str:
+    return f"the window of {w.get('fault')} [{w.get('start'):g}, {w.get('stop'):g})"
+
+
 def _crosstalk(design: Design):
     from ..design import crosstalk
 
@@ -137,15 +144,69 @@ def protected(design: Design, plant, scenario, *, paths: int = 8, seed: int = 0,
               dt=None, threads=None) -> Design:  # fmt: skip
     """``design`` as ``fte design`` writes it: where its faults' estimates cross-talk (:func:`needs_gate`) and the
     plant has a scenario with faults, with the gate of rule ``"explain"``, memoryless, calibrated on the
-    scenario's fault-free paths (:func:`accommodated`); otherwise unchanged (every estimate compensated always,
-    the paper: with one fault nothing can leak into its compensation, and a gate would only delay it)."""
+    scenario's fault-free paths (:func:`accommodated`), unless compensating every estimate always measures
+    better on the scenario (:func:`_measured`); otherwise unchanged (every estimate compensated always, the
+    paper: with one fault nothing can leak into its compensation, and a gate would only delay it)."""
     if scenario is None or not scenario.faults or design.accommodation is not None or not needs_gate(design):
         return design
     try:
-        return accommodated(design, plant, scenario, paths=paths, seed=seed, false_alarm_rate=false_alarm_rate,
-                            dt=dt, threads=threads, release=1.0, rule="explain")  # fmt: skip
+        gated = accommodated(design, plant, scenario, paths=paths, seed=seed, false_alarm_rate=false_alarm_rate,
+                             dt=dt, threads=threads, release=1.0, rule="explain")  # fmt: skip
     except (SimulationError, ParameterError) as exc:  # the design stands; its gate could not be calibrated
         why = " ".join(str(exc).split())
         note = (f"warning: every fault estimate is compensated always (no gate): its thresholds could not be calibrated "
                 f"on the scenario's fault-free paths ({why})")  # fmt: skip
         return dataclasses.replace(design, status=[*design.status, note])
+    return _measured(design, gated, plant, scenario, paths=paths, seed=seed, dt=dt, threads=threads)
+
+
+def _measured(
+    design: Design, gated: Design, plant, scenario, *, paths: int, seed: int, dt, threads
+) -> Design:
+    """The gate, or none, as they measure on ``paths`` paths of the scenario drawn with ``seed +``
+    :data:`SELECTION_SEED` (not those ``fte simulate`` draws by default, nor the calibration's):
+    every estimate compensated always is kept where no window's FTC true ratio and none of its outputs' is above
+    1 on these paths (the figure itself, not its interval: the choice errs towards the gate) and its windows'
+    ratios, worst first, are smaller than the gate's; the gate otherwise. Where a run fails, the other is kept."""
+    from ..verdicts import WORSE_THAN_NONE
+    from ._engine import simulate
+
+    got, seed = {}, seed + SELECTION_SEED
+    for tag, d in (("gate", gated), ("always", design)):
+        try:
+            res = simulate(d, plant, scenario, paths=paths, seed=seed, dt=dt, threads=threads, progress=False,
+                           detect=False)  # fmt: skip
+        except (SimulationError, ParameterError) as exc:
+            got[tag] = " ".join(str(exc).split())
+            continue
+        wins = res.metrics.get("windows") or []
+        names = list(design.names.get("outputs") or [])
+        worse = [f"{_where(w)}: {r:.4g}" for w in wins for r in [w.get("ftc_true_ratio")]
+                 if r is not None and r > WORSE_THAN_NONE]  # fmt: skip
+        worse += [f"{_where(w)} on {names[k] if k < len(names) else f'output {k}'}: {r:.4g}" for w in wins
+                  for k, r in enumerate(w.get("ftc_true_ratio_per_output") or [])
+                  if r is not None and r > WORSE_THAN_NONE]  # fmt: skip
+        ratios = [w.get("ftc_true_ratio") for w in wins]
+        got[tag] = (worse, sorted((r for r in ratios if r is not None), reverse=True), ratios)
+    where = f"measured on {paths} paths (seed {seed}) of scenario {scenario.name!r}"
+
+    def fmt(ratios) -> str:
+        return ", ".join("n/a" if r is None else f"{r:.3g}" for r in ratios)
+
+    always, gate = got["always"], got["gate"]
+    if isinstance(always, str):
+        note = f"the gate is kept: without it the run fails ({where}: {always})"
+        return dataclasses.replace(gated, status=[*gated.status, note])
+    if not always[0] and (isinstance(gate, str) or always[1] < gate[1]):
+        against = (
+            f"the run with the gate fails ({gate})"
+            if isinstance(gate, str)
+            else f"{fmt(gate[2])} with the gate"
+        )
+        note = (f"no gate: compensating every fault estimate always measures better ({where}): FTC true ratios per "
+                f"window {fmt(always[2])}, no window or output worse than none, against {against}")  # fmt: skip
+        return dataclasses.replace(design, status=[*design.status, note])
+    why = (f"without it tolerant control is worse than none ({'; '.join(always[0])})" if always[0] else
+           f"without it the windows' FTC true ratios are {fmt(always[2])}, with it {fmt(gate[2])}")  # fmt: skip
+    note = f"the gate is kept ({where}): {why}"
+    return dataclasses.replace(gated, status=[*gated.status, note])

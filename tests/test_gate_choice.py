@@ -1,0 +1,136 @@
+"""The gate `fte design` writes, or none, as they measure (fte_casadi.sim._accommodate._measured): compensating
+every fault estimate always is kept only where it leaves no window and no output above 1 on the measured paths
+and its windows' FTC true ratios, worst first, are smaller than the gate's."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from fte_casadi.design import Design
+from fte_casadi.errors import SimulationError
+from fte_casadi.plants import load_scenario
+from fte_casadi.sim import _accommodate, _engine
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _window(fault, a, b, ratio, per_output):
+    return {
+        "fault": fault,
+        "start": a,
+        "stop": b,
+        "ftc_true_ratio": ratio,
+        "ftc_true_ratio_per_output": per_output,
+    }
+
+
+@pytest.fixture()
+def pair():
+    d = Design.load(ROOT / "generated" / "manipulator" / "design.json")
+    plain = dataclasses.replace(d, accommodation=None, status=[])
+    return plain, d
+
+
+def _runs(monkeypatch, gate, always, seen):
+    """simulate() answering the gate's metrics (or raising) for the design with a gate, the other for the one
+    without; the seeds asked are collected in ``seen``."""
+
+    def fake(design, plant, scenario, *, paths, seed, **kw):
+        seen.append((paths, seed, kw.get("detect")))
+        out = gate if design.accommodation is not None else always
+        if isinstance(out, Exception):
+            raise out
+        return SimpleNamespace(metrics={"windows": out})
+
+    monkeypatch.setattr(_engine, "simulate", fake)
+
+
+@pytest.mark.parametrize(
+    "gate, always, kept, said",
+    [
+        # always compensating is better in every window and no output above 1: no gate
+        (
+            [_window("fa", 2, 4, 1.0, [1.0, 1.0]), _window("fs", 6, 8, 1.0, [1.0, 1.0])],
+            [_window("fa", 2, 4, 0.51, [0.45, 0.72]), _window("fs", 6, 8, 0.19, [0.19, 0.19])],
+            False,
+            "no gate: compensating every fault estimate always measures better",
+        ),
+        # better in both windows, but one output above 1 (the manipulator's theta_m, 1.117): the gate
+        (
+            [_window("fa", 2.5, 5, 0.106, [0.07, 0.18]), _window("fs", 7, 10, 0.782, [0.71, 0.8])],
+            [_window("fa", 2.5, 5, 0.098, [0.06, 0.16]), _window("fs", 7, 10, 0.675, [1.117, 0.47])],
+            True,
+            "the window of fs [7, 10) on theta_m: 1.117",
+        ),
+        # harmless but not better where it matters most (worst window first): the gate
+        (
+            [_window("fa", 2, 4, 0.3, [0.3, 0.3]), _window("fs", 6, 8, 0.9, [0.9, 0.9])],
+            [_window("fa", 2, 4, 0.1, [0.1, 0.1]), _window("fs", 6, 8, 0.95, [0.95, 0.95])],
+            True,
+            "the windows' FTC true ratios are 0.1, 0.95, with it 0.3, 0.9",
+        ),
+        # without the gate the run diverges: the gate
+        (
+            [_window("fa", 2, 4, 0.3, [0.3, 0.3])],
+            SimulationError("path 3 diverged"),
+            True,
+            "without it the run fails",
+        ),
+        # with the gate the run diverges, without it all is well: no gate
+        (
+            SimulationError("path 1 diverged"),
+            [_window("fa", 2, 4, 0.3, [0.3, 0.3])],
+            False,
+            "the run with the gate fails (path 1 diverged)",
+        ),
+    ],
+)
+def test_measured_choice(monkeypatch, pair, gate, always, kept, said):
+    plain, gated = pair
+    seen = []
+    _runs(monkeypatch, gate, always, seen)
+    got = _accommodate._measured(plain, gated, None, load_scenario("manipulator"), paths=5, seed=0, dt=None,
+                                 threads=None)  # fmt: skip
+    assert (got.accommodation is not None) == kept
+    assert got.accommodation == (gated.accommodation if kept else None)
+    assert said in got.status[-1], got.status[-1]
+    # both measured on the same paths, apart from a run's default ones (seed 0), without detection
+    assert seen == [(5, _accommodate.SELECTION_SEED, False)] * 2
+
+
+@pytest.mark.slow
+def test_vehicle_in_its_region_runs_without_the_gate(tmp_path):
+    """tests/plant_vehicle.py:vehicle_near at the defaults: certified; with the gate tolerant control applied
+    nothing in either window (ratios 1 and 1, its faults never above the thresholds in the estimates' noise),
+    always compensating measures 0.51 and 0.19, so the design drops the gate; `fte simulate` (8 paths, seed 1)
+    then meets #38's figures: the actuator window at most 0.6, no window and no output above 1, three observer
+    time constants within the shortest window, no input at a limit, no measurement the C would refuse."""
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+    from fte_casadi.plants import load_plant
+    from fte_casadi.sim import simulate
+
+    spec = f"{ROOT / 'tests' / 'plant_vehicle.py'}:vehicle_near"
+    out = tmp_path / "vehicle.json"
+    r = CliRunner().invoke(main, ["design", spec, "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    d = Design.load(out)
+    assert d.certified and d.accommodation is None
+    assert any(
+        s.startswith("no gate: compensating every fault estimate always measures better") for s in d.status
+    )
+    res = simulate(d, load_plant(spec), load_scenario(spec), paths=8, seed=1, progress=False)
+    m = res.metrics
+    wins = {w["fault"]: w for w in m["windows"]}
+    assert wins["fa"]["ftc_true_ratio"] <= 0.6
+    for w in m["windows"]:
+        assert w["ftc_true_ratio"] <= 1.0 and max(w["ftc_true_ratio_per_output"]) <= 1.0, w
+        assert 3 * m["observer_time_constant"] <= w["stop"] - w["start"]
+    assert (
+        max(m["input_saturation"]) == 0.0 and m["outside_c_range_paths"] == 0.0 and m["outside_region"] == 0.0
+    )
