@@ -8,6 +8,8 @@ without importing the simulator. Every verdict is judged on the figures measured
 
 from __future__ import annotations
 
+from ._text import ratio
+
 __all__ = [
     "WORSE_THAN_NONE",
     "FALSE_ALARM",
@@ -93,7 +95,10 @@ def judged_ftc_ratio(w: dict) -> float | None:
 
 
 def _iv(interval) -> str:
-    return "" if interval is None else f", 95 % interval {interval[0]:.4g}-{interval[1]:.4g} over the paths"
+    """An FTC ratio's interval, its ends told from 1 (:func:`fte_casadi._text.ratio`)."""
+    if interval is None:
+        return ""
+    return f", 95 % interval {ratio(interval[0], 4)}-{ratio(interval[1], 4)} over the paths"
 
 
 def _rate_verdicts(m: dict, add) -> None:
@@ -180,10 +185,12 @@ def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
     if _above(r, w.get("ftc_true_ratio_interval"), WORSE_THAN_NONE):
         per = w.get("ftc_true_ratio_per_output") or []
         worst = ", ".join(
-            f"{outputs[k] if k < len(outputs) else k}: {v:.4g}" for k, v in enumerate(per) if v is not None
+            f"{outputs[k] if k < len(outputs) else k}: {ratio(v, 4)}"
+            for k, v in enumerate(per)
+            if v is not None
         )
         add("worse than none", where, r,
-            f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {r:.4g} > "
+            f"in {where} tolerant control makes the TRUE outputs worse than none (ftc_true_ratio {ratio(r, 4)} > "
             f"{WORSE_THAN_NONE:g}{_iv(w.get('ftc_true_ratio_interval'))}; per output {worst})"
             f"{_cause(w, faults)}")  # fmt: skip
     elif r is not None:
@@ -198,9 +205,9 @@ def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
                     size = (f": RMS deviation from the fault-free run {rms['ftc'][k]:.3g}{unit} with it against "
                             f"{rms['no_ftc'][k]:.3g}{unit} without")  # fmt: skip
                 add("worse than none on an output", f"{where}, {name}", v,
-                    f"in {where} tolerant control makes the true output {name} worse than none (ratio {v:.4g} > "
+                    f"in {where} tolerant control makes the true output {name} worse than none (ratio {ratio(v, 4)} > "
                     f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
-                    f"whole are not worse (ftc_true_ratio {r:.3g}){_cause(w, faults)}")  # fmt: skip
+                    f"whole are not worse (ftc_true_ratio {ratio(r)}){_cause(w, faults)}")  # fmt: skip
 
 
 def _window_verdicts(m: dict, w: dict, add, inputs) -> None:

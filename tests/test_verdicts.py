@@ -221,3 +221,14 @@ def test_a_window_tolerant_control_left_alone_is_blamed_on_what_it_carried_in(ap
     assert carried == (applied == 0.0)
     assert ("1.16e-05" in v["text"] and "3.32e-05" in v["text"]) == carried
     assert ("cross-talk" in v["text"]) == (not carried)
+
+
+def test_a_ratio_just_above_1_is_printed_above_1():
+    """A window worse than none by 1.2e-7 (the levitation's sensor window: the runs' paths are shared, so the
+    interval is that narrow) says by how much, never "ftc_true_ratio 1 > 1"."""
+    w = {"fault": "fs", "start": 1.75, "stop": 2.25, "ftc_true_ratio": 1.0000001164,
+         "ftc_true_ratio_interval": [1.0000000701, 1.000000159], "ftc_true_ratio_per_output": [1.0000001, 0.99997]}  # fmt: skip
+    (v,) = [v for v in verdicts.verdicts({"windows": [w]}, ["u"], ["fa", "fs"], ["y1", "y2"])
+            if v["verdict"] == "worse than none"]  # fmt: skip
+    assert "ftc_true_ratio 1.00000012 > 1, 95 % interval 1.00000007-1.00000016" in v["text"], v["text"]
+    assert "y1: 1.0000001, y2: 0.99997" in v["text"]

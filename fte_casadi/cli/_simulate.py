@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from .._text import ratio
 from ..errors import ParameterError
 from ._common import _check_paths, _check_seed, _guard, _outputs, _positive, _writable_target
 from ._targets import _allow_option, _design_or_plant, _need_plant, _plant_option
@@ -27,6 +28,16 @@ _fast_math_option = click.option("--fast-math", "fast_math", is_flag=True,
 
 def _fmt_list(v) -> str:
     return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
+
+
+def _ratios(v) -> str:
+    """FTC ratios, each told from 1 (:func:`fte_casadi._text.ratio`)."""
+    return "[" + ", ".join(ratio(x) for x in v) + "]"
+
+
+def _rival(iv) -> str:
+    """An FTC ratio's 95 % interval, its ends told from 1, or nothing."""
+    return "" if not iv else f" [{ratio(iv[0])}, {ratio(iv[1])}]"
 
 
 def _noise_option(noise: str | None) -> list[float] | None:
@@ -98,8 +109,8 @@ def _summary(plant: str, m: dict) -> str:
         f"{_fmt_list(m.get('false_alarm_peak_raw') or [])}: in the start-up "
         f"{_fmt_list(m.get('false_alarm_peak_startup') or [])}, after a window "
         f"{_fmt_list(m.get('false_alarm_peak_after_window') or [])}",
-        f"  tolerant control, true outputs C x (ftc_true_ratio, < 1: better than none): {_num(m['ftc_true_ratio'])}"
-        f"{_ival(m.get('ftc_true_ratio_interval'))}; compensated reading yc (ftc_compensated_ratio, estimation only): "
+        f"  tolerant control, true outputs C x (ftc_true_ratio, < 1: better than none): {ratio(m['ftc_true_ratio'])}"
+        f"{_rival(m.get('ftc_true_ratio_interval'))}; compensated reading yc (ftc_compensated_ratio, estimation only): "
         f"{_num(m['ftc_compensated_ratio'])}",
     ]
     for e in m.get("detection") or []:
@@ -163,8 +174,8 @@ def _window_lines(m: dict) -> list[str]:
             f"  window {w['fault']} [{w['start']:g}, {w['stop']:g}): fault error (relative RMS, whole window) "
             f"{_num(w['fault_rel_rms_error'])}{_ival(w.get('fault_rel_rms_error_interval'))}, settled part "
             f"{_num(w.get('fault_rel_rms_error_settled'))}, settling time {_num(w.get('settling_time'))}; FTC true ratio "
-            f"{_num(w.get('ftc_true_ratio'))}{_ival(w.get('ftc_true_ratio_interval'))} (per output "
-            f"{_fmt_list(w.get('ftc_true_ratio_per_output') or [])}), compensated {_num(w.get('ftc_compensated_ratio'))}"
+            f"{ratio(w.get('ftc_true_ratio'))}{_rival(w.get('ftc_true_ratio_interval'))} (per output "
+            f"{_ratios(w.get('ftc_true_ratio_per_output') or [])}), compensated {_num(w.get('ftc_compensated_ratio'))}"
             + detected
         )
     return out
