@@ -159,6 +159,13 @@ def test_ftc_rule_judges_ties_as_the_verdicts_do():
     assert choose([worse, idle], [0, 1], names, "ftc")[0] == 1
     better = rec(2, 0.3, [(0.6, [0.5, 0.7]), (0.99, [0.98, 0.995])])
     assert choose([base, idle, better], [0, 1, 2], names, "ftc")[0] == 2
+    # the levitation's tune (maglev_near, 30 trials): the default worse than none by 1.2e-7 in the sensor window
+    # (its interval above 1: the runs share their paths), trial 13's tolerant control doing next to nothing; to
+    # the resolution of 0.001 both tie there, and the default's 0.709 decides
+    lev = rec(0, 0.24, [(0.7092, [0.698, 0.7235]), (1.0000001164, [1.0000000701, 1.000000159])])
+    nothing = rec(13, 0.43, [(0.99996709, [0.99996015, 0.9999747]), (0.99995242, [0.9999524, 0.99999984])])
+    assert _admissible(lev.metrics) == (True, True)
+    assert choose([lev, nothing], [0, 1], names, "ftc")[0] == 0
 
 
 def test_cli_json_files_and_tuned_design_simulates(tmp_path):

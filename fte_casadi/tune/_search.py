@@ -22,7 +22,7 @@ Objectives (all minimised; those the base design leaves undefined are dropped):
 The chosen design (:func:`choose`) is a member of the front: among the front members that are
 certified (every completed trial is) and make tolerant control no worse than none in any window
 (FTC ratio <= 1, a ratio above 1 whose interval over the paths holds 1 counting as a tie, as the
-verdicts judge it) and keep every false-alarm ratio below 1 — or, when none does, those with no
+verdicts judge it, each to :data:`FTC_RESOLUTION`) and keep every false-alarm ratio below 1 — or, when none does, those with no
 window worse than none, or else all of them — the one with the smallest score of the rule:
 
 - ``balanced`` (default): among the members whose input peak stays within :data:`INPUT_PEAK_ALLOWANCE`
@@ -78,6 +78,10 @@ FLOORS = {
     "input_saturation": 1e-2,
     "bound": 1e-12,
 }
+#: the resolution of the FTC ratios the choice compares (tiers and the ``ftc`` rule): the levitation's default
+#: design tied in its sensor window to 1.2e-7 (interval above 1: the runs share their paths), and a design whose
+#: tolerant control did next to nothing (0.99997 and 0.99995) was chosen over its 0.709 in the actuator window
+FTC_RESOLUTION = 1e-3
 #: the objectives of the balanced rule's score (the issue's table: errors, false alarms, FTC ratio per window)
 FAULT_KINDS = ("fault_error", "false_alarm", "ftc")
 #: the balanced rule takes designs whose input peak is at most this multiple of the base design's
@@ -210,15 +214,18 @@ def _within_inputs(values: tuple, base: tuple, names: tuple) -> bool:
 
 def _admissible(m: dict) -> tuple[bool, bool]:
     """(no window's tolerant control worse than none, every false-alarm ratio < 1): the thresholds and the rule of
-    :mod:`fte_casadi.verdicts` (a ratio above 1 whose interval over the paths holds 1 is a tie, not worse)."""
+    :mod:`fte_casadi.verdicts` (a ratio above 1 whose interval over the paths holds 1 is a tie, not worse), the
+    ratios to :data:`FTC_RESOLUTION`."""
     ftc = all(v <= WORSE_THAN_NONE for v in _judged(m))
     fa = all(v < FALSE_ALARM for v in m.get("false_alarm_peak") or [] if v is not None)
     return ftc, fa
 
 
 def _judged(m: dict) -> list[float]:
-    """Every window's FTC ratio as the verdicts judge it (:func:`fte_casadi.verdicts.judged_ftc_ratio`)."""
-    return [v for v in (judged_ftc_ratio(w) for w in m.get("windows") or []) if v is not None]
+    """Every window's FTC ratio as the verdicts judge it (:func:`fte_casadi.verdicts.judged_ftc_ratio`), rounded to
+    :data:`FTC_RESOLUTION`: a design is not chosen, nor left out, for less."""
+    return [round(v / FTC_RESOLUTION) * FTC_RESOLUTION for v in (judged_ftc_ratio(w) for w in m.get("windows") or [])
+            if v is not None]  # fmt: skip
 
 
 def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> tuple[int, str]:
