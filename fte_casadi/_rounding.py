@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["nice_floor", "nice_ceil", "series_floor"]
+__all__ = ["nice_floor", "nice_ceil", "series_floor", "ratio_text"]
 
 #: relative slack that keeps a value computed as 0.19999999999999998 at 0.2
 _SLACK = 1e-12
@@ -47,3 +47,18 @@ def series_floor(v: float) -> float:
         if c <= v * (1 + _SLACK):
             return c
     return float(f"5e{e - 1}")
+
+
+def ratio_text(value: float | None, digits: int = 3) -> str:
+    """A ratio against 1 (an FTC ratio) with ``digits`` significant digits, or as many more as tell it from 1: a
+    ratio above 1 is never printed as 1 ("n/a" for None).
+
+    >>> ratio_text(0.71234), ratio_text(1.0000001164), ratio_text(0.99997), ratio_text(1.0), ratio_text(None)
+    ('0.712', '1.00000012', '0.99997', '1', 'n/a')
+    """
+    if value is None:
+        return "n/a"
+    d = abs(float(value) - 1.0)
+    if 0.0 < d < 10.0 ** (1 - digits):
+        digits = min(17, int(math.ceil(-math.log10(d))) + 2)
+    return f"{float(value):.{digits}g}"

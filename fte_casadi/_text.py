@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import math
-
-__all__ = ["shorten", "ratio"]
+__all__ = ["shorten"]
 
 #: what marks a shortened text
 ELLIPSIS = " ..."
@@ -32,18 +30,3 @@ def shorten(text: object, limit: int) -> str:
     if not cut:  # no word boundary before the limit (or only punctuation before it): cut inside the word
         return s[: max(limit - 3, 0)].rstrip() + "..."
     return cut + ELLIPSIS
-
-
-def ratio(value: float | None, digits: int = 3) -> str:
-    """A ratio against 1 (an FTC ratio) with ``digits`` significant digits, or as many more as tell it from 1: a
-    ratio above 1 is never printed as 1 ("n/a" for None).
-
-    >>> ratio(0.71234), ratio(1.0000001164), ratio(0.99997), ratio(1.0), ratio(None)
-    ('0.712', '1.00000012', '0.99997', '1', 'n/a')
-    """
-    if value is None:
-        return "n/a"
-    d = abs(float(value) - 1.0)
-    if 0.0 < d < 10.0 ** (1 - digits):
-        digits = min(17, int(math.ceil(-math.log10(d))) + 2)
-    return f"{float(value):.{digits}g}"

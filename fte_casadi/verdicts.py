@@ -8,7 +8,7 @@ without importing the simulator. Every verdict is judged on the figures measured
 
 from __future__ import annotations
 
-from ._text import ratio
+from ._rounding import ratio_text as ratio
 
 __all__ = [
     "WORSE_THAN_NONE",
@@ -95,7 +95,7 @@ def judged_ftc_ratio(w: dict) -> float | None:
 
 
 def _iv(interval) -> str:
-    """An FTC ratio's interval, its ends told from 1 (:func:`fte_casadi._text.ratio`)."""
+    """An FTC ratio's interval, its ends told from 1 (:func:`fte_casadi._rounding.ratio_text`)."""
     if interval is None:
         return ""
     return f", 95 % interval {ratio(interval[0], 4)}-{ratio(interval[1], 4)} over the paths"

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from .._text import ratio
+from .._rounding import ratio_text as ratio
 from ..errors import ParameterError
 from ._common import _check_paths, _check_seed, _guard, _outputs, _positive, _writable_target
 from ._targets import _allow_option, _design_or_plant, _need_plant, _plant_option
@@ -31,7 +31,7 @@ def _fmt_list(v) -> str:
 
 
 def _ratios(v) -> str:
-    """FTC ratios, each told from 1 (:func:`fte_casadi._text.ratio`)."""
+    """FTC ratios, each told from 1 (:func:`fte_casadi._rounding.ratio_text`)."""
     return "[" + ", ".join(ratio(x) for x in v) + "]"
 
 
