@@ -20,6 +20,7 @@ __all__ = [
     "SATURATES_EARLY",
     "verdicts",
     "judged_ftc_ratio",
+    "window_label",
 ]
 
 #: a window's ``ftc_true_ratio`` above this: tolerant control leaves the TRUE outputs worse than none
@@ -40,7 +41,8 @@ SLOW_OBSERVER = 3.0
 SATURATES_EARLY = 0.01
 
 
-def _where(w: dict) -> str:
+def window_label(w: dict) -> str:
+    """A window of the metrics document in words: ``the window of fs [7, 10)``."""
     return f"the window of {w['fault']} [{w['start']:g}, {w['stop']:g})"
 
 
@@ -180,7 +182,7 @@ def _c_range_verdict(m: dict, add, outputs) -> None:
 
 def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
     """Window ``w``'s tolerant control worse than none: on the true outputs as a whole, else on one of them."""
-    where = _where(w)
+    where = window_label(w)
     r = w.get("ftc_true_ratio")
     if _above(r, w.get("ftc_true_ratio_interval"), WORSE_THAN_NONE):
         per = w.get("ftc_true_ratio_per_output") or []
@@ -213,7 +215,7 @@ def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
 def _window_verdicts(m: dict, w: dict, add, inputs) -> None:
     """Window ``w``'s estimate (poor, too slow an observer, not settled), detection (missed, a standing alarm)
     and inputs (saturated)."""
-    where = _where(w)
+    where = window_label(w)
     err, err_iv = w.get("fault_rel_rms_error"), w.get("fault_rel_rms_error_interval")
     if err is not None and err >= POOR_ESTIMATE and (err_iv is None or err_iv[0] >= POOR_ESTIMATE):
         add("poor estimate", where, err,

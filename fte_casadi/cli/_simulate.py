@@ -26,18 +26,13 @@ _fast_math_option = click.option("--fast-math", "fast_math", is_flag=True,
                    "the tolerance of docs/simulation.md; the same numbers for any split of the paths).")  # fmt: skip
 
 
-def _fmt_list(v) -> str:
-    return "[" + ", ".join("n/a" if x is None else f"{x:.3g}" for x in v) + "]"
+def _g3(x) -> str:
+    return "n/a" if x is None else f"{x:.3g}"
 
 
-def _ratios(v) -> str:
-    """FTC ratios, each told from 1 (:func:`fte_casadi._rounding.ratio_text`)."""
-    return "[" + ", ".join(ratio(x) for x in v) + "]"
-
-
-def _rival(iv) -> str:
-    """An FTC ratio's 95 % interval, its ends told from 1, or nothing."""
-    return "" if not iv else f" [{ratio(iv[0])}, {ratio(iv[1])}]"
+def _fmt_list(v, fmt=_g3) -> str:
+    """Numbers in brackets, each by ``fmt`` (FTC ratios: :func:`fte_casadi._rounding.ratio_text`)."""
+    return "[" + ", ".join(fmt(x) for x in v) + "]"
 
 
 def _noise_option(noise: str | None) -> list[float] | None:
@@ -110,7 +105,7 @@ def _summary(plant: str, m: dict) -> str:
         f"{_fmt_list(m.get('false_alarm_peak_startup') or [])}, after a window "
         f"{_fmt_list(m.get('false_alarm_peak_after_window') or [])}",
         f"  tolerant control, true outputs C x (ftc_true_ratio, < 1: better than none): {ratio(m['ftc_true_ratio'])}"
-        f"{_rival(m.get('ftc_true_ratio_interval'))}; compensated reading yc (ftc_compensated_ratio, estimation only): "
+        f"{_ival(m.get('ftc_true_ratio_interval'), fmt=ratio)}; compensated reading yc (ftc_compensated_ratio, estimation only): "
         f"{_num(m['ftc_compensated_ratio'])}",
     ]
     for e in m.get("detection") or []:
@@ -151,9 +146,9 @@ def _num(v, fmt: str = ".3g") -> str:
     return "n/a" if v is None else format(v, fmt)
 
 
-def _ival(iv, lead: str = " ") -> str:
-    """A 95 % interval over the paths, ``[lo, hi]``, or nothing."""
-    return "" if not iv else f"{lead}[{iv[0]:.3g}, {iv[1]:.3g}]"
+def _ival(iv, lead: str = " ", fmt=_g3) -> str:
+    """A 95 % interval over the paths, ``[lo, hi]`` (each end by ``fmt``), or nothing."""
+    return "" if not iv else f"{lead}[{fmt(iv[0])}, {fmt(iv[1])}]"
 
 
 def _window_lines(m: dict) -> list[str]:
@@ -174,8 +169,8 @@ def _window_lines(m: dict) -> list[str]:
             f"  window {w['fault']} [{w['start']:g}, {w['stop']:g}): fault error (relative RMS, whole window) "
             f"{_num(w['fault_rel_rms_error'])}{_ival(w.get('fault_rel_rms_error_interval'))}, settled part "
             f"{_num(w.get('fault_rel_rms_error_settled'))}, settling time {_num(w.get('settling_time'))}; FTC true ratio "
-            f"{ratio(w.get('ftc_true_ratio'))}{_rival(w.get('ftc_true_ratio_interval'))} (per output "
-            f"{_ratios(w.get('ftc_true_ratio_per_output') or [])}), compensated {_num(w.get('ftc_compensated_ratio'))}"
+            f"{ratio(w.get('ftc_true_ratio'))}{_ival(w.get('ftc_true_ratio_interval'), fmt=ratio)} (per output "
+            f"{_fmt_list(w.get('ftc_true_ratio_per_output') or [], ratio)}), compensated {_num(w.get('ftc_compensated_ratio'))}"
             + detected
         )
     return out

@@ -103,10 +103,6 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
     return dataclasses.replace(design, accommodation=acc, status=[*design.status, note])
 
 
-def _where(w: dict) -> str:
-    return f"the window of {w.get('fault')} [{w.get('start'):g}, {w.get('stop'):g})"
-
-
 def _crosstalk(design: Design):
     from ..design import crosstalk
 
@@ -169,6 +165,7 @@ def _measured(
     1 on these paths (the figure itself, not its interval: the choice errs towards the gate) and its windows'
     ratios, worst first, are smaller than the gate's; the gate otherwise. Where a run fails, the other is kept."""
     from ..verdicts import WORSE_THAN_NONE
+    from ..verdicts import window_label as _where
     from ._engine import simulate
 
     got, seed = {}, seed + SELECTION_SEED
@@ -186,27 +183,29 @@ def _measured(
         worse += [f"{_where(w)} on {names[k] if k < len(names) else f'output {k}'}: {r:.4g}" for w in wins
                   for k, r in enumerate(w.get("ftc_true_ratio_per_output") or [])
                   if r is not None and r > WORSE_THAN_NONE]  # fmt: skip
-        ratios = [w.get("ftc_true_ratio") for w in wins]
-        got[tag] = (worse, sorted((r for r in ratios if r is not None), reverse=True), ratios)
+        got[tag] = (worse, [w.get("ftc_true_ratio") for w in wins])
     where = f"measured on {paths} paths (seed {seed}) of scenario {scenario.name!r}"
 
     def fmt(ratios) -> str:
         return ", ".join("n/a" if r is None else f"{r:.3g}" for r in ratios)
 
+    def worst_first(ratios) -> list:
+        return sorted((r for r in ratios if r is not None), reverse=True)
+
     always, gate = got["always"], got["gate"]
     if isinstance(always, str):
         note = f"the gate is kept: without it the run fails ({where}: {always})"
         return dataclasses.replace(gated, status=[*gated.status, note])
-    if not always[0] and (isinstance(gate, str) or always[1] < gate[1]):
+    if not always[0] and (isinstance(gate, str) or worst_first(always[1]) < worst_first(gate[1])):
         against = (
             f"the run with the gate fails ({gate})"
             if isinstance(gate, str)
-            else f"{fmt(gate[2])} with the gate"
+            else f"{fmt(gate[1])} with the gate"
         )
         note = (f"no gate: compensating every fault estimate always measures better ({where}): FTC true ratios per "
-                f"window {fmt(always[2])}, no window or output worse than none, against {against}")  # fmt: skip
+                f"window {fmt(always[1])}, no window or output worse than none, against {against}")  # fmt: skip
         return dataclasses.replace(design, status=[*design.status, note])
     why = (f"without it tolerant control is worse than none ({'; '.join(always[0])})" if always[0] else
-           f"without it the windows' FTC true ratios are {fmt(always[2])}, with it {fmt(gate[2])}")  # fmt: skip
+           f"without it the windows' FTC true ratios are {fmt(always[1])}, with it {fmt(gate[1])}")  # fmt: skip
     note = f"the gate is kept ({where}): {why}"
     return dataclasses.replace(gated, status=[*gated.status, note])
