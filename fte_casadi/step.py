@@ -130,7 +130,7 @@ def saturate(u: ca.SX, limits) -> ca.SX:
 
 
 def accommodation_gate(
-    fhat: ca.SX, acc: dict, latch: ca.SX | None = None, memory: ca.SX | None = None, numbers=None
+    fhat: ca.SX, acc: dict, latch: ca.SX | None = None, memory: ca.SX | None = None, numbers=None, held=None
 ) -> ca.SX:
     """Per fault, 1 while its estimate is compensated in ``u``, else 0.
 
@@ -143,12 +143,14 @@ def accommodation_gate(
     unless another fault q switches on with ``r_q > r_j`` (isolation while latched: at most one fault is
     compensated, ties aside). With ``rho = 1`` this is the memoryless gate exactly: a latched fault with
     ``r_j >= 1`` and no larger ratio switches on anyway, and a larger ratio >= 1 means the largest one
-    switches on. ``numbers``: where the gate's numbers come from (:func:`step_function`)."""
+    switches on. ``numbers``: where the gate's numbers come from (:func:`step_function`); ``held``: per fault
+    the largest ``|fhat_q|`` held so far, decaying (the memories after this sample's update), for rule
+    ``"explain"`` with ``crosstalk_held``."""
     numbers = _Folded() if numbers is None else numbers
     thr = [numbers.scalar(f"threshold_{j}", v) for j, v in enumerate(acc["thresholds"])]
     lf = len(thr)
     if acc.get("rule") == "explain":
-        return _explained_gate(fhat, acc, thr, latch, memory, numbers)
+        return _explained_gate(fhat, acc, thr, latch, memory, numbers, held)
     rr = [ca.fabs(fhat[j]) / thr[j] for j in range(lf)]
     on = []
     for j in range(lf):
@@ -171,7 +173,13 @@ def accommodation_gate(
 
 
 def _explained_gate(
-    fhat: ca.SX, acc: dict, thr: list, latch: ca.SX | None, memory: ca.SX | None = None, numbers=None
+    fhat: ca.SX,
+    acc: dict,
+    thr: list,
+    latch: ca.SX | None,
+    memory: ca.SX | None = None,
+    numbers=None,
+    held=None,
 ) -> ca.SX:
     """The gate of rule ``"explain"`` (:mod:`fte_casadi.design._isolation`): fault j is compensated while
     ``r_j = |fhat_j| / (threshold_j + sum_q crosstalk[j][q] |fhat_q| + overshoot_j m_j) >= 1``, i.e. detected and
@@ -179,8 +187,13 @@ def _explained_gate(
     held extreme of the other sign than ``fhat_j``'s; the estimate of a fault that has just ended swings past
     zero by up to ``overshoot_j`` of it); with a release ratio ``rho < 1`` and ``latch``, it stays on while
     ``r_j >= rho``. A fault that no other fault's estimate explains (its row of ``crosstalk`` zero: a plant with
-    one fault) is compensated always, as in the paper: a gate would only delay it."""
+    one fault) is compensated always, as in the paper: a gate would only delay it. With ``crosstalk_held`` in
+    ``acc`` (and ``held``), each other fault's term is the smaller of ``crosstalk[j][q] |fhat_q|`` and
+    ``crosstalk_held[j][q] M_q``, ``M_q`` its held estimate (:func:`fte_casadi.design._isolation.crosstalk_held`):
+    both bound the cross-talk of a step of fault q, so their smaller does too."""
     ct = np.asarray(acc["crosstalk"], dtype=float)
+    ch = acc.get("crosstalk_held") if held is not None else None
+    ch = None if ch is None else np.asarray(ch, dtype=float)
     lf = len(thr)
     ov = acc.get("overshoot")
     gates = []
@@ -191,7 +204,10 @@ def _explained_gate(
             continue
         b = thr[j]
         for q in sources:
-            b = b + numbers.scalar(f"crosstalk_{j}_{q}", ct[j, q]) * ca.fabs(fhat[q])
+            now = numbers.scalar(f"crosstalk_{j}_{q}", ct[j, q]) * ca.fabs(fhat[q])
+            if ch is not None:
+                now = ca.fmin(now, numbers.scalar(f"crosstalk_held_{j}_{q}", ch[j, q]) * held[q])
+            b = b + now
         if memory is not None and ov[j] > 0:  # its own swing past the other sign's recent extreme
             other = ca.if_else(fhat[j] >= 0, memory[lf + j], memory[j])
             b = b + numbers.scalar(f"overshoot_{j}", ov[j]) * other
@@ -275,10 +291,16 @@ def step_function(
     for j in range(r):
         uj = ca.mtimes(c.matrix(f"K_{j}", design.K[j]), xhat)
         u = u + h[j] * uj
+    hi = lo = held = None
+    if memory is not None:  # each estimate's largest and smallest, decaying with memory_time
+        k = c.scalar("memory_decay", np.exp(-float(sample_time) / float(design.accommodation["memory_time"])))
+        hi = [ca.fmax(ca.fmax(fhat[j], 0.0), k * memory[j]) for j in range(lf)]
+        lo = [ca.fmax(ca.fmax(-fhat[j], 0.0), k * memory[lf + j]) for j in range(lf)]
+        held = [ca.fmax(a, b) for a, b in zip(hi, lo)]
     gate = (
         None
         if design.accommodation is None
-        else accommodation_gate(fhat, design.accommodation, latch, memory, c)
+        else accommodation_gate(fhat, design.accommodation, latch, memory, c, held)
     )
     fcomp = fhat if gate is None else fhat * gate
     if tolerant and design.Kf_rules is not None:  # Kf(h) = sum_i h_i Kf_i where the rules' Kf_i differ
@@ -313,10 +335,7 @@ def step_function(
     z_next = z + c.scalar("sample_time", sample_time) * rhs
     if latched:  # the gates of this sample are the next sample's latches
         z_next = ca.vertcat(z_next, gate)
-    if memory is not None:  # each estimate's largest and smallest, decaying with memory_time
-        k = c.scalar("memory_decay", np.exp(-float(sample_time) / float(design.accommodation["memory_time"])))
-        hi = [ca.fmax(ca.fmax(fhat[j], 0.0), k * memory[j]) for j in range(lf)]
-        lo = [ca.fmax(ca.fmax(-fhat[j], 0.0), k * memory[lf + j]) for j in range(lf)]
+    if memory is not None:
         z_next = ca.vertcat(z_next, *hi, *lo)
     # with symbols for the design's numbers, they are the Function's free variables: the caller's Function has them
     # as an input (numbers.symbols)

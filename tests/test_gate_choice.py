@@ -137,3 +137,35 @@ def test_own_plants_run_without_the_gate_and_meet_the_figures(tmp_path, spec):
     assert (
         max(m["input_saturation"]) == 0.0 and m["outside_c_range_paths"] == 0.0 and m["outside_region"] == 0.0
     )
+
+
+@pytest.mark.slow
+def test_the_levitations_coil_fault_is_compensated_through_the_held_crosstalk(tmp_path):
+    """tests/plant_levitation.py:maglev_near at the defaults: the gap sensor's estimate starts the wrong way after a
+    step of its fault, so its cross-talk into the coil's estimate, against the sensor's estimate itself, is at the
+    cap (its ratio crosses infinity); against the held estimate it is below 1. With the gate reading the held
+    estimates, the coil's 20 % loss is compensated in time: its window measures at most 0.6 (8 paths, seed 1);
+    the same design's gate without the held term measured 0.715."""
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+    from fte_casadi.plants import load_plant
+    from fte_casadi.sim import simulate
+
+    spec = f"{ROOT / 'tests' / 'plant_levitation.py'}:maglev_near"
+    out = tmp_path / "design.json"
+    r = CliRunner().invoke(main, ["design", spec, "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    d = Design.load(out)
+    assert d.certified and d.accommodation is not None
+    (ct, ch) = (d.accommodation[k][0][1] for k in ("crosstalk", "crosstalk_held"))
+    assert ct > 100 and ch < 1, (ct, ch)
+    plant, sc = load_plant(spec), load_scenario(spec)
+    runs = {}
+    for tag, acc in (("held", d.accommodation), ("now", {k: v for k, v in d.accommodation.items()
+                                                         if k != "crosstalk_held"})):  # fmt: skip
+        m = simulate(dataclasses.replace(d, accommodation=acc), plant, sc, paths=8, seed=1, progress=False,
+                     detect=False).metrics  # fmt: skip
+        runs[tag] = {w["fault"]: w["ftc_true_ratio"] for w in m["windows"]}
+        assert 3 * m["observer_time_constant"] <= sc.shortest_window()
+    assert runs["held"]["fa"] <= 0.6 < runs["now"]["fa"], runs

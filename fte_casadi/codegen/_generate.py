@@ -413,6 +413,10 @@ def _gate_texts(design: Design, NAME: str) -> dict:
         ct = "; ".join(", ".join(f"{v:.4g}" for v in row) for row in acc["crosstalk"])
         rule = (f"fault j is compensated in u (the Kf fhat term) while |fhat_j| >= threshold_j + sum_q crosstalk[j][q] "
                 f"|fhat_q| (thresholds {thr}; crosstalk rows {ct}), a fault no other one cross-talks into always")  # fmt: skip
+        if design.remembers and "crosstalk_held" in acc:
+            ch = "; ".join(", ".join(f"{v:.4g}" for v in row) for row in acc["crosstalk_held"])
+            rule += (f"; each term the smaller of crosstalk[j][q] |fhat_q| and crosstalk_held[j][q] M_q, M_q the "
+                     f"largest |fhat_q| held, decaying as the memories (crosstalk_held rows {ch})")  # fmt: skip
         if design.remembers:
             ov = ", ".join(f"{v:.4g}" for v in acc["overshoot"])
             rule += (f", and more than its own overshoot explains: + overshoot_j m_j (overshoot {ov}), m_j the "

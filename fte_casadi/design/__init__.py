@@ -11,6 +11,7 @@ from ._augment import augment as augment
 from ._docchecks import param_problem as param_problem
 from ._identities import identity_failures as identity_failures
 from ._isolation import crosstalk as crosstalk
+from ._isolation import crosstalk_held as crosstalk_held
 from ._isolation import overshoot as overshoot
 from ._limits import explain_metrics as explain_metrics
 from ._matfile import is_fte_mat as is_fte_mat

@@ -129,3 +129,55 @@ def overshoot(R, T, n: int, lf: int) -> tuple[np.ndarray, float]:
                 ov[j], float(np.max(np.maximum(fh - 1.0, 0.0) * np.exp(times / tau))) * (1 + REFINE_MARGIN)
             )
     return ov, tau
+
+
+def crosstalk_held(R, T, n: int, lf: int, tau: float) -> np.ndarray:
+    """``kappa`` (lf x lf, zero diagonal) of the gate that weighs each other fault's *held* estimate: the smallest
+    ``k`` with ``|fhat_j(t)| <= k M_q(t)`` for fault q alone, ``M_q`` the largest ``|fhat_q|`` so far, decaying
+    by ``exp(-dt / tau)`` (what the step's memories hold, :func:`overshoot`'s ``tau``). Both of a step's edges:
+
+    - its start, ``fhat_q = own(t)``, ``M_q`` the decayed running largest of ``|own|``;
+    - its end (the fault held long enough for ``fhat_q = 1``): ``fhat_q = 1 - own(t)``, ``fhat_j`` the
+      start's negated, and ``M_q`` at least ``exp(-t / tau)``, the 1 held before the end.
+
+    :func:`crosstalk` divides by ``|fhat_q(t)|`` itself, which a non-minimum-phase estimate (one that starts the
+    wrong way) passes through zero while ``fhat_j`` is not: its ratio is unbounded there (capped at
+    :data:`KAPPA_CAP`), and the gate then blocks fault j while fault q's estimate is anything but tiny. The held
+    estimate does not pass through zero. Over the rules (each frozen); capped at :data:`KAPPA_CAP`."""
+    T = np.asarray(T, dtype=float)
+    kappa = np.zeros((lf, lf))
+    if lf < 2:
+        return kappa
+    for ts, steps, _ in _decaying(R):
+        ts = np.geomspace(ts[0], ts[-1], HELD_POINTS)
+        fade = np.exp(-np.diff(ts, prepend=0.0) / tau)
+        for q in range(lf):
+            e0 = T[:, n + lf + q]
+            D = steps.delta(e0, ts)
+            own = (1.0 - e0[n + lf + q]) - D[:, n + lf + q]
+            held_start = _held(np.abs(own), fade)
+            held_end = np.maximum(_held(np.abs(1.0 - own), fade), np.exp(-ts / tau))
+            for j in range(lf):
+                if j == q:
+                    continue
+                ct = np.abs(e0[n + lf + j] + D[:, n + lf + j])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    r = np.where(held_start > 0, ct / np.where(held_start > 0, held_start, 1.0),
+                                 np.where(ct > 0, np.inf, 0.0))  # fmt: skip
+                top = max(float(np.max(r)), float(np.max(ct / held_end)))
+                kappa[j, q] = max(kappa[j, q], min(top * (1 + REFINE_MARGIN), KAPPA_CAP))
+    return kappa
+
+
+#: points of :func:`crosstalk_held`'s logarithmic time grid (no refinement: its held denominators do not dip)
+HELD_POINTS = 4000
+
+
+def _held(x: np.ndarray, fade: np.ndarray) -> np.ndarray:
+    """The running largest of ``x``, each earlier value decayed by the product of ``fade`` since."""
+    out = np.empty_like(x)
+    m = 0.0
+    for i, (v, f) in enumerate(zip(x, fade)):
+        m = max(v, m * f)
+        out[i] = m
+    return out

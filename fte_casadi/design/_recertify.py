@@ -156,6 +156,14 @@ def recertify(d) -> list[str]:
             if not gap <= _REL:
                 out.append(f"accommodation.overshoot and memory_time are not the observer's (off by {gap:.3g} "
                            f"relative; recomputed {np.round(ov, 4).tolist()}, {tau:.6g})")  # fmt: skip
+            if "crosstalk_held" in acc:  # and the held estimates' ratios its own, at that memory time
+                from ._isolation import crosstalk_held
+
+                made = crosstalk_held(R, T, aug.n, aug.lf, tau)
+                gap = _far(np.asarray(acc["crosstalk_held"], dtype=float), made)
+                if not gap <= _REL:
+                    out.append(f"accommodation.crosstalk_held is not the observer's cross-talk against the held "
+                               f"estimates (off by {gap:.3g} relative; recomputed {np.round(made, 4).tolist()})")  # fmt: skip
     try:
         checks = certify(d)
     except np.linalg.LinAlgError as exc:

@@ -12,7 +12,9 @@ calibrated on fault-free paths of the scenario:
   (:func:`fte_casadi.design._isolation.crosstalk`), ``overshoot_j`` how far its own estimate swings past a step of
   its fault and ``m_j`` the estimate's recent extreme of the other sign, decaying
   (:func:`fte_casadi.design._isolation.overshoot`): detected, and more than the other faults and its own fault's
-  end can explain (the estimate of a fault that has just ended swings to the other sign: not compensated);
+  end can explain (the estimate of a fault that has just ended swings to the other sign: not compensated); each
+  term ``kappa[j, q] |fhat_q|`` the smaller of it and ``crosstalk_held[j, q] M_q``, ``M_q`` fault q's largest
+  estimate held in the memories (:func:`fte_casadi.design._isolation.crosstalk_held`);
 - rule ``"isolate"`` (``fte simulate --accommodate``): fault j switches on when ``|fhat_j|`` reaches its
   threshold and its normalised residual ``r_j = |fhat_j| / threshold_j`` is the largest, and stays on
   (hysteresis) until ``r_j`` falls below the release ratio (default :data:`RELEASE`) or another fault switches
@@ -85,6 +87,7 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
         acc["crosstalk"] = _crosstalk(design).tolist()
         ov, tau = _overshoot(design)
         acc["overshoot"], acc["memory_time"] = [float(v) for v in ov], float(tau)
+        acc["crosstalk_held"] = _crosstalk_held(design, tau).tolist()
         held = "memoryless" if release >= 1 else f"held until that ratio < {float(release):g}"
         what = (
             "while detected and more than the other faults' estimates and its own overshoot explain (|fhat_j| >= "
@@ -94,6 +97,8 @@ def accommodated(design: Design, plant, scenario, *, paths: int, seed: int, fals
             + _ratios(design, acc["crosstalk"])
             + "; overshoot "
             + ", ".join(f"{v:.3g}" for v in acc["overshoot"])
+            + "; each crosstalk term at most crosstalk_held[j][q] M_q, M_q fault q's largest |fhat_q| held: "
+            + _ratios(design, acc["crosstalk_held"])
             + ")"
         )
     else:
@@ -107,6 +112,12 @@ def _crosstalk(design: Design):
     from ..design import crosstalk
 
     return crosstalk(design.R, design.T, int(design.dims.n), int(design.dims.lf))
+
+
+def _crosstalk_held(design: Design, tau: float):
+    from ..design import crosstalk_held
+
+    return crosstalk_held(design.R, design.T, int(design.dims.n), int(design.dims.lf), tau)
 
 
 def _overshoot(design: Design):

@@ -20,7 +20,7 @@ extern "C" {
 
 #include <math.h>
 #include "fte_manipulator_casadi.h"
-#if FTE_MANIPULATOR_CASADI_SET != 0x33e7e078UL
+#if FTE_MANIPULATOR_CASADI_SET != 0x34ab397eUL
 #error "fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -98,7 +98,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   (void)mem;
   casadi_real a00, a01, a02, a03, a04, a05, a06, a07, a08, a09, a10, a11;
   casadi_real a12, a13, a14, a15, a16, a17, a18, a19, a20, a21, a22, a23;
-  casadi_real a24, a25, a26, a27, a28, a29, a30, a31;
+  casadi_real a24, a25, a26, a27, a28, a29, a30, a31, a32, a33, a34;
   a00=arg[0]? arg[0][0] : 0;
   a01=1.0000000000000000e-03;
   a02=arg[1]? arg[1][2] : 0;
@@ -222,17 +222,31 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a27=1.4060012881530757e+00;
   a25=casadi_fabs(a17);
   a27=(a27*a25);
+  a25=1.9799624837367689e+00;
+  a03=0.;
+  a24=casadi_fmax(a17,a03);
+  a30=9.9894585587042162e-01;
+  a31=arg[0]? arg[0][9] : 0;
+  a31=(a30*a31);
+  a24=casadi_fmax(a24,a31);
+  a31=(-a17);
+  a31=casadi_fmax(a31,a03);
+  a32=arg[0]? arg[0][11] : 0;
+  a32=(a30*a32);
+  a31=casadi_fmax(a31,a32);
+  a32=casadi_fmax(a24,a31);
+  a25=(a25*a32);
+  a27=casadi_fmin(a27,a25);
   a26=(a26+a27);
   a27=4.6964057239856066e-01;
-  a25=0.;
-  a03=(a25<=a15);
-  a24=arg[0]? arg[0][10] : 0;
-  a30=(a03?a24:0);
-  a03=(!a03);
-  a31=arg[0]? arg[0][8] : 0;
-  a03=(a03?a31:0);
-  a30=(a30+a03);
-  a27=(a27*a30);
+  a25=(a03<=a15);
+  a32=arg[0]? arg[0][10] : 0;
+  a33=(a25?a32:0);
+  a25=(!a25);
+  a34=arg[0]? arg[0][8] : 0;
+  a25=(a25?a34:0);
+  a33=(a33+a25);
+  a27=(a27*a33);
   a26=(a26+a27);
   a18=(a18/a26);
   a04=(a04<=a18);
@@ -684,27 +698,17 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a01=(a01*a06);
   a01=(a17+a01);
   if (res[0]!=0) res[0][7]=a01;
-  a01=casadi_fmax(a15,a25);
-  a06=9.9894585587042162e-01;
-  a31=(a06*a31);
-  a01=casadi_fmax(a01,a31);
+  a01=casadi_fmax(a15,a03);
+  a34=(a30*a34);
+  a01=casadi_fmax(a01,a34);
   if (res[0]!=0) res[0][8]=a01;
-  a01=casadi_fmax(a17,a25);
-  a31=arg[0]? arg[0][9] : 0;
-  a31=(a06*a31);
-  a01=casadi_fmax(a01,a31);
-  if (res[0]!=0) res[0][9]=a01;
-  a01=(-a15);
-  a01=casadi_fmax(a01,a25);
-  a24=(a06*a24);
-  a01=casadi_fmax(a01,a24);
-  if (res[0]!=0) res[0][10]=a01;
-  a01=(-a17);
-  a01=casadi_fmax(a01,a25);
-  a25=arg[0]? arg[0][11] : 0;
-  a06=(a06*a25);
-  a01=casadi_fmax(a01,a06);
-  if (res[0]!=0) res[0][11]=a01;
+  if (res[0]!=0) res[0][9]=a24;
+  a24=(-a15);
+  a24=casadi_fmax(a24,a03);
+  a30=(a30*a32);
+  a24=casadi_fmax(a24,a30);
+  if (res[0]!=0) res[0][10]=a24;
+  if (res[0]!=0) res[0][11]=a31;
   if (res[1]!=0) res[1][0]=a16;
   if (res[2]!=0) res[2][0]=a19;
   if (res[2]!=0) res[2][1]=a21;
