@@ -143,14 +143,29 @@ def accommodation_gate(
     unless another fault q switches on with ``r_q > r_j`` (isolation while latched: at most one fault is
     compensated, ties aside). With ``rho = 1`` this is the memoryless gate exactly: a latched fault with
     ``r_j >= 1`` and no larger ratio switches on anyway, and a larger ratio >= 1 means the largest one
-    switches on. ``numbers``: where the gate's numbers come from (:func:`step_function`); ``held``: per fault
+    switches on. Either rule: a fault listed in ``acc["never"]`` is never compensated (``fte design`` lists a fault
+    whose compensation measured worse than none in every one of its own windows:
+    :func:`fte_casadi.sim._accommodate.protected`). ``numbers``: where the gate's numbers come from
+    (:func:`step_function`); ``held``: per fault
     the largest ``|fhat_q|`` held so far, decaying (the memories after this sample's update), for rule
     ``"explain"`` with ``crosstalk_held``."""
     numbers = _Folded() if numbers is None else numbers
     thr = [numbers.scalar(f"threshold_{j}", v) for j, v in enumerate(acc["thresholds"])]
-    lf = len(thr)
     if acc.get("rule") == "explain":
-        return _explained_gate(fhat, acc, thr, latch, memory, numbers, held)
+        gates = _explained_gate(fhat, acc, thr, latch, memory, numbers, held)
+    else:
+        gates = _isolating_gate(fhat, acc, thr, latch, numbers)
+    never = set(
+        acc.get("never") or ()
+    )  # faults whose compensation measured worse than none in their own windows
+    if never:
+        gates = ca.vertcat(*[ca.SX(0.0) if j in never else gates[j] for j in range(len(thr))])
+    return gates
+
+
+def _isolating_gate(fhat: ca.SX, acc: dict, thr: list, latch: ca.SX | None, numbers) -> ca.SX:
+    """The gate of rule ``"isolate"`` (:func:`accommodation_gate`)."""
+    lf = len(thr)
     rr = [ca.fabs(fhat[j]) / thr[j] for j in range(lf)]
     on = []
     for j in range(lf):

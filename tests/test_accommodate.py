@@ -90,6 +90,36 @@ def test_the_document_keeps_the_accommodation_and_refuses_a_bad_one(real_designs
             Design.load(tmp_path / "b.json")
 
 
+def test_the_document_checks_the_held_crosstalk_and_the_faults_never_compensated(tmp_path):
+    d = Design.load(Path(__file__).resolve().parents[1] / "generated" / "quadruple_tank" / "design.json")
+    assert d.accommodation["rule"] == "explain" and "crosstalk_held" in d.accommodation
+    d.save(tmp_path / "a.json")
+    doc = json.loads((tmp_path / "a.json").read_text())
+    for key, bad in (("crosstalk_held", [[0.0, 1.0]]), ("crosstalk_held", [[0.0, -1.0], [1.0, 0.0]]),
+                     ("never", [2]), ("never", [0, 0]), ("never", [True]), ("never", 0), ("never", ["fa"])):  # fmt: skip
+        (tmp_path / "b.json").write_text(
+            json.dumps({**doc, "accommodation": {**doc["accommodation"], key: bad}})
+        )
+        with pytest.raises(DesignFileError, match=f"accommodation.{key}"):
+            Design.load(tmp_path / "b.json")
+    (tmp_path / "b.json").write_text(
+        json.dumps({**doc, "accommodation": {**doc["accommodation"], "never": [1, 0]}})
+    )
+    assert Design.load(tmp_path / "b.json").accommodation["never"] == [0, 1]
+
+
+@pytest.mark.parametrize("rule", ["isolate", "explain"])
+def test_a_fault_never_compensated_has_its_gate_shut(rule):
+    """accommodation.never shuts the listed fault's gate whatever its estimate; the others' gates are the rule's."""
+    acc = {"rule": rule, "thresholds": [0.1, 0.1], "crosstalk": [[0.0, 0.0], [0.0, 0.0]]}
+    f = np.array([[5.0, 0.0, 5.0, -3.0], [0.0, 5.0, 5.0, 0.2]])
+    latch = np.zeros((2, 4))
+    before = np.array(_gate_fn(acc, 2, False)(f, latch))
+    after = np.array(_gate_fn({**acc, "never": [0]}, 2, False)(f, latch))
+    assert before[0].any() and not after[0].any()
+    assert np.array_equal(after[1], before[1]) and after[1].any()
+
+
 def _gate_fn(acc: dict, lf: int, latched: bool):
     fhat, latch = ca.SX.sym("f", lf), ca.SX.sym("g", lf)
     return ca.Function("g", [fhat, latch], [accommodation_gate(fhat, acc, latch if latched else None)])

@@ -157,8 +157,7 @@ def test_the_held_crosstalk_bounds_both_edges_of_a_step(plant):
     """crosstalk_held[j][q] bounds |fhat_j| by the held |fhat_q| at every sample of a step of fault q, at its start
     and at its end, walked here sample by sample at a fine step (not the module's grid), and some sample comes
     within 10 % of it: a bound, and not a loose one. The stored numbers are the observer's own."""
-    from fte_casadi.design import overshoot
-    from fte_casadi.design import crosstalk_held
+    from fte_casadi.design import crosstalk_held, overshoot
 
     d = Design.load(ROOT / "generated" / plant / "design.json")
     n, lf = int(d.dims.n), int(d.dims.lf)

@@ -35,13 +35,14 @@ def pair():
     return plain, d
 
 
-def _runs(monkeypatch, gate, always, seen):
+def _runs(monkeypatch, gate, always, seen, never=None):
     """simulate() answering the gate's metrics (or raising) for the design with a gate, the other for the one
-    without; the seeds asked are collected in ``seen``."""
+    without, ``never`` for a gate with faults never compensated; the seeds asked are collected in ``seen``."""
 
     def fake(design, plant, scenario, *, paths, seed, **kw):
         seen.append((paths, seed, kw.get("detect")))
-        out = gate if design.accommodation is not None else always
+        acc = design.accommodation
+        out = always if acc is None else (never if acc.get("never") else gate)
         if isinstance(out, Exception):
             raise out
         return SimpleNamespace(metrics={"windows": out})
@@ -100,6 +101,54 @@ def test_measured_choice(monkeypatch, pair, gate, always, kept, said):
     assert said in got.status[-1], got.status[-1]
     # both measured on the same paths, apart from a run's default ones (seed 0), without detection
     assert seen == [(5, _accommodate.SELECTION_SEED, False)] * 2
+
+
+@pytest.mark.parametrize(
+    "never, off, said",
+    [
+        # the actuator fault's compensation worse than none in its window, not compensating it a tie: never
+        (
+            [_window("fa", 2.5, 5, 1.0, [1.0, 1.0]), _window("fs", 7, 10, 1.0, [1.0, 1.0])],
+            [0],
+            "fa never compensated: with the gate its compensation measures worse than none in every one of its "
+            "windows (the window of fa [2.5, 5): 1.05;",
+        ),
+        # not compensating it measures no better: the gate as it was, and a warning
+        (
+            [_window("fa", 2.5, 5, 1.0, [1.0, 1.0]), _window("fs", 7, 10, 1.2, [1.2, 1.2])],
+            None,
+            "warning: compensating fa measures worse than none in every one of its windows",
+        ),
+        (SimulationError("path 2 diverged"), None, "path 2 diverged"),
+    ],
+)
+def test_a_fault_whose_compensation_only_harms_is_never_compensated(monkeypatch, pair, never, off, said):
+    """With the gate kept, a fault fed into u whose own windows all measure worse than none is measured once more,
+    not compensated, on the same paths, and left out where that measures better (worst window first)."""
+    plain, gated = pair
+    seen = []
+    gate = [_window("fa", 2.5, 5, 1.05, [1.06, 0.9]), _window("fs", 7, 10, 1.0, [1.0, 1.0])]
+    always = [_window("fa", 2.5, 5, 1.02, [1.02, 1.0]), _window("fs", 7, 10, 1.3, [1.3, 1.2])]
+    _runs(monkeypatch, gate, always, seen, never)
+    got = _accommodate._measured(plain, gated, None, load_scenario("manipulator"), paths=5, seed=0, dt=None,
+                                 threads=None)  # fmt: skip
+    assert got.accommodation.get("never") == off
+    assert {k: v for k, v in got.accommodation.items() if k != "never"} == gated.accommodation
+    assert said in got.status[-1], got.status[-1]
+    assert seen == [(5, _accommodate.SELECTION_SEED, False)] * 3
+
+
+def test_a_fault_helped_in_one_of_its_windows_stays_compensated(monkeypatch, pair):
+    plain, gated = pair
+    seen = []
+    gate = [_window("fa", 1, 2, 1.05, [1.05, 1.0]), _window("fa", 3, 4, 0.5, [0.5, 0.5]),
+            _window("fs", 7, 10, 1.0, [1.0, 1.0])]  # fmt: skip
+    always = [_window("fa", 1, 2, 1.1, [1.1, 1.0]), _window("fa", 3, 4, 0.4, [0.4, 0.4]),
+              _window("fs", 7, 10, 1.3, [1.3, 1.2])]  # fmt: skip
+    _runs(monkeypatch, gate, always, seen)
+    got = _accommodate._measured(plain, gated, None, load_scenario("manipulator"), paths=5, seed=0, dt=None,
+                                 threads=None)  # fmt: skip
+    assert got.accommodation == gated.accommodation and len(seen) == 2
 
 
 @pytest.mark.slow

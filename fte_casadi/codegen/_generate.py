@@ -424,6 +424,10 @@ def _gate_texts(design: Design, NAME: str) -> dict:
     else:
         rule = (f"fault j is compensated in u (the Kf fhat term) when |fhat_j| >= threshold_j and |fhat_j| / "
                 f"threshold_j is the largest (thresholds {thr})")  # fmt: skip
+    if acc.get("never"):
+        names = list(design.names.get("faults") or [])
+        off = ", ".join(names[j] if j < len(names) else f"fault {j}" for j in acc["never"])
+        rule += f"; never compensated: {off} (its compensation measured worse than none in its own windows)"
     nf = f"FTE_{NAME}_NF"
     k = (1 if design.latched else 0) + (2 if design.remembers else 0)  # the state after z, in blocks of nf
     if k:

@@ -203,15 +203,20 @@ TIE = 0.02
 def gated_out(design, j: int) -> str:
     """Why tolerant control adds nothing in a window of fault ``j``: its own estimate does not enter u (a zero
     column of Kf: a sensor fault, which the observer already removes from xhat for both runs) and the gate of
-    rule "explain" keeps the other faults' estimates out (:mod:`fte_casadi.design._isolation`). "" otherwise."""
+    rule "explain" keeps the other faults' estimates out (:mod:`fte_casadi.design._isolation`); or it is one the
+    design never compensates (``accommodation["never"]``). "" otherwise."""
     acc = design.accommodation
     if acc is None or acc.get("rule") != "explain":
         return ""
+    names = list(design.names.get("faults") or [])
+    name = names[j] if j < len(names) else f"fault {j + 1}"
+    if j in (acc.get("never") or ()):
+        return (f"{name} is never compensated (the design measured its compensation worse than none in its own "
+                "windows: accommodation.never), and the gate keeps the other faults' estimates out of u while they are "
+                "no more than its cross-talk explains, so tolerant control adds nothing here: a ratio of 1 is a tie")  # fmt: skip
     kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
     if any(np.any(np.asarray(k)[:, j]) for k in kfs):
         return ""
-    names = list(design.names.get("faults") or [])
-    name = names[j] if j < len(names) else f"fault {j + 1}"
     return (f"{name}'s estimate does not enter u (its column of Kf is zero: the observer already removes it from xhat, "
             "which the loop without tolerant control uses too), and the gate keeps the other faults' estimates out of "
             "u while they are no more than its cross-talk explains, so tolerant control adds nothing here: a ratio of "

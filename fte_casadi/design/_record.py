@@ -144,7 +144,10 @@ class Design:
     #: writes where the faults' estimates cross-talk); or {"rule": "isolate", ...}: fault j switches on when |fhat_j| >= threshold_j and its normalised
     #: residual |fhat_j| / threshold_j is the largest (``fte simulate --accommodate``); with a release ratio below
     #: 1 either stays on until that ratio falls below it (:func:`fte_casadi.step.accommodation_gate`; no "release":
-    #: 1, the memoryless gate); None: every estimate is compensated always (the paper)
+    #: 1, the memoryless gate); with "crosstalk_held" (rule "explain") each cross-talk term is at most
+    #: crosstalk_held[j][q] times fault q's held estimate; "never": the faults never compensated (their
+    #: compensation measured worse than none in their own windows); None: every estimate is compensated always
+    #: (the paper)
     accommodation: dict | None = None
     #: how the T-S model's premises were covered (``derive(vertices=...)``: grouped, box or fewest); loading
     #: re-derives the plant's model with it. None: the derivation's default (a document older than the key, or a
@@ -525,6 +528,27 @@ def _accommodation(source: str, value, lf: int) -> dict | None:
                 f"observer's cross-talk ratios); got {ct!r}"
             )
         out["crosstalk"] = a.tolist()
+    if "crosstalk_held" in value:  # the cross-talk against the held estimates (design/_isolation.py)
+        ch = value["crosstalk_held"]
+        try:
+            a = np.array(ch, dtype=float)
+        except (TypeError, ValueError):
+            a = np.zeros(0)
+        if value["rule"] != "explain" or a.shape != (lf, lf) or not np.all(np.isfinite(a)) or np.any(a < 0):
+            raise DesignFileError(
+                f"{source}: 'accommodation.crosstalk_held' must be a {lf} x {lf} matrix of finite numbers >= 0 (the "
+                f"observer's cross-talk against the held estimates, rule 'explain' only); got {ch!r}"
+            )
+        out["crosstalk_held"] = a.tolist()
+    if "never" in value:  # the faults never compensated (their compensation measured worse than none)
+        nv = value["never"]
+        if not (isinstance(nv, list) and len(set(nv)) == len(nv)
+                and all(isinstance(j, int) and not isinstance(j, bool) and 0 <= j < lf for j in nv)):  # fmt: skip
+            raise DesignFileError(
+                f"{source}: 'accommodation.never' must be a list of distinct fault indices in 0..{lf - 1} (the faults "
+                f"never compensated); got {nv!r}"
+            )
+        out["never"] = sorted(nv)
     if "release" in value:  # absent (documents older than it): 1, the memoryless gate
         rel = value["release"]
         if not (

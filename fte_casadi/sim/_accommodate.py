@@ -136,15 +136,11 @@ def needs_gate(design: Design) -> bool:
     """True when some fault that tolerant control feeds into the plant (a nonzero column of ``Kf``) shows
     cross-talk from another fault (:func:`fte_casadi.design._isolation.crosstalk`): then always compensating it
     feeds the other faults into the plant, and :func:`protected` gates it."""
-    import numpy as np
-
     lf = int(design.dims.lf)
     if lf < 2:
         return False
     ct = _crosstalk(design)
-    kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
-    fed = [j for j in range(lf) if any(np.any(np.asarray(k)[:, j]) for k in kfs)]
-    return any(ct[j, q] > 0 for j in fed for q in range(lf) if q != j)
+    return any(ct[j, q] > 0 for j in _fed(design) for q in range(lf) if q != j)
 
 
 def protected(design: Design, plant, scenario, *, paths: int = 8, seed: int = 0, false_alarm_rate=None,
@@ -174,49 +170,101 @@ def _measured(
     :data:`SELECTION_SEED` (not those ``fte simulate`` draws by default, nor the calibration's):
     every estimate compensated always is kept where no window's FTC true ratio and none of its outputs' is above
     1 on these paths (the figure itself, not its interval: the choice errs towards the gate) and its windows'
-    ratios, worst first, are smaller than the gate's; the gate otherwise. Where a run fails, the other is kept."""
-    from ..verdicts import WORSE_THAN_NONE
-    from ..verdicts import window_label as _where
-    from ._engine import simulate
-
-    got, seed = {}, seed + SELECTION_SEED
-    for tag, d in (("gate", gated), ("always", design)):
-        try:
-            res = simulate(d, plant, scenario, paths=paths, seed=seed, dt=dt, threads=threads, progress=False,
-                           detect=False)  # fmt: skip
-        except (SimulationError, ParameterError) as exc:
-            got[tag] = " ".join(str(exc).split())
-            continue
-        wins = res.metrics.get("windows") or []
-        names = list(design.names.get("outputs") or [])
-        worse = [f"{_where(w)}: {r:.4g}" for w in wins for r in [w.get("ftc_true_ratio")]
-                 if r is not None and r > WORSE_THAN_NONE]  # fmt: skip
-        worse += [f"{_where(w)} on {names[k] if k < len(names) else f'output {k}'}: {r:.4g}" for w in wins
-                  for k, r in enumerate(w.get("ftc_true_ratio_per_output") or [])
-                  if r is not None and r > WORSE_THAN_NONE]  # fmt: skip
-        got[tag] = (worse, [w.get("ftc_true_ratio") for w in wins])
+    ratios, worst first, are smaller than the gate's; the gate otherwise. Where a run fails, the other is kept.
+    With the gate kept, a fault fed into u whose every own window measures worse than none with it is then never
+    compensated (:func:`_never`)."""
+    seed = seed + SELECTION_SEED
+    got = {tag: _run(d, plant, scenario, paths=paths, seed=seed, dt=dt, threads=threads)
+           for tag, d in (("gate", gated), ("always", design))}  # fmt: skip
     where = f"measured on {paths} paths (seed {seed}) of scenario {scenario.name!r}"
-
-    def fmt(ratios) -> str:
-        return ", ".join("n/a" if r is None else f"{r:.3g}" for r in ratios)
-
-    def worst_first(ratios) -> list:
-        return sorted((r for r in ratios if r is not None), reverse=True)
-
     always, gate = got["always"], got["gate"]
     if isinstance(always, str):
         note = f"the gate is kept: without it the run fails ({where}: {always})"
         return dataclasses.replace(gated, status=[*gated.status, note])
-    if not always[0] and (isinstance(gate, str) or worst_first(always[1]) < worst_first(gate[1])):
+    if not always[0] and (isinstance(gate, str) or _worst_first(always[1]) < _worst_first(gate[1])):
         against = (
             f"the run with the gate fails ({gate})"
             if isinstance(gate, str)
-            else f"{fmt(gate[1])} with the gate"
+            else f"{_fmt(gate[1])} with the gate"
         )
         note = (f"no gate: compensating every fault estimate always measures better ({where}): FTC true ratios per "
-                f"window {fmt(always[1])}, no window or output worse than none, against {against}")  # fmt: skip
+                f"window {_fmt(always[1])}, no window or output worse than none, against {against}")  # fmt: skip
         return dataclasses.replace(design, status=[*design.status, note])
     why = (f"without it tolerant control is worse than none ({'; '.join(always[0])})" if always[0] else
-           f"without it the windows' FTC true ratios are {fmt(always[1])}, with it {fmt(gate[1])}")  # fmt: skip
-    note = f"the gate is kept ({where}): {why}"
-    return dataclasses.replace(gated, status=[*gated.status, note])
+           f"without it the windows' FTC true ratios are {_fmt(always[1])}, with it {_fmt(gate[1])}")  # fmt: skip
+    kept = dataclasses.replace(gated, status=[*gated.status, f"the gate is kept ({where}): {why}"])
+    if isinstance(gate, str):
+        return kept
+    return _never(kept, gate, plant, scenario, paths=paths, seed=seed, dt=dt, threads=threads, where=where)
+
+
+def _run(d: Design, plant, scenario, *, paths: int, seed: int, dt, threads):
+    """``(worse, ratios, windows)`` of ``d`` on the scenario (no detection): the windows and outputs whose FTC true
+    ratio is above 1, described; each window's ratio; the windows. The run's error, in words, where it fails."""
+    from ..verdicts import WORSE_THAN_NONE
+    from ..verdicts import window_label as _where
+    from ._engine import simulate
+
+    try:
+        res = simulate(d, plant, scenario, paths=paths, seed=seed, dt=dt, threads=threads, progress=False,
+                       detect=False)  # fmt: skip
+    except (SimulationError, ParameterError) as exc:
+        return " ".join(str(exc).split())
+    wins = res.metrics.get("windows") or []
+    names = list(d.names.get("outputs") or [])
+    worse = [f"{_where(w)}: {r:.4g}" for w in wins for r in [w.get("ftc_true_ratio")]
+             if r is not None and r > WORSE_THAN_NONE]  # fmt: skip
+    worse += [f"{_where(w)} on {names[k] if k < len(names) else f'output {k}'}: {r:.4g}" for w in wins
+              for k, r in enumerate(w.get("ftc_true_ratio_per_output") or [])
+              if r is not None and r > WORSE_THAN_NONE]  # fmt: skip
+    return worse, [w.get("ftc_true_ratio") for w in wins], wins
+
+
+def _fmt(ratios) -> str:
+    return ", ".join("n/a" if r is None else f"{r:.3g}" for r in ratios)
+
+
+def _worst_first(ratios) -> list:
+    return sorted((r for r in ratios if r is not None), reverse=True)
+
+
+def _fed(design: Design) -> list[int]:
+    """The faults whose estimates tolerant control feeds into u: a nonzero column of Kf (of some rule's)."""
+    import numpy as np
+
+    kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
+    return [j for j in range(int(design.dims.lf)) if any(np.any(np.asarray(k)[:, j]) for k in kfs)]
+
+
+def _never(gated: Design, run, plant, scenario, *, paths: int, seed: int, dt, threads, where: str) -> Design:
+    """``gated`` with ``accommodation["never"]``: the faults fed into u whose every own window measures worse than
+    none with the gate (``run``, :func:`_run`); their compensation cannot help the true outputs on this scenario,
+    so it is not fed to the plant (#38: per-fault decisions). Measured again on the same paths and kept only where
+    the windows' ratios, worst first, are smaller; ``gated`` unchanged where no fault qualifies."""
+    from ..verdicts import WORSE_THAN_NONE
+    from ..verdicts import window_label as _where
+
+    names = list(gated.names.get("faults") or [f"f{j + 1}" for j in range(int(gated.dims.lf))])
+    wins = run[2]
+    off = []
+    for j in _fed(gated):
+        own = [w.get("ftc_true_ratio") for w in wins if w.get("fault") == names[j]]
+        if own and all(r is not None and r > WORSE_THAN_NONE for r in own):
+            off.append(j)
+    if not off:
+        return gated
+    trial = dataclasses.replace(gated, accommodation={**gated.accommodation, "never": off})
+    again = _run(trial, plant, scenario, paths=paths, seed=seed, dt=dt, threads=threads)
+    listed = ", ".join(names[j] for j in off)
+    theirs = "; ".join(f"{_where(w)}: {w['ftc_true_ratio']:.4g}" for w in wins if w.get("fault") in
+                       {names[j] for j in off})  # fmt: skip
+    if isinstance(again, str) or not _worst_first(again[1]) < _worst_first(run[1]):
+        after = again if isinstance(again, str) else f"the windows' FTC true ratios {_fmt(again[1])}"
+        note = (f"warning: compensating {listed} measures worse than none in every one of its windows ({theirs}; "
+                f"{where}), and not compensating it measures no better ({after}): it is compensated as the gate "
+                "says")  # fmt: skip
+        return dataclasses.replace(gated, status=[*gated.status, note])
+    note = (f"{listed} never compensated: with the gate its compensation measures worse than none in every one of "
+            f"its windows ({theirs}; {where}); without it the windows' FTC true ratios are {_fmt(again[1])}, "
+            f"against {_fmt(run[1])}")  # fmt: skip
+    return dataclasses.replace(trial, status=[*trial.status, note])
