@@ -72,8 +72,22 @@ def _cause(w: dict, faults) -> str:
         return (
             "; tolerant control applied nothing in this window (the compensation it adds to u is zero at every "
             f"sample, ftc_compensation_rms): the difference was carried into it from before{entered}"
+            + _carry_free(w)
         )
     return _crosstalk(w, faults)
+
+
+def _carry_free(w: dict) -> str:
+    """What the window measures with nothing carried in (``carry_free_ratio``, :mod:`fte_casadi.sim._carry`)."""
+    r = w.get("carry_free_ratio")
+    if r is None:
+        return ""
+    head = (f"; with this fault alone, nothing carried in, tolerant control would measure {ratio(r, 4)} against this "
+            "run without it (carry_free_ratio)")  # fmt: skip
+    if r > WORSE_THAN_NONE:
+        return head + (": the run without tolerant control gains from the tail it carries in, and no compensation "
+                       "that removes the earlier faults' effects does better than none in this window")  # fmt: skip
+    return head + ": what makes it worse is tolerant control's own tail from the earlier windows"
 
 
 def _above(value, interval, level: float) -> bool:

@@ -267,7 +267,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     faulty without tolerant control, faulty with it."""
     from .._resources import check_paths_memory
     from ..plants import load_plant, load_scenario
-    from ..sim import save_result
+    from ..sim import carry_free, save_result
     from ..sim import simulate as run_sim
 
     stds, release = _check_simulate_flags(paths, seed, dt, fa_rate, noise, release, accommodate, no_detect, save,
@@ -287,6 +287,7 @@ def simulate(target, paths, seed, dt, plots, save, scheduler, fast_math, noise, 
     res = run_sim(d, plant, scenario, paths=npaths, seed=seed, options=opts)
     m = res.metrics
     _refuse_nonfinite(m)
+    carry_free(m, d, plant, scenario, paths=npaths, seed=seed, options=opts)  # a window's tie, told from harm
     if detect_curve and opts.detect:
         m = _detectability(d, plant, scenario, m, npaths, seed, opts)
     if save:

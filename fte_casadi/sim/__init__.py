@@ -19,6 +19,7 @@ Two names for time steps, one meaning each:
 
 from ._accommodate import accommodated as accommodated
 from ._accommodate import protected as protected
+from ._carry import carry_free as carry_free
 from ._detectability import attach as attach
 from ._detectability import detectability as detectability
 from ._engine import calibrate_detection as calibrate_detection
