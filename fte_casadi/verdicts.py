@@ -59,7 +59,7 @@ def _crosstalk(w: dict, faults) -> str:
     )
 
 
-def _cause(w: dict, faults) -> str:
+def _cause(w: dict, faults, output: int | None = None) -> str:
     """What made tolerant control differ from none in window ``w``: where it applied nothing there (its
     compensation is zero at every sample, ``ftc_compensation_rms``), what the runs carried into the window
     (``onset_deviation``); else the other faults' cross-talk that it fed into the plant (:func:`_crosstalk`)."""
@@ -72,18 +72,25 @@ def _cause(w: dict, faults) -> str:
         return (
             "; tolerant control applied nothing in this window (the compensation it adds to u is zero at every "
             f"sample, ftc_compensation_rms): the difference was carried into it from before{entered}"
-            + _carry_free(w)
+            + _carry_free(w, output)
         )
     return _crosstalk(w, faults)
 
 
-def _carry_free(w: dict) -> str:
-    """What the window measures with nothing carried in (``carry_free_ratio``, :mod:`fte_casadi.sim._carry`)."""
-    r = w.get("carry_free_ratio")
+def _carry_free(w: dict, output: int | None = None) -> str:
+    """What the window measures with nothing carried in (``carry_free_ratio``, :mod:`fte_casadi.sim._carry`), on
+    the whole or on ``output``."""
+    if output is None:
+        r = w.get("carry_free_ratio")
+    else:
+        per = w.get("carry_free_ratio_per_output") or []
+        r = per[output] if output < len(per) else None
     if r is None:
         return ""
-    head = (f"; with this fault alone, nothing carried in, tolerant control would measure {ratio(r, 4)} against this "
-            "run without it (carry_free_ratio)")  # fmt: skip
+    key = "carry_free_ratio" if output is None else "carry_free_ratio_per_output"
+    on = "" if output is None else " on this output"
+    head = (f"; with this fault alone, nothing carried in, tolerant control would measure {ratio(r, 4)}{on} against "
+            f"this run without it ({key})")  # fmt: skip
     if r > WORSE_THAN_NONE:
         return head + (": the run without tolerant control gains from the tail it carries in, and no compensation "
                        "that removes the earlier faults' effects does better than none in this window")  # fmt: skip
@@ -223,7 +230,7 @@ def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
                 add("worse than none on an output", f"{where}, {name}", v,
                     f"in {where} tolerant control makes the true output {name} worse than none (ratio {ratio(v, 4)} > "
                     f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
-                    f"whole are not worse (ftc_true_ratio {ratio(r)}){_cause(w, faults)}")  # fmt: skip
+                    f"whole are not worse (ftc_true_ratio {ratio(r)}){_cause(w, faults, k)}")  # fmt: skip
 
 
 def _window_verdicts(m: dict, w: dict, add, inputs) -> None:

@@ -48,6 +48,9 @@ def test_only_a_window_worse_than_none_with_nothing_applied_and_a_tail_is_measur
     assert "carry_free_ratio" not in m["windows"][0]
     assert m["windows"][1]["carry_free_ratio"] == pytest.approx(1.0)  # sqrt(9 + 16) / sqrt(9 + 16)
     assert m["windows"][1]["carry_free_ratio_per_output"] == pytest.approx([1.0, 1.0])
+    one = _window("fs", 7, 10, 0.9, [0.0], per_output=(0.8, 1.07))  # an output worse than none: measured too
+    carry_free({"windows": [one]}, None, None, sc, paths=5, seed=3)
+    assert len(asked) == 2 and "carry_free_ratio" in one
     for skipped in (_window("fs", 7, 10, 0.99, [0.0]), _window("fs", 7, 10, 1.2, [1e-9])):
         asked.clear()
         carry_free({"windows": [skipped]}, None, None, sc, paths=5, seed=3)
@@ -65,6 +68,13 @@ def test_the_verdict_names_what_the_window_measures_with_nothing_carried_in(valu
     v = [x for x in verdicts({"windows": [w]}, faults=["fa", "fs"]) if x["verdict"] == "worse than none"]
     text = " ".join(v[0]["text"].split())
     assert "carry_free_ratio" in text and said in text
+    # an output worse than none, the whole not: the output's own figure
+    w.update(ftc_true_ratio=0.9, ftc_true_ratio_interval=[0.9, 0.9], ftc_true_ratio_per_output=[0.8, 1.07],
+             carry_free_ratio=0.5, carry_free_ratio_per_output=[0.4, value])  # fmt: skip
+    v = [x for x in verdicts({"windows": [w]}, faults=["fa", "fs"], outputs=["y1", "y2"])
+         if x["verdict"] == "worse than none on an output"]  # fmt: skip
+    text = " ".join(v[0]["text"].split())
+    assert f"would measure {value:.4g} on this output" in text and said in text
 
 
 @pytest.mark.slow

@@ -31,7 +31,7 @@ def carry_free(metrics: dict, design, plant, scenario, *, paths: int, seed: int,
                options: SimulateOptions | None = None) -> dict:  # fmt: skip
     """Fill ``carry_free_ratio`` (and ``carry_free_ratio_per_output``) of each window of ``metrics`` (the
     metrics document of ``simulate(design, plant, scenario, paths=paths, seed=seed, options=options)``) whose
-    FTC true ratio is above 1 while tolerant control applied nothing in it, and which an earlier fault window
+    FTC true ratio, or an output's, is above 1 while tolerant control applied nothing in it, and which an earlier fault window
     precedes (module docstring): one more Monte Carlo run per such window, of its own fault alone, without
     detection or records. Returns ``metrics``, changed in place; the other windows get no such key (a window's
     null figure must say why: these are absent where not measured)."""
@@ -60,12 +60,13 @@ def carry_free(metrics: dict, design, plant, scenario, *, paths: int, seed: int,
 
 
 def _qualifies(w: dict, scenario):
-    """The fault profile of window ``w`` where its ratio is above 1, tolerant control applied nothing in it and an
+    """The fault profile of window ``w`` where its ratio or an output's is above 1, tolerant control applied nothing in it and an
     earlier fault window precedes it; else None."""
     from ..verdicts import WORSE_THAN_NONE
 
-    r, comp = w.get("ftc_true_ratio"), w.get("ftc_compensation_rms")
-    if r is None or not r > WORSE_THAN_NONE or not comp or any(v is None or v != 0 for v in comp):
+    rs = [w.get("ftc_true_ratio"), *(w.get("ftc_true_ratio_per_output") or [])]
+    comp = w.get("ftc_compensation_rms")
+    if not any(r is not None and r > WORSE_THAN_NONE for r in rs) or not comp or any(v != 0 for v in comp):
         return None
     mine = [fp for fp in scenario.faults if fp.fault == w["fault"] and fp.start == w["start"]]
     if len(mine) != 1 or not any(fp.start < w["start"] for fp in scenario.faults if fp is not mine[0]):
