@@ -150,13 +150,12 @@ def crosstalk_held(R, T, n: int, lf: int, tau: float) -> np.ndarray:
         return kappa
     for ts, steps, _ in _decaying(R):
         ts = np.geomspace(ts[0], ts[-1], HELD_POINTS)
-        fade = np.exp(-np.diff(ts, prepend=0.0) / tau)
         for q in range(lf):
             e0 = T[:, n + lf + q]
             D = steps.delta(e0, ts)
             own = (1.0 - e0[n + lf + q]) - D[:, n + lf + q]
-            held_start = _held(np.abs(own), fade)
-            held_end = np.maximum(_held(np.abs(1.0 - own), fade), np.exp(-ts / tau))
+            held_start = _held(np.abs(own), ts, tau)
+            held_end = np.maximum(_held(np.abs(1.0 - own), ts, tau), np.exp(-ts / tau))
             for j in range(lf):
                 if j == q:
                     continue
@@ -173,11 +172,9 @@ def crosstalk_held(R, T, n: int, lf: int, tau: float) -> np.ndarray:
 HELD_POINTS = 4000
 
 
-def _held(x: np.ndarray, fade: np.ndarray) -> np.ndarray:
-    """The running largest of ``x``, each earlier value decayed by the product of ``fade`` since."""
-    out = np.empty_like(x)
-    m = 0.0
-    for i, (v, f) in enumerate(zip(x, fade)):
-        m = max(v, m * f)
-        out[i] = m
-    return out
+def _held(x: np.ndarray, ts: np.ndarray, tau: float) -> np.ndarray:
+    """At each time of ``ts``, the largest of ``x`` so far, each earlier value decayed by ``exp(-(t - t_k) / tau)``:
+    ``exp(-t / tau)`` times the running largest of ``x_k exp(t_k / tau)`` (``t / tau`` is at most 15 on
+    :func:`_decaying`'s grids, 30 of a rule's slowest time constant against ``tau``, twice the slowest of all)."""
+    grow = np.exp(ts / tau)
+    return np.maximum.accumulate(x * grow) / grow
