@@ -206,3 +206,32 @@ def test_the_c_step_accommodates_as_the_simulation(release, real_designs, tmp_pa
     if acc.latched:
         assert held > 0  # a latch held a fault between the release ratio and its threshold
         assert set(np.unique(gates)) == {0.0, 1.0}
+
+
+@pytest.mark.slow
+@needs_cc
+def test_the_c_step_of_a_gate_with_held_crosstalk_and_a_fault_never_compensated(tmp_path):
+    """The committed manipulator design (rule "explain", its memories and crosstalk_held) with its actuator fault
+    listed in ``never``: the Monte Carlo applies no compensation at any sample (its sensor fault's column of Kf is
+    zero), and the generated C, fed the run's measurements, gives the run's inputs and estimates."""
+    d = Design.load(ROOT / "generated" / "manipulator" / "design.json")
+    assert d.remembers and "crosstalk_held" in d.accommodation
+    off = dataclasses.replace(d, accommodation={**d.accommodation, "never": [0]})
+    plant, sc = load_plant("manipulator"), SCENARIOS["manipulator"]()
+    res = simulate(
+        off, plant, sc, paths=1, seed=2, record_all=True, record_every=1, progress=False, detect=False
+    )
+    ftc = res.ftc
+    assert np.max(np.abs(ftc.ucomp)) == 0.0 and np.max(np.abs(ftc.fhat[0, :, 0])) > 0.1
+    generate_c(off, tmp_path, sample_time=res.dt)
+    c = CStep(build.compile_shared(tmp_path, tmp_path / "libstep.so"), off, "double")
+    c.init(np.concatenate([ftc.xbarhat[0, 0] - np.asarray(off.H) @ ftc.y[0, 0], np.zeros(off.nz - off.nbar)]))
+    scale = max(1.0, float(np.max(np.abs(ftc.y))), float(np.max(np.abs(ftc.u))))
+    worst = 0.0
+    for k in range(ftc.y.shape[1]):
+        rc, u, xb, _ = c.step(ftc.y[0, k])
+        assert rc == 0
+        worst = max(
+            worst, float(np.max(np.abs(u - ftc.u[0, k]))), float(np.max(np.abs(xb - ftc.xbarhat[0, k])))
+        )
+    assert worst <= C_DOUBLE * scale, worst
