@@ -148,14 +148,14 @@ def crosstalk_held(R, T, n: int, lf: int, tau: float) -> np.ndarray:
     kappa = np.zeros((lf, lf))
     if lf < 2:
         return kappa
-    for ts, steps, _ in _decaying(R):
-        ts = np.geomspace(ts[0], ts[-1], HELD_POINTS)
+    for grid, steps, _ in _decaying(R):
+        times = np.geomspace(grid[0], grid[-1], HELD_POINTS)
         for q in range(lf):
             e0 = T[:, n + lf + q]
-            D = steps.delta(e0, ts)
+            D = steps.delta(e0, times)
             own = (1.0 - e0[n + lf + q]) - D[:, n + lf + q]
-            held_start = _held(np.abs(own), ts, tau)
-            held_end = np.maximum(_held(np.abs(1.0 - own), ts, tau), np.exp(-ts / tau))
+            held_start = _held(np.abs(own), times, tau)
+            held_end = np.maximum(_held(np.abs(1.0 - own), times, tau), np.exp(-times / tau))
             for j in range(lf):
                 if j == q:
                     continue
@@ -172,9 +172,9 @@ def crosstalk_held(R, T, n: int, lf: int, tau: float) -> np.ndarray:
 HELD_POINTS = 4000
 
 
-def _held(x: np.ndarray, ts: np.ndarray, tau: float) -> np.ndarray:
-    """At each time of ``ts``, the largest of ``x`` so far, each earlier value decayed by ``exp(-(t - t_k) / tau)``:
+def _held(x: np.ndarray, times: np.ndarray, tau: float) -> np.ndarray:
+    """At each of ``times``, the largest of ``x`` so far, each earlier value decayed by ``exp(-(t - t_k) / tau)``:
     ``exp(-t / tau)`` times the running largest of ``x_k exp(t_k / tau)`` (``t / tau`` is at most 15 on
     :func:`_decaying`'s grids, 30 of a rule's slowest time constant against ``tau``, twice the slowest of all)."""
-    grow = np.exp(ts / tau)
+    grow = np.exp(times / tau)
     return np.maximum.accumulate(x * grow) / grow
