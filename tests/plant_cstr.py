@@ -6,8 +6,10 @@ multiplicative noise on the reaction rate (``noise`` of its deviation), sensor n
 Measured on 2026-11-29 (`fte design`, then `fte simulate --paths 8 --seed 1`, the scenario below):
 
 - ``cstr_calm`` (no diffusion): certified at the defaults in 26 s; the observer's slowest time constant 4.5 min
-  against the loop's 0.75 min, so tolerant control barely beats the loop's own rejection of the coolant bias
-  (``ftc_true_ratio`` 0.966 in its window); the thermocouple window 1.0000012, carried in (``carry_free_ratio``
+  against the loop's 0.75 min (``--kappa 1e6``: 4.1 min), so tolerant control barely beats the loop's own
+  rejection of the coolant bias (``ftc_true_ratio`` 0.966 in its window). `fte simulate` names the cause: the
+  outputs tell the two faults apart only weakly (the column-normalised rank test [[A_i, Bf], [C, Df]] 0.0016 at
+  rule 4: a colder coolant and a thermocouple reading high look alike but for the concentration's slow reply); the thermocouple window 1.0000012, carried in (``carry_free_ratio``
   1.109: no compensation does better there).
 - ``cstr_1pc`` (1 % of the rate's deviation as noise) and ``cstr`` (5 %): refused at dt = 0.01 (the (29) route's
   step needs Ts < 0.00104, as the refusal says) and at 0.001 (its observer at most 0.12 / min against the 0.2 three
