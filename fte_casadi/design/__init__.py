@@ -14,6 +14,7 @@ from ._isolation import crosstalk as crosstalk
 from ._isolation import crosstalk_held as crosstalk_held
 from ._isolation import overshoot as overshoot
 from ._limits import explain_metrics as explain_metrics
+from ._limits import fed_faults as fed_faults
 from ._matfile import is_fte_mat as is_fte_mat
 from ._options import DesignOptions as DesignOptions
 from ._parts import Dims as Dims

@@ -200,6 +200,12 @@ IDLE_GAIN = 1e-6
 TIE = 0.02
 
 
+def fed_faults(design) -> list[int]:
+    """The faults whose estimates tolerant control feeds into u: a nonzero column of Kf (of some rule's Kf_i)."""
+    kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
+    return [j for j in range(int(design.dims.lf)) if any(np.any(np.asarray(k)[:, j]) for k in kfs)]
+
+
 def gated_out(design, j: int) -> str:
     """Why tolerant control adds nothing in a window of fault ``j``: its own estimate does not enter u (a zero
     column of Kf: a sensor fault, which the observer already removes from xhat for both runs) and the gate of
@@ -214,8 +220,7 @@ def gated_out(design, j: int) -> str:
         return (f"{name} is never compensated (the design measured its compensation worse than none in its own "
                 "windows: accommodation.never), and the gate keeps the other faults' estimates out of u while they are "
                 "no more than its cross-talk explains, so tolerant control adds nothing here: a ratio of 1 is a tie")  # fmt: skip
-    kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
-    if any(np.any(np.asarray(k)[:, j]) for k in kfs):
+    if j in fed_faults(design):
         return ""
     return (f"{name}'s estimate does not enter u (its column of Kf is zero: the observer already removes it from xhat, "
             "which the loop without tolerant control uses too), and the gate keeps the other faults' estimates out of "

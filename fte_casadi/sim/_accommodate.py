@@ -229,11 +229,9 @@ def _worst_first(ratios) -> list:
 
 
 def _fed(design: Design) -> list[int]:
-    """The faults whose estimates tolerant control feeds into u: a nonzero column of Kf (of some rule's)."""
-    import numpy as np
+    from ..design import fed_faults
 
-    kfs = [design.Kf] if design.Kf_rules is None else list(design.Kf_rules)
-    return [j for j in range(int(design.dims.lf)) if any(np.any(np.asarray(k)[:, j]) for k in kfs)]
+    return fed_faults(design)
 
 
 def _never(gated: Design, run, plant, scenario, *, paths: int, seed: int, dt, threads, where: str) -> Design:
