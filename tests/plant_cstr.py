@@ -9,13 +9,13 @@ Measured on 2026-11-29 (`fte design`, then `fte simulate --paths 8 --seed 1`, th
   against the loop's 0.75 min (``--kappa 1e6``: 4.1 min), so tolerant control barely beats the loop's own
   rejection of the coolant bias (``ftc_true_ratio`` 0.966 in its window). `fte simulate` names the cause: the
   outputs tell the two faults apart only weakly (the column-normalised rank test [[A_i, Bf], [C, Df]] 0.0016 at
-  rule 4: a colder coolant and a thermocouple reading high look alike but for the concentration's slow reply); the thermocouple window 1.0000012, carried in (``carry_free_ratio``
-  1.109: no compensation does better there).
-- ``cstr_1pc`` (1 % of the rate's deviation as noise) and ``cstr`` (5 %): refused at dt = 0.01 (the (29) route's
-  step needs Ts < 0.00104, as the refusal says) and at 0.001 (its observer at most 0.12 / min against the 0.2 three
-  time constants in the 15 min windows need; the refusal names the sample time). At dt = 2.5e-4 ``cstr_1pc`` is
-  certified (57 s): the coolant window 0.998, the gate shut on it nearly throughout (the thermocouple's estimate
-  explains it: crosstalk_held 136 K per K).
+  rule 4: a colder coolant and a thermocouple reading high look alike but for the concentration's slow reply);
+  the thermocouple window 1.0000012, carried in (``carry_free_ratio`` 1.109: no compensation does better there).
+- ``cstr`` (5 % of the rate's deviation as noise): refused at dt = 0.01 (the (29) route's step needs Ts < 0.00104,
+  as the refusal says) and at 0.001 (its observer at most 0.0198 / min). ``cstr_1pc`` (1 %): refused at 0.001 (its
+  observer at most 0.12 / min against the 0.2 that three time constants in the 15 min windows need; the refusal
+  names the sample time as what binds); at dt = 2.5e-4 certified (57 s): the coolant window 0.998, the gate shut
+  on it nearly throughout (the thermocouple's estimate explains it: crosstalk_held 136 K per K).
 An example of what #38 does not yet reach: an observer far slower than the loop, and a sensor fault whose
 estimate's cross-talk into the actuator fault's dwarfs it."""
 
