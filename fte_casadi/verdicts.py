@@ -59,12 +59,19 @@ def _crosstalk(w: dict, faults) -> str:
     )
 
 
+def applied_nothing(w: dict) -> bool:
+    """Tolerant control added nothing to u in window ``w``: its compensation is zero at every sample (per input,
+    ``ftc_compensation_rms``); the window's FTC ratios then differ from 1 only by what the runs carried in."""
+    comp = w.get("ftc_compensation_rms")
+    return bool(comp) and all(v is not None and v == 0 for v in comp)
+
+
 def _cause(w: dict, faults, output: int | None = None) -> str:
     """What made tolerant control differ from none in window ``w``: where it applied nothing there (its
     compensation is zero at every sample, ``ftc_compensation_rms``), what the runs carried into the window
     (``onset_deviation``); else the other faults' cross-talk that it fed into the plant (:func:`_crosstalk`)."""
-    comp, on = w.get("ftc_compensation_rms"), w.get("onset_deviation") or {}
-    if comp and all(v is not None and v == 0 for v in comp):
+    on = w.get("onset_deviation") or {}
+    if applied_nothing(w):
         a, b = on.get("ftc"), on.get("no_ftc")
         entered = ("" if a is None or b is None else
                    f", the runs entering it at a deviation from the fault-free run of {a:.3g} with tolerant control "

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..design import Design
+from ..design import Design, fed_faults
 from ..errors import ParameterError, SimulationError
 from ._engine import calibrate_detection
 
@@ -140,7 +140,7 @@ def needs_gate(design: Design) -> bool:
     if lf < 2:
         return False
     ct = _crosstalk(design)
-    return any(ct[j, q] > 0 for j in _fed(design) for q in range(lf) if q != j)
+    return any(ct[j, q] > 0 for j in fed_faults(design) for q in range(lf) if q != j)
 
 
 def protected(design: Design, plant, scenario, *, paths: int = 8, seed: int = 0, false_alarm_rate=None,
@@ -228,12 +228,6 @@ def _worst_first(ratios) -> list:
     return sorted((r for r in ratios if r is not None), reverse=True)
 
 
-def _fed(design: Design) -> list[int]:
-    from ..design import fed_faults
-
-    return fed_faults(design)
-
-
 def _never(gated: Design, run, plant, scenario, *, paths: int, seed: int, dt, threads, where: str) -> Design:
     """``gated`` with ``accommodation["never"]``: the faults fed into u whose every own window measures worse than
     none with the gate (``run``, :func:`_run`); their compensation cannot help the true outputs on this scenario,
@@ -245,7 +239,7 @@ def _never(gated: Design, run, plant, scenario, *, paths: int, seed: int, dt, th
     names = list(gated.names.get("faults") or [f"f{j + 1}" for j in range(int(gated.dims.lf))])
     wins = run[2]
     off = []
-    for j in _fed(gated):
+    for j in fed_faults(gated):
         own = [w.get("ftc_true_ratio") for w in wins if w.get("fault") == names[j]]
         if own and all(r is not None and r > WORSE_THAN_NONE for r in own):
             off.append(j)

@@ -62,11 +62,10 @@ def carry_free(metrics: dict, design, plant, scenario, *, paths: int, seed: int,
 def _qualifies(w: dict, scenario):
     """The fault profile of window ``w`` where its ratio or an output's is above 1, tolerant control applied nothing in it and an
     earlier fault window precedes it; else None."""
-    from ..verdicts import WORSE_THAN_NONE
+    from ..verdicts import WORSE_THAN_NONE, applied_nothing
 
     rs = [w.get("ftc_true_ratio"), *(w.get("ftc_true_ratio_per_output") or [])]
-    comp = w.get("ftc_compensation_rms")
-    if not any(r is not None and r > WORSE_THAN_NONE for r in rs) or not comp or any(v != 0 for v in comp):
+    if not any(r is not None and r > WORSE_THAN_NONE for r in rs) or not applied_nothing(w):
         return None
     mine = [fp for fp in scenario.faults if fp.fault == w["fault"] and fp.start == w["start"]]
     if len(mine) != 1 or not any(fp.start < w["start"] for fp in scenario.faults if fp is not mine[0]):
