@@ -20,6 +20,7 @@ __all__ = [
     "SATURATES_EARLY",
     "verdicts",
     "judged_ftc_ratio",
+    "judged_ftc_ratios_per_output",
     "window_label",
 ]
 
@@ -116,7 +117,21 @@ def judged_ftc_ratio(w: dict) -> float | None:
     """Window ``w``'s ``ftc_true_ratio`` as the verdicts judge it: :data:`WORSE_THAN_NONE` itself (a tie) where
     the ratio's interval over the paths holds it, else the ratio (None where the window has none). Above
     :data:`WORSE_THAN_NONE` it is "worse than none", as ``fte simulate`` warns; below it, measurably better."""
-    r, iv = w.get("ftc_true_ratio"), w.get("ftc_true_ratio_interval")
+    return _judged(w.get("ftc_true_ratio"), w.get("ftc_true_ratio_interval"))
+
+
+def judged_ftc_ratios_per_output(w: dict) -> list[float | None]:
+    """Window ``w``'s ``ftc_true_ratio_per_output``, each judged as :func:`judged_ftc_ratio` judges the window's
+    (by its own interval, ``ftc_true_ratio_per_output_interval``): above :data:`WORSE_THAN_NONE`, that output is
+    worse than none, as ``fte simulate`` warns."""
+    ivs = w.get("ftc_true_ratio_per_output_interval") or []
+    return [
+        _judged(r, ivs[k] if k < len(ivs) else None)
+        for k, r in enumerate(w.get("ftc_true_ratio_per_output") or [])
+    ]
+
+
+def _judged(r, iv) -> float | None:
     if r is None:
         return None
     if iv is not None and iv[0] is not None and iv[1] is not None and iv[0] <= WORSE_THAN_NONE <= iv[1]:

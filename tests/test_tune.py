@@ -151,11 +151,11 @@ def test_ftc_rule_judges_ties_as_the_verdicts_do():
 
     base = rec(0, 0.24, [(0.709, [0.70, 0.89]), (1.00002, [0.9999, 1.0001])])
     idle = rec(1, 0.43, [(0.99999, [0.9999, 1.00001]), (0.99998, [0.9999, 1.00001])])
-    assert _admissible(base.metrics) == (True, True)  # the tie above 1 is not worse than none
+    assert _admissible(base.metrics) == (True, True, True)  # the tie above 1 (1.00002 to 0.001) is not worse
     assert choose([base, idle], [0, 1], names, "ftc")[0] == 0
     # measurably worse (its interval above 1): then it is, and a design that helps everywhere is taken
     worse = rec(0, 0.24, [(0.709, [0.70, 0.89]), (1.02, [1.01, 1.03])])
-    assert _admissible(worse.metrics) == (False, True)
+    assert _admissible(worse.metrics) == (False, False, True)
     assert choose([worse, idle], [0, 1], names, "ftc")[0] == 1
     better = rec(2, 0.3, [(0.6, [0.5, 0.7]), (0.99, [0.98, 0.995])])
     assert choose([base, idle, better], [0, 1, 2], names, "ftc")[0] == 2
@@ -164,8 +164,44 @@ def test_ftc_rule_judges_ties_as_the_verdicts_do():
     # the resolution of 0.001 both tie there, and the default's 0.709 decides
     lev = rec(0, 0.24, [(0.7092, [0.698, 0.7235]), (1.0000001164, [1.0000000701, 1.000000159])])
     nothing = rec(13, 0.43, [(0.99996709, [0.99996015, 0.9999747]), (0.99995242, [0.9999524, 0.99999984])])
-    assert _admissible(lev.metrics) == (True, True)
+    assert _admissible(lev.metrics) == (True, True, True)
     assert choose([lev, nothing], [0, 1], names, "ftc")[0] == 0
+
+
+def test_an_output_worse_than_none_keeps_a_design_out():
+    """#38: tolerant control no worse than none on any output. The three-tank's tune (60 trials, seed 1, 20 paths):
+    the base and trial 11 (the base's epsilon doubled, a hair better on every objective) leave h1 worse, 1.0079
+    (interval 1.0012-1.0163) and 1.0077 (0.9999-1.0158: a tie by the interval); trial 9 (kappa doubled) measures
+    h1 0.9918 for a fault error of 0.274 against 0.270. The window as a whole, 0.199, hid h1 from the tiers."""
+    from fte_casadi.tune._search import _admissible
+
+    names = ("fault_error[fa]", "false_alarm[fa]", "ftc[fa@200]")
+
+    def rec(k, values, h1, h1_iv):
+        w = {
+            "ftc_true_ratio": values[2],
+            "ftc_true_ratio_interval": [values[2] - 0.01, values[2] + 0.01],
+            "ftc_true_ratio_per_output": [h1, 0.19],
+            "ftc_true_ratio_per_output_interval": [h1_iv, [0.18, 0.2]],
+        }
+        return Record(k, {}, "ok", {}, {"windows": [w], "false_alarm_peak": [values[1]]}, None, tuple(values))
+
+    base = rec(0, (0.270, 0.712, 0.199), 1.0079, [1.0012, 1.0163])
+    tie = rec(11, (0.269, 0.708, 0.199), 1.0077, [0.9999, 1.0158])
+    kappa2 = rec(9, (0.274, 0.760, 0.182), 0.9918, [0.9837, 1.001])
+    assert _admissible(base.metrics) == (False, False, False)
+    assert _admissible(tie.metrics) == (True, False, False)
+    assert _admissible(kappa2.metrics) == (True, True, False)
+    chosen, tier = choose([base, tie, kappa2], [0, 1, 2], names, "balanced")
+    assert chosen == 9 and tier.startswith("tolerant control measured no worse than none")
+    # without a member measuring every ratio <= 1, the tie by the interval; without that, all of them
+    assert choose([base, tie], [0, 1], names, "balanced")[0] == 11
+    assert choose([base], [0], names, "balanced")[1].startswith("none of the front")
+    # the window's ratio alone (no per-output figures) is judged as before
+    alone = Record(
+        0, {}, "ok", {}, {"windows": [{"ftc_true_ratio": 0.199}], "false_alarm_peak": [0.3]}, None, ()
+    )
+    assert _admissible(alone.metrics) == (True, True, True)
 
 
 def test_cli_json_files_and_tuned_design_simulates(tmp_path):

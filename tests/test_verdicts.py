@@ -53,12 +53,17 @@ def test_warnings_choice_and_explanations_agree_at_the_thresholds(side, real_des
     fa = verdicts.FALSE_ALARM * (1 + side * 1e-3)
     m = _doc(ratio, fa, faults)
     warned = _warnings(m, list(d.names["inputs"]), faults)
-    ftc_ok, fa_ok = search._admissible(m)
+    ftc_ok, measured_ok, fa_ok = search._admissible(m)
     explained = limits.explain_metrics(d, m)
     bad = side > 0
-    assert sum("worse than none" in w for w in warned) == int(bad) and ftc_ok == (not bad)
+    assert sum("worse than none" in w for w in warned) == int(bad) and ftc_ok == measured_ok == (not bad)
     assert sum("false alarms" in w for w in warned) == int(bad) and fa_ok == (not bad)
     assert len(explained) == 2 * int(bad)  # one window, one fault explained above the thresholds, none below
+    # one output at the threshold, the window as a whole well below it: warned and judged alike (#38)
+    m["windows"][0] |= {"ftc_true_ratio": 0.5, "ftc_true_ratio_per_output": [0.3, ratio]}
+    warned = _warnings(m, list(d.names["inputs"]), faults)
+    assert sum("makes the true output" in w and "worse than none" in w for w in warned) == int(bad)
+    assert search._admissible(m)[:2] == (not bad, not bad)
 
 
 def test_each_verdict_on_its_figure():

@@ -240,7 +240,7 @@ def _say_tune(result, plant, seed: int, rule: str, files: dict, as_json: bool) -
     for line in front_table(result):
         say("  " + line)
     rows = comparison(result.baseline.metrics, result.record(result.chosen).metrics, list(plant.fault_names),
-                      list(plant.input_names))  # fmt: skip
+                      list(plant.input_names), list(plant.output_names))  # fmt: skip
     say(f"default (trial 0) vs chosen (trial {result.chosen}; {result.tier}):")
     for line in fmt_rows(rows):
         say("  " + line)

@@ -124,9 +124,10 @@ def _fmt(v) -> str:
 
 
 def comparison(
-    base: dict, chosen: dict, fault_names, input_names
+    base: dict, chosen: dict, fault_names, input_names, output_names=()
 ) -> list[tuple[str, float | None, float | None]]:
-    """``(metric, default, chosen)`` rows over every metric of the issue's table and the inputs."""
+    """``(metric, default, chosen)`` rows over every metric of the issue's table, each window's FTC ratio on each
+    output (named by ``output_names``) and the inputs."""
     rows = []
     for j, f in enumerate(fault_names):
         rows.append((f"fault error {f}", base["fault_rel_rms_error"][j], chosen["fault_rel_rms_error"][j]))
@@ -136,6 +137,10 @@ def comparison(
         tag = f"{wb['fault']} [{wb['start']:g}, {wb['stop']:g})"
         rows.append((f"fault error in window {tag}", wb["fault_rel_rms_error"], wc["fault_rel_rms_error"]))
         rows.append((f"FTC ratio in window {tag}", wb["ftc_true_ratio"], wc["ftc_true_ratio"]))
+        for k, (b, c) in enumerate(zip(wb.get("ftc_true_ratio_per_output") or [],
+                                       wc.get("ftc_true_ratio_per_output") or [])):  # fmt: skip
+            name = output_names[k] if k < len(output_names) else f"output {k}"
+            rows.append((f"FTC ratio in window {tag}, {name}", b, c))
     rows.append(("FTC ratio, all windows", base["ftc_true_ratio"], chosen["ftc_true_ratio"]))
     for i, u in enumerate(input_names):
         rows.append((f"peak |{u}|", base["input_peak"][i], chosen["input_peak"][i]))

@@ -20,10 +20,11 @@ Objectives (all minimised; those the base design leaves undefined are dropped):
   design has none).
 
 The chosen design (:func:`choose`) is a member of the front: among the front members that are
-certified (every completed trial is) and make tolerant control no worse than none in any window
-(FTC ratio <= 1, a ratio above 1 whose interval over the paths holds 1 counting as a tie, as the
-verdicts judge it, each to :data:`FTC_RESOLUTION`) and keep every false-alarm ratio below 1 — or, when none does, those with no
-window worse than none, or else all of them — the one with the smallest score of the rule:
+certified (every completed trial is), make tolerant control no worse than none in any window, on the outputs
+as a whole and on each output (every FTC ratio measured <= 1, each to :data:`FTC_RESOLUTION`) and keep every
+false-alarm ratio below 1 — or, when none does, the first tier of :data:`TIERS` that has members (a ratio above 1
+whose interval over the paths holds 1 counting as a tie, as the verdicts judge it; then without the false alarms;
+else all of them) — the one with the smallest score of the rule:
 
 - ``balanced`` (default): among the members whose input peak stays within :data:`INPUT_PEAK_ALLOWANCE`
   x the base's and whose saturation rises by at most 1 % of the samples, those better than the base on
@@ -55,7 +56,7 @@ import numpy as np
 
 from .._keywords import with_keywords
 from ..errors import ParameterError
-from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE, judged_ftc_ratio
+from ..verdicts import FALSE_ALARM, WORSE_THAN_NONE, judged_ftc_ratio, judged_ftc_ratios_per_output
 from ._evaluate import evaluate
 from ._options import RULES as RULES
 from ._options import TuneOptions
@@ -212,20 +213,45 @@ def _within_inputs(values: tuple, base: tuple, names: tuple) -> bool:
             and v.get("input_saturation", 0.0) <= b.get("input_saturation", 0.0) + 0.01)  # fmt: skip
 
 
-def _admissible(m: dict) -> tuple[bool, bool]:
-    """(no window's tolerant control worse than none, every false-alarm ratio < 1): the thresholds and the rule of
-    :mod:`fte_casadi.verdicts` (a ratio above 1 whose interval over the paths holds 1 is a tie, not worse), the
-    ratios to :data:`FTC_RESOLUTION`."""
-    ftc = all(v <= WORSE_THAN_NONE for v in _judged(m))
+def _admissible(m: dict) -> tuple[bool, bool, bool]:
+    """(no window's tolerant control worse than none, on the outputs as a whole or on any one output, as the
+    verdicts judge it; every one of those ratios measured at most 1; every false-alarm ratio < 1): the
+    thresholds and the rule of :mod:`fte_casadi.verdicts` (a ratio above 1 whose interval over the paths holds 1
+    is a tie, not worse), the ratios to :data:`FTC_RESOLUTION`."""
+    windows = m.get("windows") or []
+    judged = _judged(m) + _rounded(v for w in windows for v in judged_ftc_ratios_per_output(w))
+    measured = _rounded(v for w in windows for v in (w.get("ftc_true_ratio"), *(w.get("ftc_true_ratio_per_output")
+                                                                                 or [])))  # fmt: skip
     fa = all(v < FALSE_ALARM for v in m.get("false_alarm_peak") or [] if v is not None)
-    return ftc, fa
+    return (all(v <= WORSE_THAN_NONE for v in judged), all(v <= WORSE_THAN_NONE for v in measured), fa)
 
 
 def _judged(m: dict) -> list[float]:
     """Every window's FTC ratio as the verdicts judge it (:func:`fte_casadi.verdicts.judged_ftc_ratio`), rounded to
     :data:`FTC_RESOLUTION`: a design is not chosen, nor left out, for less."""
-    return [round(v / FTC_RESOLUTION) * FTC_RESOLUTION for v in (judged_ftc_ratio(w) for w in m.get("windows") or [])
-            if v is not None]  # fmt: skip
+    return _rounded(judged_ftc_ratio(w) for w in m.get("windows") or [])
+
+
+def _rounded(values) -> list[float]:
+    return [round(v / FTC_RESOLUTION) * FTC_RESOLUTION for v in values if v is not None]
+
+
+#: the tiers of :func:`choose`, first to last: (what its members do, which of :func:`_admissible`'s three they
+#: meet); a tie (a ratio above 1 whose interval holds 1) counts as not worse than none, but a design that measures
+#: no ratio above 1 is taken first
+TIERS = (
+    ("tolerant control measured no worse than none in any window nor on any output (every ratio <= 1), and every "
+     "false-alarm ratio < 1", (True, True, True)),
+    ("tolerant control not worse than none in any window nor on any output (a ratio above 1 whose interval holds 1 "
+     "a tie; no front member measures every ratio <= 1), and every false-alarm ratio < 1", (True, False, True)),
+    ("tolerant control measured no worse than none in any window nor on any output (every ratio <= 1; no front "
+     "member keeps every false-alarm ratio below 1)", (True, True, False)),
+    ("tolerant control not worse than none in any window nor on any output (a ratio above 1 whose interval holds 1 "
+     "a tie; no front member measures every ratio <= 1, nor keeps every false-alarm ratio below 1)",
+     (True, False, False)),
+    ("none of the front keeps tolerant control from being worse than none in every window and on every output",
+     (False, False, False)),
+)  # fmt: skip
 
 
 def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> tuple[int, str]:
@@ -235,18 +261,11 @@ def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> 
         raise ParameterError(f"unknown objective rule {rule!r}; choose one of {', '.join(RULES)}")
     base = records[0].values
     cands = [records[k] for k in front]
-    tiers = (
-        ("tolerant control not worse than none in any window and every false-alarm ratio < 1",
-         lambda r: all(_admissible(r.metrics))),
-        ("tolerant control not worse than none in any window (no front member keeps every false-alarm ratio "
-         "below 1)",
-         lambda r: _admissible(r.metrics)[0]),
-        ("none of the front makes tolerant control better than none in every window", lambda r: True),
-    )  # fmt: skip
-    tier, pool = tiers[-1][0], cands
-    for name, ok in tiers:
-        if any(ok(r) for r in cands):
-            tier, pool = name, [r for r in cands if ok(r)]
+    tier, pool = TIERS[-1][0], cands
+    for name, needs in TIERS:
+        ok = [r for r in cands if all(have or not need for have, need in zip(_admissible(r.metrics), needs))]
+        if ok:
+            tier, pool = name, ok
             break
     if rule == "balanced":
         kept = [r for r in pool if _within_inputs(r.values, base, names)]

@@ -4,7 +4,7 @@
 #include "fte_three_tank.h"
 #include "fte_three_tank_casadi.h"
 
-#if FTE_THREE_TANK_SET != 0xef7cfd40UL || FTE_THREE_TANK_CASADI_SET != 0xef7cfd40UL
+#if FTE_THREE_TANK_SET != 0x38822905UL || FTE_THREE_TANK_CASADI_SET != 0x38822905UL
 #error "fte_three_tank.h or fte_three_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 

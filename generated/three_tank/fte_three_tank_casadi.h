@@ -5,7 +5,7 @@
  *   3) user code: owned by the user
  *
  */
-#define FTE_THREE_TANK_CASADI_SET 0xef7cfd40UL /* the set these files belong to */
+#define FTE_THREE_TANK_CASADI_SET 0x38822905UL /* the set these files belong to */
 #ifdef __cplusplus
 extern "C" {
 #endif
