@@ -18,7 +18,7 @@ from fte_casadi.sim import _engine, carry_free, simulate
 from fte_casadi.verdicts import verdicts
 
 ROOT = Path(__file__).resolve().parents[1]
-PENDULUM = "examples/pendulum_plant.py:pendulum"
+PENDULUM = "examples/pendulum_plain.py:pendulum"  # the hand-written defaults (pendulum_plant.py has tune's)
 
 
 def _window(fault, a, b, ratio, comp, per_output=(1.0, 1.0)):
@@ -79,9 +79,9 @@ def test_the_verdict_names_what_the_window_measures_with_nothing_carried_in(valu
 
 @pytest.mark.slow
 def test_the_pendulums_sensor_window_is_worse_than_none_by_what_the_run_without_it_carries_in(tmp_path):
-    """examples/pendulum_plant.py at the defaults, 8 paths, seed 1: the sensor window's ratio is above 1 with no
-    compensation applied in it. With the actuator fault removed from the scenario (nothing carried in) the FTC run
-    measures above 1 too, against the same run without tolerant control: recomputed here from the recorded
+    """examples/pendulum_plain.py at its hand-written defaults, 8 paths, seed 1: the sensor window's ratio is above 1
+    with no compensation applied in it. With the actuator fault removed from the scenario (nothing carried in) the
+    FTC run measures above 1 too, against the same run without tolerant control: recomputed here from the recorded
     arrays of both runs, the number carry_free writes."""
     out = tmp_path / "p.json"
     proc = subprocess.run([sys.executable, "-m", "fte_casadi", "design", PENDULUM, "-o", str(out)],
