@@ -9,8 +9,11 @@ moves the state, not z; ``xbarhat = z + H y`` takes ``H Cbar e_q`` of it at once
 
     fhat_q(t) = 1 - [exp(R_i t) T e_q]_q,     fhat_j(t) = -[exp(R_i t) T e_q]_j   (j != q),
 
-and ``kappa[j, q] = sup_t |fhat_j(t)| / |fhat_q(t)|``, the largest over the rules (each frozen), is how much
-of fault j's estimate fault q's estimate can explain at any moment. The step's gate
+and ``kappa[j, q] = sup_t |fhat_j(t)| / |fhat_q(t)|``, the largest over the rules (each frozen) and over both of
+the step's edges (at its end ``fhat_q = 1 - `` the start's, ``fhat_j`` the start's negated), is how much of fault
+j's estimate fault q's estimate can explain at any moment. (Over the start alone it was no bound at the end: fault
+q's estimate falls at once while fault j's cross-talk decays more slowly, and the gate then compensated that
+cross-talk after every sensor-fault window, docs/design.md.) The step's gate
 (:func:`fte_casadi.step.accommodation_gate`, rule ``"explain"``) compensates fault j only while
 ``|fhat_j| >= threshold_j + sum_q kappa[j, q] |fhat_q|``: detected, and more than the other faults' estimates
 can explain. A fault whose step is a sum of steps of one sign (a ramp, a stuck sensor drifting away) gives a
@@ -53,10 +56,15 @@ class _StepResponse:
             )
         return np.array([_phi_step(self.R, t) @ e0 for t in times])
 
-    def ratios(self, e0: np.ndarray, own: int, other: int, times: np.ndarray) -> np.ndarray:
-        """``|fhat_other(t)| / |fhat_own(t)|`` after a unit step of the fault at ``own``."""
+    def ratios(
+        self, e0: np.ndarray, own: int, other: int, times: np.ndarray, end: bool = False
+    ) -> np.ndarray:
+        """``|fhat_other(t)| / |fhat_own(t)|`` after a unit step of the fault at ``own``; ``end``: after the end of
+        that fault, held long enough for its estimate to reach it (``fhat_own = 1 - `` the start's, ``fhat_other``
+        the start's negated)."""
         D = self.delta(e0, times)
-        f_own = np.abs((1.0 - e0[own]) - D[:, own])
+        f_own = (1.0 - e0[own]) - D[:, own]
+        f_own = np.abs(1.0 - f_own if end else f_own)
         f_other = np.abs(e0[other] + D[:, other])
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(
@@ -85,10 +93,14 @@ def _decaying(R):
             yield np.geomspace(1e-6 / fast, 30.0 / slow, POINTS), _StepResponse(Ri), slow
 
 
-def crosstalk(R, T, n: int, lf: int) -> np.ndarray:
+def crosstalk(R, T, n: int, lf: int, end: bool = True) -> np.ndarray:
     """``kappa`` (lf x lf, zero diagonal): the largest ratio ``|fhat_j(t)| / |fhat_q(t)|`` after a unit step of
-    fault q alone, over the rules ``R`` (each ``T Abar_i - L1_i Cbar``) and a logarithmic time grid; see the
-    module docstring. Capped at :data:`KAPPA_CAP`; zeros for a rule whose observer does not decay."""
+    fault q alone, over the rules ``R`` (each ``T Abar_i - L1_i Cbar``), a logarithmic time grid and both of the
+    step's edges (its start, and its end once the estimate has reached it: ``fhat_q = 1 - own(t)``, ``fhat_j`` the
+    start's negated); see the module docstring. At its end, fault q's estimate falls while the cross-talk it
+    caused is still decaying, so the end's ratio is often the larger, and often beyond the cap: the gate then
+    relies on :func:`crosstalk_held`. Capped at :data:`KAPPA_CAP`; zeros for a rule whose observer does not
+    decay. ``end=False``: the start alone (what documents written before 2026-11-29 hold)."""
     T = np.asarray(T, dtype=float)
     kappa = np.zeros((lf, lf))
     if lf < 2:
@@ -99,12 +111,15 @@ def crosstalk(R, T, n: int, lf: int) -> np.ndarray:
             for j in range(lf):
                 if j == q:
                     continue
-                ratio = steps.ratios(e0, n + lf + q, n + lf + j, ts)
-                k = int(np.argmax(ratio))
-                # the grid's largest, refined between its neighbours, then rounded up by REFINE_MARGIN
-                fine = np.geomspace(ts[max(k - 1, 0)], ts[min(k + 1, len(ts) - 1)], 65)
-                top = max(float(ratio[k]), float(np.max(steps.ratios(e0, n + lf + q, n + lf + j, fine))))
-                kappa[j, q] = max(kappa[j, q], min(top * (1 + REFINE_MARGIN), KAPPA_CAP))
+                for edge in (False, True) if end else (False,):
+                    ratio = steps.ratios(e0, n + lf + q, n + lf + j, ts, edge)
+                    k = int(np.argmax(ratio))
+                    # the grid's largest, refined between its neighbours, then rounded up by REFINE_MARGIN
+                    fine = np.geomspace(ts[max(k - 1, 0)], ts[min(k + 1, len(ts) - 1)], 65)
+                    top = max(
+                        float(ratio[k]), float(np.max(steps.ratios(e0, n + lf + q, n + lf + j, fine, edge)))
+                    )
+                    kappa[j, q] = max(kappa[j, q], min(top * (1 + REFINE_MARGIN), KAPPA_CAP))
     return kappa
 
 

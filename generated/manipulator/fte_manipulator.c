@@ -4,7 +4,7 @@
 #include "fte_manipulator.h"
 #include "fte_manipulator_casadi.h"
 
-#if FTE_MANIPULATOR_SET != 0x34ab397eUL || FTE_MANIPULATOR_CASADI_SET != 0x34ab397eUL
+#if FTE_MANIPULATOR_SET != 0x63a35e9aUL || FTE_MANIPULATOR_CASADI_SET != 0x63a35e9aUL
 #error "fte_manipulator.h or fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 

@@ -26,7 +26,7 @@ typedef double fte_real;
 
 /* The set these files belong to: each .c file stops the compilation with an #error when a header is of
  * another run of fte codegen (a mix of two sets never builds). */
-#define FTE_MANIPULATOR_SET 0x34ab397eUL
+#define FTE_MANIPULATOR_SET 0x63a35e9aUL
 
 /* The accepted range of each measurement (see above); a y outside it is refused with return 3. */
 extern const fte_real fte_manipulator_Y_MIN[3];
@@ -48,7 +48,7 @@ typedef struct {
 
 /* Accommodation after detection: fault j is compensated in u (the Kf fhat term) while |fhat_j| >=
  * threshold_j + sum_q crosstalk[j][q] |fhat_q| (thresholds 0.0179675, 0.00774552; crosstalk rows 0,
- * 1.406; 0.2492, 0), a fault no other one cross-talks into always; each term the smaller of
+ * 1000; 1000, 0), a fault no other one cross-talks into always; each term the smaller of
  * crosstalk[j][q] |fhat_q| and crosstalk_held[j][q] M_q, M_q the largest |fhat_q| held, decaying as
  * the memories (crosstalk_held rows 0, 1.98; 0.2532, 0), and more than its own overshoot explains: +
  * overshoot_j m_j (overshoot 0.4696, 0.56), m_j the largest estimate of the other sign, held and

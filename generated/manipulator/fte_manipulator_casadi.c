@@ -20,7 +20,7 @@ extern "C" {
 
 #include <math.h>
 #include "fte_manipulator_casadi.h"
-#if FTE_MANIPULATOR_CASADI_SET != 0x34ab397eUL
+#if FTE_MANIPULATOR_CASADI_SET != 0x63a35e9aUL
 #error "fte_manipulator_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -219,7 +219,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a16=(a16+a18);
   a18=casadi_fabs(a15);
   a26=1.7967458990570888e-02;
-  a27=1.4060012881530757e+00;
+  a27=1000.;
   a25=casadi_fabs(a17);
   a27=(a27*a25);
   a25=1.9799624837367689e+00;

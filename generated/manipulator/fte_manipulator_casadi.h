@@ -5,7 +5,7 @@
  *   3) user code: owned by the user
  *
  */
-#define FTE_MANIPULATOR_CASADI_SET 0x34ab397eUL /* the set these files belong to */
+#define FTE_MANIPULATOR_CASADI_SET 0x63a35e9aUL /* the set these files belong to */
 #ifdef __cplusplus
 extern "C" {
 #endif

@@ -4,7 +4,7 @@
 #include "fte_quadruple_tank.h"
 #include "fte_quadruple_tank_casadi.h"
 
-#if FTE_QUADRUPLE_TANK_SET != 0x3cc924d9UL || FTE_QUADRUPLE_TANK_CASADI_SET != 0x3cc924d9UL
+#if FTE_QUADRUPLE_TANK_SET != 0xcad2a3d5UL || FTE_QUADRUPLE_TANK_CASADI_SET != 0xcad2a3d5UL
 #error "fte_quadruple_tank.h or fte_quadruple_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 

@@ -26,7 +26,7 @@ typedef double fte_real;
 
 /* The set these files belong to: each .c file stops the compilation with an #error when a header is of
  * another run of fte codegen (a mix of two sets never builds). */
-#define FTE_QUADRUPLE_TANK_SET 0x3cc924d9UL
+#define FTE_QUADRUPLE_TANK_SET 0xcad2a3d5UL
 
 /* The accepted range of each measurement (see above); a y outside it is refused with return 3. */
 extern const fte_real fte_quadruple_tank_Y_MIN[4];
@@ -48,7 +48,7 @@ typedef struct {
 
 /* Accommodation after detection: fault j is compensated in u (the Kf fhat term) while |fhat_j| >=
  * threshold_j + sum_q crosstalk[j][q] |fhat_q| (thresholds 0.0266317, 0.0157155; crosstalk rows 0,
- * 0.5196; 2.185, 0), a fault no other one cross-talks into always; each term the smaller of
+ * 1000; 1000, 0), a fault no other one cross-talks into always; each term the smaller of
  * crosstalk[j][q] |fhat_q| and crosstalk_held[j][q] M_q, M_q the largest |fhat_q| held, decaying as
  * the memories (crosstalk_held rows 0, 0.5196; 2.185, 0), and more than its own overshoot explains: +
  * overshoot_j m_j (overshoot 0.4858, 0.1255), m_j the largest estimate of the other sign, held and

@@ -20,7 +20,7 @@ extern "C" {
 
 #include <math.h>
 #include "fte_quadruple_tank_casadi.h"
-#if FTE_QUADRUPLE_TANK_CASADI_SET != 0x3cc924d9UL
+#if FTE_QUADRUPLE_TANK_CASADI_SET != 0xcad2a3d5UL
 #error "fte_quadruple_tank_casadi.h is of another run of fte codegen than this file: generate the C again as one set (fte codegen)"
 #endif
 
@@ -479,7 +479,7 @@ static int casadi_f0(const casadi_real** arg, casadi_real** res, casadi_int* iw,
   a34=1.;
   a32=casadi_fabs(a27);
   a31=2.6631674682620662e-02;
-  a09=5.1961258091637874e-01;
+  a09=1000.;
   a21=casadi_fabs(a29);
   a09=(a09*a21);
   a21=5.1961192575356396e-01;

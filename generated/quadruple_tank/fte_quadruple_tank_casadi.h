@@ -5,7 +5,7 @@
  *   3) user code: owned by the user
  *
  */
-#define FTE_QUADRUPLE_TANK_CASADI_SET 0x3cc924d9UL /* the set these files belong to */
+#define FTE_QUADRUPLE_TANK_CASADI_SET 0xcad2a3d5UL /* the set these files belong to */
 #ifdef __cplusplus
 extern "C" {
 #endif
