@@ -218,3 +218,24 @@ def test_the_levitations_coil_fault_is_compensated_through_the_held_crosstalk(tm
         runs[tag] = {w["fault"]: w["ftc_true_ratio"] for w in m["windows"]}
         assert 3 * m["observer_time_constant"] <= sc.shortest_window()
     assert runs["held"]["fa"] <= 0.6 < runs["now"]["fa"], runs
+
+
+@pytest.mark.slow
+def test_explore_finds_the_design_the_levitation_certifies_under_a_larger_kappa(tmp_path):
+    """`fte design maglev_near --explore`: its frontier keeps cond(Pbar) <= 1e4 at every sigma (no search of kappa
+    there) and certifies nothing, while the plant's own design certifies under kappa = 1e5. Explore said "no
+    certified design" and blamed the gap fault; it now writes the plant's own design, with the gate `fte design`
+    gives it, and says where it came from."""
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+
+    spec = f"{ROOT / 'tests' / 'plant_levitation.py'}:maglev_near"
+    out = tmp_path / "best.json"
+    r = CliRunner().invoke(
+        main, ["design", spec, "--explore", "-o", str(out), "--out", str(tmp_path / "fig")]
+    )
+    assert r.exit_code == 0, r.output
+    assert "the design at the plant's defaults, with kappa = 100000" in r.output
+    d = Design.load(out)
+    assert d.certified and d.params.kappa == 1e5 and d.accommodation["rule"] == "explain"

@@ -45,9 +45,11 @@ def _save(d, output: str) -> None:
         click.echo(f"design document written to {output}")
 
 
-def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, output: str | None = None) -> None:
+def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, output: str | None = None,
+             always_compensate: bool = False) -> None:  # fmt: skip
     """The feasible frontier of ``plant_spec`` with the options of a design (``options``: every option of
-    ``fte design`` but gamma, sigma and --allow-uncertified, which :func:`~fte_casadi.design.explore` refuses)."""
+    ``fte design`` but gamma, sigma and --allow-uncertified, which :func:`~fte_casadi.design.explore` refuses); the
+    best design written with ``output`` gets the gate ``fte design`` gives (:func:`fte_casadi.sim.protected`)."""
     from ..design import explore
     from ..plants import load_plant
     from ..plot import frontier_figure
@@ -84,10 +86,17 @@ def _explore(plant_spec: str, options, vertices: str | None, out_dir: str, outpu
             + " (the frontier above lists what each sigma gave)"
         )
     click.echo(
-        f"best certified design found (the fastest observer): sigma = {best.params.sigma:.4g}, gamma = "
-        f"{best.params.gamma:g}, decay rate {best.observer.alpha:.4g}"
+        f"best certified design found ({info.get('best_from') or 'the fastest observer'}): sigma = "
+        f"{best.params.sigma:.4g}, gamma = {best.params.gamma:g}, decay rate {best.observer.alpha:.4g}"
     )
     if output:
+        sc = _scenario(plant_spec)
+        if (
+            sc is not None and not always_compensate
+        ):  # as fte design writes it: the gate where the faults cross-talk
+            from ..sim import protected
+
+            best = protected(best, ts.plant, sc, paths=sc.paths, seed=0)
         _save(best, output)
 
 
@@ -196,7 +205,8 @@ def design(plant, variant, solver, gamma, gamma1, sigma, delta, epsilon, alpha, 
             )
         options = _design_options(plant, variant, solver.upper(), params, False, accept)
         _outputs(out_dir or "fte-explore", output)
-        _explore(plant, options, vertices, out_dir or "fte-explore", output)
+        _explore(plant, options, vertices, out_dir or "fte-explore", output,
+                 always_compensate=always_compensate or variant == "paper")  # fmt: skip
         return
     if out_dir is not None:
         raise ParameterError(

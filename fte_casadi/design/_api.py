@@ -247,7 +247,9 @@ def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int
     ``sigmas`` default: ``count`` values spaced in log scale from ``min(sigma / 30, 1e-3 sigma_sup)``
     (``sigma`` the plant's default) to just below ``sigma_sup``, the largest sigma any gamma allows. Returns the
     points and a dict with the plant's default parameters, that sigma bound, ``best`` (the certified design
-    with the fastest observer, None without one) and ``cause`` (why none is certified, when the diffusion is
+    with the fastest observer, None without one; where no point is certified and no kappa was given, the design
+    at the plant's defaults, which searches kappa as :func:`design` does, if it is certified: ``best_from`` says
+    so) and ``cause`` (why none is certified, when the diffusion is
     why: :func:`~fte_casadi.design.diagnose.tolerance`). ``budget`` (seconds, None: none): sigmas not reached
     within it are listed as not tried, and said so in ``info["skipped"]``.
     """
@@ -342,7 +344,19 @@ def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int
         if progress is not None:
             progress(k + 1, len(sigmas))
     points.sort(key=lambda pt: pt.sigma)
-    cause = None
+    cause, best_from = None, None
+    if best is None and options.kappa is None and (budget is None or time.perf_counter() - t0 < budget):
+        # the grid's designs keep cond(X'), cond(Pbar) <= the default kappa (no search of it: it doubled a refusal's
+        # time); the plant's own design searches kappa, and a plant certified only under a larger one (a levitation)
+        # would be told that nothing certifies
+        try:
+            d = design(ts, options)
+        except FteError:
+            d = None
+        if d is not None and d.certified:
+            best = d
+            best_from = (f"the design at the plant's defaults, with kappa = {d.params.kappa:g} (fte design searches "
+                         f"kappa; the frontier's grid keeps the default bound)")  # fmt: skip
     if (
         best is None and refused_46 is not None
     ):  # the causes of a refusal (diagnose.name_cause), decided the same way
@@ -353,4 +367,4 @@ def explore(ts, options: DesignOptions | None = None, *, sigmas=None, count: int
         )
         cause = found.render() if found is not None else None
     return points, {"gamma": params["gamma"], "gamma1": g1, "sigma": params["sigma"], "sigma_sup": sup,
-                    "best": best, "cause": cause, "skipped": skipped}  # fmt: skip
+                    "best": best, "best_from": best_from, "cause": cause, "skipped": skipped}  # fmt: skip
