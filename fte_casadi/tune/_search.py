@@ -262,8 +262,9 @@ def choose(records: list[Record], front: list[int], names: tuple, rule: str) -> 
     base = records[0].values
     cands = [records[k] for k in front]
     tier, pool = TIERS[-1][0], cands
+    admissible = {r.number: _admissible(r.metrics) for r in cands}  # once per member, not once per tier
     for name, needs in TIERS:
-        ok = [r for r in cands if all(have or not need for have, need in zip(_admissible(r.metrics), needs))]
+        ok = [r for r in cands if all(have or not need for have, need in zip(admissible[r.number], needs))]
         if ok:
             tier, pool = name, ok
             break
