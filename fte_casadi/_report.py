@@ -229,20 +229,26 @@ def _windows_section(m: dict, plant) -> list[str]:
            "above 1; a ratio above 1 whose interval holds 1 is a tie):", "",
            "| fault | window | fault error (whole window) | settled part | settling time | detected (within the allowed "
            "delay) / standing alarms / missed | detection delay "
-           f"| FTC true ratio (per output: {', '.join(plant.output_names)}) | compensated ratio | inputs at a limit "
+           f"| FTC true ratio (per output: {', '.join(plant.output_names)}) | after the window, no fault in the plant: "
+           "span, FTC true ratio (per output) | compensated ratio | inputs at a limit "
            f"({', '.join(plant.input_names)}) |",
-           "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+           "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
 
     def worse(v, iv) -> bool:
         return v is not None and v > 1.0 and (iv is None or iv[0] > 1.0)
 
-    for w in m["windows"]:
-        r, riv = w["ftc_true_ratio"], w.get("ftc_true_ratio_interval")
+    def ftc(f: dict) -> str:
+        r, riv = f["ftc_true_ratio"], f.get("ftc_true_ratio_interval")
         rs = f"**{r:.3g}{_iv(riv)} (worse than none)**" if worse(r, riv) else f"{_g(r)}{_iv(riv)}"
-        ivs = w.get("ftc_true_ratio_per_output_interval") or [None] * len(w["ftc_true_ratio_per_output"])
+        ivs = f.get("ftc_true_ratio_per_output_interval") or [None] * len(f["ftc_true_ratio_per_output"])
         per = ", ".join(
-            f"**{v:.3g}**" if worse(v, iv) else _g(v) for v, iv in zip(w["ftc_true_ratio_per_output"], ivs)
+            f"**{v:.3g}**" if worse(v, iv) else _g(v) for v, iv in zip(f["ftc_true_ratio_per_output"], ivs)
         )
+        return f"{rs} ({per})"
+
+    for w in m["windows"]:
+        a = w.get("after_window")
+        after = "-" if not a else f"[{a['start']:g}, {a['stop']:g}): {ftc(a)}"
         det = "-" if w.get("missed_detections") is None else (
             f"{_g(w['detection_probability'])}{_iv(w.get('detection_probability_interval'))} "
             f"({_g(w.get('detection_probability_within'))} within {_g(w.get('detection_delay_allowed'))}) / "
@@ -251,7 +257,7 @@ def _windows_section(m: dict, plant) -> list[str]:
         out.append(
             f"| {w['fault']} | [{w['start']:g}, {w['stop']:g}) | {_g(w['fault_rel_rms_error'])}"
             f"{_iv(w.get('fault_rel_rms_error_interval'))} | {_g(w['fault_rel_rms_error_settled'])} | "
-            f"{_g(w['settling_time'])} | {det} | {_g(w['detection_delay'])} | {rs} ({per}) | "
+            f"{_g(w['settling_time'])} | {det} | {_g(w['detection_delay'])} | {ftc(w)} | {after} | "
             f"{_g(w['ftc_compensated_ratio'])} | {sat} |"
         )
     names = plant.fault_names

@@ -171,7 +171,9 @@ def _rate_verdicts(m: dict, add) -> None:
 
 def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     """The verdicts on metrics document ``m``: a list of ``{"verdict", "where", "value", "text"}`` with
-    ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``false alarm``,
+    ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``worse than none after a window``
+    (over the span from a window's end to the next window or the horizon, ``after_window``), ``worse than none
+    after a window on an output``, ``false alarm``,
     ``false-alarm rate``, ``standing alarm``, ``saturated``, ``poor estimate``, ``slow observer``, ``not
     settled``, ``missed``, ``outside region``, ``C stops``. A ratio is worse than none only when its interval over the
     paths lies above 1 (where the document gives one); a ratio above 1 whose interval holds 1 is a tie. A poor
@@ -189,6 +191,7 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     _rate_verdicts(m, add)
     for w in m.get("windows", []):
         _tolerance_verdicts(w, add, faults, outputs, units)
+        _after_window_verdicts(w, add, faults, outputs)
         _window_verdicts(m, w, add, inputs)
     frac = m.get("outside_region")
     if frac is not None and frac > OUTSIDE_REGION:
@@ -253,6 +256,47 @@ def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
                     f"in {where} tolerant control makes the true output {name} worse than none (ratio {ratio(v, 4)} > "
                     f"{WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}{size}), though the outputs as a "
                     f"whole are not worse (ftc_true_ratio {ratio(r)}){_cause(w, faults, k)}")  # fmt: skip
+
+
+def _after_window_verdicts(w: dict, add, faults, outputs) -> None:
+    """Tolerant control worse than none after window ``w`` (``after_window``: from its end to the next fault
+    window or the horizon, no fault in the plant), on the true outputs as a whole, else on one of them."""
+    a = w.get("after_window")
+    if not a:
+        return
+    where = f"the span after {window_label(w)}, [{a['start']:g}, {a['stop']:g})"
+    r, ivs = a.get("ftc_true_ratio"), a.get("ftc_true_ratio_per_output_interval") or []
+    per = a.get("ftc_true_ratio_per_output") or []
+    names = [outputs[k] if k < len(outputs) else f"output {k}" for k in range(len(per))]
+    if _above(r, a.get("ftc_true_ratio_interval"), WORSE_THAN_NONE):
+        each = ", ".join(f"{names[k]}: {ratio(v, 4)}" for k, v in enumerate(per) if v is not None)
+        add("worse than none after a window", where, r,
+            f"in {where}, where no fault is in the plant, tolerant control makes the TRUE outputs worse than none "
+            f"(ratio {ratio(r, 4)} > {WORSE_THAN_NONE:g}{_iv(a.get('ftc_true_ratio_interval'))}; per output "
+            f"{each}){_after_cause(w, a, faults)}")  # fmt: skip
+        return
+    for k, v in enumerate(per):
+        if r is not None and _above(v, ivs[k] if k < len(ivs) else None, WORSE_THAN_NONE):
+            add("worse than none after a window on an output", f"{where}, {names[k]}", v,
+                f"in {where}, where no fault is in the plant, tolerant control makes the true output {names[k]} "
+                f"worse than none (ratio {ratio(v, 4)} > {WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}), "
+                f"though the outputs as a whole are not worse (ratio {ratio(r)}){_after_cause(w, a, faults)}")  # fmt: skip
+
+
+def _after_cause(w: dict, a: dict, faults) -> str:
+    """Why tolerant control differs from none after window ``w`` (its ``after_window`` figures ``a``): what it
+    still adds to u there, and how long the window's fault estimate takes to fall back (``release_time``)."""
+    comp = a.get("ftc_compensation_rms") or []
+    if comp and all(v == 0 for v in comp):
+        return ("; tolerant control applied nothing there (its compensation is zero at every sample): the runs left "
+                "the window at different states")  # fmt: skip
+    rel = w.get("release_time")
+    lag = (f"{w['fault']}'s estimate falls back within 10 % of the fault's size {rel:.3g} after its end" if rel is not None
+           else f"{w['fault']}'s estimate does not fall back within 10 % of the fault's size before the span ends")  # fmt: skip
+    held = ", ".join(f"{v:.3g}" for v in comp)
+    return (f"; tolerant control still adds to u there (RMS {held} per input), compensating estimates that lag "
+            f"the fault's end ({lag}) or show another fault's cross-talk, while the run without it only recovers "
+            "from the deviation the fault left")  # fmt: skip
 
 
 def _window_verdicts(m: dict, w: dict, add, inputs) -> None:

@@ -305,7 +305,7 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
 
     for name in ("manipulator", "three-tank"):
         sc = SCENARIOS[name]()
-        sc = sc.until(sc.T / 2 if name == "manipulator" else 300.0)
+        sc = sc.until(sc.T if name == "manipulator" else 300.0)
         res = simulate(real_designs[name], plants[name], sc, paths=6, seed=2, progress=False, record_all=True,
                        record_every=1)  # fmt: skip
         save_result(res, tmp_path / f"{name}.npz")  # recompute from the saved per-path arrays
@@ -328,6 +328,31 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
                       "settling_time", "release_time", "detection_delay", "missed_detections"):  # fmt: skip
                 assert (w[k] is None and v[k] is None) or w[k] == pytest.approx(v[k], rel=1e-12)
             np.testing.assert_allclose(w["input_saturation"], v["input_saturation"], rtol=1e-12, atol=0)
+            _same_after_window(w["after_window"], v["after_window"])
+        if name == "manipulator":  # fa [2.5, 5) has a span after it, up to fs at 7; fs none before T = 10
+            assert [w["after_window"] is not None for w in got["windows"]] == [True, False]
+            assert (
+                got["windows"][0]["after_window"]["start"],
+                got["windows"][0]["after_window"]["stop"],
+            ) == (5.0, 7.0)
+
+
+def _same_after_window(a: dict | None, b: dict | None) -> None:
+    """The streamed ``after_window`` figures of a window equal the reference's."""
+    assert (a is None) == (b is None)
+    if a is None:
+        return
+    assert (a["start"], a["stop"]) == (b["start"], b["stop"])
+    assert a["ftc_true_ratio"] == pytest.approx(b["ftc_true_ratio"], rel=1e-12)
+    for key in ("ftc_true_ratio_per_output", "ftc_compensation_rms"):
+        np.testing.assert_allclose(a[key], b[key], rtol=1e-12, atol=0)
+    for run in ("ftc", "no_ftc"):
+        np.testing.assert_allclose(
+            a["ftc_true_rms_per_output"][run], b["ftc_true_rms_per_output"][run], rtol=1e-12
+        )
+    np.testing.assert_allclose(a["ftc_true_ratio_interval"], b["ftc_true_ratio_interval"], rtol=1e-9)
+    np.testing.assert_allclose(a["ftc_true_ratio_per_output_interval"], b["ftc_true_ratio_per_output_interval"],
+                               rtol=1e-9)  # fmt: skip
 
 
 def test_memory_does_not_grow_with_paths(plants, lqr_designs):

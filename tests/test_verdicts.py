@@ -127,6 +127,43 @@ def test_a_ratio_above_one_is_worse_than_none_only_when_its_interval_is():
     assert said(doc(1.05, [1.01, 1.1], [1.05, 1.05], [[0.9, 1.2], [0.9, 1.2]])) == ["worse than none"]
 
 
+def test_tolerant_control_after_a_window_is_judged_like_the_window():
+    """After a window (``after_window``: no fault in the plant) a ratio whose interval lies above 1 is worse than
+    none, on the whole or on one output, and the verdict names what tolerant control still applied there and how
+    long the estimate took to fall back; an interval that holds 1 is a tie; no span, no verdict."""
+
+    def doc(r, iv, per, per_iv, comp):
+        a = {"start": 2.0, "stop": 5.0, "ftc_true_ratio": r, "ftc_true_ratio_interval": iv,
+             "ftc_true_ratio_per_output": per, "ftc_true_ratio_per_output_interval": per_iv,
+             "ftc_compensation_rms": comp}  # fmt: skip
+        w = {"fault": "fa", "start": 0.0, "stop": 2.0, "fault_rel_rms_error": 0.1, "settling_time": 0.2,
+             "release_time": 0.7, "ftc_true_ratio": 0.2, "ftc_true_ratio_interval": [0.19, 0.21],
+             "ftc_true_ratio_per_output": [0.2, 0.2], "ftc_true_ratio_per_output_interval": [[0.19, 0.21]] * 2,
+             "input_saturation": [0.0], "after_window": a}  # fmt: skip
+        return {"paths": 20, "windows": [w], "false_alarm_peak": [0.1]}
+
+    def said(m):
+        return [
+            (v["verdict"], v["where"], v["text"]) for v in verdicts.verdicts(m, ["u"], ["fa"], ["h1", "h2"])
+        ]
+
+    ((v, where, text),) = said(doc(1.43, [1.42, 1.44], [1.45, 1.15], [[1.44, 1.46], [1.14, 1.16]], [0.39]))
+    assert v == "worse than none after a window" and where == "the span after the window of fa [0, 2), [2, 5)"
+    assert (
+        "ratio 1.43 > 1" in text
+        and "h1: 1.45" in text
+        and "RMS 0.39 per input" in text
+        and "0.7 after its end" in text
+    )
+    ((v, where, text),) = said(doc(0.9, [0.8, 0.95], [1.08, 0.5], [[1.02, 1.1], [0.4, 0.6]], [0.0]))
+    assert v == "worse than none after a window on an output" and where.endswith(", h1")
+    assert "applied nothing there" in text
+    assert said(doc(1.05, [0.98, 1.1], [1.05, 1.05], [[0.9, 1.2], [0.9, 1.2]], [0.1])) == []
+    none = doc(1.4, [1.3, 1.5], [1.4, 1.4], [[1.3, 1.5]] * 2, [0.1])
+    none["windows"][0]["after_window"] = None
+    assert said(none) == []
+
+
 def test_false_alarm_rates_are_judged_against_the_promise():
     """On the fault-free paths and in the faulty run outside a fault's windows: a verdict when the measured
     rate's interval lies above the interval the calibration promised; a rate inside it, or an interval that

@@ -172,8 +172,18 @@ def _window_lines(m: dict) -> list[str]:
             f"{ratio(w.get('ftc_true_ratio'))}{_ival(w.get('ftc_true_ratio_interval'), fmt=ratio)} (per output "
             f"{_fmt_list(w.get('ftc_true_ratio_per_output') or [], ratio)}), compensated {_num(w.get('ftc_compensated_ratio'))}"
             + detected
+            + _after_window_text(w.get("after_window"))
         )
     return out
+
+
+def _after_window_text(a: dict | None) -> str:
+    """A window's ``after_window`` figures: tolerant control from the window's end to the next window or the horizon."""
+    if not a:
+        return ""
+    return (f"; after it, [{a['start']:g}, {a['stop']:g}) with no fault in the plant: FTC true ratio "
+            f"{ratio(a.get('ftc_true_ratio'))}{_ival(a.get('ftc_true_ratio_interval'), fmt=ratio)} (per output "
+            f"{_fmt_list(a.get('ftc_true_ratio_per_output') or [], ratio)})")  # fmt: skip
 
 
 def _detectability(d, plant, scenario, m: dict, paths: int, seed: int, opts) -> dict:

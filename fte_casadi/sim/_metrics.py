@@ -125,7 +125,7 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
     """The metrics document (docs/interface.md) recomputed from the recorded arrays (the reference).
 
     The detection thresholds are the run's own (``result.metrics["detection"]``); without them, none."""
-    from ._reduce import _window_intervals
+    from ._reduce import _window_intervals, after_window_intervals
 
     t = result.t
     allow = allowances(result.design, result.scenario)
@@ -142,7 +142,7 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
     faults = _per_fault(c)
     rel = faults["fault_rel_rms_error"]
     union = _mask(t, [w for ws in wins for w in ws])
-    windows, pairs = [], []
+    windows, pairs, tails = [], [], []
     peaks = [
         float(np.max(np.abs(ftc.f[:, _mask(t, wins[q]), q]))) if _mask(t, wins[q]).any() else 0.0
         for q in range(lf)
@@ -151,12 +151,14 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         entry, more = _window_from_arrays(c, fp, peaks)
         windows.append(entry)
         pairs += more
+        tails += _after_window_from_arrays(c, len(windows) - 1, entry)
     e, dC_ftc, dC_no = c.e, c.dC_ftc, c.dC_no
     glob = [(_sq(e[:, _mask(t, wins[j]), j]), _sq(ftc.f[:, _mask(t, wins[j]), j])) for j in range(lf)]
     glob += [(_sq(dC_ftc[:, union]), _sq(dC_no[:, union])), (_sq(ftc.yc[:, union] - free.y[:, union]),
              _sq(no.y[:, union] - free.y[:, union]))]  # fmt: skip
-    iv = ratio_intervals(int(result.seed), pairs + glob)
-    g = iv[_window_intervals(windows, iv) :]
+    iv = ratio_intervals(int(result.seed), pairs + glob + tails)
+    after_window_intervals(windows, iv[len(pairs) + len(glob) :])
+    g = iv[_window_intervals(windows, iv) : len(pairs) + len(glob)]
     has = any(r is not None for r in rel)
     true_all = _rms_ratio(dC_ftc[:, union], dC_no[:, union]) if has else None
     comp_all = (
@@ -341,6 +343,27 @@ def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
     pairs += [(_sq(dC_ftc[:, w, k]), _sq(dC_no[:, w, k])) for k in range(p)]
     pairs += [(_sq(ftc.yc[:, w] - free.y[:, w]), _sq(no.y[:, w] - free.y[:, w]))]
     return entry, pairs
+
+
+def _after_window_from_arrays(c: _Run, w: int, entry: dict) -> list:
+    """Set the ``after_window`` figures of window ``w`` (the scenario's order) in ``entry``, by their definition over
+    the recorded samples (:func:`._reduce.after_window_entry`), and return the per-path pairs of its ratios."""
+    from ._reduce import after_span, after_window_entry
+
+    prof = [(fp.fault, float(fp.start), float(fp.stop)) for fp in c.result.scenario.faults]
+    span = after_span(prof, w, float(c.result.T))
+    a = (c.t >= span[0]) & (c.t < span[1])  # the same samples as _reduce.after_mask
+    p, ucomp = c.dC_ftc.shape[2], c.result.ftc.ucomp
+    m = c.result.ftc.u.shape[2]
+    sums = ([float(np.sum(c.dC_ftc[:, a, k] ** 2)) for k in range(p)],
+            [float(np.sum(c.dC_no[:, a, k] ** 2)) for k in range(p)],
+            [float(np.sum(ucomp[:, a, i] ** 2)) if ucomp is not None else 0.0 for i in range(m)])  # fmt: skip
+    entry["after_window"] = after_window_entry(
+        span, float(a.sum()) * c.P, sums, entry["fault_rel_rms_error"] is not None
+    )
+    return [(_sq(c.dC_ftc[:, a]), _sq(c.dC_no[:, a]))] + [
+        (_sq(c.dC_ftc[:, a, k]), _sq(c.dC_no[:, a, k])) for k in range(p)
+    ]
 
 
 def _outside_c_range(result: SimulationResult) -> dict:

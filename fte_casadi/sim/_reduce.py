@@ -91,7 +91,9 @@ class Masks:
     """Per-sample masks, rows of ``M`` (nmask, samples), in this order: ``after`` (t >= transient);
     per fault its whole windows; per fault its settled windows (each minus its first 20 %); the union of
     all windows; per window all of it; per window its settled part; per fault ``outside`` (after the
-    transient, outside its windows and not within ``settle_after`` of one's end)."""
+    transient, outside its windows and not within ``settle_after`` of one's end); per fault its samples
+    outside before the transient and within ``settle_after`` of a window's end; per window its onset; per window
+    the span after it (:func:`after_span`)."""
 
     M: np.ndarray
     fault_of_window: tuple[int, ...]
@@ -109,7 +111,7 @@ class Masks:
         base = {"after": 0, "fault": 1, "fault_settled": 1 + lf, "union": 1 + 2 * lf, "window": 2 + 2 * lf,
                 "window_settled": 2 + 2 * lf + nw, "outside": 2 + 2 * lf + 2 * nw,
                 "startup_outside": 2 + 3 * lf + 2 * nw, "lag_outside": 2 + 4 * lf + 2 * nw,
-                "onset": 2 + 5 * lf + 2 * nw}[kind]  # fmt: skip
+                "onset": 2 + 5 * lf + 2 * nw, "after_window": 2 + 5 * lf + 3 * nw}[kind]  # fmt: skip
         return base + k
 
 
@@ -152,6 +154,7 @@ def masks(t: np.ndarray, scenario, fault_names, allow: Allowances) -> Masks:
     parts = [allowance_masks(t, wins[j], allow.transient, allow.settle_after) for j in range(len(names))]
     rows += [p[0] for p in parts] + [p[1] for p in parts]
     rows += [onset_mask(t, a) for _, a, _ in prof]
+    rows += [after_mask(t, prof, w, float(scenario.T)) for w in range(len(prof))]
     M = np.array(rows, dtype=float).reshape(len(rows), len(t))
     return Masks(M, tuple(names.index(f) for f, _, _ in prof), tuple(prof), len(names), allow.transient,
                  allow.settle_after)  # fmt: skip
@@ -256,6 +259,13 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
             s.add(f"cmp{w}_{i}", msk[row("window", w)] * ftc["ucomp"][i] ** 2)
         s.add(f"ona{w}", msk[row("onset", w)] * ca.sumsqr(dC[0]))
         s.add(f"onb{w}", msk[row("onset", w)] * ca.sumsqr(dC[1]))
+    for w in range(mk.nw):  # the span after each window (no fault in the plant): tolerant control's own tail
+        m_a = msk[row("after_window", w)]
+        for k in range(C.size1()):
+            s.add(f"aa{w}_{k}", m_a * dC[0][k] ** 2)
+            s.add(f"ba{w}_{k}", m_a * dC[1][k] ** 2)
+        for i in range(lay.m):
+            s.add(f"cma{w}_{i}", m_a * ftc["ucomp"][i] ** 2)
     for w in range(mk.nw):  # cross-talk: the peak of every fault's estimate in each window
         m_w = msk[row("window", w)]
         for j in range(lf):
@@ -409,13 +419,25 @@ def settling_time(err: np.ndarray, size: float, t: np.ndarray, start: float) -> 
     return float(t[k0] - start)
 
 
+def after_span(windows, w: int, horizon: float = math.inf) -> tuple[float, float]:
+    """The span after window ``w`` of ``windows`` (``(fault, start, stop)`` each): from its end to the start of
+    the next fault window of any fault, or to ``horizon``. No fault enters the plant there, and the estimate
+    falls back to zero undisturbed."""
+    _, _, b = windows[w]
+    later = [s for _, s, _ in windows if s >= b]
+    return float(b), float(min(later)) if later else float(horizon)
+
+
+def after_mask(t: np.ndarray, windows, w: int, horizon: float = math.inf) -> np.ndarray:
+    """The samples of :func:`after_span` of window ``w``."""
+    b, end = after_span(windows, w, horizon)
+    return (t >= b) & (t < end)
+
+
 def release_mask(t: np.ndarray, mk: Masks, w: int) -> np.ndarray:
     """The samples after window ``w``'s end up to the start of the next fault window of any fault (or the
     horizon): where the estimate falls back to zero undisturbed."""
-    _, _, b = mk.windows[w]
-    later = [s for _, s, _ in mk.windows if s >= b]
-    end = min(later) if later else math.inf
-    return (t >= b) & (t < end)
+    return after_mask(t, mk.windows, w)
 
 
 def _peak_at(mcol, tag: str, j: int, size: float) -> dict | None:
@@ -471,16 +493,20 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
     ]
     n_out = [c.n_rows("outside", j) for j in range(lf)]
     peaks = _false_alarms(c, n_out)
-    windows, pairs = [], []
+    windows, pairs, tails = [], [], []
     for w in range(len(mk.windows)):
         entry, more = _window(c, w)
         windows.append(entry)
         pairs += more
+        tails += _after_window(c, w, entry)
     has_window = any(w["fault_rel_rms_error"] is not None for w in windows)
     globals_ = [(col[f"ef{j}"], col[f"ff{j}"]) for j in range(lf)]
     globals_ += [(col["a"], col["b"]), (col["ac"], col["bc"])]
-    iv = ratio_intervals(seed, pairs + globals_) if P else [None] * (len(pairs) + len(globals_))
-    g = iv[_window_intervals(windows, iv) :]
+    both = pairs + globals_ + tails
+    iv = ratio_intervals(seed, both) if P else [None] * len(both)
+    k_tails = len(pairs) + len(globals_)
+    after_window_intervals(windows, iv[k_tails:])
+    g = iv[_window_intervals(windows, iv) : k_tails]
     rel_all = [_ratio(_fsum(col[f"ef{j}"]), _fsum(col[f"ff{j}"])) for j in range(lf)]
     true_all, comp_all = _ratio(_fsum(col["a"]), _fsum(col["b"])), _ratio(_fsum(col["ac"]), _fsum(col["bc"]))
     return {
@@ -637,6 +663,52 @@ def _window(c: _Columns, w: int) -> tuple[dict, list]:
         "why": "; ".join(why) or None,
     }  # fmt: skip
     return entry, pairs
+
+
+def _after_window(c: _Columns, w: int, entry: dict) -> list:
+    """Set window ``w``'s ``after_window`` figures in ``entry`` (:func:`after_window_entry`) and return the per-path
+    numerators and denominators of its ratios, bootstrapped with the others (:func:`after_window_intervals`)."""
+    col, P, mk = c.col, c.P, c.mk
+    p_out = len(entry["ftc_true_ratio_per_output"])
+    na = c.n_rows("after_window", w)
+    aa = [col[f"aa{w}_{k}"] for k in range(p_out)]
+    ba = [col[f"ba{w}_{k}"] for k in range(p_out)]
+    cm = [col[f"cma{w}_{i}"] for i in range(int(c.meta["m"]))]
+    span = after_span(mk.windows, w, float(c.meta["T"]))
+    sums = ([_fsum(v) for v in aa], [_fsum(v) for v in ba], [_fsum(v) for v in cm])
+    entry["after_window"] = after_window_entry(span, na * P, sums, entry["fault_rel_rms_error"] is not None)
+    return [(np.sum(aa, axis=0), np.sum(ba, axis=0))] + list(zip(aa, ba))
+
+
+def after_window_entry(span: tuple[float, float], n: float, sums: tuple, defined: bool) -> dict | None:
+    """The ``after_window`` figures of a window (docs/interface.md): over ``span`` (:func:`after_span`), from ``n``
+    (path, sample) pairs with the sums over them of the FTC and no-FTC runs' squared deviations of each true output
+    from the fault-free run and of the squared compensation on each input; None where the span holds no sample or
+    the window's fault is zero throughout (``defined`` False). Its intervals come later (:func:`after_window_intervals`)."""
+    if not n or not defined:
+        return None
+    a, b, cm = sums
+    return {
+        "start": span[0], "stop": span[1],
+        "ftc_true_ratio": _ratio(math.fsum(a), math.fsum(b)),
+        "ftc_true_ratio_per_output": [_ratio(x, y) for x, y in zip(a, b)],
+        "ftc_true_rms_per_output": {"ftc": [math.sqrt(x / n) for x in a], "no_ftc": [math.sqrt(y / n) for y in b]},
+        "ftc_compensation_rms": [math.sqrt(v / n) for v in cm],
+    }  # fmt: skip
+
+
+def after_window_intervals(windows: list[dict], iv: list) -> None:
+    """Fill each window's ``after_window`` intervals from ``iv`` (per window: the whole, then each output)."""
+    k = 0
+    for w in windows:
+        p_out = len(w["ftc_true_ratio_per_output"])
+        a = w.get("after_window")
+        if a is not None:
+            a["ftc_true_ratio_interval"] = iv[k] if a["ftc_true_ratio"] is not None else None
+            a["ftc_true_ratio_per_output_interval"] = [
+                iv[k + 1 + q] if a["ftc_true_ratio_per_output"][q] is not None else None for q in range(p_out)
+            ]
+        k += 1 + p_out
 
 
 def _window_why(nw: float, rel, settle, release, has_tail: bool, true_ratio, undetected: bool) -> list[str]:
