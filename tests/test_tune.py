@@ -204,6 +204,29 @@ def test_an_output_worse_than_none_keeps_a_design_out():
     assert _admissible(alone.metrics) == (True, True, True)
 
 
+def test_the_comparison_shows_tolerant_control_after_each_window():
+    """The "default vs chosen" table has the span after a window (``after_window``) beside the window, per output,
+    where both documents measured it, and counts it among the fault metrics of ``dominates``."""
+    from fte_casadi.tune._output import comparison, dominates
+
+    def doc(after_h1):
+        a = {"ftc_true_ratio": 0.9, "ftc_true_ratio_per_output": [after_h1, 0.8]}
+        w = {"fault": "fa", "start": 200.0, "stop": 400.0, "fault_rel_rms_error": 0.27, "ftc_true_ratio": 0.18,
+             "ftc_true_ratio_per_output": [0.99, 0.17], "after_window": a}  # fmt: skip
+        return {"fault_rel_rms_error": [0.27], "false_alarm_peak": [0.7], "windows": [w], "ftc_true_ratio": 0.18,
+                "input_peak": [43.0], "input_saturation": [0.0], "state_rms_error": [0.01]}  # fmt: skip
+
+    rows = comparison(doc(1.09), doc(0.99), ["fa"], ["Q"], ["h1", "h2"])
+    after = {name: (b, c) for name, b, c in rows if name.startswith("FTC ratio after window fa [200, 400)")}
+    assert after == {"FTC ratio after window fa [200, 400)": (0.9, 0.9),
+                     "FTC ratio after window fa [200, 400), h1": (1.09, 0.99),
+                     "FTC ratio after window fa [200, 400), h2": (0.8, 0.8)}  # fmt: skip
+    assert dominates(rows) and not dominates(comparison(doc(0.99), doc(1.09), ["fa"], ["Q"], ["h1", "h2"]))
+    old = doc(1.0)
+    old["windows"][0].pop("after_window")  # a document from before it was measured: no row
+    assert not any("after window" in r[0] for r in comparison(old, doc(0.99), ["fa"], ["Q"], ["h1", "h2"]))
+
+
 def test_cli_json_files_and_tuned_design_simulates(tmp_path):
     out = tmp_path / "t"
     r = CliRunner().invoke(main, ["tune", SPEC, "--trials", "4", "--seed", "2", "--paths", "2", "--out", str(out),

@@ -127,7 +127,8 @@ def comparison(
     base: dict, chosen: dict, fault_names, input_names, output_names=()
 ) -> list[tuple[str, float | None, float | None]]:
     """``(metric, default, chosen)`` rows over every metric of the issue's table, each window's FTC ratio on each
-    output (named by ``output_names``) and the inputs."""
+    output (named by ``output_names``), the same after each window where both documents measured it
+    (``after_window``), and the inputs."""
     rows = []
     for j, f in enumerate(fault_names):
         rows.append((f"fault error {f}", base["fault_rel_rms_error"][j], chosen["fault_rel_rms_error"][j]))
@@ -141,6 +142,12 @@ def comparison(
                                        wc.get("ftc_true_ratio_per_output") or [])):  # fmt: skip
             name = output_names[k] if k < len(output_names) else f"output {k}"
             rows.append((f"FTC ratio in window {tag}, {name}", b, c))
+        ab, ac = wb.get("after_window"), wc.get("after_window")
+        if ab and ac:  # the span after the window, up to the next (no fault in the plant)
+            rows.append((f"FTC ratio after window {tag}", ab["ftc_true_ratio"], ac["ftc_true_ratio"]))
+            for k, (b, c) in enumerate(zip(ab["ftc_true_ratio_per_output"], ac["ftc_true_ratio_per_output"])):
+                name = output_names[k] if k < len(output_names) else f"output {k}"
+                rows.append((f"FTC ratio after window {tag}, {name}", b, c))
     rows.append(("FTC ratio, all windows", base["ftc_true_ratio"], chosen["ftc_true_ratio"]))
     for i, u in enumerate(input_names):
         rows.append((f"peak |{u}|", base["input_peak"][i], chosen["input_peak"][i]))
