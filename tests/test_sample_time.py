@@ -134,5 +134,17 @@ def test_a_rate_the_sample_time_did_not_lower_is_not_called_lowered():
         and "sample time" not in r.detail
         and "(29) itself or kappa: only kappa = 1e+08" in r.detail
     )
+    # lowered from 0.5 where 6 is needed: the sample time cost some rate, but (46) binds (a CSTR of my own with its
+    # temperature sensor faulty was told "a shorter sample time allows a faster observer"; 10 x shorter gave the
+    # same 0.014 against 0.43 needed)
     r = _too_slow(None, None, opts, None, None, 0.5, 6.0, [(1e8, 0.416, lowered)])
-    assert "What binds is the sample time 0.0001" in r.detail
+    assert "What binds is (46) itself" in r.detail and "lowered the rate further, from 0.5" in r.detail
+    assert r.lmi == "46" and "What binds is the sample time" not in r.detail
+    before = SimpleNamespace(
+        observer={"alpha_before_sample_time": 7.0}
+    )  # the rate (29) allowed reaches the need
+    r = _too_slow(None, None, opts, None, None, 0.5, 6.0, [(1e8, 0.416, before)])
+    assert (
+        "What binds is the sample time 0.0001: the decay rate was lowered from 7" in r.detail
+        and r.lmi is None
+    )

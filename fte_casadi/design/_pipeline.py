@@ -327,7 +327,7 @@ def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resol
         s3j, s5j = _loops(ts, st, options, resolved, s3, joint=True)
     except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:
         also = (
-            f"; and Theorem 1's (29) at step 3's K fails too ({shorten(str(jexc), 480, placeholder=' ...')})"
+            f"; and Theorem 1's (29) at step 3's K fails too ({shorten(str(jexc), 800, placeholder=' ...')})"
         )
         raise InfeasibleDesignError(
             dataclasses.replace(first.refusal, statement=first.refusal.statement.rstrip(".") + also),
@@ -390,14 +390,20 @@ def _too_slow(
             + (f"{best_r:.3g} (kappa = {best_k:g}; " + ", ".join(f"{r:.3g} at kappa = {k:g}" for k, r in rates) + ")"
                if best_r is not None else "none (every kappa tried was refused)"))  # fmt: skip
     numbers = {"window": window, "rate_needed": need, **({"rate": best_r, "kappa": best_k} if rates else {})}
-    if best is not None and best.observer.get("alpha_before_sample_time") is not None:
-        limit = (f"What binds is the sample time {options.sample_time:g}: the decay rate was lowered so that the "
-                 "discrete step z+ = z + Ts (...) is proven stable; a shorter sample time allows a faster observer")  # fmt: skip
+    a0 = best.observer.get("alpha_before_sample_time") if best is not None else None
+    # the sample time lowered the rate; it binds only where the rate (46) allowed before that reaches the need
+    shortened = ("" if a0 is None else
+                 f"; the sample time {options.sample_time:g} lowered the rate further, from {a0:.3g}, so a shorter one "
+                 f"gives at most that")  # fmt: skip
+    if a0 is not None and a0 >= need:
+        limit = (f"What binds is the sample time {options.sample_time:g}: the decay rate was lowered from {a0:.3g} so "
+                 "that the discrete step z+ = z + Ts (...) is proven stable; a shorter sample time allows a faster "
+                 "observer")  # fmt: skip
         lmi, bounded = None, False
     elif len(rates) >= 2 and rates[-1][1] > 1.1 * rates[-2][1]:
         limit = (f"What binds is kappa, the bound on cond(Pbar): the rate still grows with it ({rates[-2][1]:.3g} at "
                  f"{rates[-2][0]:g}, {rates[-1][1]:.3g} at {rates[-1][0]:g}); a larger --kappa may reach it, with larger "
-                 "observer gains (checked only up to the ladder's end)")  # fmt: skip
+                 f"observer gains (checked only up to the ladder's end){shortened}")  # fmt: skip
         lmi, bounded = ("29" if joint else "46"), True
     else:
         lmi, bounded = ("29" if joint else "46"), False
@@ -405,7 +411,7 @@ def _too_slow(
                "its -sigma P^2 block must dominate the observer's coupling with the loop (K) and the diffusion")  # fmt: skip
         limit = (f"What binds is ({lmi}) itself, not kappa (the rate stopped growing with it): {why}" if len(rates) >= 2
                  else f"What binds is ({lmi}) itself" + (f" or kappa: only kappa = {rates[0][0]:g} gave an observer"
-                                                         if rates else "") + f"; {why}")  # fmt: skip
+                                                         if rates else "") + f"; {why}") + shortened  # fmt: skip
     return Refusal(Refused.SETTLE, head, lmi=lmi, bounded=bounded, numbers=numbers,
                    detail=limit, advice="To accept a slower observer, design with --settle-within a longer window (0: "
                    "none) or give --alpha")  # fmt: skip
