@@ -106,6 +106,24 @@ def test_bilinear_and_saturation_derive_with_four_rules():
     assert ts.local_models[3].A[1].tolist() == pytest.approx([-np.tanh(2.0), 1.5], abs=1e-9)
 
 
+def test_a_constant_written_with_round_off_is_no_premise():
+    """A CSTR's reaction rate k(T) Ca less its value r* at the operating point, in deviations c, th: the piece at
+    th = 0, k(T*) (Ca* + c) - r*, is linear in c, but its coefficient (k(T*) (Ca* + c) - r*) / c spans 6e-12 of
+    itself over the region by round-off (r* = k(T*) Ca* computed apart). It is a constant
+    (:data:`fte_casadi.ts._auto.CONSTANT_SPREAD`), not a premise: one premise and two rules (the temperature's),
+    not four, and the model is exact."""
+    k0, er, t_star, ca_star = 7.2e10, 8750.0, 350.0055, 0.4999183
+    r_star = float(k0 * np.exp(-er / t_star) * ca_star)
+
+    def rows(c, th, u, fa):
+        r = k0 * ca.exp(-er / (t_star + th)) * (ca_star + c) - r_star
+        return [-c - r, -th + 0.2 * r + u + fa]
+
+    ts = derive(two_state(rows, region=((-0.2, 0.2), (-10.0, 10.0))))
+    assert len(ts.premises) == 1 and "exp" in ts.premises[0].expr and ts.r == 2
+    assert ts.fidelity.max_abs_error <= 1e-9
+
+
 @pytest.mark.slow
 def test_kinked_terms_are_exact():
     """fabs, fmin/fmax saturation and a leaky if_else: exact quotient, filled at 0 only."""

@@ -72,6 +72,11 @@ MAX_PREMISES = 10
 SEARCHES = 200
 #: the orders of the states tried for the telescoping (all of them up to 6 states in shared terms)
 MAX_ORDERS = 720
+#: a coefficient whose range over the region is within this fraction of its size is a constant written with
+#: round-off, not a premise (a CSTR's k(T*) (Ca* + c) - r* over c, with r* = k(T*) Ca* computed apart, spans 6e-12
+#: of itself: 4 rules where 2 are exact); a hundredth of the exactness allowance EXACT_TOL, which
+#: :func:`._auto_checks.check_exact` checks on the model that takes it as its constant
+CONSTANT_SPREAD = 1e-11
 #: a constant offset within this x the sum of the sizes of the constants it adds up is round-off: 0
 ROUNDOFF_SUM = 16 * np.finfo(float).eps
 #: operations with a kink or a jump: such a term keeps its exact quotient (filled at 0 only)
@@ -506,7 +511,7 @@ def _premise_bounds(plant: Plant, cand: list, reps: list, rep_of: list) -> tuple
     for r in reps:
         members = [cand[k].where for k in range(len(cand)) if rep_of[k] == r]
         mn, mx, idx, gap = _bounds(plant, cand[r].expr, cand[r].text, members)
-        if mx - mn <= 1e-12 * max(abs(mn), abs(mx)):  # relative: a coefficient in any unit
+        if mx - mn <= CONSTANT_SPREAD * max(abs(mn), abs(mx)):  # relative: a coefficient in any unit
             value[r] = 0.5 * (mn + mx)
             continue
         sign[r] = -1.0 if _orient(plant, cand[r].expr, mn, mx) else 1.0
