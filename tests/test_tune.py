@@ -207,7 +207,7 @@ def test_an_output_worse_than_none_keeps_a_design_out():
 def test_the_comparison_shows_tolerant_control_after_each_window():
     """The "default vs chosen" table has the span after a window (``after_window``) beside the window, per output,
     where both documents measured it, and counts it among the fault metrics of ``dominates``."""
-    from fte_casadi.tune._output import comparison, dominates
+    from fte_casadi.tune import comparison, dominates
 
     def doc(after_h1):
         a = {"ftc_true_ratio": 0.9, "ftc_true_ratio_per_output": [after_h1, 0.8]}
