@@ -286,8 +286,10 @@ def _after_window_verdicts(w: dict, add, faults, outputs) -> None:
 def _after_cause(w: dict, a: dict, faults) -> str:
     """Why tolerant control differs from none after window ``w`` (its ``after_window`` figures ``a``): what it
     still adds to u there, and how long the window's fault estimate takes to fall back (``release_time``)."""
-    comp = a.get("ftc_compensation_rms") or []
-    if comp and all(v == 0 for v in comp):
+    comp = a.get("ftc_compensation_rms")
+    if not comp:  # not recorded (a result saved before it was): no cause said
+        return ""
+    if all(v == 0 for v in comp):
         return ("; tolerant control applied nothing there (its compensation is zero at every sample): the runs left "
                 "the window at different states")  # fmt: skip
     rel = w.get("release_time")

@@ -357,7 +357,7 @@ def _after_window_from_arrays(c: _Run, w: int, entry: dict) -> list:
     m = c.result.ftc.u.shape[2]
     sums = ([float(np.sum(c.dC_ftc[:, a, k] ** 2)) for k in range(p)],
             [float(np.sum(c.dC_no[:, a, k] ** 2)) for k in range(p)],
-            [float(np.sum(ucomp[:, a, i] ** 2)) if ucomp is not None else 0.0 for i in range(m)])  # fmt: skip
+            None if ucomp is None else [float(np.sum(ucomp[:, a, i] ** 2)) for i in range(m)])  # fmt: skip
     entry["after_window"] = after_window_entry(
         span, float(a.sum()) * c.P, sums, entry["fault_rel_rms_error"] is not None
     )

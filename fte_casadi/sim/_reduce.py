@@ -683,7 +683,8 @@ def _after_window(c: _Columns, w: int, entry: dict) -> list:
 def after_window_entry(span: tuple[float, float], n: float, sums: tuple, defined: bool) -> dict | None:
     """The ``after_window`` figures of a window (docs/interface.md): over ``span`` (:func:`after_span`), from ``n``
     (path, sample) pairs with the sums over them of the FTC and no-FTC runs' squared deviations of each true output
-    from the fault-free run and of the squared compensation on each input; None where the span holds no sample or
+    from the fault-free run and of the squared compensation on each input (None: not recorded, as in a result saved
+    before the compensation was; the compensation is then null, as the window's); None where the span holds no sample or
     the window's fault is zero throughout (``defined`` False). Its intervals come later (:func:`after_window_intervals`)."""
     if not n or not defined:
         return None
@@ -693,7 +694,7 @@ def after_window_entry(span: tuple[float, float], n: float, sums: tuple, defined
         "ftc_true_ratio": _ratio(math.fsum(a), math.fsum(b)),
         "ftc_true_ratio_per_output": [_ratio(x, y) for x, y in zip(a, b)],
         "ftc_true_rms_per_output": {"ftc": [math.sqrt(x / n) for x in a], "no_ftc": [math.sqrt(y / n) for y in b]},
-        "ftc_compensation_rms": [math.sqrt(v / n) for v in cm],
+        "ftc_compensation_rms": None if cm is None else [math.sqrt(v / n) for v in cm],
     }  # fmt: skip
 
 
