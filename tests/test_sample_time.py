@@ -47,6 +47,10 @@ def test_too_slow_a_sample_time_names_the_fastest_that_works(ts_models):
     assert m, msg
     fastest = float(m.group(1))
     assert 0 < fastest < 0.05
+    # what a shorter sample time buys: each decay rate tried with the sample time its design is proven stable below
+    pairs = [(float(a), float(t)) for a, t in re.findall(r"alpha ([0-9.e+-]+): Ts < ([0-9.e+-]+)", msg)]
+    assert len(pairs) >= 2 and "a faster observer needs a shorter one" in msg
+    assert max(t for _, t in pairs) >= fastest and min(a for a, _ in pairs) >= 0
     # the sample time the message names does give a certified design, proven at that step
     d = design(ts, sample_time=fastest)
     assert d.certified and d.checks["discrete"]["holds"]

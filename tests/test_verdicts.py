@@ -161,7 +161,9 @@ def test_tolerant_control_after_a_window_is_judged_like_the_window():
     assert said(doc(1.05, [0.98, 1.1], [1.05, 1.05], [[0.9, 1.2], [0.9, 1.2]], [0.1])) == []
     # a result saved before the compensation was recorded: the verdict, without a cause it cannot know
     ((v, _, text),) = said(doc(1.43, [1.42, 1.44], [1.45, 1.15], [[1.44, 1.46], [1.14, 1.16]], None))
-    assert v == "worse than none after a window" and "still adds" not in text and "applied nothing" not in text
+    assert (
+        v == "worse than none after a window" and "still adds" not in text and "applied nothing" not in text
+    )
     none = doc(1.4, [1.3, 1.5], [1.4, 1.4], [[1.3, 1.5]] * 2, [0.1])
     none["windows"][0]["after_window"] = None
     assert said(none) == []

@@ -96,10 +96,15 @@ def cap_for_sample_time(prob, a: float, pt: dict, why: str, sample_time: float):
             "(Ts |lambda| must stay well below 2), set by the gains L_i1 that (46) needs to dominate the loop's "
             "coupling"
         )
+    # what a shorter sample time buys: per decay rate tried, the sample time its design is proven stable below
+    table = "; ".join(
+        f"alpha {al:.3g}: Ts < {p['ts_cert']:.2g}" for al, p in sorted(tried, key=lambda t: -t[0])
+    )
     raise InfeasibleDesignError(
         f"no certified design runs at the sample time {sample_time:g}: over the observer decay rates tried "
         f"(0 to {a:.3g}) the discrete step z+ = z + Ts (...) is proven stable at best for Ts < {fastest:.3g}{limit}. "
         f"Run the observer at a sample time <= {nice_floor(fastest):g} (--sample-time, and the scenario's dt), "
+        f"where it decays at {al:.3g}; a faster observer needs a shorter one ({table}), "
         "or change sigma/gamma (`fte design PLANT --explore` shows ts_max per row)",
         kind=Refused.SAMPLE_TIME,
         lmi="46",
