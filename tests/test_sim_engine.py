@@ -337,6 +337,20 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
             ) == (5.0, 7.0)
 
 
+def test_the_span_after_a_window_holds_no_fault():
+    """``after_window``'s span: from the window's end to the next window's start (or the horizon); empty where
+    another window holds the end (overlapping windows) or starts at it."""
+    from fte_casadi.sim._reduce import after_mask, after_span
+
+    wins = [("fa", 2.0, 5.0), ("fs", 7.0, 10.0)]
+    assert after_span(wins, 0, 12.0) == (5.0, 7.0) and after_span(wins, 1, 12.0) == (10.0, 12.0)
+    overlap = [("fa", 2.0, 6.0), ("fs", 4.0, 8.0)]  # fs holds fa's end: no fault-free span after fa
+    assert after_span(overlap, 0, 12.0) == (6.0, 6.0) and after_span(overlap, 1, 12.0) == (8.0, 12.0)
+    assert after_span([("fa", 2.0, 5.0), ("fs", 5.0, 8.0)], 0, 12.0) == (5.0, 5.0)
+    t = np.arange(0.0, 12.0, 0.5)
+    assert not after_mask(t, overlap, 0, 12.0).any() and after_mask(t, overlap, 1, 12.0).sum() == 8
+
+
 def _same_after_window(a: dict | None, b: dict | None) -> None:
     """The streamed ``after_window`` figures of a window equal the reference's."""
     assert (a is None) == (b is None)

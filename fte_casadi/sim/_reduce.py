@@ -421,9 +421,11 @@ def settling_time(err: np.ndarray, size: float, t: np.ndarray, start: float) -> 
 
 def after_span(windows, w: int, horizon: float = math.inf) -> tuple[float, float]:
     """The span after window ``w`` of ``windows`` (``(fault, start, stop)`` each): from its end to the start of
-    the next fault window of any fault, or to ``horizon``. No fault enters the plant there, and the estimate
-    falls back to zero undisturbed."""
+    the next fault window of any fault, or to ``horizon``; empty (``(b, b)``) where another window holds its end.
+    No fault is in the plant there."""
     _, _, b = windows[w]
+    if any(a < b < e for _, a, e in windows):  # overlapping windows: no fault-free span follows this one
+        return float(b), float(b)
     later = [s for _, s, _ in windows if s >= b]
     return float(b), float(min(later)) if later else float(horizon)
 
@@ -437,7 +439,10 @@ def after_mask(t: np.ndarray, windows, w: int, horizon: float = math.inf) -> np.
 def release_mask(t: np.ndarray, mk: Masks, w: int) -> np.ndarray:
     """The samples after window ``w``'s end up to the start of the next fault window of any fault (or the
     horizon): where the estimate falls back to zero undisturbed."""
-    return after_mask(t, mk.windows, w)
+    _, _, b = mk.windows[w]
+    later = [s for _, s, _ in mk.windows if s >= b]
+    end = min(later) if later else math.inf
+    return (t >= b) & (t < end)
 
 
 def _peak_at(mcol, tag: str, j: int, size: float) -> dict | None:
