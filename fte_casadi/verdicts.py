@@ -273,7 +273,7 @@ def _after_window_verdicts(w: dict, add, faults, outputs) -> None:
         add("worse than none after a window", where, r,
             f"in {where}, where no fault is in the plant, tolerant control makes the TRUE outputs worse than none "
             f"(ratio {ratio(r, 4)} > {WORSE_THAN_NONE:g}{_iv(a.get('ftc_true_ratio_interval'))}; per output "
-            f"{each}){_after_cause(w, a, faults)}")  # fmt: skip
+            f"{each}){_after_cause(w, a, faults)}{_net(a)}")  # fmt: skip
         return
     for k, v in enumerate(per):
         if r is not None and _above(v, ivs[k] if k < len(ivs) else None, WORSE_THAN_NONE):
@@ -281,6 +281,18 @@ def _after_window_verdicts(w: dict, add, faults, outputs) -> None:
                 f"in {where}, where no fault is in the plant, tolerant control makes the true output {names[k]} "
                 f"worse than none (ratio {ratio(v, 4)} > {WORSE_THAN_NONE:g}{_iv(ivs[k] if k < len(ivs) else None)}), "
                 f"though the outputs as a whole are not worse (ratio {ratio(r)}){_after_cause(w, a, faults)}")  # fmt: skip
+
+
+def _net(a: dict) -> str:
+    """Tolerant control over the window and the span after it together (``ftc_true_ratio_with_window``)."""
+    r = a.get("ftc_true_ratio_with_window")
+    if r is None:
+        return ""
+    net = "better than none" if r < WORSE_THAN_NONE else "no better than none"
+    return (
+        f"; over the window and this span together it is {net} (ftc_true_ratio_with_window {ratio(r, 4)}"
+        f"{_iv(a.get('ftc_true_ratio_with_window_interval'))})"
+    )
 
 
 def _after_cause(w: dict, a: dict, faults) -> str:

@@ -358,6 +358,9 @@ def _same_after_window(a: dict | None, b: dict | None) -> None:
         return
     assert (a["start"], a["stop"]) == (b["start"], b["stop"])
     assert a["ftc_true_ratio"] == pytest.approx(b["ftc_true_ratio"], rel=1e-12)
+    assert a["ftc_true_ratio_with_window"] == pytest.approx(b["ftc_true_ratio_with_window"], rel=1e-12)
+    np.testing.assert_allclose(a["ftc_true_ratio_with_window_interval"], b["ftc_true_ratio_with_window_interval"],
+                               rtol=1e-9)  # fmt: skip
     for key in ("ftc_true_ratio_per_output", "ftc_compensation_rms"):
         np.testing.assert_allclose(a[key], b[key], rtol=1e-12, atol=0)
     for run in ("ftc", "no_ftc"):

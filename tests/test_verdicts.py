@@ -159,6 +159,13 @@ def test_tolerant_control_after_a_window_is_judged_like_the_window():
     assert v == "worse than none after a window on an output" and where.endswith(", h1")
     assert "applied nothing there" in text
     assert said(doc(1.05, [0.98, 1.1], [1.05, 1.05], [[0.9, 1.2], [0.9, 1.2]], [0.1])) == []
+    # the net of the fault's episode, the window and the span together, where measured
+    net = doc(1.43, [1.42, 1.44], [1.45, 1.15], [[1.44, 1.46], [1.14, 1.16]], [0.39])
+    net["windows"][0]["after_window"].update(
+        ftc_true_ratio_with_window=0.75, ftc_true_ratio_with_window_interval=[0.74, 0.76]
+    )
+    ((_, _, text),) = said(net)
+    assert "together it is better than none (ftc_true_ratio_with_window 0.75, 95 % interval 0.74-0.76" in text
     # a result saved before the compensation was recorded: the verdict, without a cause it cannot know
     ((v, _, text),) = said(doc(1.43, [1.42, 1.44], [1.45, 1.15], [[1.44, 1.46], [1.14, 1.16]], None))
     assert (

@@ -183,7 +183,9 @@ def _after_window_text(a: dict | None) -> str:
         return ""
     return (f"; after it, [{a['start']:g}, {a['stop']:g}) with no fault in the plant: FTC true ratio "
             f"{ratio(a.get('ftc_true_ratio'))}{_ival(a.get('ftc_true_ratio_interval'), fmt=ratio)} (per output "
-            f"{_fmt_list(a.get('ftc_true_ratio_per_output') or [], ratio)})")  # fmt: skip
+            f"{_fmt_list(a.get('ftc_true_ratio_per_output') or [], ratio)}), with the window "
+            f"{ratio(a.get('ftc_true_ratio_with_window'))}"
+            f"{_ival(a.get('ftc_true_ratio_with_window_interval'), fmt=ratio)}")  # fmt: skip
 
 
 def _detectability(d, plant, scenario, m: dict, paths: int, seed: int, opts) -> dict:

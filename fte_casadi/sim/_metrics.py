@@ -355,15 +355,19 @@ def _after_window_from_arrays(c: _Run, w: int, entry: dict) -> list:
     a = (c.t >= span[0]) & (c.t < span[1])  # the same samples as _reduce.after_mask
     p, ucomp = c.dC_ftc.shape[2], c.result.ftc.ucomp
     m = c.result.ftc.u.shape[2]
+    both = a | _mask(c.t, [prof[w][1:]])  # the window and the span together
     sums = ([float(np.sum(c.dC_ftc[:, a, k] ** 2)) for k in range(p)],
             [float(np.sum(c.dC_no[:, a, k] ** 2)) for k in range(p)],
-            None if ucomp is None else [float(np.sum(ucomp[:, a, i] ** 2)) for i in range(m)])  # fmt: skip
+            None if ucomp is None else [float(np.sum(ucomp[:, a, i] ** 2)) for i in range(m)],
+            (float(np.sum(c.dC_ftc[:, both] ** 2)), float(np.sum(c.dC_no[:, both] ** 2))))  # fmt: skip
     entry["after_window"] = after_window_entry(
         span, float(a.sum()) * c.P, sums, entry["fault_rel_rms_error"] is not None
     )
-    return [(_sq(c.dC_ftc[:, a]), _sq(c.dC_no[:, a]))] + [
-        (_sq(c.dC_ftc[:, a, k]), _sq(c.dC_no[:, a, k])) for k in range(p)
-    ]
+    return (
+        [(_sq(c.dC_ftc[:, a]), _sq(c.dC_no[:, a]))]
+        + [(_sq(c.dC_ftc[:, a, k]), _sq(c.dC_no[:, a, k])) for k in range(p)]
+        + [(_sq(c.dC_ftc[:, both]), _sq(c.dC_no[:, both]))]
+    )
 
 
 def _outside_c_range(result: SimulationResult) -> dict:

@@ -680,23 +680,33 @@ def _after_window(c: _Columns, w: int, entry: dict) -> list:
     ba = [col[f"ba{w}_{k}"] for k in range(p_out)]
     cm = [col[f"cma{w}_{i}"] for i in range(int(c.meta["m"]))]
     span = after_span(mk.windows, w, float(c.meta["T"]))
-    sums = ([_fsum(v) for v in aa], [_fsum(v) for v in ba], [_fsum(v) for v in cm])
+    # the window and the span together: the window's per-path sums plus the span's
+    both = (np.sum([col[f"at{w}_{k}"] for k in range(p_out)] + aa, axis=0),
+            np.sum([col[f"bt{w}_{k}"] for k in range(p_out)] + ba, axis=0))  # fmt: skip
+    sums = (
+        [_fsum(v) for v in aa],
+        [_fsum(v) for v in ba],
+        [_fsum(v) for v in cm],
+        (_fsum(both[0]), _fsum(both[1])),
+    )
     entry["after_window"] = after_window_entry(span, na * P, sums, entry["fault_rel_rms_error"] is not None)
-    return [(np.sum(aa, axis=0), np.sum(ba, axis=0))] + list(zip(aa, ba))
+    return [(np.sum(aa, axis=0), np.sum(ba, axis=0))] + list(zip(aa, ba)) + [both]
 
 
 def after_window_entry(span: tuple[float, float], n: float, sums: tuple, defined: bool) -> dict | None:
     """The ``after_window`` figures of a window (docs/interface.md): over ``span`` (:func:`after_span`), from ``n``
     (path, sample) pairs with the sums over them of the FTC and no-FTC runs' squared deviations of each true output
     from the fault-free run and of the squared compensation on each input (None: not recorded, as in a result saved
-    before the compensation was; the compensation is then null, as the window's); None where the span holds no sample or
+    before the compensation was; the compensation is then null, as the window's), and the FTC and no-FTC runs' sums
+    over the window and the span together; None where the span holds no sample or
     the window's fault is zero throughout (``defined`` False). Its intervals come later (:func:`after_window_intervals`)."""
     if not n or not defined:
         return None
-    a, b, cm = sums
+    a, b, cm, both = sums
     return {
         "start": span[0], "stop": span[1],
         "ftc_true_ratio": _ratio(math.fsum(a), math.fsum(b)),
+        "ftc_true_ratio_with_window": _ratio(*both),
         "ftc_true_ratio_per_output": [_ratio(x, y) for x, y in zip(a, b)],
         "ftc_true_rms_per_output": {"ftc": [math.sqrt(x / n) for x in a], "no_ftc": [math.sqrt(y / n) for y in b]},
         "ftc_compensation_rms": None if cm is None else [math.sqrt(v / n) for v in cm],
@@ -704,7 +714,8 @@ def after_window_entry(span: tuple[float, float], n: float, sums: tuple, defined
 
 
 def after_window_intervals(windows: list[dict], iv: list) -> None:
-    """Fill each window's ``after_window`` intervals from ``iv`` (per window: the whole, then each output)."""
+    """Fill each window's ``after_window`` intervals from ``iv`` (per window: the whole, each output, then the
+    window and the span together)."""
     k = 0
     for w in windows:
         p_out = len(w["ftc_true_ratio_per_output"])
@@ -714,7 +725,10 @@ def after_window_intervals(windows: list[dict], iv: list) -> None:
             a["ftc_true_ratio_per_output_interval"] = [
                 iv[k + 1 + q] if a["ftc_true_ratio_per_output"][q] is not None else None for q in range(p_out)
             ]
-        k += 1 + p_out
+            a["ftc_true_ratio_with_window_interval"] = (
+                iv[k + 1 + p_out] if a["ftc_true_ratio_with_window"] is not None else None
+            )
+        k += 2 + p_out
 
 
 def _window_why(nw: float, rel, settle, release, has_tail: bool, true_ratio, undetected: bool) -> list[str]:
