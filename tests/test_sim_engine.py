@@ -340,7 +340,7 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
 def test_the_span_after_a_window_holds_no_fault():
     """``after_window``'s span: from the window's end to the next window's start (or the horizon); empty where
     another window holds the end (overlapping windows) or starts at it."""
-    from fte_casadi.sim._reduce import after_mask, after_span
+    from fte_casadi.sim._masks import after_mask, after_span
 
     wins = [("fa", 2.0, 5.0), ("fs", 7.0, 10.0)]
     assert after_span(wins, 0, 12.0) == (5.0, 7.0) and after_span(wins, 1, 12.0) == (10.0, 12.0)

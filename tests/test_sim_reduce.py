@@ -6,7 +6,8 @@ import numpy as np
 
 from fte_casadi.sim import LossOfEffectiveness, Scenario, Stuck
 from fte_casadi.sim._engine import PathLayout
-from fte_casadi.sim._reduce import Allowances, finalize, masks, monitor
+from fte_casadi.sim._masks import Allowances, masks
+from fte_casadi.sim._reduce import finalize, monitor
 
 
 def _setup():

@@ -45,9 +45,10 @@ from ..step import StepParameters, step_function
 from ._c_range import accepted_measurements
 from ._cluster import plant_from_bytes, run_on_cluster
 from ._detect import default_rate
+from ._masks import allowances, masks
 from ._options import SCALES as SCALES
 from ._options import SimulateOptions, check_scales
-from ._reduce import allowances, finalize, masks, monitor
+from ._reduce import finalize, monitor
 from ._result import RUNS, RunData, SimulationResult
 from ._scenario import FaultSchedule, Scenario, fault_schedule
 from ._vector import CHUNK as CHUNK

@@ -16,16 +16,8 @@ from ..verdicts import FALSE_ALARM as FALSE_ALARM
 from ..verdicts import SATURATED as SATURATED
 from ..verdicts import WORSE_THAN_NONE as WORSE_THAN_NONE
 from ._intervals import clopper_pearson, rate_intervals, ratio_intervals
-from ._reduce import (
-    HYSTERESIS,
-    SETTLE_FRACTION,
-    _mask,
-    allowance_masks,
-    allowances,
-    onset_mask,
-    outside_mask,
-    settling_time,
-)
+from ._masks import SETTLE_FRACTION, _mask, after_span, allowance_masks, allowances, onset_mask, outside_mask
+from ._reduce import HYSTERESIS, settling_time
 from ._result import SimulationResult
 
 __all__ = ["metrics", "metrics_from_arrays", "input_saturation", "alarms"]  # public: docs/api.md
@@ -348,11 +340,11 @@ def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
 def _after_window_from_arrays(c: _Run, w: int, entry: dict) -> list:
     """Set the ``after_window`` figures of window ``w`` (the scenario's order) in ``entry``, by their definition over
     the recorded samples (:func:`._reduce.after_window_entry`), and return the per-path pairs of its ratios."""
-    from ._reduce import after_span, after_window_entry
+    from ._reduce import after_window_entry
 
     prof = [(fp.fault, float(fp.start), float(fp.stop)) for fp in c.result.scenario.faults]
     span = after_span(prof, w, float(c.result.T))
-    a = (c.t >= span[0]) & (c.t < span[1])  # the same samples as _reduce.after_mask
+    a = (c.t >= span[0]) & (c.t < span[1])  # the same samples as _masks.after_mask
     p, ucomp = c.dC_ftc.shape[2], c.result.ftc.ucomp
     m = c.result.ftc.u.shape[2]
     both = a | _mask(c.t, [prof[w][1:]])  # the window and the span together
