@@ -8,6 +8,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from .._text import shorten
@@ -30,11 +31,14 @@ def bench_growth(members=MEMBERS, log=lambda s: None) -> list[dict]:
     rows = []
     for n, q in members:
         log(f"bench: design growth, chain n = {n}, {2**q} rules")
-        p = subprocess.run([sys.executable, "-m", "fte_casadi.bench._growth_member", str(n), str(q)],
-                           capture_output=True, text=True, env=env, cwd=root)  # fmt: skip
+        with tempfile.TemporaryDirectory() as tmp:  # the member writes its row there
+            out = Path(tmp) / "row.json"
+            p = subprocess.run([sys.executable, "-m", "fte_casadi.bench._growth_member", str(n), str(q), str(out)],
+                               capture_output=True, text=True, env=env, cwd=root)  # fmt: skip
+            text = out.read_text() if out.exists() else ""
         try:
-            row = json.loads(p.stdout.strip().splitlines()[-1])
-        except (ValueError, IndexError):
+            row = json.loads(text)
+        except ValueError:
             row = {
                 "n": n,
                 "q": q,

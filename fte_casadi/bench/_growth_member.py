@@ -1,9 +1,9 @@
 """One member of the design-growth benchmark (:mod:`._growth`), measured in a process of its own so that
 its peak memory is its own:
 
-    python -m fte_casadi.bench._growth_member N Q
+    python -m fte_casadi.bench._growth_member N Q OUT.json
 
-prints the member's row (one line of JSON): the chain of N states and Q couplings designed at its defaults,
+writes the member's row (JSON) to OUT.json: the chain of N states and Q couplings designed at its defaults,
 then once more at the parameters found.
 """
 
@@ -42,4 +42,6 @@ def measure(n: int, q: int) -> dict:
 
 
 if __name__ == "__main__":
-    print(json.dumps(measure(int(sys.argv[1]), int(sys.argv[2]))))
+    from fte_casadi._atomic import atomic_write_text
+
+    atomic_write_text(sys.argv[3], json.dumps(measure(int(sys.argv[1]), int(sys.argv[2]))))
