@@ -43,9 +43,9 @@ def _plant(n: int, a: list, c: float, w: float, b: list):
     return pb.build()
 
 
-def _certified_loads(d: Design, tmp_path: Path) -> None:
+def _certified_loads(d: Design, tmp_path: Path) -> Design:
     """``d`` as fte design prints it and as every command loads it: the same decision, nothing positive
-    printed beside CERTIFIED."""
+    printed beside CERTIFIED. Returns the design as loaded and checked."""
     assert d.certified
     line = next(s for s in design_summary(d).splitlines() if "largest eigenvalue of each LMI" in s)
     assert "CERTIFIED" in design_summary(d).splitlines()[0]
@@ -61,7 +61,9 @@ def _certified_loads(d: Design, tmp_path: Path) -> None:
     d.save(path)
     loaded = Design.load(path)
     assert recertify(loaded) == []
-    assert check_loaded(loaded, None).design.certified
+    checked = check_loaded(loaded, None).design
+    assert checked.certified
+    return checked
 
 
 @pytest.mark.slow
@@ -89,7 +91,8 @@ def test_every_design_printed_certified_loads_certified(tmp_path, n, a, c, w, b,
         if known:  # the explicit example is a plant that designs: a refusal there is a failure, not a pass
             raise
         return  # refused: nothing printed as certified
-    _certified_loads(d, tmp_path)
+    loaded = _certified_loads(d, tmp_path)
+    assert loaded.certified and loaded.checks["certified_by"] == d.checks["certified_by"]  # the same route
 
 
 def test_the_maglev_printed_certified_loads_certified(tmp_path):
@@ -101,6 +104,7 @@ def test_the_maglev_printed_certified_loads_certified(tmp_path):
         d = design(derive(maglev_calm(), fidelity_samples=100), kappa=1e8, sigma=1e-3, sample_time=1e-4)
     except FteError as exc:
         pytest.skip(f"not certified at these parameters on this machine: {exc}")
-    _certified_loads(d, tmp_path)
+    loaded = _certified_loads(d, tmp_path)
+    assert loaded.certified and loaded.checks["certified_by"] == d.checks["certified_by"]  # the same route
     # the raw form is kept for reference, and may be of either sign within its round-off
     assert all(abs(v) < np.inf for v in d.checks["lmi_raw_max_eig"].values())
