@@ -3,12 +3,21 @@ the plant's scenario; and the options that name them."""
 
 from __future__ import annotations
 
+import contextlib
+import shutil
+import sys
 import textwrap
+import time
 from pathlib import Path
 
 import click
+from tqdm import tqdm
 
+from .._progress import note, reporting
 from ..errors import ParameterError
+
+#: seconds a design runs before its status line shows
+STATUS_DELAY = 1.0
 
 _VERTICES = click.option(
     "--vertices", type=click.Choice(["grouped", "box", "fewest"]), default=None,
@@ -55,6 +64,32 @@ def _design_options(
     return options
 
 
+@contextlib.contextmanager
+def _design_status(name: str, stream=None, clock=time.monotonic):
+    """While a design of ``name`` runs: on a terminal (``stream``, default stderr), after :data:`STATUS_DELAY`
+    seconds, a status line with the time elapsed and what the design is doing (:mod:`fte_casadi._progress`: the
+    step, the parameter search's trial, the diagnosis), each step shown as it starts. A refusal's parameter
+    search and diagnosis design again at every value they try, which can take minutes."""
+    stream = sys.stderr if stream is None else stream
+    size = shutil.get_terminal_size(
+        (100, 24)
+    )  # the line is cut to its width (a terminal that reports 0 x 0: 100)
+    bar = tqdm(total=None, desc=f"design {name}", file=stream, disable=None, ncols=size.columns, nrows=size.lines,
+               bar_format="{desc} [{elapsed}]{postfix}")  # fmt: skip
+    t0 = clock()
+
+    def show(what: str) -> None:
+        bar.set_postfix_str(what, refresh=False)
+        if clock() - t0 >= STATUS_DELAY:
+            bar.refresh()
+
+    try:
+        with reporting(show):
+            yield
+    finally:
+        bar.close()
+
+
 def _make_design(
     plant_spec: str, variant: str, solver: str, params: dict, allow_uncertified: bool = False, accept=(),
     vertices: str | None = None, full: bool = False, always_compensate: bool = False,
@@ -70,13 +105,15 @@ def _make_design(
     options = _design_options(plant_spec, variant, solver, params, allow_uncertified, accept)
     ts = derive_ts(load_plant(plant_spec), vertices=vertices)
     sc = _scenario(plant_spec)
-    d = run_design(ts, options)
-    if (
-        sc is not None and not always_compensate
-    ):  # the other faults' estimates kept out of a fault's compensation
-        from ..sim import protected
+    with _design_status(ts.plant.name):
+        d = run_design(ts, options)
+        if (
+            sc is not None and not always_compensate
+        ):  # the other faults' estimates kept out of a fault's compensation
+            from ..sim import protected
 
-        d = protected(d, ts.plant, sc, paths=sc.paths, seed=0)
+            note(f"the accommodation gate: calibrated, and measured on {sc.paths} paths of the scenario")
+            d = protected(d, ts.plant, sc, paths=sc.paths, seed=0)
     return (d, ts, options) if full else d
 
 

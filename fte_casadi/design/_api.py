@@ -15,6 +15,7 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from .._progress import note, stage
 from .._text import shorten
 from ..errors import FteError, InfeasibleDesignError, ParameterError, Refused
 from ..ts import TSModel, as_model
@@ -144,6 +145,7 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
     if options.variant == "paper":
         s3, K, s5 = pipeline.paper_steps(st, res, solver)
         return pipeline.finish(ts, options, res, st, s3, K, s5, t0)
+    note(f"step 3: the gain K by LMI (45) at {_at(params)}")
     try:
         try:
             if "sigma" in generic:
@@ -162,6 +164,7 @@ def _attempt(ts: TSModel, options: DesignOptions, retried: str | None = None) ->
         if chosen is not None:
             return chosen
         raise _explained(ts, options, st, params, refused, "45", exc) from None
+    note(f"step 5: the observer by LMI (46) at {_at(params)}, its decay rate and kappa searched")
     try:
         s3, s5 = pipeline.loop_then_observer(ts, st, options, res, s3)
     except conditioned.SolverFailedError as exc:
@@ -186,11 +189,17 @@ def _explained(ts: TSModel, options: DesignOptions, st, params: dict, refused: l
                exc: InfeasibleDesignError) -> InfeasibleDesignError:  # fmt: skip
     """The refusal of ``lmi`` ("45" or "46") at ``params`` with its bounds, the advice checked, and its cause named
     (:mod:`fte_casadi.design.diagnose`); ``refused``: the values the parameter search tried."""
-    if lmi == "45":
-        err = diagnose.explain_45(_attempt, ts, options, st.aug, params, refused)
-    else:
-        err = diagnose.explain_46(_attempt, ts, options, st.aug, params, exc, refused)
-    return diagnose.name_cause(_attempt, err, ts, options, st, params, refused, lmi)
+    with stage(f"diagnosis of the refusal by ({lmi}): its bounds, its advice checked"):
+        if lmi == "45":
+            err = diagnose.explain_45(_attempt, ts, options, st.aug, params, refused)
+        else:
+            err = diagnose.explain_46(_attempt, ts, options, st.aug, params, exc, refused)
+        return diagnose.name_cause(_attempt, err, ts, options, st, params, refused, lmi)
+
+
+def _at(params: dict) -> str:
+    """The parameters a progress note names: sigma and gamma."""
+    return ", ".join(f"{k} = {params[k]:.3g}" for k in ("sigma", "gamma") if params.get(k) is not None)
 
 
 def _refuse_beyond_sigma_max(aug, params: dict, solver: str) -> None:

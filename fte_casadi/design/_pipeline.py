@@ -20,6 +20,7 @@ from types import SimpleNamespace
 import casadi as ca
 import numpy as np
 
+from .._progress import note
 from ..errors import AssumptionError, FteError, InfeasibleDesignError, Refusal, Refused
 from ..model import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
@@ -323,6 +324,7 @@ def loop_then_observer(ts: TSModel, st: Structure, options: DesignOptions, resol
         return _loops(ts, st, options, resolved, s3, joint=False)
     except InfeasibleDesignError as exc:
         first = exc
+    note("step 5: (46) gave no observer; Theorem 1's (29) at step 3's K")
     try:
         s3j, s5j = _loops(ts, st, options, resolved, s3, joint=True)
     except (InfeasibleDesignError, conditioned.SolverFailedError) as jexc:

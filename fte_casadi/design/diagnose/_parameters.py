@@ -13,6 +13,7 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from ..._progress import stage
 from ..._rounding import nice_floor
 from ..._text import shorten
 from ...errors import FteError, InfeasibleDesignError
@@ -138,8 +139,10 @@ def choose(attempt: Attempt, ts, options: DesignOptions, aug, params: dict, gene
                 why = f"the smallest gamma for which (45) is feasible at sigma = {sg:g}, gamma1 = {g1:g} is {gmin:.3g}"
                 yield from (({"gamma": round_gamma(max(gmin * f, g1 * 1.01), gs)}, why) for f in GAMMA_TRIALS)
 
-    for change, why in trials():
-        d = try_design(attempt, ts, options, refused, **change)
+    for k, (change, why) in enumerate(trials(), 1):
+        tried = ", ".join(f"{n} = {v:g}" for n, v in change.items())
+        with stage(f"parameter search, trial {k}: {tried} (LMI ({lmi}) refused the defaults)"):
+            d = try_design(attempt, ts, options, refused, **change)
         if d is not None:
             first = shorten(exc, 200)
             chosen = {k: {"value": v, "why": f"the generic default {params[k]:g} failed ({first}); {why}; "
