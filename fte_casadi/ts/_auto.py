@@ -352,7 +352,10 @@ def _order(plant: Plant, terms: list[_Term], inputs: list[_Piece], rng: np.rando
                     values[id(p.expr)] = np.array(fn(pts)).ravel()
             reps, _, _ = _group(plant, [p.expr for p in cand], None, pts, [values[k] for k in key])
             deps = [frozenset(j for j in range(n) if ca.depends_on(cand[r].expr, plant.x[j])) for r in reps]
-            scores[key] = (len(reps), _estimate_rules(deps))
+            # an order whose coefficients are not finite in the region (a power of a negative number where a later
+            # state is set to 0) loses to one whose are; if every order has some, the bounds refuse them by name
+            broken = sum(not np.all(np.isfinite(values[k])) for k in key)
+            scores[key] = (broken, len(reps), _estimate_rules(deps))
         score = scores[key]
         if best is None or score < best[0]:
             best = (score, order, pieces)
@@ -389,7 +392,9 @@ def _group(plant: Plant, candidates: list[ca.SX], rng: np.random.Generator | Non
     for k in range(len(candidates)):
         v = vals[k]
         found = None
-        for r in reps:
+        for r in reps if np.all(np.isfinite(v)) else ():  # a coefficient not finite somewhere is its own
+            if not np.all(np.isfinite(vals[r])):
+                continue
             A = np.column_stack([np.ones(N), vals[r]])
             ab, *_ = np.linalg.lstsq(A, v, rcond=None)
             if np.all(np.isfinite(ab)) and np.max(np.abs(A @ ab - v)) <= 1e-9 * np.max(np.abs(v)):
@@ -427,6 +432,26 @@ def _orient(plant: Plant, expr: ca.SX, mn: float, mx: float) -> bool:
     return v0 < 0.5 * (mn + mx) - 1e-12 * (mx - mn)
 
 
+def _origin_outside(plant: Plant) -> str:
+    """For a refusal of a term measured at x = 0: where x = 0 lies outside the plant's region (states in absolute
+    units, a temperature in K), what is additive there may be proportional to a deviation from a point inside it."""
+    lo, hi = plant.region_lo, plant.region_hi
+    out = [
+        j for j in range(plant.n) if (np.isfinite(lo[j]) and lo[j] > 0) or (np.isfinite(hi[j]) and hi[j] < 0)
+    ]
+    if not out:
+        return ""
+    ref = plant.x_ref if plant.x_ref is not None else 0.5 * (lo + hi)
+    shown = ", ".join(f"{plant.state_names[j]} in [{lo[j]:g}, {hi[j]:g}]" for j in out[:3])
+    shifted = ", ".join(f"{plant.state_names[j]} - {ref[j]:g}" for j in out[:3])
+    return (
+        f". x = 0 lies outside the plant's region ({shown}{', ...' if len(out) > 3 else ''}): the paper's model is "
+        f"written about x = 0, so noise proportional to a state's deviation from a point of the region is additive "
+        f"there. Write those states as deviations from a point of the region ({shifted}{', ...' if len(out) > 3 else ''}"
+        "; b.operating_point for the inputs), and such noise is proportional to them"
+    )
+
+
 def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
     """The plant rewritten with automatically found premises (see the module docstring).
 
@@ -442,6 +467,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
         raise DerivationError(
             f"the diffusion rows {rows} have a term that is not proportional to x, u, f or d2 (additive noise, "
             f"{off_g[np.flatnonzero(off_g)].tolist()} at x = 0): the paper's model has none; remove it"
+            + _origin_outside(plant)
         )
     order, states = _order(plant, terms_f + terms_g, inputs_f + inputs_g, rng)
     pieces = sorted(inputs_f + inputs_g + states, key=lambda p: p.seq)  # stable: row, term, inputs, states
