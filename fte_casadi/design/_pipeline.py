@@ -596,6 +596,11 @@ def within_limits(ts: TSModel, st: Structure, resolved: Resolved, s3, solver: st
     return kept if best >= 10 * first else s3
 
 
+#: the drift left at x_ref with the input that comes nearest, relative to the drift's size there, above which x_ref is
+#: no equilibrium (:func:`u_reference` warns)
+REST_RESIDUAL = 1e-6
+
+
 def u_reference(ts: TSModel, K, status: list):
     """``(u_ref, x_ref)``: the input that holds ``x_ref`` (the plant's ``u_ref`` where it gives one), its lines in
     ``status``."""
@@ -616,7 +621,17 @@ def u_reference(ts: TSModel, K, status: list):
         ue = ue + step
         if np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(ue)):
             break
-    res = float(np.linalg.norm(np.array(J(ue)[0])))
+    rv = np.array(J(ue)[0], dtype=float).ravel()
+    res = float(np.linalg.norm(rv))
+    size = float(np.linalg.norm(np.array(J(np.zeros(ts.m))[0], dtype=float))) + float(np.linalg.norm(Jm @ ue))
+    if res > REST_RESIDUAL * size:  # not round-off: no input holds the plant at x_ref
+        k = int(np.argmax(np.abs(rv)))
+        unit = plant.state_units[k] if plant.state_units[k] else "units"
+        status.append(f"warning: x_ref is not an equilibrium of the plant: no input holds it there (with the input that "
+                      f"comes nearest, u_eq = {np.round(ue, 6).tolist()}, {plant.state_names[k]} still moves at "
+                      f"{rv[k]:.3g} {unit} per {plant.time_unit}); the loop holds the plant at another point, the "
+                      "memberships and the certificate's region about x_ref notwithstanding: give b.reference a state "
+                      "where the plant can rest")  # fmt: skip
     lim = plant.input_limits
     if lim is not None and np.any((ue < lim[:, 0]) | (ue > lim[:, 1])):
         status.append(f"warning: the input holding x_ref, u_eq = {np.round(ue, 6).tolist()}, lies outside the input "
