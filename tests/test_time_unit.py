@@ -1,14 +1,18 @@
 """A plant in its own units: a building's temperatures in kelvin, its time in seconds, its rates 1e-3 per second
 and less (:mod:`plant_house`). The derivation handles absolute units; a reference state the plant cannot rest
-at is warned."""
+at is warned; where the design is refused in seconds, the refusal names the time unit, with the unit in which the
+same plant certifies, checked; the check's model is the plant written in that unit."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from plant_house import T1_REF, TW_REF, house, house_hours, house_windy, scenario
 
 from fte_casadi.design import design
-from fte_casadi.errors import DerivationError
+from fte_casadi.design.diagnose._time_unit import TimeUnit, time_scaled_model, unit_for
+from fte_casadi.errors import DerivationError, InfeasibleDesignError
+from fte_casadi.plants import manipulator, quadruple_tank, three_tank
 from fte_casadi.ts import derive
 
 
@@ -27,6 +31,44 @@ def test_additive_noise_about_an_origin_outside_the_region_says_to_write_deviati
         "x = 0 lies outside the plant's region (Tw in [300, 360], T1 in [285, 300], T2 in [280, 300])" in msg
     )
     assert "(Tw - 337.434, T1 - 294, T2 - 286.571;" in msg
+
+
+def test_the_time_scaled_model_is_the_plant_written_in_that_unit():
+    ts, th = derive(house(), fidelity_samples=500), derive(house_hours(), fidelity_samples=500)
+    scaled = time_scaled_model(ts, 3600.0)
+    for a, b in zip(scaled.local_models, th.local_models):
+        for k in ("A", "B", "Bd", "Bf", "W", "a"):
+            np.testing.assert_allclose(getattr(a, k), getattr(b, k), rtol=1e-12, atol=1e-15)
+    x, u = np.array([331.0, 293.5, 289.0]), np.array([900.0])
+    f0 = np.zeros(2)
+    fs = scaled.plant.drift_function()(x, u, np.zeros(0), f0)
+    fh = th.plant.drift_function()(x, u, np.zeros(0), f0)
+    np.testing.assert_allclose(np.asarray(fs).ravel(), np.asarray(fh).ravel(), rtol=1e-12)
+
+
+def test_plants_near_unit_rates_are_not_rescaled():
+    for plant in (manipulator(), three_tank(), quadruple_tank(), house_hours()):
+        assert unit_for(derive(plant, fidelity_samples=200)) is None
+    assert unit_for(derive(house(), fidelity_samples=200)) == (3600.0, "hour")
+
+
+@pytest.mark.slow
+def test_a_slow_plant_in_seconds_is_refused_naming_its_time_unit_and_certifies_in_hours():
+    sc = scenario()
+    with pytest.raises(InfeasibleDesignError) as exc:
+        design(derive(house()), sample_time=sc.dt, settle_window=40000.0)
+    found = exc.value.refusal.found
+    assert isinstance(found, TimeUnit) and found.c == 3600.0 and found.unit == "s"
+    msg = " ".join(str(exc.value).split())
+    assert "The plant's time unit is the cause: its fastest rate is 0.00122 per s" in msg
+    assert "The same plant with its time in hours (3600 s" in msg
+    # the advice, followed: the plant written in hours, its scenario's times / 3600
+    sh = scenario(3600.0)
+    d = design(derive(house_hours()), sample_time=sh.dt, settle_window=40000.0 / 3600.0)
+    # the numbers quoted are this design's, to the precision of the search (the two models differ in round-off, and
+    # the decay rate's bisection stops at 10 %)
+    assert d.certified and d.params.sigma == pytest.approx(found.sigma, rel=0.1)
+    assert d.observer.alpha == pytest.approx(found.alpha, rel=0.1)
 
 
 def test_a_reference_no_input_holds_is_warned_with_the_state_that_moves():

@@ -3,7 +3,8 @@
 Behind an infeasible (45) or (46) a diagnosis looks, in order, for the plant's diffusion
 (:func:`~._diffusion.tolerance`: the fraction of it the design tolerates, and whether the whole design certifies
 with the diffusion scaled to that fraction), a fault the outputs tell apart only weakly
-(:func:`~._separability.blocking`), and the cover's vertices (:func:`~._other_cover.other_cover`). What it finds
+(:func:`~._separability.blocking`), and the cover's vertices (:func:`~._other_cover.other_cover`); before them, the
+plant's time unit (:func:`~._time_unit.other_unit`: the same plant in another unit certifies). What it finds
 is a record with a ``render()``, carried by the refusal (:attr:`~fte_casadi.errors.Refusal.found`).
 """
 
@@ -20,6 +21,7 @@ from . import _necessary as necessary
 from . import _separability as separability
 from ._other_cover import other_cover
 from ._parameters import Attempt, Trial, try_design
+from ._time_unit import other_unit
 
 __all__ = ["name_cause", "blocking_diffusion", "weak_faults", "Diffusion", "DECIDING_SOLVER"]
 
@@ -90,11 +92,16 @@ def weak_faults(ts, params: dict, at: Mapping[str, float]) -> separability.Fault
 
 def name_cause(attempt: Attempt, err: InfeasibleDesignError, ts, options, st, params: dict, refused: list[Trial],
                lmi: str) -> InfeasibleDesignError:  # fmt: skip
-    """``err`` with its cause named (:attr:`~fte_casadi.errors.Refusal.found`), where one is found, at the
+    """``err`` with its cause named (:attr:`~fte_casadi.errors.Refusal.found`), where one is found: first the plant's
+    time unit, where its rates are far from 1 per it and the same plant in another unit certifies
+    (:func:`~._time_unit.other_unit`); else, at the
     parameters tried where (45) held (else the given ones): the diffusion (the fraction of it the design
     tolerates, and whether the whole design certifies with the diffusion scaled to that fraction, run, not
     guessed), else, where (46) fails, a fault the outputs tell apart only weakly, else the cover's vertices where
     another cover gives a certified design. ``lmi``: the LMI that failed at the given parameters."""
+    unit = other_unit(attempt, ts, options)
+    if unit is not None:
+        return InfeasibleDesignError(dataclasses.replace(err.refusal, found=unit))
     at = past_step3(refused)
     p = dict(params, **at)
     where = {k: p[k] for k in ("sigma", "gamma", "gamma1")}
