@@ -23,14 +23,22 @@ def test_a_power_of_a_difference_of_absolute_states_derives_exactly():
     assert ts.r == 4 and ts.fidelity.max_abs_error <= 1e-12
 
 
-def test_additive_noise_about_an_origin_outside_the_region_says_to_write_deviations():
+def test_additive_noise_about_an_origin_outside_the_region_says_whether_deviations_remove_it():
     with pytest.raises(DerivationError, match=r"additive noise") as exc:
-        derive(house_windy())
+        derive(house_windy())  # the wind's heat flow is proportional to T1 - To, To outside the region
     msg = " ".join(str(exc.value).split())
     assert (
         "x = 0 lies outside the plant's region (Tw in [300, 360], T1 in [285, 300], T2 in [280, 300])" in msg
     )
-    assert "(Tw - 337.434, T1 - 294, T2 - 286.571;" in msg
+    assert "the noise does not vanish at the reference state either ([-7.8e-05] there" in msg
+    assert "writing deviations does not change that" in msg
+    with pytest.raises(DerivationError, match=r"additive noise") as exc:
+        derive(house(wind=0.1, wind_about=T1_REF))  # proportional to the deviation from the reference
+    msg = " ".join(str(exc.value).split())
+    assert (
+        "the noise vanishes at the reference state: write the states as deviations from it (Tw - 337.434"
+        in msg
+    )
 
 
 def test_the_time_scaled_model_is_the_plant_written_in_that_unit():

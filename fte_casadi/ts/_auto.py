@@ -432,23 +432,35 @@ def _orient(plant: Plant, expr: ca.SX, mn: float, mx: float) -> bool:
     return v0 < 0.5 * (mn + mx) - 1e-12 * (mx - mn)
 
 
-def _origin_outside(plant: Plant) -> str:
-    """For a refusal of a term measured at x = 0: where x = 0 lies outside the plant's region (states in absolute
-    units, a temperature in K), what is additive there may be proportional to a deviation from a point inside it."""
+def _origin_outside(plant: Plant, rows: np.ndarray, at_zero: np.ndarray) -> str:
+    """For a refusal of additive diffusion in ``rows`` (``at_zero``: its value there at x = 0): where x = 0 lies
+    outside the plant's region (states in absolute units, a temperature in K), whether the noise vanishes at the
+    reference state (the region's centre without one), with u, f and d2 zero. Where it does, it is proportional to
+    the deviation from that point and the plant can be written in deviations; where it does not, it is additive where
+    the plant runs too, and deviations do not help (a fluctuating conductance times T1 - To, To outside the region)."""
     lo, hi = plant.region_lo, plant.region_hi
     out = [
         j for j in range(plant.n) if (np.isfinite(lo[j]) and lo[j] > 0) or (np.isfinite(hi[j]) and hi[j] < 0)
     ]
     if not out:
         return ""
-    ref = plant.x_ref if plant.x_ref is not None else 0.5 * (lo + hi)
-    shown = ", ".join(f"{plant.state_names[j]} in [{lo[j]:g}, {hi[j]:g}]" for j in out[:3])
-    shifted = ", ".join(f"{plant.state_names[j]} - {ref[j]:g}" for j in out[:3])
+    ref = np.asarray(plant.x_ref if plant.x_ref is not None else 0.5 * (lo + hi), dtype=float)
+    what = "the reference state" if plant.x_ref is not None else "the region's centre"
+    g = plant.diffusion_function()(ref, np.zeros(plant.m), np.zeros(plant.lf), np.zeros(plant.d2.numel()))
+    g_ref = np.asarray(g, dtype=float).ravel()[rows]
+    more = ", ..." if len(out) > 3 else ""
+    shown = ", ".join(f"{plant.state_names[j]} in [{lo[j]:g}, {hi[j]:g}]" for j in out[:3]) + more
+    head = f". x = 0 lies outside the plant's region ({shown}): the paper's model is written about x = 0"
+    if np.all(np.abs(g_ref) <= ROUNDOFF_SUM * np.maximum(np.abs(at_zero), 1e-300)):
+        shifted = ", ".join(f"{plant.state_names[j]} - {ref[j]:g}" for j in out[:3]) + more
+        return (
+            f"{head}, and the noise vanishes at {what}: write the states as deviations from it ({shifted}; "
+            "b.operating_point for the inputs), and it is proportional to them"
+        )
     return (
-        f". x = 0 lies outside the plant's region ({shown}{', ...' if len(out) > 3 else ''}): the paper's model is "
-        f"written about x = 0, so noise proportional to a state's deviation from a point of the region is additive "
-        f"there. Write those states as deviations from a point of the region ({shifted}{', ...' if len(out) > 3 else ''}"
-        "; b.operating_point for the inputs), and such noise is proportional to them"
+        f"{head}, but the noise does not vanish at {what} either ({g_ref.tolist()} there, with u, f and d2 zero): it is "
+        "additive where the plant runs, and writing deviations does not change that. Write the fluctuation as one of a "
+        "coefficient times a deviation that vanishes at rest, or leave it out"
     )
 
 
@@ -467,7 +479,7 @@ def premise_form(plant: Plant, seed: int = 0) -> PremiseForm:
         raise DerivationError(
             f"the diffusion rows {rows} have a term that is not proportional to x, u, f or d2 (additive noise, "
             f"{off_g[np.flatnonzero(off_g)].tolist()} at x = 0): the paper's model has none; remove it"
-            + _origin_outside(plant)
+            + _origin_outside(plant, np.flatnonzero(off_g), off_g[np.flatnonzero(off_g)])
         )
     order, states = _order(plant, terms_f + terms_g, inputs_f + inputs_g, rng)
     pieces = sorted(inputs_f + inputs_g + states, key=lambda p: p.seq)  # stable: row, term, inputs, states
