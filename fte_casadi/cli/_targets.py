@@ -71,9 +71,8 @@ def _design_status(name: str, stream=None, clock=time.monotonic):
     step, the parameter search's trial, the diagnosis), each step shown as it starts. A refusal's parameter
     search and diagnosis design again at every value they try, which can take minutes."""
     stream = sys.stderr if stream is None else stream
-    size = shutil.get_terminal_size(
-        (100, 24)
-    )  # the line is cut to its width (a terminal that reports 0 x 0: 100)
+    # the line is cut to the terminal's width (100 where it reports 0 x 0: tqdm would then show nothing)
+    size = shutil.get_terminal_size((100, 24))
     bar = tqdm(total=None, desc=f"design {name}", file=stream, disable=None, ncols=size.columns, nrows=size.lines,
                bar_format="{desc} [{elapsed}]{postfix}")  # fmt: skip
     t0 = clock()

@@ -4,9 +4,9 @@ A change of time unit (``t = c s``) multiplies the drift by ``c`` and the diffus
 the same physics. The design is not invariant under it. The augmented state carries the faults' rates ``fdot`` in
 fault units per time unit, so cond(Pbar) under the bound kappa changes with ``c^2``; (46)'s ``-sigma P^2`` block is
 not a congruence of the rest; step 5's objective weighs the observer's gains against the sliding term per unit of
-time (docs/design.md, "The plant's time unit"). A plant written in seconds whose rates are 1e-4 per second (a
-building's temperatures, hours) then asks sigma near 1e-9 and a cond(Pbar) the bound refuses, and is refused, while
-the same plant in hours certifies at the defaults.
+time (docs/design.md, "Units and the plant's own time"). A plant written in seconds whose rates are 3e-5 to 1.2e-3
+per second (a building's temperatures, ``tests/plant_house.py``) then asks sigma below 5e-9, (46) fails at every
+sigma tried, and it is refused, while the same plant in hours certifies at the defaults.
 
 :func:`other_unit` runs that check where the plant's fastest rate lies outside ``[1 / RATE_FAR, RATE_FAR]`` per its
 time unit and sigma is the tool's to choose: the whole design of the plant in the named unit of :data:`UNITS` that
@@ -69,7 +69,7 @@ def time_scaled_model(ts, c: float):
             G=None if lm.G is None else q * lm.G,
             Gf=None if lm.Gf is None else q * lm.Gf,
             M=None if lm.M is None else q * lm.M,
-        )  # fmt: skip
+        )
         for lm in ts.local_models
     )
     p = ts.plant
