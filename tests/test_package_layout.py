@@ -114,6 +114,7 @@ LAYERS = (
         "_interrupt",
         "_version",
         "_keywords",
+        "_progress",
     },
     {"model"},
     {"ts"},
@@ -194,6 +195,7 @@ def test_the_solver_statuses_nice_rounding_and_compiler_lookup_are_written_once(
     assert _modules_of(_where(_calls("math.log10")) + _where(_calls("np.log10"))) <= {
         "_rounding.py",
         "design/core/_conditioned.py",  # the span of the bracket in a message, not a rounding
+        "design/diagnose/_time_unit.py",  # a rate's distance from 1 in decades, not a rounding
     }
     assert _modules_of(_where(_calls("shutil.which"))) == {"_toolchain.py"}
 
