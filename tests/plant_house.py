@@ -39,7 +39,10 @@ true temperature 11.1 times worse than none), with nothing compensated in it: th
 from the fault-free run, zone 1 then deviates by 0.013 K RMS without tolerant control (its observer removes the
 bias) and 0.14 K with it, what it carried in from the boiler's window (alone, nothing carried in: 0.78). The C
 of `fte codegen`, driving the plant in closed loop for the 17280 steps of the scenario with both faults, computes
-u, z, xbarhat and yc equal to the Python step's (largest difference 0.0).
+u, z, xbarhat and yc equal to the Python step's (largest difference 0.0). `fte tune tests/plant_house.py:house_hours
+--trials 30 --seed 1` (5 min 25 s, 20 paths) chose trial 4 (kappa 9.0e5, alpha 0.397 per hour): the windows measure
+0.414 and 0.0922, every output at most 0.42 in them, and the thermometer fault's false-alarm peak 1.41 against the
+default's 5.3; but after the boiler's window the water's temperature measures 1.51 (the default: 0.84).
 """
 
 import casadi as ca
