@@ -12,7 +12,8 @@ zone 1's. It rests with zone 1 at 294 K, zone 2 at 286.6 K, the water at 337.4 K
 ``house(seconds_per_unit)`` counts time in units of that many seconds: the drift x it (1: seconds, 3600: hours);
 ``wind``: the relative fluctuation of the outside conductance, as diffusion (the derivation refuses it, below);
 ``reference``: the state held, if not the rest point; ``wind_about``: the temperature the fluctuating heat flow is
-proportional to the difference from (the outside's; another, to show the derivation's advice where it vanishes).
+proportional to the difference from (the outside's; another, to show the derivation's advice where it vanishes);
+``boiler_noise``: the boiler's power fluctuating by this fraction per sqrt(s) (proportional to u: the paper's G u).
 
 How it came to be written so (each refusal verbatim, in seconds):
 
@@ -57,7 +58,8 @@ Q_REF = U12 * (T1_REF - T2_REF) + U1O * (T1_REF - TO)  # W: the boiler's power a
 TW_REF = T1_REF + (Q_REF / UR) ** (1 / 1.3)
 
 
-def house(seconds_per_unit: float = 1.0, wind: float = 0.0, reference=None, wind_about: float = TO):
+def house(seconds_per_unit: float = 1.0, wind: float = 0.0, reference=None, wind_about: float = TO,
+          boiler_noise: float = 0.0):  # fmt: skip
     from fte_casadi import PlantBuilder
 
     h = float(seconds_per_unit)
@@ -71,6 +73,10 @@ def house(seconds_per_unit: float = 1.0, wind: float = 0.0, reference=None, wind
              h * (U12 * (t1 - t2) - U2O * (t2 - TO)) / C2])  # fmt: skip
     if wind:
         b.diffusion([0.0, -wind * ca.sqrt(h) * U1O * (t1 - wind_about) / C1, 0.0])
+    if (
+        boiler_noise
+    ):  # the boiler's power fluctuating by this fraction per sqrt(s): G u, the paper's Theorem 5
+        b.diffusion([boiler_noise * ca.sqrt(h) * p / CW, 0.0, 0.0])
     b.outputs([tw, t1 + fs, t2], names=["Tw_meas", "T1_meas", "T2_meas"], units=["K", "K", "K"])
     b.region(Tw=(300.0, 360.0), T1=(285.0, 300.0), T2=(280.0, 300.0))
     b.reference(x=[TW_REF, T1_REF, T2_REF] if reference is None else list(reference))

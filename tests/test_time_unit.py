@@ -42,16 +42,23 @@ def test_additive_noise_about_an_origin_outside_the_region_says_whether_deviatio
 
 
 def test_the_time_scaled_model_is_the_plant_written_in_that_unit():
-    ts, th = derive(house(), fidelity_samples=500), derive(house_hours(), fidelity_samples=500)
+    """In hours the drift is 3600 times the drift in seconds, and a noise of intensity s per sqrt(s) is one of
+    60 s per sqrt(h): the boiler's 2 % per sqrt(s) enters G 60 times larger."""
+    ts = derive(house(boiler_noise=0.02), fidelity_samples=500)
+    th = derive(house(3600.0, boiler_noise=0.02), fidelity_samples=500)
     scaled = time_scaled_model(ts, 3600.0)
+    assert np.any(scaled.local_models[0].G)
     for a, b in zip(scaled.local_models, th.local_models):
-        for k in ("A", "B", "Bd", "Bf", "W", "a"):
+        for k in ("A", "B", "Bd", "Bf", "W", "G", "Gf", "a"):
             np.testing.assert_allclose(getattr(a, k), getattr(b, k), rtol=1e-12, atol=1e-15)
     x, u = np.array([331.0, 293.5, 289.0]), np.array([900.0])
     f0 = np.zeros(2)
     fs = scaled.plant.drift_function()(x, u, np.zeros(0), f0)
     fh = th.plant.drift_function()(x, u, np.zeros(0), f0)
     np.testing.assert_allclose(np.asarray(fs).ravel(), np.asarray(fh).ravel(), rtol=1e-12)
+    gs = scaled.plant.diffusion_function()(x, u, f0, np.zeros(0))
+    gh = th.plant.diffusion_function()(x, u, f0, np.zeros(0))
+    np.testing.assert_allclose(np.asarray(gs).ravel(), np.asarray(gh).ravel(), rtol=1e-12)
 
 
 def test_plants_near_unit_rates_are_not_rescaled():
