@@ -68,13 +68,13 @@ def _design_options(
 def _design_status(name: str, stream=None, clock=time.monotonic):
     """While a design of ``name`` runs: on a terminal (``stream``, default stderr), after :data:`STATUS_DELAY`
     seconds, a status line with the time elapsed and what the design is doing (:mod:`fte_casadi._progress`: the
-    step, the parameter search's trial, the diagnosis), each step shown as it starts. A refusal's parameter
-    search and diagnosis design again at every value they try, which can take minutes."""
+    step, the parameter search's trial, the diagnosis), each step shown as it starts, cleared when the design ends.
+    A refusal's parameter search and diagnosis design again at every value they try, which can take minutes."""
     stream = sys.stderr if stream is None else stream
     # the line is cut to the terminal's width (100 where it reports 0 x 0: tqdm would then show nothing)
     size = shutil.get_terminal_size((100, 24))
     bar = tqdm(total=None, desc=f"design {name}", file=stream, disable=None, ncols=size.columns, nrows=size.lines,
-               bar_format="{desc} [{elapsed}]{postfix}")  # fmt: skip
+               leave=False, bar_format="{desc} [{elapsed}]{postfix}")  # fmt: skip
     t0 = clock()
 
     def show(what: str) -> None:
