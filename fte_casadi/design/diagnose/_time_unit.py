@@ -1,10 +1,10 @@
 """The plant's time unit as the cause of a refusal: the same plant, its time counted in another unit, certifies.
 
 A change of time unit (``t = c s``) multiplies the drift by ``c`` and the diffusion by ``sqrt(c)``: the same plant,
-the same physics. The design is not invariant under it. The augmented state carries the faults' rates ``fdot`` in
-fault units per time unit, so cond(Pbar) under the bound kappa changes with ``c^2``; (46)'s ``-sigma P^2`` block is
-not a congruence of the rest; step 5's objective weighs the observer's gains against the sliding term per unit of
-time (docs/design.md, "Units and the plant's own time"). A plant written in seconds whose rates are 3e-5 to 1.2e-3
+the same physics. The design is not invariant under it: the augmented state carries the faults' rates ``fdot`` in
+fault units per time unit (its block ``f' = fdot`` stays the identity), so the same Lyapunov function has its
+``fdot`` block scaled by up to ``c^2``, another cond(Pbar) under the bound kappa and another feasible set of (46);
+step 5's objective weighs the observer's gains against the sliding term per unit of time (docs/design.md, "Units and the plant's own time"). A plant written in seconds whose rates are 3e-5 to 1.2e-3
 per second (a building's temperatures, ``tests/plant_house.py``) then asks sigma below 5e-9, (46) fails at every
 sigma tried, and it is refused, while the same plant in hours certifies at the defaults.
 
