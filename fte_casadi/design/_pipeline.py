@@ -596,9 +596,24 @@ def within_limits(ts: TSModel, st: Structure, resolved: Resolved, s3, solver: st
     return kept if best >= 10 * first else s3
 
 
-#: the drift left at x_ref with the input that comes nearest, relative to the drift's size there, above which x_ref is
-#: no equilibrium (:func:`u_reference` warns)
-REST_RESIDUAL = 1e-6
+#: the drift left at x_ref with the input that comes nearest, per state relative to that state's largest drift over the
+#: region (about the share of the region the loop's resting point moves away from x_ref), above which :func:`u_reference`
+#: warns that no input holds x_ref (a textbook's rounded steady state, 3e-5 of it, is not warned)
+REST_RESIDUAL = 1e-3
+
+
+def _drift_size(ts: TSModel, F, u, xr, samples: int = 64) -> np.ndarray:
+    """Per state, the largest |drift| at ``samples`` points of the plant's region (a fixed draw; a state without
+    bounds at its value in ``xr``) with the input ``u``: what a residual drift at x_ref is measured against."""
+    lo, hi = ts.plant.region_lo, ts.plant.region_hi
+    rng = np.random.default_rng(0)
+    pts = np.tile(np.asarray(xr, dtype=float).reshape(-1, 1), samples)
+    for j in range(ts.n):
+        if np.isfinite(lo[j]) and np.isfinite(hi[j]):
+            pts[j] = lo[j] + (hi[j] - lo[j]) * rng.random(samples)
+    us = np.tile(np.asarray(u, dtype=float).reshape(-1, 1), samples)
+    fx = F.map(samples)(pts, us, np.zeros((ts.ld, samples)), np.zeros((ts.lf, samples)))
+    return np.max(np.abs(np.array(fx, dtype=float)), axis=1)
 
 
 def u_reference(ts: TSModel, K, status: list):
@@ -623,15 +638,15 @@ def u_reference(ts: TSModel, K, status: list):
             break
     rv = np.array(J(ue)[0], dtype=float).ravel()
     res = float(np.linalg.norm(rv))
-    size = float(np.linalg.norm(np.array(J(np.zeros(ts.m))[0], dtype=float))) + float(np.linalg.norm(Jm @ ue))
-    if res > REST_RESIDUAL * size:  # not round-off: no input holds the plant at x_ref
-        k = int(np.argmax(np.abs(rv)))
+    share = np.abs(rv) / np.maximum(_drift_size(ts, F, ue, xr), 1e-300)
+    if np.max(share) > REST_RESIDUAL:  # no input holds the plant at x_ref, by more than round-off or rounding
+        k = int(np.argmax(share))
         unit = plant.state_units[k] if plant.state_units[k] else "units"
         status.append(f"warning: x_ref is not an equilibrium of the plant: no input holds it there (with the input that "
                       f"comes nearest, u_eq = {np.round(ue, 6).tolist()}, {plant.state_names[k]} still moves at "
-                      f"{rv[k]:.3g} {unit} per {plant.time_unit}); the loop holds the plant at another point, the "
-                      "memberships and the certificate's region about x_ref notwithstanding: give b.reference a state "
-                      "where the plant can rest")  # fmt: skip
+                      f"{rv[k]:.3g} {unit} per {plant.time_unit}, {share[k]:.2g} of its largest rate over the region), "
+                      "so the loop rests at another point than x_ref: give b.reference a state where the plant can "
+                      "rest")  # fmt: skip
     lim = plant.input_limits
     if lim is not None and np.any((ue < lim[:, 0]) | (ue > lim[:, 1])):
         status.append(f"warning: the input holding x_ref, u_eq = {np.round(ue, 6).tolist()}, lies outside the input "
