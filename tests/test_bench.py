@@ -179,3 +179,58 @@ def test_the_c_step_bench_runs_a_gate_that_remembers():
     assert b["casadi_us"] > 0
     if find_compiler() is not None:
         assert b["c_ns"] > 0 and b["sizeof_state"] >= 8 * d.nz
+
+
+@pytest.mark.slow
+def test_the_diffusion_scales_each_condition_allows_grow_with_its_freedom():
+    """`fte bench --diffusion PLANT`: the largest diffusion scale each condition allows (bisection to 2 %); a
+    condition with more freedom allows at least as much (the design's certificate first, the frozen rules last)."""
+    import json
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+
+    plant = str(Path(__file__).parent / "plant_duffing_noisy.py") + ":duffing"
+    r = CliRunner().invoke(main, ["bench", "--diffusion", plant, "--at", '{"sigma": 0.5}'])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.stdout.strip().splitlines()[-1])
+    assert rows["params"]["sigma"] == 0.5
+    s = {
+        k: float(v) for k, v in rows.items() if k not in ("params", "seconds")
+    }  # "inf" is JSON's text for it
+    slack = 1.03  # two bisections to 2 % each
+    assert 0 < s["design (45)-(46)"] <= slack * s["design (45)-(46) or (29)"]
+    assert s["(46) at step 3's X"] <= slack * s["(29) at P = c X^-1"] <= slack**2 * s["(29), P free"]
+    assert s["(29), P free"] <= slack * s["mean-square stability, block-diagonal V"]
+    assert s["(29) at the design's gains"] <= slack * s["one full V at the design's gains"]
+    assert (
+        s["one full V at the design's gains"] <= slack * s["each frozen rule, exactly, at the design's gains"]
+    )
+    bad = CliRunner().invoke(main, ["bench", "--diffusion", plant, "--at", "[1]"])
+    assert bad.exit_code == 2 and "give a JSON object of numbers" in bad.output
+
+
+def test_the_bound_weights_give_one_json_line_per_weight_and_refuse_what_is_not_one():
+    """`fte bench --bound-weights PLANT --weights ...`: a design and a short Monte Carlo per weight, one JSON line
+    each, in the order given; a weight of 0 leaves the bound out of the objective."""
+    import json
+
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+
+    r = CliRunner().invoke(
+        main, ["bench", "--bound-weights", "three-tank", "--weights", "0,1", "--paths", "2"]
+    )
+    assert r.exit_code == 0, r.output
+    rows = [json.loads(line) for line in r.stdout.strip().splitlines()]
+    assert [row["weight"] for row in rows] == [0.0, 1.0]
+    assert rows[0]["bound_objective"] == [None, None] and rows[1]["bound_objective"][1] is not None
+    assert all(len(row["ftc"]) == 1 and row["bound"] > 0 for row in rows)
+    for args, why in ((["--weights", "1,-2"], "give weights >= 0"), ([], "needs the weights")):
+        bad = CliRunner().invoke(main, ["bench", "--bound-weights", "three-tank", *args])
+        assert bad.exit_code == 2 and why in bad.output
+    bad = CliRunner().invoke(main, ["bench", "--weights", "1"])
+    assert bad.exit_code == 2 and "go with --diffusion PLANT or --bound-weights PLANT" in bad.output

@@ -1,17 +1,15 @@
 """What the fault-error bound's weight in step 5's objective does (docs/design.md): a built-in plant designed
 at each weight, its certified bound, and the metrics of ``simulate(..., paths, seed=1)`` on its scenario.
 
-    python -m fte_casadi.bench._bound_weight manipulator 0,0.3,1,3,10 20 \
-        '{"gamma": 2, "gamma1": 0.01, "sigma": 0.2, "delta": 1e-5, "epsilon": 1e-5}'
+    fte bench --bound-weights manipulator --weights 0,0.3,1,3,10 --paths 20 \
+        --at '{"gamma": 2, "gamma1": 0.01, "sigma": 0.2, "delta": 1e-5, "epsilon": 1e-5}'
 
-The optional last argument replaces the plant's design defaults (above: Section 6.1's parameters, without
+The optional ``--at`` replaces the plant's design defaults (above: Section 6.1's parameters, without
 the tuned decay rate, kappa and bound weight the built-in manipulator now has).
 """
 
 from __future__ import annotations
 
-import json
-import sys
 import time
 
 __all__ = ["run"]
@@ -50,9 +48,3 @@ def run(
         if on_row is not None:
             on_row(rows[-1])
     return rows
-
-
-if __name__ == "__main__":
-    run(sys.argv[1], [float(w) for w in sys.argv[2].split(",")], int(sys.argv[3]) if len(sys.argv) > 3 else 20,
-        defaults=json.loads(sys.argv[4]) if len(sys.argv) > 4 else None,
-        on_row=lambda row: print(json.dumps(row), flush=True))  # fmt: skip

@@ -2,8 +2,8 @@
 plant, the largest scale s of its diffusion (every ``W_i`` times s; 1: as written) that each condition allows,
 from the design's certificate down to what no controller can beat.
 
-    python -m fte_casadi.bench._noise tests/plant_helicopter.py:helicopter
-    python -m fte_casadi.bench._noise tests/plant_fjoint.py:fjoint '{"sigma": 0.35}'
+    fte bench --diffusion tests/plant_helicopter.py:helicopter
+    fte bench --diffusion tests/plant_fjoint.py:fjoint --at '{"sigma": 0.35}'
 
 The optional JSON sets the design parameters (else the ones the design at the defaults ends with, or the generic
 ones where it is refused). Rows, each a largest s (bisection, 2 % in s):
@@ -23,9 +23,7 @@ ones where it is refused). Rows, each a largest s (bisection, 2 % in s):
 
 from __future__ import annotations
 
-import json
 import math
-import sys
 import time
 
 import numpy as np
@@ -177,8 +175,10 @@ def _common_full(aug, T, K, L1, s) -> bool:
     return _solve(cons)
 
 
-def measure(spec: str, params: dict | None = None, log=print) -> dict:
-    """The rows of the module docstring for the plant ``spec`` (``FILE.py:FUNCTION`` or a built-in name)."""
+def measure(spec: str, params: dict | None = None, log=None) -> dict:
+    """The rows of the module docstring for the plant ``spec`` (``FILE.py:FUNCTION`` or a built-in name); ``log``
+    (default: nothing) is told each row as it is measured. A row that is not finite is given as its text (JSON)."""
+    log = (lambda _msg: None) if log is None else log
     from fte_casadi.design import augment, design, uio_gain
     from fte_casadi.design.core import step3
     from fte_casadi.design.diagnose import decide, tolerance
@@ -234,13 +234,4 @@ def measure(spec: str, params: dict | None = None, log=print) -> dict:
         row(f"no controller can: mean-square {kind}",
             min(_largest(lambda s, i=i, k=kind: bool(decide(aug, i, k, s, "CLARABEL"))) for i in range(aug.r)))  # fmt: skip
     rows["seconds"] = time.perf_counter() - t0
-    return rows
-
-
-if __name__ == "__main__":
-    out = measure(sys.argv[1], json.loads(sys.argv[2]) if len(sys.argv) > 2 else None)
-    print(
-        json.dumps(
-            {k: (v if not isinstance(v, float) or math.isfinite(v) else str(v)) for k, v in out.items()}
-        )
-    )
+    return {k: (v if not isinstance(v, float) or math.isfinite(v) else str(v)) for k, v in rows.items()}
