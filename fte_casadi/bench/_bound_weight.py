@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import time
 
-__all__ = ["run"]
+__all__ = ["bound_weight_rows"]
 
 
-def run(
+def bound_weight_rows(
     name: str, weights, paths: int = 20, seed: int = 1, defaults: dict | None = None, on_row=None
 ) -> list[dict]:
     """One row per weight; ``on_row(row)``, when given, is called with each row as soon as it is measured

@@ -30,7 +30,7 @@ import numpy as np
 
 from fte_casadi._text import shorten
 
-__all__ = ["measure"]
+__all__ = ["diffusion_scales"]
 
 EPS = 1e-7
 
@@ -175,7 +175,7 @@ def _common_full(aug, T, K, L1, s) -> bool:
     return _solve(cons)
 
 
-def measure(spec: str, params: dict | None = None, log=None) -> dict:
+def diffusion_scales(spec: str, params: dict | None = None, log=None) -> dict:
     """The rows of the module docstring for the plant ``spec`` (``FILE.py:FUNCTION`` or a built-in name); ``log``
     (default: nothing) is told each row as it is measured. A row that is not finite is given as its text (JSON)."""
     log = (lambda _msg: None) if log is None else log

@@ -10,16 +10,18 @@ from ..errors import ParameterError
 from ._common import _check_paths, _guard
 
 
-def _weights(text: str | None) -> list[float]:
+def _weights(listed: str | None) -> list[float]:
     """--weights: numbers >= 0, separated by commas."""
-    if text is None:
+    if listed is None:
         raise ParameterError("--bound-weights needs the weights: --weights W1,W2,... (e.g. 0,0.3,1,3,10)")
     try:
-        out = [float(w) for w in text.split(",")]
+        out = [float(w) for w in listed.split(",")]
     except ValueError:
         out = []
     if not out or not all(w >= 0 for w in out):
-        raise ParameterError(f"--weights {text!r}: give weights >= 0 separated by commas, e.g. 0,0.3,1,3,10")
+        raise ParameterError(
+            f"--weights {listed!r}: give weights >= 0 separated by commas, e.g. 0,0.3,1,3,10"
+        )
     return out
 
 
@@ -71,13 +73,13 @@ BENCH_PARTS = ("design", "growth", "monte-carlo", "c-step")
 def bench(as_json, paths, only, diffusion_plant, weights_plant, weights, at_params):
     """Speed of design, Monte Carlo and the C step, against baselines run in the same process."""
     if diffusion_plant is not None:
-        from ..bench._noise import measure
+        from ..bench import diffusion_scales
 
-        out = measure(diffusion_plant, _params(at_params), log=lambda msg: click.echo(msg, err=True))
+        out = diffusion_scales(diffusion_plant, _params(at_params), log=lambda msg: click.echo(msg, err=True))
         click.echo(json.dumps(out))
         return
     if weights_plant is not None:
-        from ..bench._bound_weight import run
+        from ..bench import bound_weight_rows
         from ..plants import BUILTIN
 
         if weights_plant not in BUILTIN:
@@ -85,7 +87,7 @@ def bench(as_json, paths, only, diffusion_plant, weights_plant, weights, at_para
                 f"--bound-weights {weights_plant!r}: give a built-in plant ({', '.join(BUILTIN)})"
             )
         _check_paths(paths)
-        run(weights_plant, _weights(weights), paths, defaults=_params(at_params),
+        bound_weight_rows(weights_plant, _weights(weights), paths, defaults=_params(at_params),
             on_row=lambda row: click.echo(json.dumps(row)))  # fmt: skip
         return
     if at_params is not None or weights is not None:
