@@ -14,14 +14,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-# `fte bench --diffusion` and `--bound-weights` (internal names, not in __all__)
-from ._bound_weight import bound_weight_rows as bound_weight_rows
+from ._bound_weight import bound_weight_rows as bound_weight_rows  # fte bench --bound-weights; internal
 from ._cstep import bench_c_step as bench_c_step
 from ._design import bench_design as bench_design
 from ._growth import bench_growth as bench_growth
 from ._growth import growth_lines
 from ._mc import bench as bench_monte_carlo
-from ._noise import diffusion_scales as diffusion_scales
+from ._noise import diffusion_scales as diffusion_scales  # fte bench --diffusion; internal
 
 __all__ = ["PARTS", "bench_c_step", "bench_design", "bench_growth", "bench_monte_carlo", "run_all",
            "summary_lines", "fast_lines"]  # fmt: skip
