@@ -36,11 +36,17 @@ EPS = 1e-7
 
 
 def _solve(cons) -> bool:
+    """Feasible, by Clarabel: "optimal" only (an inaccurate answer counts as infeasible, so each row's scale errs
+    low, and cvxpy's warning about it is not passed on to the command's output)."""
+    import warnings
+
     import cvxpy as cp
 
     prob = cp.Problem(cp.Minimize(0), cons)
     try:
-        prob.solve(solver="CLARABEL")
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate", category=UserWarning)
+            prob.solve(solver="CLARABEL")
     except cp.SolverError:
         return False
     return prob.status == "optimal"
