@@ -71,9 +71,10 @@ class Refusal:
     bounds it; ``advice``: what to change, ``checked`` when a whole design was run at it and certified;
     ``found``: the cause a diagnosis found behind the refusal (a record with a ``render()``: the plant's diffusion,
     a fault the outputs tell apart only weakly, the cover's vertices), None when none was; ``tried``: values tried
-    and refused for other reasons, ``(change, message)`` (``({"sigma": 0.4}, "...")``), said only where no advice
-    was checked and no cause found. ``lmi`` is the key of the registered LMI that decides (``"45"``, ``"46"``;
-    None: no LMI does); ``bounded``: infeasible under the bound kappa on a condition number (a larger bound may
+    and refused for other reasons, ``(change, message)`` (``({"sigma": 0.4}, "...")``), said where no advice was
+    checked, before the cause found (the search may have passed the statement's LMI and stopped at another: a
+    chemostat refused by (45) at sigma = 1 passed it at every smaller sigma tried and failed (46) there). ``lmi`` is
+    the key of the registered LMI that decides (``"45"``, ``"46"``; None: no LMI does); ``bounded``: infeasible under the bound kappa on a condition number (a larger bound may
     make it feasible)."""
 
     kind: Refused
@@ -89,22 +90,28 @@ class Refusal:
 
     def render(self) -> str:
         """The message: the statement, what bounds it, the advice (a checked one, or any where no cause was found),
-        the cause found, and the values tried (where no advice was checked and no cause found)."""
-        parts = [self.statement.rstrip(".") if self.detail or self.advice or self.found else self.statement]
+        the values tried (where no advice was checked), and the cause found."""
+        tried = (
+            "the values tried were refused for other reasons: "
+            + "; ".join(
+                f"at {', '.join(f'{k} = {v:g}' for k, v in change.items())}: {shorten(why, 700 if self.found is None else 300)}"
+                for change, why in self.tried
+            )
+            if self.tried and not self.checked
+            else ""
+        )
+        parts = [
+            self.statement.rstrip(".")
+            if self.detail or self.advice or self.found or tried
+            else self.statement
+        ]
         parts += [self.detail] if self.detail else []
         parts += [self.advice] if self.advice and (self.checked or self.found is None) else []
+        parts += (
+            [tried] if tried else []
+        )  # what stopped the search past the statement's LMI, before the cause
         parts += [self.found.render()] if self.found is not None else []
-        text = parts[0] if len(parts) == 1 else ". ".join(parts[:1] + [_capital(p) for p in parts[1:]]) + "."
-        if self.tried and not self.checked and self.found is None:
-            text += (
-                " The values tried were refused for other reasons: "
-                + "; ".join(
-                    f"at {', '.join(f'{k} = {v:g}' for k, v in change.items())}: {shorten(why, 700)}"
-                    for change, why in self.tried
-                )
-                + "."
-            )
-        return text
+        return parts[0] if len(parts) == 1 else ". ".join(parts[:1] + [_capital(p) for p in parts[1:]]) + "."
 
 
 def _capital(text: str) -> str:

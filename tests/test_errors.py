@@ -35,11 +35,15 @@ def test_a_refusal_is_rendered_from_its_parts():
         "tried were refused for other reasons: at sigma = 0.4: LMI (45) is infeasible; at sigma = 0.2, gamma = 3: "
         "no certified design."
     )
-    # a cause found replaces advice that was not checked, and the values tried
+    # a cause found replaces advice that was not checked; the values tried stay, before it (the search may have
+    # passed the statement's LMI and stopped at another)
     found = Refusal(
         Refused.LMI, "LMI (45) is infeasible: a", advice="no value tried", tried=tried, found=_Found()
     )
-    assert found.render() == "LMI (45) is infeasible: a. The plant's diffusion is the cause: 20 % of it."
+    assert found.render() == (
+        "LMI (45) is infeasible: a. The values tried were refused for other reasons: at sigma = 0.4: LMI (45) is "
+        "infeasible; at sigma = 0.2, gamma = 3: no certified design. The plant's diffusion is the cause: 20 % of it."
+    )
     # a checked advice stays beside it
     checked = Refusal(Refused.LMI, "LMI (45) is infeasible: a", advice="lower sigma to <= 0.1 (checked)",
                       checked=True, tried=tried, found=_Found())  # fmt: skip
