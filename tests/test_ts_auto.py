@@ -169,6 +169,27 @@ def test_input_entering_nonlinearly_is_refused_by_name():
         two_state(lambda x1, x2, u, fa: [x2, ca.sin(u) + fa])
 
 
+def test_an_input_times_an_unknown_input_is_refused_with_the_products_advice():
+    """A chemostat's feed concentration fluctuating, D (Sf + d - S) (tests/plant_chemostat.py): a product of two
+    signals has no function of one to invert; the advice is to take the product as one signal."""
+    b = __import__("fte_casadi").PlantBuilder("feed")
+    (s,) = b.states("S")
+    (dil,) = b.inputs("D")
+    (d,) = b.unknown_inputs("dSf")
+    (fs,) = b.faults("fs", kind="sensor")
+    b.drift([dil * (10.0 + d - s) - s])
+    b.outputs([s + fs])
+    b.region(S=(0.0, 1.0))
+    with pytest.raises(PlantError) as exc:
+        b.build()
+    text = " ".join(str(exc.value).split())
+    assert "drift row 'S' is nonlinear in 'D'" in text and "that term multiplies 'D' by 'dSf'" in text
+    assert "an unknown input standing for D * dSf" in text and "sin(u)" not in text
+    # one signal's own nonlinearity keeps the advice to invert it
+    with pytest.raises(PlantError, match=r"v = sin\(u\)"):
+        two_state(lambda x1, x2, u, fa: [x2, ca.sin(u) + fa])
+
+
 def test_uncovered_term_with_declared_premises_keeps_todays_error():
     b = __import__("fte_casadi").PlantBuilder("half")
     x1, x2 = b.states("x1", "x2")

@@ -56,12 +56,21 @@ def _linearity(
             if _depends(e, var):
                 bad = [var_names[k] for k in range(var.numel()) if ca.depends_on(e, var[k])]
                 if auto:
+                    # a product of two signals (an input times an unknown input): not a function of one to invert
+                    other = [b for b in bad if b != var_names[j]]
+                    fix = (
+                        f"that term multiplies {var_names[j]!r} by {other[0]!r}, two signals the model takes "
+                        f"affinely: take their product as one signal (e.g. an unknown input standing for "
+                        f"{var_names[j]} * {other[0]}, bounded by the product of their bounds), or model one of them "
+                        "as a state"
+                        if other and var_names[j] not in bad
+                        else "rewrite that term: e.g. take the nonlinear function of the input (v = sin(u)) as the "
+                        "input and invert it in the controller, or model the actuator as a state"
+                    )
                     raise PlantError(
                         f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {shorten(e, 120)} "
                         f"depends on {bad}. Inputs, unknown inputs and faults must enter affinely (their coefficients "
-                        "may depend on the states, which gives premises of their own). Rewrite that term: e.g. take "
-                        "the nonlinear function of the input (v = sin(u)) as the input and invert it in the controller, "
-                        "or model the actuator as a state"
+                        f"may depend on the states, which gives premises of their own); {fix}"
                     )
                 raise PlantError(
                     f"{kind} row {rows[i]!r} is nonlinear in {var_names[j]!r}: its derivative {shorten(e, 120)} "
