@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import textwrap
 
 import click
 import numpy as np
@@ -62,3 +63,7 @@ def derive(plant: str, as_json: bool, vertices: str | None) -> None:
         f"trajectory: {f.trajectory_max_abs_error:.3g}"
         + (f" (stopped early: {f.trajectory_stop})" if f.trajectory_stop else "")
     )
+    from ..design import missed_motion
+
+    if (missed := missed_motion(ts)) is not None:  # the model about x = 0 misses the motion at the reference
+        click.echo(textwrap.fill("fte: " + missed[1], width=100), err=True)

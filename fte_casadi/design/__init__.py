@@ -16,6 +16,7 @@ from ._isolation import overshoot as overshoot
 from ._limits import explain_metrics as explain_metrics
 from ._limits import fed_faults as fed_faults
 from ._matfile import is_fte_mat as is_fte_mat
+from ._model_form import missed_motion as missed_motion  # internal: fte derive
 from ._options import DesignOptions as DesignOptions
 from ._parts import Dims as Dims
 from ._parts import Observer as Observer

@@ -26,6 +26,7 @@ from ..model import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
 from ..verdicts import SATURATES_EARLY
 from ._augment import Augmented, augment
+from ._model_form import missed_motion
 from ._options import DesignOptions, Resolved
 from ._parts import Dims, Observer, Params
 from ._recertify import certify, unsaturated
@@ -79,7 +80,7 @@ def structure(ts: TSModel, options: DesignOptions, resolved: Resolved) -> Struct
     if r5 is not None:  # Remark 5: H decouples what it can, the sliding term attenuates the rest
         H, T, aug = r5.H, r5.T, with_remark5(aug, r5)
         checks_a = check_assumptions(aug, T, remark5=r5)
-    checks_a = explain_causes(_named(checks_a, aug, ts.plant), aug, ts.plant, options.remark5)
+    checks_a = explain_causes(_named(checks_a, aug, ts), aug, ts.plant, options.remark5)
     try:
         notes += enforce(checks_a, options.accept_assumptions)
     except AssumptionError as exc:
@@ -443,6 +444,8 @@ def finish(
     Ls = T @ aug.Js  # T J1, or T [Bdbar_u J1] with Remark 5
     Kf, Kf_rules = _fault_gains(ts, status)
     u_ref, x_ref = u_reference(ts, K, status)
+    if (missed := missed_motion(ts)) is not None:
+        status.append(missed[1])
     sched, sources = scheduling_from_measurements(ts)
     plant = ts.plant
     total = time.perf_counter() - t0
@@ -728,18 +731,24 @@ def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, fallback=None) -
     return {"fault_error": fe, "state_error": state_error_bound(view, start=fe)}
 
 
-def _named(checks: list, aug, plant) -> list:
+def _named(checks: list, aug, ts: TSModel) -> list:
     """The failed assumptions (1) and (2) with the faults and unknown inputs behind them named, and the
-    measurement that would separate them (:mod:`fte_casadi.design._structure`)."""
+    measurement that would separate them (:mod:`fte_casadi.design._structure`); the first failed of (2) and (4)
+    says where the model's form hides a state's effect (:mod:`fte_casadi.design._model_form`)."""
     import dataclasses
 
+    from ._model_form import hidden_effects
     from ._structure import describe
 
-    out = []
+    out, form = [], None
     for c in checks:
         if not c.holds and c.name in ("(1)", "(2)"):
-            why = describe(aug, plant, {c.name})
+            why = describe(aug, ts.plant, {c.name})
             if why:
                 c = dataclasses.replace(c, message=f"{c.message}. Which: {why}")
+        if not c.holds and c.name in ("(2)", "(4)") and form is None:
+            form = hidden_effects(ts) or False
+            if form:
+                c = dataclasses.replace(c, message=f"{c.message}. But {form.render(ts.plant)}")
         out.append(c)
     return out

@@ -135,5 +135,7 @@ def design_summary(d) -> str:
     lines.append(
         f"  time: {d.timings['total_s']:.2f} s in all, {d.timings['solver_s']:.2f} s in the solver{solves}"
     )
-    lines += [f"  note: {s}" for s in d.status]
+    lines += [
+        f"  {s}" if s.startswith("warning: ") else f"  note: {s}" for s in d.status
+    ]  # a warning says so
     return "\n".join(lines)

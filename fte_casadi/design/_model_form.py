@@ -1,0 +1,196 @@
+"""Where a failed assumption is the sector model's form, not the plant: an effect of a state the model hides.
+
+A sector model is exact, ``f(x, u) = A(z(x)) x + B(z(x)) u``, but it is written about x = 0. A plant written in
+absolute units with a reference far from 0 (a chemostat's substrate S at 0.3 g/L, its dilution rate D at 0.3 per
+h) can have the whole effect of a state held in the premises and the input's coefficient: ``mu(S) X`` telescoped
+as ``mu(S) * X`` (S in a premise), ``D (Sf - S)`` as ``B(S) D``. Then every ``A_i`` has a zero column for S
+although the plant, at its reference, moves with S (``df/dS``: growth and dilution). The rank tests of the
+observer see only the ``A_i``: a sensor fault on S becomes indistinguishable from S itself (assumption (2)), and
+S's mode an unobservable eigenvalue 0 (assumption (4)), and the refusal's advice (measure S free of the fault)
+would not help: S is measured. Written in deviations from the reference (``S - S_ref``, ``D - D_eq``) the
+effect the reference input and state had through those coefficients is part of ``A``.
+
+:func:`hidden_effects` finds such states (a column of every ``A_i`` zero where the plant's Jacobian at the
+reference is not) and checks the advice: the plant shifted to its reference, derived again, and assumption (2)'s
+rank test run on it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import casadi as ca
+import numpy as np
+
+from ._uio import rank
+
+__all__ = []
+
+#: a column of every A_i this small against the largest A_i is zero (the telescoping puts an exact 0 there)
+ZERO_COLUMN = 1e-12
+#: the plant's Jacobian column at the reference, against the whole Jacobian, above which the state moves the plant
+MOVES = 1e-6
+
+
+@dataclasses.dataclass(frozen=True)
+class Hidden:
+    """The states whose effect the model hides, the reference point, and whether (2) holds in deviations."""
+
+    states: tuple[int, ...]
+    x_star: np.ndarray
+    u_star: np.ndarray
+    jacobian: np.ndarray
+    #: assumption (2) on the plant written in deviations from (x_star, u_star): ``(rules where it fails, rules)``;
+    #: None: not checked (or that derivation failed)
+    in_deviations: tuple[int, int] | None
+
+    def render(self, plant) -> str:
+        names = [plant.state_names[k] for k in self.states]
+        q = ", ".join(f'"{nm}"' for nm in names)
+        rates = "; ".join(
+            f"df/d{plant.state_names[k]} = [{', '.join(f'{v:.3g}' for v in self.jacobian[:, k])}]"
+            for k in self.states[:3]
+        )
+        column = f"the column of {q} is" if len(names) == 1 else f"the columns of {q} are"
+        shift = ", ".join(f"{nm} - {self.x_star[k]:.4g}" for k, nm in enumerate(plant.state_names)
+                          if self.x_star[k] != 0.0)  # fmt: skip
+        inputs = np.round(self.u_star, 6).tolist()
+        text = (
+            f"the model's form is the cause, not the plant: at its reference the plant moves with {q} ({rates}), but "
+            f"{column} zero in every A_i: the sector model is written about x = 0, and holds that effect "
+            "in its premises and in the inputs' state-dependent coefficients (B(x) times the reference input), which "
+            "the observer's rank tests do not see as motion"
+            + (f". Write the plant in deviations from its reference ({shift}; the inputs less {inputs}, declared by "
+               f"b.operating_point(u={inputs})): the effect is then part of A" if shift or any(inputs) else "")
+        )  # fmt: skip
+        if self.in_deviations is not None:
+            failed, rules = self.in_deviations
+            text += (" (checked: the plant so written derives a model for which assumption (2) holds in every rule)"
+                     if not failed else f" (checked: so written, assumption (2) still fails in {failed} of its {rules} "
+                     "rules: there the faults act alike on the plant itself)")  # fmt: skip
+        return text
+
+
+def _drift(plant) -> ca.SX:
+    """The plant's drift in x and u, with d = f = 0."""
+    return ca.substitute(
+        plant.nonlinear_drift(), ca.vertcat(plant.d, plant.f), ca.DM.zeros(plant.ld + plant.lf)
+    )
+
+
+def _jacobian(plant, x_star: np.ndarray, u_star: np.ndarray) -> np.ndarray:
+    """``df/dx`` of the plant at ``(x_star, u_star)``, d = f = 0."""
+    fn = ca.Function("J", [plant.x, plant.u], [ca.jacobian(_drift(plant), plant.x)])
+    return np.asarray(fn(x_star, u_star), dtype=float)
+
+
+def reference_point(plant) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(x*, u*)``: the reference state and the input that holds the plant there (least squares: inputs enter
+    affinely), or x = 0 with the reference input; None where the plant gives neither."""
+    if plant.x_ref is None and plant.u_ref is None:
+        return None
+    n, m = plant.n, plant.m
+    drift = _drift(plant)
+    fn = ca.Function("fx", [plant.x, plant.u], [drift, ca.jacobian(drift, plant.u)])
+    x_star = np.zeros(n) if plant.x_ref is None else np.asarray(plant.x_ref, dtype=float).ravel()
+    if plant.x_ref is None:
+        return x_star, np.asarray(plant.u_ref, dtype=float).ravel()
+    f0, G = (np.asarray(v, dtype=float) for v in fn(x_star, np.zeros(m)))
+    u_star, *_ = np.linalg.lstsq(G.reshape(n, m), -f0.ravel(), rcond=None)
+    return x_star, u_star
+
+
+def hidden_effects(ts, check: bool = True) -> Hidden | None:
+    """The states the sector model's ``A_i`` do not move with although the plant does at its reference (see the
+    module docstring), with ``check``: assumption (2) tested on the plant written in deviations; None where there
+    are none, or the model is not a sector model of the plain equations."""
+    plant = ts.plant
+    if ts.kind not in ("sector_auto", "sector") or (point := reference_point(plant)) is None:
+        return None
+    x_star, u_star = point
+    J = _jacobian(plant, x_star, u_star)
+    if not np.all(np.isfinite(J)) or not np.any(J):
+        return None
+    A = [np.asarray(lm.A, dtype=float) for lm in ts.local_models]
+    a_size = max(float(np.linalg.norm(a)) for a in A)
+    states = tuple(
+        k
+        for k in range(plant.n)
+        if max(float(np.linalg.norm(a[:, k])) for a in A) <= ZERO_COLUMN * max(a_size, 1e-300)
+        and np.linalg.norm(J[:, k]) > MOVES * np.linalg.norm(J)
+    )
+    if not states:
+        return None
+    return Hidden(states, x_star, u_star, J, _in_deviations(ts, x_star, u_star) if check else None)
+
+
+def _in_deviations(ts, x_star: np.ndarray, u_star: np.ndarray) -> tuple[int, int] | None:
+    """Assumption (2)'s rank test on the plant written in deviations from ``(x_star, u_star)`` (its drift only:
+    the rank test does not read the diffusion), derived again: ``(rules where it fails, rules)``; None where that
+    derivation fails."""
+    from ..errors import FteError
+    from ..ts import structure
+
+    plant = ts.plant
+    drift = ca.substitute(plant.nonlinear_drift(), ca.vertcat(plant.x, plant.u),
+                          ca.vertcat(plant.x + ca.DM(x_star), plant.u + ca.DM(u_star)))  # fmt: skip
+    shifted = dataclasses.replace(
+        plant, drift_z=drift, diffusion_z=ca.SX.zeros(plant.n), z=ca.SX(0, 1), z_names=(), z_exprs=ca.SX(0, 1),
+        z_texts=(), region_lo=plant.region_lo - x_star, region_hi=plant.region_hi - x_star, x0=plant.x0 - x_star,
+        x_ref=None, u_ref=None, method="sector", operating_points=None, operating_inputs=None,
+        scheduling_state=None, u_operating=u_star,
+    )  # fmt: skip
+    try:
+        with (
+            warnings.catch_warnings()
+        ):  # a warning of many premises is about this trial, not the user's plant
+            warnings.simplefilter("ignore")
+            dev = structure(shifted)
+    except (FteError, ValueError, RuntimeError):
+        return None
+    p = dev.C.shape[0]
+    blocks = [np.block([[lm.A, lm.Bf, lm.Bd], [dev.C, dev.Df, np.zeros((p, lm.Bd.shape[1]))]])
+              for lm in dev.local_models]  # fmt: skip
+    return sum(rank(M) < M.shape[1] for M in blocks), len(blocks)
+
+
+#: the share of the plant's linear motion at its reference the model's A there misses, above which the design warns
+MISSED = 0.1
+
+
+def missed_motion(ts) -> tuple[float, str] | None:
+    """``(share, warning)`` where the model's ``A`` at the reference, ``sum_i h_i(x*) A_i``, misses more than
+    :data:`MISSED` of the plant's Jacobian ``df/dx`` there (``||J - A(x*)|| / ||J||``, Frobenius), the rest of it
+    held in the premises and in ``B(x)`` times the reference input (see the module docstring); None where it
+    does not, where the plant gives no reference, or where the reference lies outside the region.
+
+    Measured (``fte design``, 2026-11-29): a boost converter in absolute units misses 0.996, a building in kelvin
+    0.466, a quadrotor at hover 0.983; the plants written in deviations and the built-ins 0 to round-off, a vehicle
+    0.074, a motor arm 0.0036."""
+    plant = ts.plant
+    if ts.kind not in ("sector_auto", "sector") or (point := reference_point(plant)) is None:
+        return None
+    x_star, u_star = point
+    lo, hi = np.nan_to_num(plant.region_lo, nan=-np.inf), np.nan_to_num(plant.region_hi, nan=np.inf)
+    if np.any(x_star < lo) or np.any(x_star > hi):
+        return None
+    J = _jacobian(plant, x_star, u_star)
+    h = np.asarray(ts.memberships(x_star), dtype=float).ravel()
+    A = sum(hi * np.asarray(lm.A, dtype=float) for hi, lm in zip(h, ts.local_models))
+    size = float(np.linalg.norm(J))
+    if not np.all(np.isfinite(J)) or size == 0.0:
+        return None
+    share = float(np.linalg.norm(J - A)) / size
+    if share <= MISSED:
+        return None
+    where = "x_ref" if plant.x_ref is not None else "x = 0 with the reference input"
+    return share, (
+        f"warning: the T-S model is written about x = 0, and at the plant's reference ({where}, the input "
+        f"{np.round(u_star, 6).tolist()}) its A, sum_i h_i A_i, misses {share:.2g} of the plant's linear motion "
+        "df/dx there (||df/dx - A|| / ||df/dx||): the rest lies in the premises and in the inputs' state-dependent "
+        "coefficients times the reference input, which LMI (45) does not see (it certifies A_i + B_i K_j about x = "
+        "0), nor the observer as motion. Write the plant in deviations from its reference (the states less x_ref, "
+        "the inputs less the input holding it, declared by b.operating_point): there A carries it (it may take more "
+        "premises: each coefficient then holds the reference too)"
+    )

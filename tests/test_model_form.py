@@ -1,0 +1,77 @@
+"""Where a failed assumption is the sector model's form, not the plant (fte_casadi/design/_model_form.py): a
+chemostat in absolute units (tests/plant_chemostat.py) has the substrate's whole effect held in premises and in
+the input's coefficient, every A_i's column of S zero, so the rank tests refuse a probe fault on a measured
+state; and a plant whose model about x = 0 misses most of its linear motion at the reference is warned."""
+
+import numpy as np
+import pytest
+from plant_chemostat import chemostat, chemostat_deviations, chemostat_probe
+
+from fte_casadi.design import design
+from fte_casadi.design._model_form import MISSED, hidden_effects, missed_motion, reference_point
+from fte_casadi.errors import AssumptionError
+from fte_casadi.ts import derive
+
+
+@pytest.fixture(scope="module")
+def probe():
+    return derive(chemostat_probe(), fidelity_samples=200)
+
+
+def test_the_hidden_states_are_those_the_plant_moves_with_and_no_A_i_does(probe):
+    h = hidden_effects(probe)
+    assert h is not None and [probe.plant.state_names[k] for k in h.states] == ["S", "P"]
+    for k in h.states:  # the model: a zero column in every rule; the plant at its reference: not
+        assert all(np.all(lm.A[:, k] == 0.0) for lm in probe.local_models)
+        assert np.linalg.norm(h.jacobian[:, k]) > 0.1
+    # the point: the reference state, and the dilution rate that holds it (mu(S0) = 0.3 per h)
+    x_star, u_star = reference_point(probe.plant)
+    assert np.allclose(x_star, probe.plant.x_ref) and u_star == pytest.approx([0.3], rel=1e-9)
+    # the advice checked: written in deviations, assumption (2) holds in every rule of the model derived again
+    failed, rules = h.in_deviations
+    assert failed == 0 and rules > 1
+    assert "(checked: the plant so written derives a model for which assumption (2) holds" in h.render(
+        probe.plant
+    )
+
+
+def test_with_both_faults_the_check_says_the_faults_themselves_act_alike():
+    h = hidden_effects(derive(chemostat(), fidelity_samples=200))
+    failed, rules = h.in_deviations
+    assert 0 < failed < rules
+    assert f"still fails in {failed} of its {rules} rules" in h.render(chemostat())
+
+
+def test_the_refusal_names_the_models_form_and_its_advice(probe):
+    with pytest.raises(AssumptionError) as info:
+        design(probe)
+    text = " ".join(str(info.value).split())
+    assert "assumption (2) fails" in text and "But the model's form is the cause, not the plant" in text
+    assert 'the columns of "S", "P" are zero in every A_i' in text
+    assert "b.operating_point(u=[0.3])" in text and "X - 4.846, S - 0.3071, P - 10.5" in text
+
+
+def test_a_plant_in_deviations_hides_nothing_and_is_not_warned():
+    ts = derive(chemostat_deviations(), fidelity_samples=200)
+    assert hidden_effects(ts) is None and missed_motion(ts) is None
+
+
+def test_the_model_about_zero_missing_the_motion_at_the_reference_is_warned(probe):
+    share, text = missed_motion(probe)
+    assert MISSED < share <= 1.0
+    assert text.startswith("warning: the T-S model is written about x = 0") and f"misses {share:.2g}" in text
+
+
+def test_fte_derive_warns_on_stderr_and_not_for_the_deviation_form():
+    from click.testing import CliRunner
+
+    from fte_casadi.cli import main
+
+    here = __import__("pathlib").Path(__file__).resolve().parent / "plant_chemostat.py"
+    r = CliRunner().invoke(main, ["derive", f"{here}:chemostat_probe"])
+    assert r.exit_code == 0, r.output
+    said = " ".join(r.stderr.split())
+    assert "fte: warning: the T-S model is written about x = 0" in said and "misses 0.99" in said
+    assert "warning" not in r.stdout  # the model itself on stdout, unchanged
+    quiet = CliRunner().invoke(main, ["derive", f"{here}:chemostat_deviations"])
+    assert quiet.exit_code == 0 and "warning" not in quiet.stderr
