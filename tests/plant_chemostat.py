@@ -45,18 +45,30 @@ def _mu(s):
     return MU * s / (KS + s + s**2 / KI)
 
 
+def _declare(b, states, units, pump: bool, sensor: bool):
+    """The states, the dilution input, the excess substrate and the faults asked for (0 where not)."""
+    xs = b.states(*states, units=units)
+    (dil,) = b.inputs(("D", "dD")[states[0].startswith("d")])
+    (d,) = b.unknown_inputs("dSf")
+    fa = b.faults("pump", kind="actuator")[0] if pump else 0.0
+    fs = b.faults("S_sensor", kind="sensor")[0] if sensor else 0.0
+    return xs, dil, d, fa, fs
+
+
+def _rates(x, s, p, D, d) -> list:
+    """Growth, consumption and production, diluted at D; d the excess substrate fed."""
+    mu = _mu(s)
+    return [mu * x - D * x, -mu * x / Y + D * (SF - s) + d, (ALPHA * mu + BETA) * x - D * p]
+
+
 def chemostat(pump: bool = True, sensor: bool = True):
     """In absolute units, with a reference state (refused: the model's form, above)."""
     from fte_casadi import PlantBuilder
 
     b = PlantBuilder("chemostat")
-    x, s, p = b.states("X", "S", "P", units=["g/L", "g/L", "g/L"])
-    (dil,) = b.inputs("D")
-    (d,) = b.unknown_inputs("dSf")
-    fa = b.faults("pump", kind="actuator")[0] if pump else 0.0
-    fs = b.faults("S_sensor", kind="sensor")[0] if sensor else 0.0
-    mu, D = _mu(s), dil + fa
-    b.drift([mu * x - D * x, -mu * x / Y + D * (SF - s) + d, (ALPHA * mu + BETA) * x - D * p])
+    (x, s, p), dil, d, fa, fs = _declare(b, ("X", "S", "P"), ["g/L"] * 3, pump, sensor)
+    b.drift(_rates(x, s, p, dil + fa, d))
+    mu = _mu(s)
     b.diffusion([SIGMA * mu * x, -SIGMA * mu * x / Y, SIGMA * ALPHA * mu * x])
     b.outputs([x, s + fs, p], names=["OD", "S_meas", "P_meas"], units=["g/L", "g/L", "g/L"])
     b.region(X=(3.0, 6.0), S=(0.05, 1.0), P=(6.0, 14.0))
@@ -77,15 +89,10 @@ def chemostat_deviations(pump: bool = True, sensor: bool = True):
     from fte_casadi import PlantBuilder
 
     b = PlantBuilder("chemostat_dev")
-    dx, ds, dp = b.states("dX", "dS", "dP", units=["g/L", "g/L", "g/L"])
-    (v,) = b.inputs("dD")
-    (d,) = b.unknown_inputs("dSf")
-    fa = b.faults("pump", kind="actuator")[0] if pump else 0.0
-    fs = b.faults("S_sensor", kind="sensor")[0] if sensor else 0.0
-    x, s, p, D = X0 + dx, S0 + ds, P0 + dp, D0 + v + fa
-    mu = _mu(s)
-    b.drift([mu * x - D * x, -mu * x / Y + D * (SF - s) + d, (ALPHA * mu + BETA) * x - D * p])
-    g = SIGMA * (mu * x - D0 * X0)  # the growth's deviation from rest fluctuating
+    (dx, ds, dp), v, d, fa, fs = _declare(b, ("dX", "dS", "dP"), ["g/L"] * 3, pump, sensor)
+    x, s, p = X0 + dx, S0 + ds, P0 + dp
+    b.drift(_rates(x, s, p, D0 + v + fa, d))
+    g = SIGMA * (_mu(s) * x - D0 * X0)  # the growth's deviation from rest fluctuating
     b.diffusion([g, -g / Y, ALPHA * g])
     b.outputs([dx, ds + fs, dp], names=["OD", "S_meas", "P_meas"], units=["g/L", "g/L", "g/L"])
     b.region(dX=(3.0 - X0, 6.0 - X0), dS=(0.05 - S0, 1.0 - S0), dP=(6.0 - P0, 14.0 - P0))
