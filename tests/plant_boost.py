@@ -89,3 +89,27 @@ def scenario():
         paths=8,
         measurement_noise=(0.02, 0.05, 0.05),
     )
+
+
+def boost_deviations():
+    """The same converter in deviations from its operating point (i_L* = 2.4 A, v_C* = 24 V at D* = 0.5), the
+    duty cycle's deviation the input (docs/your-plant.md, "A reference far from 0")."""
+    i0, v0 = VIN / ((1 - D_STAR) ** 2 * R), VIN / (1 - D_STAR)
+    b = PlantBuilder("boost_dev")
+    di, dv = b.states("di_L", "dv_C", units=["A", "V"])
+    (dd,) = b.inputs("dduty")
+    (i_o,) = b.unknown_inputs("i_o")
+    (fa,) = b.faults("fa", kind="actuator")
+    (fs,) = b.faults("fs", kind="sensor")
+    b.drift(_rhs(i0 + di, v0 + dv, D_STAR + dd + fa, i_o))
+    b.diffusion([0.0, -NOISE * dv / (R * C)])
+    b.outputs([di, dv + fs, dv], names=["i_L", "v_C", "v_C2"], units=["A", "V", "V"])
+    b.region(di_L=(-i0, 6.0 - i0), dv_C=(12.0 - v0, 36.0 - v0))
+    b.operating_point(u=[D_STAR])
+    b.input_limits(dduty=(0.05 - D_STAR, 0.9 - D_STAR))
+    return b.build()
+
+
+def boost_deviations_scenario():
+    """:func:`scenario`, for :func:`boost_deviations`."""
+    return scenario()

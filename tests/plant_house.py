@@ -120,3 +120,32 @@ def scenario(seconds_per_unit: float = 1.0):
 def house_hours_scenario():
     """:func:`scenario` in hours, for :func:`house_hours`."""
     return scenario(3600.0)
+
+
+def house_deviations():
+    """The building in hours written in deviations from its rest point, the boiler's power less 5.4 kW the input
+    (docs/your-plant.md, "A reference far from 0"). Without the wind: its fluctuation is additive noise at rest."""
+    from fte_casadi import PlantBuilder
+
+    h = 3600.0
+    b = PlantBuilder("house_dev")
+    dw, d1, d2 = b.states("dTw", "dT1", "dT2", units=["K", "K", "K"])
+    (dp,) = b.inputs("dP")
+    (fa,) = b.faults("fa", kind="actuator")
+    (fs,) = b.faults("fs", kind="sensor")
+    tw, t1, t2, p = TW_REF + dw, T1_REF + d1, T2_REF + d2, Q_REF + dp
+    q = UR * (tw - t1) ** 1.3
+    b.drift([h * (p + fa - q) / CW, h * (q - U12 * (t1 - t2) - U1O * (t1 - TO)) / C1,
+             h * (U12 * (t1 - t2) - U2O * (t2 - TO)) / C2])  # fmt: skip
+    b.outputs([dw, d1 + fs, d2], names=["Tw_meas", "T1_meas", "T2_meas"], units=["K", "K", "K"])
+    b.region(dTw=(300.0 - TW_REF, 360.0 - TW_REF), dT1=(285.0 - T1_REF, 300.0 - T1_REF),
+             dT2=(280.0 - T2_REF, 300.0 - T2_REF))  # fmt: skip
+    b.operating_point(u=[Q_REF])
+    b.time_unit("h")
+    b.input_limits(dP=(-Q_REF, 8000.0 - Q_REF))
+    return b.build()
+
+
+def house_deviations_scenario():
+    """:func:`scenario` in hours, for :func:`house_deviations`."""
+    return scenario(3600.0)
