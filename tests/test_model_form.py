@@ -75,3 +75,44 @@ def test_fte_derive_warns_on_stderr_and_not_for_the_deviation_form():
     assert "warning" not in r.stdout  # the model itself on stdout, unchanged
     quiet = CliRunner().invoke(main, ["derive", f"{here}:chemostat_deviations"])
     assert quiet.exit_code == 0 and "warning" not in quiet.stderr
+
+
+def test_the_share_missed_is_the_reference_inputs_part_of_the_jacobian():
+    """x' = A x + (b + N x) u at the reference input u0 (x* = 0): the plant's df/dx there is A + N u0, the model's A
+    about x = 0 is A (N x u is the input's coefficient), so the share missed is ||N u0|| / ||A + N u0||, warned
+    above MISSED; a linear plant (N = 0) misses nothing wherever it rests."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from fte_casadi import PlantBuilder
+
+    entry = st.floats(-2.0, 2.0).map(lambda v: round(v, 3))
+
+    @settings(max_examples=15, deadline=None)
+    @given(a=st.lists(entry, min_size=4, max_size=4), n=st.lists(entry, min_size=4, max_size=4),
+           u0=st.floats(-3.0, 3.0).map(lambda v: round(v, 3)), linear=st.booleans())  # fmt: skip
+    def check(a, n, u0, linear):
+        A, N = np.reshape(a, (2, 2)), np.zeros((2, 2)) if linear else np.reshape(n, (2, 2))
+        b = PlantBuilder("bilinear")
+        x1, x2 = b.states("x1", "x2")
+        (u,) = b.inputs("u")
+        (fa,) = b.faults("fa", kind="actuator")
+        (fs,) = b.faults("fs", kind="sensor")
+        x = [x1, x2]
+        coef = [1.0 + N[i, 0] * x1 + N[i, 1] * x2 for i in range(2)]
+        b.drift([A[i, 0] * x1 + A[i, 1] * x2 + coef[i] * (u + fa) for i in range(2)])
+        b.outputs([x[0] + fs, x[1], x[0] + x[1]])
+        b.region(x1=(-1.0, 1.0), x2=(-1.0, 1.0))
+        b.reference(u=[u0])
+        J = A + N * u0
+        ts = derive(b.build(), fidelity_samples=50)
+        found = missed_motion(ts)
+        if np.linalg.norm(J) == 0.0:
+            assert found is None
+            return
+        share = np.linalg.norm(N * u0) / np.linalg.norm(J)
+        assert (found is not None) == (share > MISSED)
+        if found is not None:
+            assert found[0] == pytest.approx(share, rel=1e-9, abs=1e-12)
+
+    check()
