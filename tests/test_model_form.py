@@ -58,8 +58,9 @@ def test_a_plant_in_deviations_hides_nothing_and_is_not_warned():
 
 def test_the_model_about_zero_missing_the_motion_at_the_reference_is_warned(probe):
     share, text = missed_motion(probe)
-    assert MISSED < share <= 1.0
-    assert text.startswith("warning: the T-S model is written about x = 0") and f"misses {share:.2g}" in text
+    assert MISSED < share <= 2.0  # ||J_i - A_i|| over the larger of the two rows: at most 2
+    assert text.startswith("warning: the T-S model is written about x = 0")
+    assert f"misses {share:.2g} of the rate of X" in text
 
 
 def test_fte_derive_warns_on_stderr_and_not_for_the_deviation_form():
@@ -71,7 +72,9 @@ def test_fte_derive_warns_on_stderr_and_not_for_the_deviation_form():
     r = CliRunner().invoke(main, ["derive", f"{here}:chemostat_probe"])
     assert r.exit_code == 0, r.output
     said = " ".join(r.stderr.split())
-    assert "fte: warning: the T-S model is written about x = 0" in said and "misses 0.99" in said
+    assert (
+        "fte: warning: the T-S model is written about x = 0" in said and "misses 1.1 of the rate of X" in said
+    )
     assert "warning" not in r.stdout  # the model itself on stdout, unchanged
     quiet = CliRunner().invoke(main, ["derive", f"{here}:chemostat_deviations"])
     assert quiet.exit_code == 0 and "warning" not in quiet.stderr
@@ -79,8 +82,9 @@ def test_fte_derive_warns_on_stderr_and_not_for_the_deviation_form():
 
 def test_the_share_missed_is_the_reference_inputs_part_of_the_jacobian():
     """x' = A x + (b + N x) u at the reference input u0 (x* = 0): the plant's df/dx there is A + N u0, the model's A
-    about x = 0 is A (N x u is the input's coefficient), so the share missed is ||N u0|| / ||A + N u0||, warned
-    above MISSED; a linear plant (N = 0) misses nothing wherever it rests."""
+    about x = 0 is A (N x u is the input's coefficient), so each state's share missed is ||(N u0)_i|| /
+    max(||(A + N u0)_i||, ||A_i||) (the region's half-widths are 1), warned above MISSED at the largest; a linear
+    plant (N = 0) misses nothing wherever it rests."""
     from hypothesis import given, settings
     from hypothesis import strategies as st
 
@@ -105,14 +109,24 @@ def test_the_share_missed_is_the_reference_inputs_part_of_the_jacobian():
         b.region(x1=(-1.0, 1.0), x2=(-1.0, 1.0))
         b.reference(u=[u0])
         J = A + N * u0
-        ts = derive(b.build(), fidelity_samples=50)
-        found = missed_motion(ts)
-        if np.linalg.norm(J) == 0.0:
-            assert found is None
-            return
-        share = np.linalg.norm(N * u0) / np.linalg.norm(J)
+        found = missed_motion(derive(b.build(), fidelity_samples=50))
+        den = np.maximum(np.linalg.norm(J, axis=1), np.linalg.norm(A, axis=1))
+        shares = [np.linalg.norm((N * u0)[i]) / den[i] for i in range(2) if den[i] > 0]
+        share = max(shares, default=0.0)
         assert (found is not None) == (share > MISSED)
         if found is not None:
             assert found[0] == pytest.approx(share, rel=1e-9, abs=1e-12)
 
     check()
+
+
+def test_the_share_does_not_depend_on_the_states_units():
+    """The generator's angle in degrees and its speed in mpu (x 57.3 and x 1000, the region too) misses the same share
+    of the speed's rate as in rad and pu: each state's column is weighted by its half-width in the region."""
+    from plant_smib import smib
+
+    base = missed_motion(derive(smib(), fidelity_samples=50))
+    scaled = missed_motion(
+        derive(smib(angle_per_rad=180.0 / np.pi, speed_per_pu=1000.0), fidelity_samples=50)
+    )
+    assert base[0] > MISSED and scaled[0] == pytest.approx(base[0], rel=1e-9)
