@@ -94,7 +94,7 @@ class Refusal:
         tried = (
             "the values tried were refused for other reasons: "
             + "; ".join(
-                f"at {', '.join(f'{k} = {v:g}' for k, v in change.items())}: {shorten(why, 700 if self.found is None else 300)}"
+                f"at {', '.join(f'{k} = {v:g}' for k, v in change.items())}: {shorten(why, 700 if self.found is None else 300).rstrip('.')}"
                 for change, why in self.tried
             )
             if self.tried and not self.checked
