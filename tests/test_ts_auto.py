@@ -185,6 +185,14 @@ def test_an_input_times_an_unknown_input_is_refused_with_the_products_advice():
     text = " ".join(str(exc.value).split())
     assert "drift row 'S' is nonlinear in 'D'" in text and "that term multiplies 'D' by 'dSf'" in text
     assert "an unknown input standing for D * dSf" in text and "sin(u)" not in text
+    # an input times a fault: write the fault added; two inputs: their product is one input
+    for rows, said in (
+        (lambda x1, x2, u, fa: [x2, u * (1.0 + fa)], "write the fault where it enters, added (u + fa"),
+        (lambda x1, x2, u, fa: [x2, u * u + fa], "v = sin(u)"),  # u * u: one signal's own nonlinearity
+    ):
+        with pytest.raises(PlantError) as exc:
+            two_state(rows)
+        assert said in " ".join(str(exc.value).split())
     # one signal's own nonlinearity keeps the advice to invert it
     with pytest.raises(PlantError, match=r"v = sin\(u\)"):
         two_state(lambda x1, x2, u, fa: [x2, ca.sin(u) + fa])

@@ -44,9 +44,11 @@ def _linearity(
     var: ca.SX,
     var_names: list[str],
     auto: bool = False,
+    kinds: dict | None = None,
 ) -> None:
     """``expr`` must be affine in ``var``: its coefficients may depend on what ``var`` leaves out (the
-    premises z; with ``auto`` or local linearisation, the states x too). ``auto`` only words the message."""
+    premises z; with ``auto`` or local linearisation, the states x too). ``auto`` and ``kinds`` (name -> "input",
+    "unknown input", "fault") only word the message."""
     if var.numel() == 0:
         return
     jac = ca.jacobian(expr, var)
@@ -59,10 +61,7 @@ def _linearity(
                     # a product of two signals (an input times an unknown input): not a function of one to invert
                     other = [b for b in bad if b != var_names[j]]
                     fix = (
-                        f"that term multiplies {var_names[j]!r} by {other[0]!r}, two signals the model takes "
-                        f"affinely: take their product as one signal (e.g. an unknown input standing for "
-                        f"{var_names[j]} * {other[0]}, bounded by the product of their bounds), or model one of them "
-                        "as a state"
+                        _product_advice(var_names[j], other[0], kinds or {})
                         if other and var_names[j] not in bad
                         else "rewrite that term: e.g. take the nonlinear function of the input (v = sin(u)) as the "
                         "input and invert it in the controller, or model the actuator as a state"
@@ -79,6 +78,20 @@ def _linearity(
                     "so that for fixed premises the plant is linear in states, inputs, unknown inputs and faults, "
                     "or declare no premise at all: the premises are then found in the plain equations"
                 )
+
+
+def _product_advice(a: str, b: str, kinds: dict) -> str:
+    """What to do with a term multiplying the signals ``a`` and ``b`` (each entering affinely on its own)."""
+    head = f"that term multiplies {a!r} by {b!r}, two signals the model takes affinely: "
+    if "fault" in (kinds.get(a), kinds.get(b)):
+        return head + ("write the fault where it enters, added (u + fa: the actuator delivers u + fa), and give its "
+                       "shape in the scenario: a loss of effectiveness is LossOfEffectiveness there")  # fmt: skip
+    if kinds.get(a) == kinds.get(b) == "input":
+        return (
+            head + f"take their product as one input (v = {a} * {b}) and recover the pair in the controller"
+        )
+    return head + (f"take their product as one signal (e.g. an unknown input standing for {a} * {b}, bounded by the "
+                   "product of their bounds), or model one of them as a state")  # fmt: skip
 
 
 def triangular_memberships(v: ca.SX, centres: np.ndarray) -> list[ca.SX]:
@@ -182,8 +195,10 @@ def _check_dependence(b: PlantBuilder, syms: tuple, drift: ca.SX, diff: ca.SX, y
         # local linearisation: x and u may enter nonlinearly; d and f must enter affinely
         v, vn = ca.vertcat(d, f), list(b._dn) + list(b._fn)
         w, wn = ca.vertcat(f, d2), list(b._fn) + list(b._d2n)
-    _linearity("drift", b._xn, drift, v, vn, auto)
-    _linearity("diffusion", b._xn, diff, w, wn, auto)
+    kinds = {**{n: "input" for n in b._un}, **{n: "unknown input" for n in (*b._dn, *b._d2n)},
+             **{n: "fault" for n in b._fn}}  # fmt: skip
+    _linearity("drift", b._xn, drift, v, vn, auto, kinds)
+    _linearity("diffusion", b._xn, diff, w, wn, auto, kinds)
 
 
 def _output_map(b: PlantBuilder, x: ca.SX, f: ca.SX, y: ca.SX) -> tuple[np.ndarray, np.ndarray, tuple, tuple]:
