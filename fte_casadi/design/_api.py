@@ -9,6 +9,7 @@ was checked to work, and names the cause behind it. A refusal is read by its rec
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 
@@ -21,6 +22,7 @@ from ..errors import FteError, InfeasibleDesignError, ParameterError, Refused
 from ..ts import TSModel, as_model
 from . import _pipeline as pipeline
 from . import diagnose
+from ._model_form import missed_motion
 from ._options import SOLVERS, DesignOptions, _params, gamma_size, resolve, round_gamma
 from ._record import Design
 from .core import _conditioned as conditioned
@@ -194,7 +196,13 @@ def _explained(ts: TSModel, options: DesignOptions, st, params: dict, refused: l
             err = diagnose.explain_45(_attempt, ts, options, st.aug, params, refused)
         else:
             err = diagnose.explain_46(_attempt, ts, options, st.aug, params, exc, refused)
-        return diagnose.name_cause(_attempt, err, ts, options, st, params, refused, lmi)
+        err = diagnose.name_cause(_attempt, err, ts, options, st, params, refused, lmi)
+    if (missed := missed_motion(ts)) is None:
+        return err
+    # the LMIs refused the model about x = 0, which at the reference is off from the plant: say so beside the cause
+    r = err.refusal
+    form = missed[1].removeprefix("warning: ")
+    return InfeasibleDesignError(dataclasses.replace(r, detail=f"{r.detail}. {form}" if r.detail else form))
 
 
 def _at(params: dict) -> str:

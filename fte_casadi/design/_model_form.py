@@ -49,27 +49,43 @@ class Hidden:
         names = [plant.state_names[k] for k in self.states]
         q = ", ".join(f'"{nm}"' for nm in names)
         rates = "; ".join(
-            f"df/d{plant.state_names[k]} = [{', '.join(f'{v:.3g}' for v in self.jacobian[:, k])}]"
-            for k in self.states[:3]
+            f"df/d{plant.state_names[k]} = [{_numbers(self.jacobian[:, k])}]" for k in self.states[:3]
         )
         column = f"the column of {q} is" if len(names) == 1 else f"the columns of {q} are"
-        shift = ", ".join(f"{nm} - {self.x_star[k]:.4g}" for k, nm in enumerate(plant.state_names)
-                          if self.x_star[k] != 0.0)  # fmt: skip
-        inputs = np.round(self.u_star, 6).tolist()
+        fixed = self.in_deviations is not None and self.in_deviations[0] == 0
+        head = ("the model's form is the cause, not the plant" if fixed else
+                "the model's form may be part of the cause")  # fmt: skip
         text = (
-            f"the model's form is the cause, not the plant: at its reference the plant moves with {q} ({rates}), but "
-            f"{column} zero in every A_i: the sector model is written about x = 0, and holds that effect "
-            "in its premises and in the inputs' state-dependent coefficients (B(x) times the reference input), which "
-            "the observer's rank tests do not see as motion"
-            + (f". Write the plant in deviations from its reference ({shift}; the inputs less {inputs}, declared by "
-               f"b.operating_point(u={inputs})): the effect is then part of A" if shift or any(inputs) else "")
-        )  # fmt: skip
+            f"{head}: at its reference the plant moves with {q} ({rates}), but {column} zero in every A_i: the sector "
+            "model is written about x = 0, and holds that effect in its premises and in the inputs' state-dependent "
+            "coefficients (B(x) times the reference input), which the observer's rank tests do not see as motion. "
+            f"{_advice(plant, self.x_star, self.u_star)}: the effect is then part of A"
+        )
         if self.in_deviations is not None:
             failed, rules = self.in_deviations
             text += (" (checked: the plant so written derives a model for which assumption (2) holds in every rule)"
                      if not failed else f" (checked: so written, assumption (2) still fails in {failed} of its {rules} "
-                     "rules: there the faults act alike on the plant itself)")  # fmt: skip
+                     "rules, for another reason: the refusal of the plant so written names it)")  # fmt: skip
         return text
+
+
+def _numbers(values) -> str:
+    """The entries, each below 1e-12 of the largest shown as 0 (``mu(S*) - D*`` is 0 to round-off; no "-0")."""
+    values = np.asarray(values, dtype=float)
+    tiny = 1e-12 * float(np.max(np.abs(values), initial=0.0))
+    return ", ".join(f"{(v if abs(v) > tiny else 0.0) + 0.0:.3g}" for v in values)
+
+
+def _advice(plant, x_star: np.ndarray, u_star: np.ndarray) -> str:
+    """ "Write the plant in deviations from its reference (X - 4.846, S + 0.5; the inputs less [0.3], ...)"."""
+    shift = ", ".join(
+        f"{nm} {'-' if v > 0 else '+'} {abs(v):.4g}" for nm, v in zip(plant.state_names, x_star) if v
+    )
+    inputs = np.round(u_star, 6).tolist()
+    parts = ([shift] if shift else []) + (
+        [f"the inputs less {inputs}, declared by b.operating_point(u={inputs})"] if any(inputs) else []
+    )
+    return "Write the plant in deviations from its reference" + (f" ({'; '.join(parts)})" if parts else "")
 
 
 def _drift(plant) -> ca.SX:
@@ -85,18 +101,30 @@ def _jacobian(plant, x_star: np.ndarray, u_star: np.ndarray) -> np.ndarray:
     return np.asarray(fn(x_star, u_star), dtype=float)
 
 
+def _half_widths(plant) -> np.ndarray:
+    """Each state's half-width in the region (1 where it has no finite one)."""
+    half = (plant.region_hi - plant.region_lo) / 2.0
+    return np.where(np.isfinite(half) & (half > 0.0), half, 1.0)
+
+
 def reference_point(plant) -> tuple[np.ndarray, np.ndarray] | None:
     """``(x*, u*)``: the reference state and the input that holds the plant there (least squares: inputs enter
-    affinely), or x = 0 with the reference input; None where the plant gives neither."""
+    affinely), or x = 0 with the reference input; None where the plant gives neither, where that point lies outside
+    the region, or where the plant is not finite there."""
     if plant.x_ref is None and plant.u_ref is None:
         return None
     n, m = plant.n, plant.m
     drift = _drift(plant)
     fn = ca.Function("fx", [plant.x, plant.u], [drift, ca.jacobian(drift, plant.u)])
     x_star = np.zeros(n) if plant.x_ref is None else np.asarray(plant.x_ref, dtype=float).ravel()
+    lo, hi = np.nan_to_num(plant.region_lo, nan=-np.inf), np.nan_to_num(plant.region_hi, nan=np.inf)
+    if np.any(x_star < lo) or np.any(x_star > hi):
+        return None  # a reference outside the region: the model claims nothing there
     if plant.x_ref is None:
         return x_star, np.asarray(plant.u_ref, dtype=float).ravel()
     f0, G = (np.asarray(v, dtype=float) for v in fn(x_star, np.zeros(m)))
+    if not (np.all(np.isfinite(f0)) and np.all(np.isfinite(G))):
+        return None
     u_star, *_ = np.linalg.lstsq(G.reshape(n, m), -f0.ravel(), rcond=None)
     return x_star, u_star
 
@@ -114,11 +142,12 @@ def hidden_effects(ts, check: bool = True) -> Hidden | None:
         return None
     A = [np.asarray(lm.A, dtype=float) for lm in ts.local_models]
     a_size = max(float(np.linalg.norm(a)) for a in A)
+    Jw = J * _half_widths(plant)[None, :]  # a state's column in its own units, weighted by its reach
     states = tuple(
         k
         for k in range(plant.n)
         if max(float(np.linalg.norm(a[:, k])) for a in A) <= ZERO_COLUMN * max(a_size, 1e-300)
-        and np.linalg.norm(J[:, k]) > MOVES * np.linalg.norm(J)
+        and np.linalg.norm(Jw[:, k]) > MOVES * np.linalg.norm(Jw)
     )
     if not states:
         return None
@@ -155,7 +184,7 @@ def _in_deviations(ts, x_star: np.ndarray, u_star: np.ndarray) -> tuple[int, int
     return sum(rank(M) < M.shape[1] for M in blocks), len(blocks)
 
 
-#: the share of a state's rate at the reference the model's A there misses, above which the design warns
+#: how far the model's A at the reference is off in a state's rate (:func:`row_shares`), above which it warns
 MISSED = 0.2
 
 
@@ -171,29 +200,25 @@ def row_shares(J: np.ndarray, A: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 def missed_motion(ts) -> tuple[float, str] | None:
-    """``(share, warning)`` where the model's ``A`` at the reference, ``sum_i h_i(x*) A_i``, misses more than
-    :data:`MISSED` of some state's rate in the plant's Jacobian ``df/dx`` there (:func:`row_shares`, the largest),
-    the rest of it held in the premises and in ``B(x)`` times the reference input (see the module docstring); None
-    where it does not, where the plant gives no reference, or where the reference lies outside the region.
+    """``(share, warning)`` where the model's ``A`` at the reference, ``sum_i h_i(x*) A_i``, is off by more than
+    :data:`MISSED` in some state's rate of the plant's Jacobian ``df/dx`` there (:func:`row_shares`, the largest),
+    the rest held in the premises and in ``B(x)`` times the reference input (see the module docstring); None where
+    it is not, where the plant gives no reference, or where the reference lies outside the region.
 
-    Measured (2026-11-29): a boost converter in absolute units misses 0.5 of its current's rate, a synchronous
-    generator (angle in rad) 0.94 of its speed's, a building in kelvin 0.3 of its water's, a quadrotor at hover
-    0.95 of vx's; the plants written in deviations and the built-ins 0 to round-off, a vehicle 0.09, a motor arm
-    0.04."""
+    Measured (2026-11-29): a boost converter in absolute units is off by 0.5 in its current's rate, a synchronous
+    generator (angle in rad) by 0.94 in its speed's, a building in kelvin by 0.3 in its water's, a quadrotor at
+    hover by 0.95 in vx's; the plants written in deviations and the built-ins by 0 to round-off, a vehicle by 0.08,
+    a motor arm by 0.04."""
     plant = ts.plant
     if ts.kind not in ("sector_auto", "sector") or (point := reference_point(plant)) is None:
         return None
     x_star, u_star = point
-    lo, hi = np.nan_to_num(plant.region_lo, nan=-np.inf), np.nan_to_num(plant.region_hi, nan=np.inf)
-    if np.any(x_star < lo) or np.any(x_star > hi):
-        return None
     J = _jacobian(plant, x_star, u_star)
     if not np.all(np.isfinite(J)):
         return None
     h = np.asarray(ts.memberships(x_star), dtype=float).ravel()
     A = sum(hi * np.asarray(lm.A, dtype=float) for hi, lm in zip(h, ts.local_models))
-    half = (hi - lo) / 2.0
-    shares = row_shares(J, A, np.where(np.isfinite(half) & (half > 0.0), half, 1.0))
+    shares = row_shares(J, A, _half_widths(plant))
     k = int(np.argmax(shares))
     share = float(shares[k])
     if share <= MISSED:
@@ -202,14 +227,13 @@ def missed_motion(ts) -> tuple[float, str] | None:
     unit = (
         f"{plant.state_units[k]} per {plant.time_unit}" if plant.state_units[k] else f"per {plant.time_unit}"
     )
-    rate = ", ".join(f"{v:.3g}" for v in J[k])
     return share, (
         f"warning: the T-S model is written about x = 0, and at the plant's reference ({where}, the input "
-        f"{np.round(u_star, 6).tolist()}) its A, sum_i h_i A_i, misses {share:.2g} of the rate of "
-        f"{plant.state_names[k]} (its row of df/dx there: [{rate}] {unit} per unit of each state; the share weighs "
-        "each state by its half-width in the region): the rest lies in the premises and in the inputs' "
-        "state-dependent coefficients times the reference input, which LMI (45) does not see (it certifies A_i + "
-        "B_i K_j about x = 0), nor the observer as motion. Write the plant in deviations from its reference (the "
-        "states less x_ref, the inputs less the input holding it, declared by b.operating_point): there A carries it "
-        "(it may take more premises: each coefficient then holds the reference too)"
+        f"{np.round(u_star, 6).tolist()}) its A, sum_i h_i A_i, is off by {share:.2g} in the rate of "
+        f"{plant.state_names[k]} (its row of df/dx there: [{_numbers(J[k])}] {unit} per unit of each state; the "
+        "error of the model's row over the larger of the two, each state weighted by its half-width in the region: "
+        "0 the same, 1 nothing in common): the rest lies in the premises and in the inputs' state-dependent "
+        "coefficients times the reference input, which LMI (45) does not see (it certifies A_i + B_i K_j about x = "
+        f"0), nor the observer as motion. {_advice(plant, x_star, u_star)}: there A carries it (it may take more "
+        "premises: each coefficient then holds the reference too)"
     )

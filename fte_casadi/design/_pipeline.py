@@ -34,7 +34,7 @@ from ._record import Design
 from ._remark5 import explain_causes, with_remark5
 from ._remark5 import fallback as remark5_fallback
 from ._remark5 import record as remark5_record
-from ._uio import check_assumptions, enforce, uio_gain
+from ._uio import accepted_names, check_assumptions, enforce, uio_gain
 from .core import _conditioned as conditioned
 from .core import _paper as paper
 from .core import _step5
@@ -80,7 +80,9 @@ def structure(ts: TSModel, options: DesignOptions, resolved: Resolved) -> Struct
     if r5 is not None:  # Remark 5: H decouples what it can, the sliding term attenuates the rest
         H, T, aug = r5.H, r5.T, with_remark5(aug, r5)
         checks_a = check_assumptions(aug, T, remark5=r5)
-    checks_a = explain_causes(_named(checks_a, aug, ts), aug, ts.plant, options.remark5)
+    checks_a = explain_causes(
+        _named(checks_a, aug, ts, options.accept_assumptions), aug, ts.plant, options.remark5
+    )
     try:
         notes += enforce(checks_a, options.accept_assumptions)
     except AssumptionError as exc:
@@ -731,23 +733,31 @@ def _bounds(certified, R, K, Kf, Kf_rules, T, ts, u_ref, r5doc, fallback=None) -
     return {"fault_error": fe, "state_error": state_error_bound(view, start=fe)}
 
 
-def _named(checks: list, aug, ts: TSModel) -> list:
+def _named(checks: list, aug, ts: TSModel, accepted=()) -> list:
     """The failed assumptions (1) and (2) with the faults and unknown inputs behind them named, and the
     measurement that would separate them (:mod:`fte_casadi.design._structure`); the first failed of (2) and (4)
-    says where the model's form hides a state's effect (:mod:`fte_casadi.design._model_form`)."""
+    not ``accepted`` says where the model's form hides a state's effect (:mod:`fte_casadi.design._model_form`)."""
     import dataclasses
 
     from ._model_form import hidden_effects
     from ._structure import describe
 
-    out, form = [], None
+    out, form, acc = [], None, accepted_names(accepted)
     for c in checks:
         if not c.holds and c.name in ("(1)", "(2)"):
             why = describe(aug, ts.plant, {c.name})
             if why:
                 c = dataclasses.replace(c, message=f"{c.message}. Which: {why}")
-        if not c.holds and c.name in ("(2)", "(4)") and form is None:
-            form = hidden_effects(ts) or False
+        if (
+            not c.holds
+            and c.name in ("(2)", "(4)")
+            and acc is not None
+            and c.name not in acc
+            and form is None
+        ):
+            form = (
+                hidden_effects(ts, check=c.name == "(2)") or False
+            )  # the check re-derives: (2) is what it tests
             if form:
                 c = dataclasses.replace(c, message=f"{c.message}. But {form.render(ts.plant)}")
         out.append(c)

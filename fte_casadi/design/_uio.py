@@ -327,19 +327,20 @@ def check_assumptions(
     return [first, two, three, check_observability(aug, T), check_fault_matching(aug)]
 
 
+def accepted_names(accept: bool | Iterable[str]) -> set[str] | None:
+    """The accepted assumptions as ``{"(2)", ...}`` (``"2"`` or ``"(2)"`` given), None for all (``True``)."""
+    if accept is True:
+        return None
+    return set() if accept is False else {a if a.startswith("(") else f"({a})" for a in accept}
+
+
 def enforce(checks: Iterable[AssumptionCheck], accept: bool | Iterable[str] = ()) -> list[str]:
     """Raise :class:`AssumptionError` naming every failed check not in ``accept``.
 
     ``accept`` is ``True`` (accept all) or names such as ``"(3)"`` or ``"3"``. Returns the
     status lines of the accepted failures and of the warnings.
     """
-    acc = (
-        set()
-        if accept is False
-        else None
-        if accept is True
-        else {a if a.startswith("(") else f"({a})" for a in accept}
-    )
+    acc = accepted_names(accept)
     refused, notes, names, hopeless = [], [], [], []
     for c in checks:
         if c.holds:
