@@ -151,3 +151,23 @@ def test_the_share_does_not_depend_on_the_states_units():
         derive(smib(angle_per_rad=180.0 / np.pi, speed_per_pu=1000.0), fidelity_samples=50)
     )
     assert base[0] > MISSED and scaled[0] == pytest.approx(base[0], rel=1e-9)
+
+
+def test_a_reference_outside_the_region_is_left_alone():
+    """The model claims nothing outside its region, where the plant need not even be finite (sqrt(x1) at x1 = -1):
+    no warning, no diagnosis, no crash (review: `fte derive` died with an internal LinAlgError)."""
+    import casadi as ca
+
+    from fte_casadi import PlantBuilder
+
+    b = PlantBuilder("outside")
+    x1, x2 = b.states("x1", "x2")
+    (u,) = b.inputs("u")
+    (fa,) = b.faults("fa", kind="actuator")
+    (fs,) = b.faults("fs", kind="sensor")
+    b.drift([x2, -x1 - x2 + (u + fa) * ca.sqrt(x1)])
+    b.outputs([x1 + fs, x2, x1 + x2])
+    b.region(x1=(1.0, 4.0), x2=(-1.0, 1.0))
+    b.reference(x=[-1.0, 0.0])
+    ts = derive(b.build(), fidelity_samples=50)
+    assert reference_point(ts.plant) is None and missed_motion(ts) is None and hidden_effects(ts) is None
