@@ -90,9 +90,24 @@ def _advice(plant, x_star: np.ndarray, u_star: np.ndarray) -> str:
 
 def _drift(plant) -> ca.SX:
     """The plant's drift in x and u, with d = f = 0."""
-    return ca.substitute(
-        plant.nonlinear_drift(), ca.vertcat(plant.d, plant.f), ca.DM.zeros(plant.ld + plant.lf)
-    )
+    return plant.drift_function()(plant.x, plant.u, np.zeros(plant.ld), np.zeros(plant.lf))
+
+
+def holding_input(plant, xr: np.ndarray) -> np.ndarray:
+    """The input that comes nearest to holding the plant at ``xr`` (d = f = 0): Gauss-Newton on the drift there (one
+    step where the inputs enter affinely, as the builder asks), the ``u_eq`` of
+    :func:`~fte_casadi.design._pipeline.u_reference`."""
+    u = ca.SX.sym("u", plant.m)
+    g = plant.drift_function()(xr, u, np.zeros(plant.ld), np.zeros(plant.lf))
+    J = ca.Function("J", [u], [g, ca.jacobian(g, u)])
+    ue = np.zeros(plant.m)
+    for _ in range(50):
+        r, Jm = (np.array(v) for v in J(ue))
+        step = np.linalg.lstsq(Jm, -r.ravel(), rcond=None)[0]
+        ue = ue + step
+        if np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(ue)):
+            break
+    return ue
 
 
 def _jacobian(plant, x_star: np.ndarray, u_star: np.ndarray) -> np.ndarray:
@@ -108,25 +123,23 @@ def _half_widths(plant) -> np.ndarray:
 
 
 def reference_point(plant) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(x*, u*)``: the reference state and the input that holds the plant there (least squares: inputs enter
-    affinely), or x = 0 with the reference input; None where the plant gives neither, where that point lies outside
+    """``(x*, u*)``: the reference state and the input that holds the plant there (:func:`holding_input`), or x = 0 with the reference input; None where the plant gives neither, where that point lies outside
     the region, or where the plant is not finite there."""
     if plant.x_ref is None and plant.u_ref is None:
         return None
-    n, m = plant.n, plant.m
-    drift = _drift(plant)
-    fn = ca.Function("fx", [plant.x, plant.u], [drift, ca.jacobian(drift, plant.u)])
-    x_star = np.zeros(n) if plant.x_ref is None else np.asarray(plant.x_ref, dtype=float).ravel()
+    x_star = np.zeros(plant.n) if plant.x_ref is None else np.asarray(plant.x_ref, dtype=float).ravel()
     lo, hi = np.nan_to_num(plant.region_lo, nan=-np.inf), np.nan_to_num(plant.region_hi, nan=np.inf)
     if np.any(x_star < lo) or np.any(x_star > hi):
         return None  # a reference outside the region: the model claims nothing there
     if plant.x_ref is None:
         return x_star, np.asarray(plant.u_ref, dtype=float).ravel()
-    f0, G = (np.asarray(v, dtype=float) for v in fn(x_star, np.zeros(m)))
-    if not (np.all(np.isfinite(f0)) and np.all(np.isfinite(G))):
+    drift = _drift(plant)
+    at_rest = ca.Function("fx", [plant.x, plant.u], [drift, ca.jacobian(drift, plant.u)])(
+        x_star, np.zeros(plant.m)
+    )
+    if not all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in at_rest):
         return None
-    u_star, *_ = np.linalg.lstsq(G.reshape(n, m), -f0.ravel(), rcond=None)
-    return x_star, u_star
+    return x_star, holding_input(plant, x_star)
 
 
 def hidden_effects(ts, check: bool = True) -> Hidden | None:

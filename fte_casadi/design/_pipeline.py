@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from textwrap import shorten
 from types import SimpleNamespace
 
-import casadi as ca
 import numpy as np
 
 from .._progress import note
@@ -26,7 +25,7 @@ from ..model import plant_fingerprint
 from ..ts import TSModel, scheduling_from_measurements
 from ..verdicts import SATURATES_EARLY
 from ._augment import Augmented, augment
-from ._model_form import missed_motion
+from ._model_form import holding_input, missed_motion
 from ._options import DesignOptions, Resolved
 from ._parts import Dims, Observer, Params
 from ._recertify import certify, unsaturated
@@ -631,17 +630,8 @@ def u_reference(ts: TSModel, K, status: list):
         return np.zeros(ts.m), None
     xr = np.asarray(plant.x_ref, dtype=float).ravel()
     F = plant.drift_function()
-    u = ca.SX.sym("u", ts.m)
-    g = F(xr, u, np.zeros(ts.ld), np.zeros(ts.lf))
-    J = ca.Function("J", [u], [g, ca.jacobian(g, u)])
-    ue = np.zeros(ts.m)
-    for _ in range(50):  # Gauss-Newton on the drift at x_ref with d = f = 0
-        r, Jm = (np.array(v) for v in J(ue))
-        step = np.linalg.lstsq(Jm, -r.ravel(), rcond=None)[0]
-        ue = ue + step
-        if np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(ue)):
-            break
-    rv = np.array(J(ue)[0], dtype=float).ravel()
+    ue = holding_input(plant, xr)
+    rv = np.array(F(xr, ue, np.zeros(ts.ld), np.zeros(ts.lf)), dtype=float).ravel()
     res = float(np.linalg.norm(rv))
     share = np.abs(rv) / np.maximum(_drift_size(ts, F, ue, xr), 1e-300)
     if np.max(share) > REST_RESIDUAL:  # no input holds the plant at x_ref, by more than round-off or rounding
