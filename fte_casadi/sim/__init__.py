@@ -23,6 +23,7 @@ from ._carry import carry_free as carry_free
 from ._detectability import attach as attach
 from ._detectability import detectability as detectability
 from ._engine import calibrate_detection as calibrate_detection
+from ._engine import observer_start as observer_start
 from ._engine import simulate as simulate
 from ._fault_shapes import FaultRows as FaultRows
 from ._fault_shapes import FaultShape as FaultShape

@@ -439,19 +439,30 @@ class Prepared:
             raise SimulationError(f"scenario x0 has {x0n.size} entries; the plant has {plant.n} states")
         x0 = x0n + sc.x0_noise * x0_normals(seed, paths, plant.n)
         state = np.zeros((len(paths), lay.ns + self.monitor.nmon))
-        H = np.asarray(self.design.H)
-        xb_nom = np.concatenate([x0n, np.zeros(lay.nbar - plant.n)])
-        # a single row would take another BLAS route (a matrix-vector product, rounded differently): a path
-        # alone in its chunk is computed as one of two rows, so its numbers do not depend on the chunk
-        x0b = np.vstack([x0, x0]) if len(x0) == 1 else x0
-        zb = (xb_nom - (x0b @ np.asarray(plant.C).T) @ H.T)[: len(x0)]
+        zb = observer_start(self.design, plant, sc, x0)
         for r in range(3):
             o = r * lay.run_state
             state[:, o : o + plant.n] = x0
-            if sc.observer_init == "nominal":
+            if zb is not None:
                 state[:, o + plant.n : o + plant.n + lay.nbar] = zb
         state[:, lay.ns :] = self.monitor.mon0()[None, :]
         return state
+
+
+def observer_start(design, plant, scenario, x0: np.ndarray) -> np.ndarray | None:
+    """The observer's start ``z_0`` per path (a row of ``x0`` each, the plant's initial states), as the
+    simulation starts it: ``xbar0 - H C x0``, ``xbar0 = [x0 nominal; 0]`` the scenario's nominal initial state
+    (the plant's without one), so that ``xbarhat_0`` is ``xbar0`` up to the first measurement's noise and faults;
+    None where the scenario starts the observer at ``z = 0`` (``observer_init``)."""
+    if scenario.observer_init != "nominal":
+        return None
+    x0n = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
+    xb_nom = np.concatenate([x0n, np.zeros(int(design.dims.nbar) - plant.n)])
+    x0 = np.atleast_2d(np.asarray(x0, dtype=float))
+    # a single row would take another BLAS route (a matrix-vector product, rounded differently): a path
+    # alone in its chunk is computed as one of two rows, so its numbers do not depend on the chunk
+    x0b = np.vstack([x0, x0]) if len(x0) == 1 else x0
+    return (xb_nom - (x0b @ np.asarray(plant.C).T) @ np.asarray(design.H).T)[: len(x0)]
 
 
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
