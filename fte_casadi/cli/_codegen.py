@@ -6,8 +6,8 @@ import shlex
 
 import click
 
-from ._common import _guard, _outputs, _positive
-from ._targets import _allow_option, _design_or_plant, _plant_option
+from ._common import EXIT_FAILED, _fail, _guard, _outputs, _positive
+from ._targets import _allow_option, _design_or_plant, _need_plant, _plant_option
 
 
 @click.command()
@@ -24,12 +24,17 @@ from ._targets import _allow_option, _design_or_plant, _plant_option
 @click.option("--real", type=click.Choice(["double", "float"]), default="double", show_default=True)
 @click.option("--boundary-layer", type=float, help="Replace sgn(s) by sat(s/PHI).")
 @click.option("--fmu", is_flag=True, help="Also write DIR/PLANT.fmu, an FMI 2.0 co-simulation FMU.")
+@click.option(
+    "--check", is_flag=True,
+    help="Compile the C and feed it the measurements of one simulated path of the plant's scenario (its faulty "
+    "run with tolerant control): it must return the inputs and estimates the simulation applied. Exit 1 if not.",
+)  # fmt: skip
+@click.option("--seed", type=int, default=0, show_default=True, help="The simulated path of --check.")
 @_plant_option
 @_allow_option
 @_guard
-def codegen(
-    target, out_dir, sample_time, sample_time_alias, real, boundary_layer, fmu, plant_opt, allow_uncertified
-):
+def codegen(target, out_dir, sample_time, sample_time_alias, real, boundary_layer, fmu, check, seed, plant_opt,
+            allow_uncertified):  # fmt: skip
     """Generate the embedded C of the observer/controller step."""
     from ..codegen import check_fmu_target, default_sample_time, generate_c, generate_c_and_fmu
     from ..plants import SCENARIOS
@@ -40,7 +45,9 @@ def codegen(
     _positive("sample-time", sample_time)
     _positive("boundary-layer", boundary_layer)
     _outputs(out_dir)
-    d, _ = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
+    d, spec = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
+    if check:  # everything --check needs, before any file is written
+        spec = _check_ready(d, spec, real, boundary_layer)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
     made_for = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
@@ -61,3 +68,25 @@ def codegen(
     click.echo(f"compile with: cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic -I{q} {q}/*.c your_main.c -lm")
     for path in files[len(c_files) :]:
         click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {sample_time:g} (docs/fmu.md)")
+    if check:
+        _check(d, spec, out_dir, sample_time, real, seed)
+
+
+def _check_ready(d, spec, real, boundary_layer) -> str:
+    """The plant spec ``--check`` simulates; a clear error, before any work, for what it cannot do."""
+    from ..codegen import require_check_target
+
+    require_check_target(real, boundary_layer)
+    return _need_plant(d, spec, "codegen --check")
+
+
+def _check(d, spec, out_dir, sample_time, real, seed) -> None:
+    from ..codegen import check_c
+    from ..plants import load_plant, load_scenario
+
+    got = check_c(
+        d, load_plant(spec), load_scenario(spec), out_dir, sample_time=sample_time, real=real, seed=seed
+    )
+    if not got.ok:
+        _fail(got.render(), EXIT_FAILED)
+    click.echo("checked: " + got.render())

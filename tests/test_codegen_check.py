@@ -1,0 +1,138 @@
+"""`fte codegen --check`: the generated C, fed the measurements of a simulated path, returns what the simulation
+applied; where it does not (a difference, a refused measurement), the check fails and says where."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import fte_casadi.codegen._build as build
+import fte_casadi.codegen._replay as replay
+from fte_casadi.cli import main
+from fte_casadi.codegen import check_c, find_compiler, generate_c
+from fte_casadi.plants import BUILTIN, SCENARIOS
+from fte_casadi.sim import SimulateOptions, observer_start, simulate
+
+needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
+
+
+def run(*args):
+    r = CliRunner().invoke(main, list(args))
+    assert "Traceback" not in (r.output or ""), r.output
+    r.text = " ".join((r.output or "").split())
+    return r
+
+
+@pytest.fixture(scope="module")
+def manipulator_doc(real_designs, tmp_path_factory):
+    f = tmp_path_factory.mktemp("check") / "manipulator.json"
+    real_designs["manipulator"].save(f)
+    return f
+
+
+def _check(d, folder, sabotage=None, monkeypatch=None):
+    """check_c on the manipulator's scenario; ``sabotage(y, sim)`` changes what the C is fed or compared with."""
+    ts = SCENARIOS["manipulator"]().dt
+    generate_c(d, folder, sample_time=ts)
+    if sabotage is not None:
+        original = replay._replay
+
+        def changed(design, cstep, z0, y, sim, **kw):
+            y, sim = y.copy(), {k: v.copy() for k, v in sim.items()}
+            sabotage(y, sim)
+            return original(design, cstep, z0, y, sim, **kw)
+
+        monkeypatch.setattr(replay, "_replay", changed)
+    return check_c(d, BUILTIN["manipulator"](), SCENARIOS["manipulator"](), folder, sample_time=ts, seed=3)
+
+
+@needs_cc
+def test_the_c_returns_what_the_simulation_applied_on_a_whole_path(manipulator_doc, tmp_path):
+    r = run("codegen", str(manipulator_doc), "--out", str(tmp_path / "c"), "--check", "--seed", "2")
+    assert r.exit_code == 0, r.output
+    assert "checked: fed the measurements of one simulated path of scenario 'manipulator' (seed 2" in r.text
+    assert "within 1e-09 of each signal's largest magnitude" in r.text
+    assert (tmp_path / "c" / "fte_manipulator.c").is_file()
+
+
+@needs_cc
+def test_the_check_compares_every_sample_and_fails_on_a_difference(real_designs, tmp_path, monkeypatch):
+    d = real_designs["manipulator"]
+    got = _check(d, tmp_path / "a")
+    assert got.ok and got.refused is None and got.samples == got.total == 10001
+    assert min(got.scale.values()) > 0.1  # the signals move: the comparison is not of zeros
+    assert max(got.relative(k) for k in got.diff) <= replay.TOLERANCE
+
+    def nudge(y, sim):  # one sample of u off by 1e-6 of its range, far inside the path
+        sim["u"][7000] += 1e-6 * np.max(np.abs(sim["u"]))
+
+    got = _check(d, tmp_path / "b", nudge, monkeypatch)
+    assert not got.ok and got.refused is None
+    assert 0.9e-6 < got.relative("u") < 1.1e-6
+    assert "NOT within 1e-09" in got.render()
+
+
+@needs_cc
+def test_a_measurement_the_c_refuses_fails_the_check_and_is_named(real_designs, tmp_path, monkeypatch):
+    d = real_designs["manipulator"]
+
+    def out_of_range(y, sim):
+        y[4321, 1] = 1e6
+
+    got = _check(d, tmp_path / "a", out_of_range, monkeypatch)
+    assert not got.ok and got.refused == (4321, 3) and got.samples == 4321
+    text = got.render()
+    assert "its step returned 3 at sample 4321 (t = 4.321)" in text
+    assert f"{d.names['outputs'][1]} = 1e+06 outside [" in text and "b.region" in text
+
+    def nan(y, sim):
+        y[50, 0] = np.nan
+
+    got = _check(d, tmp_path / "b", nan, monkeypatch)
+    assert got.refused == (50, 1) and "a NaN or an infinity" in got.render()
+
+
+def test_float_is_reported_not_judged():
+    r = replay.Replay("s", 0, 0.01, 10, 10, "float", {"u": 0.1, "xbarhat": 0.2, "yc": 0.0},
+                      {"u": 1.0, "xbarhat": 1.0, "yc": 1.0}, None, None)  # fmt: skip
+    assert r.ok and "reported, not judged" in r.render()
+    refused = replay.Replay("s", 0, 0.01, 3, 10, "float", r.diff, r.scale, (3, 1), None)
+    assert not refused.ok
+
+
+def test_check_refuses_what_it_cannot_do_before_writing(manipulator_doc, tmp_path, monkeypatch):
+    out = tmp_path / "c"
+    r = run("codegen", str(manipulator_doc), "--out", str(out), "--check", "--boundary-layer", "0.1")
+    assert r.exit_code == 2 and "--check compares the C with fte simulate's step, which runs sgn(s)" in r.text
+    assert not out.exists() or not any(out.iterdir())
+    monkeypatch.setattr(build, "find_compiler", lambda: None)
+    r = run("codegen", str(manipulator_doc), "--out", str(out), "--check")
+    assert r.exit_code == 2 and "--check compiles the C: no C compiler found" in r.text
+    assert not out.exists() or not any(out.iterdir())
+
+
+@needs_cc
+def test_the_c_starts_where_the_simulation_started_its_observer(real_designs, tmp_path):
+    """The simulation starts its observer at xbar0 - H C x0, not from the first (noisy) measurement: where H != 0
+    and the sensors are noisy, the C started by init_from_y differs (the chemostat of `tests/plant_chemostat.py`,
+    pump fault alone: by 0.45 in u, of 0.15). The check starts it where the simulation did; the three-tank with
+    a noisy level sensor shows the difference it would make, and the equality."""
+    d = real_designs["three-tank"]
+    scenario = dataclasses.replace(SCENARIOS["three-tank"](), measurement_noise=(0.5, 0.5)).until(100.0)
+    ts = scenario.dt
+    generate_c(d, tmp_path, sample_time=ts)
+    got = check_c(d, BUILTIN["three-tank"](), scenario, tmp_path, sample_time=ts, seed=1)
+    assert got.ok and got.samples == got.total and max(got.relative(k) for k in got.diff) <= replay.TOLERANCE
+    # what init_from_y would have started from: the first measurement's noise through H
+    run = simulate(
+        d,
+        BUILTIN["three-tank"](),
+        scenario,
+        paths=1,
+        seed=1,
+        options=SimulateOptions(record_every=1, record_paths=1, progress=False, detect=False),
+    ).run("ftc")
+    from_y = d.xbar0 - np.asarray(d.H) @ run.y[0][0]
+    start = observer_start(d, BUILTIN["three-tank"](), scenario, run.x[0][0])[0]
+    assert np.max(np.abs(from_y - start)) > 0.05  # fmt: skip
