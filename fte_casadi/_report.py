@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import platform
-import tempfile
 import time
 from collections.abc import Callable
 from importlib import metadata
@@ -152,9 +151,7 @@ def _design_rows(designs: dict, printed: dict | None) -> list[str]:
 def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .bench import bench_c_step
     from .codegen import (
-        CStep,
-        closed_loop_compare,
-        compile_shared,
+        check_c,
         default_sample_time,
         find_compiler,
         generate_c,
@@ -163,33 +160,17 @@ def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .errors import CodegenError, MissingDependencyError
     from .plants import SCENARIOS
 
-    sample_time = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
+    scenario = SCENARIOS[d.plant]()
+    sample_time = default_sample_time(d, scenario.dt)
     files = generate_c(d, folder, sample_time=sample_time)
     out = [f"Generated into `{folder.name}/` ({', '.join(f.name for f in files)}), Ts = {sample_time:g} s."]
     info: dict = {"ts": sample_time}  # the report document's key (kept: documents are not renamed)
     if find_compiler() is None:
         return out + ["No C compiler found: the C was not compiled or checked here."], info
-    with tempfile.TemporaryDirectory(prefix="fte_report_") as tmp:
-        lib = compile_shared(folder, Path(tmp) / "libstep.so")
-        steps = int(min(20000, round(float(SCENARIOS[d.plant]().T) / sample_time)))
-        lf = int(d.dims.lf)
-
-        def fault(t, u):
-            f = np.zeros(lf)
-            f[0] = -0.4 * float(u[0]) if d.plant == "manipulator" and t >= 0.25 * steps * sample_time else 0.0
-            if d.plant == "three-tank" and t >= 0.3 * steps * sample_time:
-                f[0] = -10.0
-            if (
-                d.plant == "quadruple-tank" and t >= 0.25 * steps * sample_time
-            ):  # pump 1 delivers 70 % of v0 + dv1
-                f[0] = -0.3 * (3.0 + float(u[0]))
-            return f
-
-        err, _ = closed_loop_compare(
-            d, CStep(lib, d), sample_time, steps, plant=BUILTIN[d.plant](), fault=fault
-        )
-    info["max_diff"] = max(err.values())
-    info["steps"] = steps
+    got = check_c(d, BUILTIN[d.plant](), scenario, folder, sample_time=sample_time)
+    info["max_diff"] = max(got.diff.values())
+    info["steps"] = got.samples
+    info["check"] = {"ok": got.ok, "refused": got.refused, "diff": got.diff, "scale": got.scale}
     try:  # the timings need the benchmark's C compiled and run; the sizes do not
         b = bench_c_step(d, sample_time=sample_time, iters=100_000, reps=3)
     except (MissingDependencyError, CodegenError) as exc:
@@ -200,9 +181,7 @@ def _c_section(d, folder: Path) -> tuple[list[str], dict]:
         }
     info["bench"] = b
     out += [
-        f"Compiled with `cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic`; over a {steps}-sample closed loop on the "
-        f"nonlinear plant (with a fault) the C step and the CasADi step differ by at most {info['max_diff']:.2g} "
-        "(z, u, xbarhat, yc).",
+        f"Compiled with `cc -std=c99 -O2 -Wall -Wextra -Werror -pedantic` (`fte codegen --check`): {got.render()}.",
         "",
         "| C step | hand-written C loop | ratio | CasADi from Python | state | constants | stack locals |",
         "|---|---|---|---|---|---|---|",
