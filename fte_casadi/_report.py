@@ -151,7 +151,6 @@ def _design_rows(designs: dict, printed: dict | None) -> list[str]:
 def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     from .bench import bench_c_step
     from .codegen import (
-        check_c,
         default_sample_time,
         find_compiler,
         generate_c,
@@ -159,6 +158,7 @@ def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     )
     from .errors import CodegenError, MissingDependencyError
     from .plants import SCENARIOS
+    from .sim import check_c
 
     scenario = SCENARIOS[d.plant]()
     sample_time = default_sample_time(d, scenario.dt)

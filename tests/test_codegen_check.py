@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import fte_casadi.codegen._build as build
-import fte_casadi.codegen._replay as replay
+import fte_casadi.sim._c_check as replay
 from fte_casadi.cli import main
-from fte_casadi.codegen import check_c, find_compiler, generate_c
+from fte_casadi.codegen import find_compiler, generate_c
 from fte_casadi.plants import BUILTIN, SCENARIOS
-from fte_casadi.sim import SimulateOptions, observer_start, simulate
+from fte_casadi.sim import Bias, SimulateOptions, check_c, first_observer_state, simulate
+from fte_casadi.sim._result import RUNS
 
 needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 
@@ -106,33 +106,43 @@ def test_check_refuses_what_it_cannot_do_before_writing(manipulator_doc, tmp_pat
     r = run("codegen", str(manipulator_doc), "--out", str(out), "--check", "--boundary-layer", "0.1")
     assert r.exit_code == 2 and "--check compares the C with fte simulate's step, which runs sgn(s)" in r.text
     assert not out.exists() or not any(out.iterdir())
-    monkeypatch.setattr(build, "find_compiler", lambda: None)
+    monkeypatch.setattr(replay, "find_compiler", lambda: None)
     r = run("codegen", str(manipulator_doc), "--out", str(out), "--check")
     assert r.exit_code == 2 and "--check compiles the C: no C compiler found" in r.text
     assert not out.exists() or not any(out.iterdir())
 
 
 @needs_cc
-def test_the_c_starts_where_the_simulation_started_its_observer(real_designs, tmp_path):
-    """The simulation starts its observer at xbar0 - H C x0, not from the first (noisy) measurement: where H != 0
-    and the sensors are noisy, the C started by init_from_y differs (the chemostat of `tests/plant_chemostat.py`,
-    pump fault alone: by 0.45 in u, of 0.15). The check starts it where the simulation did; the three-tank with
-    a noisy level sensor shows the difference it would make, and the equality."""
+def test_a_noisy_start_is_checked(real_designs, tmp_path):
+    """The three-tank with a noisy level sensor (H != 0): the C, started where the simulation started (its
+    z_0 = xbar0 - H y_0 bit for bit), returns what the simulation applied."""
     d = real_designs["three-tank"]
     scenario = dataclasses.replace(SCENARIOS["three-tank"](), measurement_noise=(0.5, 0.5)).until(100.0)
     ts = scenario.dt
     generate_c(d, tmp_path, sample_time=ts)
     got = check_c(d, BUILTIN["three-tank"](), scenario, tmp_path, sample_time=ts, seed=1)
     assert got.ok and got.samples == got.total and max(got.relative(k) for k in got.diff) <= replay.TOLERANCE
-    # what init_from_y would have started from: the first measurement's noise through H
-    run = simulate(
-        d,
-        BUILTIN["three-tank"](),
-        scenario,
-        paths=1,
-        seed=1,
-        options=SimulateOptions(record_every=1, record_paths=1, progress=False, detect=False),
-    ).run("ftc")
-    from_y = d.xbar0 - np.asarray(d.H) @ run.y[0][0]
-    start = observer_start(d, BUILTIN["three-tank"](), scenario, run.x[0][0])[0]
-    assert np.max(np.abs(from_y - start)) > 0.05  # fmt: skip
+
+
+def test_the_simulation_starts_its_observer_from_the_first_measurement(real_designs):
+    """docs/method.md: ``z_0 = xbar0 - H y_0`` with ``y_0`` the first measurement, its noise and a sensor fault
+    present at t = 0 included, so that ``xbarhat_0 = xbar0`` in every run, as the C's ``init_from_y`` starts.
+    Before, the simulation left them out of ``y_0`` (``xbarhat_0 = xbar0 + H v_0``): a C started by
+    ``init_from_y`` on the chemostat of `tests/plant_chemostat.py` (pump fault) then differed from the
+    simulation by 0.45 in u, of 0.15, fed the same measurements."""
+    d, plant = real_designs["manipulator"], BUILTIN["manipulator"]()
+    scenario = dataclasses.replace(
+        SCENARIOS["manipulator"](), measurement_noise=(0.05, 0.05, 0.05), faults=(Bias("fs", 0.3, 0.0, 0.5),)
+    ).until(0.5)
+    opts = SimulateOptions(record_every=1, record_paths=3, progress=False, detect=False)
+    res = simulate(d, plant, scenario, paths=3, seed=4, options=opts)
+    for run in RUNS:
+        xb0 = np.asarray(res.run(run).xbarhat)[:, 0]
+        assert np.max(np.abs(xb0 - d.xbar0)) <= 1e-12 * max(1.0, np.max(np.abs(d.xbar0))), run
+    y0 = {run: np.asarray(res.run(run).y)[:, 0] for run in RUNS}
+    assert np.allclose(y0["ftc"][:, 0] - y0["free"][:, 0], 0.3)  # the sensor fault is in the faulty runs' y_0
+    v0 = y0["free"][0] - np.asarray(plant.C) @ np.asarray(res.run("free").x)[0, 0]
+    assert np.max(np.abs(np.asarray(d.H) @ v0)) > 1e-3  # the noise reaches z_0 through H: not vacuous
+    z0 = first_observer_state(d, plant, scenario, dt=scenario.dt, seed=4, path=2, run="no_ftc")
+    xb = np.asarray(res.run("no_ftc").xbarhat)[2, 0]  # z_0 + H y_0, rounded as the engine rounds it
+    np.testing.assert_allclose(z0 + np.asarray(d.H) @ y0["no_ftc"][2], xb, rtol=0, atol=1e-14)

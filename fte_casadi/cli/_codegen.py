@@ -74,15 +74,15 @@ def codegen(target, out_dir, sample_time, sample_time_alias, real, boundary_laye
 
 def _check_ready(d, spec, real, boundary_layer) -> str:
     """The plant spec ``--check`` simulates; a clear error, before any work, for what it cannot do."""
-    from ..codegen import require_check_target
+    from ..sim import require_check_target
 
     require_check_target(real, boundary_layer)
     return _need_plant(d, spec, "codegen --check")
 
 
 def _check(d, spec, out_dir, sample_time, real, seed) -> None:
-    from ..codegen import check_c
     from ..plants import load_plant, load_scenario
+    from ..sim import check_c
 
     got = check_c(
         d, load_plant(spec), load_scenario(spec), out_dir, sample_time=sample_time, real=real, seed=seed

@@ -18,8 +18,6 @@ from ._generate import memory_report as memory_report
 from ._generate import output_files as output_files
 from ._generate import output_range as output_range
 from ._generate import prepare_dir as prepare_dir
-from ._replay import check_c as check_c
-from ._replay import require_check_target as require_check_target
 
 __all__ = [
     "generate_c",

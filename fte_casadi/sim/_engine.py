@@ -431,7 +431,7 @@ class Prepared:
     def initial_states(self, paths: np.ndarray, seed: int) -> np.ndarray:
         """(len(paths), ns + nmon): x0 plus its noise (drawn from (seed, path)), observer initialised per
         scenario, the monitor's start."""
-        from ._rng import x0_normals
+        from ._rng import normal, path_keys, x0_normals
 
         plant, sc, lay = self.plant, self.scenario, self.lay
         x0n = np.asarray(plant.x0 if sc.x0 is None else sc.x0, dtype=float)
@@ -439,21 +439,32 @@ class Prepared:
             raise SimulationError(f"scenario x0 has {x0n.size} entries; the plant has {plant.n} states")
         x0 = x0n + sc.x0_noise * x0_normals(seed, paths, plant.n)
         state = np.zeros((len(paths), lay.ns + self.monitor.nmon))
-        zb = observer_start(self.design, plant, sc, x0)
-        for r in range(3):
+        v0 = None
+        if lay.nv:  # the first sample's measurement noise, as the engine draws it (counters 2 + ld + j)
+            keys = path_keys(seed, paths)
+            c, e = self.cols["vstd"]
+            v0 = np.column_stack([normal(keys, np.array([2 + plant.ld + j], dtype=np.uint64))[:, 0]
+                                  for j in range(lay.nv)]) * self.SH[0, c:e]  # fmt: skip
+        a0 = self.SH[
+            0, : plant.lf
+        ]  # the faults' additive part at the first sample (a stuck sensor adds 0 there)
+        for r, run in enumerate(RUNS):
             o = r * lay.run_state
             state[:, o : o + plant.n] = x0
+            zb = observer_start(self.design, plant, sc, x0, v0, a0 if run != "free" else None)
             if zb is not None:
                 state[:, o + plant.n : o + plant.n + lay.nbar] = zb
         state[:, lay.ns :] = self.monitor.mon0()[None, :]
         return state
 
 
-def observer_start(design, plant, scenario, x0: np.ndarray) -> np.ndarray | None:
-    """The observer's start ``z_0`` per path (a row of ``x0`` each, the plant's initial states), as the
-    simulation starts it: ``xbar0 - H C x0``, ``xbar0 = [x0 nominal; 0]`` the scenario's nominal initial state
-    (the plant's without one), so that ``xbarhat_0`` is ``xbar0`` up to the first measurement's noise and faults;
-    None where the scenario starts the observer at ``z = 0`` (``observer_init``)."""
+def observer_start(design, plant, scenario, x0: np.ndarray, v0=None, a0=None) -> np.ndarray | None:
+    """The observer's start ``z_0`` per path, as the simulation starts it and the generated C's
+    ``init_from_y`` does: from the first measurement, ``z_0 = xbar0 - H y_0``, so that ``xbarhat_0 = xbar0``,
+    ``xbar0 = [x0 nominal; 0]`` the scenario's nominal initial state (the plant's without one). ``y_0 = C x0 +
+    v0 + Df a0``: ``x0`` the plant's initial states (a row per path), ``v0`` the first sample's measurement
+    noise (rows; None: none), ``a0`` the faults' additive part at the first sample (None: none). None where the
+    scenario starts the observer at ``z = 0`` (``observer_init``)."""
     if scenario.observer_init != "nominal":
         return None
     x0n = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
@@ -461,8 +472,24 @@ def observer_start(design, plant, scenario, x0: np.ndarray) -> np.ndarray | None
     x0 = np.atleast_2d(np.asarray(x0, dtype=float))
     # a single row would take another BLAS route (a matrix-vector product, rounded differently): a path
     # alone in its chunk is computed as one of two rows, so its numbers do not depend on the chunk
-    x0b = np.vstack([x0, x0]) if len(x0) == 1 else x0
-    return (xb_nom - (x0b @ np.asarray(plant.C).T) @ np.asarray(design.H).T)[: len(x0)]
+    two = (lambda a: np.vstack([a, a])) if len(x0) == 1 else (lambda a: a)  # noqa: E731
+    y0 = two(x0) @ np.asarray(plant.C).T
+    if v0 is not None:
+        y0 = y0 + two(np.atleast_2d(v0))
+    Df = np.asarray(plant.Df, dtype=float)
+    if a0 is not None and np.any(Df @ np.asarray(a0, dtype=float) != 0):
+        y0 = y0 + Df @ np.asarray(a0, dtype=float)
+    return (xb_nom - y0 @ np.asarray(design.H).T)[: len(x0)]
+
+
+def first_observer_state(design, plant, scenario, *, dt: float, seed: int, path: int = 0, run: str = "ftc"):
+    """``z_0`` of one path's run as :func:`simulate` (default scales) starts it (:meth:`Prepared.initial_states`,
+    the same numbers bit for bit): for a replay of the path through the generated C (``fte codegen --check``)."""
+    steps = max(1, int(round(float(scenario.T) / dt)))
+    prep = Prepared(design, plant, scenario, dt, steps, _scales(None, scenario))
+    lay = prep.lay
+    o = RUNS.index(run) * lay.run_state + plant.n
+    return prep.initial_states(np.array([path]), seed)[0, o : o + lay.nbar]
 
 
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):

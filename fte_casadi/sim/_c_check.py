@@ -3,9 +3,9 @@
 ``fte simulate`` runs the step in its compiled engine; the generated C is the same step written out by CasADi's
 code generator. :func:`check_c` simulates one path of a scenario (the faulty run with tolerant control, which the
 C always applies) at the C's sample time, every sample kept, compiles the C, starts it where the simulation
-started its observer (``init`` with the simulation's ``z_0``: ``xbar0 - H C x0``, the plant's initial state
-without the first measurement's noise, which only a simulation knows; on the machine ``init_from_y`` starts it
-from the first measurement) and feeds it the measurements the simulated plant produced, sample by sample. Where the C returns what the simulation applied (``u``), estimated (``xbarhat``) and
+started its observer (``init`` with the simulation's ``z_0 = xbar0 - H y_0``, bit for bit: ``init_from_y``
+computes the same up to rounding, and a rounding of ``sgn(s)``'s argument near 0 would differ) and feeds it the
+measurements the simulated plant produced, sample by sample. Where the C returns what the simulation applied (``u``), estimated (``xbarhat``) and
 read (``yc``), the C in that loop is the simulation's loop: the plant sees the same inputs. Where its step
 refuses a measurement (a return code, the state held), the C would not do what the simulation shows from there.
 """
@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..codegen import CStep, compile_shared, find_compiler, output_range
 from ..design import Design
 from ..errors import CodegenError
 
@@ -97,9 +98,8 @@ def check_c(design: Design, plant, scenario, src_dir, *, sample_time: float, rea
     Needs a C compiler (:class:`~fte_casadi.errors.CodegenError` naming what to install otherwise); compiles with
     the strict flags and :data:`CHECK_FLAGS`. The path is simulated at ``sample_time``, the C's, in the exact mode,
     and cut after :data:`MAX_SAMPLES` samples."""
-    from ..sim import SimulateOptions, observer_start, simulate
-    from ._build import compile_shared
-    from ._ctypes_step import CStep
+    from ._engine import first_observer_state, simulate
+    from ._options import SimulateOptions
 
     steps = int(round(float(scenario.T) / sample_time))
     if steps > MAX_SAMPLES:
@@ -108,8 +108,7 @@ def check_c(design: Design, plant, scenario, src_dir, *, sample_time: float, rea
     run = simulate(design, plant, scenario, paths=1, seed=seed, options=opts).run("ftc")
     sim = {k: np.asarray(getattr(run, k))[0] for k, _ in SIGNALS}
     y = np.asarray(run.y)[0]
-    z0 = observer_start(design, plant, scenario, np.asarray(run.x)[0][0])
-    z0 = np.zeros(int(design.dims.nbar)) if z0 is None else z0[0]
+    z0 = first_observer_state(design, plant, scenario, dt=sample_time, seed=seed)
     with tempfile.TemporaryDirectory(prefix="fte_check_") as tmp:
         lib = compile_shared(src_dir, Path(tmp) / "libstep.so", extra_flags=CHECK_FLAGS)
         cstep = CStep(lib, design, real)
@@ -146,8 +145,6 @@ def _why(design: Design, y, rc: int, real: str, start: bool = False) -> str:
                 "docs/embedded-c.md)")  # fmt: skip
     if rc != 3:
         return _REASONS.get(rc, f"return code {rc}")
-    from ._ranges import output_range
-
     rng = output_range(design, real=real)
     names = list(design.names.get("outputs") or [f"y{k + 1}" for k in range(len(y))])
     out = [f"{names[k]} = {y[k]:.6g} outside [{rng['lo'][k]:.6g}, {rng['hi'][k]:.6g}]" for k in range(len(y))
@@ -160,8 +157,6 @@ def _why(design: Design, y, rc: int, real: str, start: bool = False) -> str:
 def require_check_target(real: str, boundary_layer) -> None:
     """Refuse what ``--check`` cannot do: compile without a compiler, compare a boundary layer (the simulation
     runs ``sgn(s)``)."""
-    from ._build import find_compiler
-
     if find_compiler() is None:
         raise CodegenError(
             "--check compiles the C: no C compiler found (looked for $CC, cc, gcc, clang on PATH); install one, "
