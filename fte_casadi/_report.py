@@ -168,6 +168,8 @@ def _c_section(d, folder: Path) -> tuple[list[str], dict]:
     if find_compiler() is None:
         return out + ["No C compiler found: the C was not compiled or checked here."], info
     got = check_c(d, BUILTIN[d.plant](), scenario, folder, sample_time=sample_time)
+    if not got.ok:  # the report's C is the loop simulated, or the report says nothing of it
+        raise CodegenError(f"{d.plant}: {got.render()}")
     info["max_diff"] = max(got.diff.values())
     info["steps"] = got.samples
     info["check"] = {"ok": got.ok, "refused": got.refused, "diff": got.diff, "scale": got.scale}

@@ -133,7 +133,7 @@ def test_the_report_without_the_benchmarks_keeps_its_sizes(real_designs, monkeyp
     mem = memory_report(d, sample_time=info["ts"])
     assert f"{mem['state_bytes']} B" in row and f"{mem['const_bytes']} B" in row
     assert "(timings: not measured (no hand-written loop (test)).)" in lines
-    assert info["max_diff"] < 1e-9 and info["bench"]["casadi_us"] is None
+    assert info["check"]["ok"] and info["max_diff"] < 1e-9 and info["bench"]["casadi_us"] is None
 
 
 def test_the_0_1_design_is_a_baseline_outside_the_wheel_that_fte_bench_runs_from_a_checkout(monkeypatch):

@@ -11,7 +11,8 @@ import fte_casadi.sim._c_check as replay
 from fte_casadi.cli import main
 from fte_casadi.codegen import find_compiler, generate_c
 from fte_casadi.plants import BUILTIN, SCENARIOS
-from fte_casadi.sim import Bias, SimulateOptions, check_c, first_observer_state, simulate
+from fte_casadi.sim import Bias, SimulateOptions, check_c, simulate
+from fte_casadi.sim._engine import first_observer_state, observer_start
 from fte_casadi.sim._result import RUNS
 
 needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
@@ -52,7 +53,10 @@ def test_the_c_returns_what_the_simulation_applied_on_a_whole_path(manipulator_d
     r = run("codegen", str(manipulator_doc), "--out", str(tmp_path / "c"), "--check", "--seed", "2")
     assert r.exit_code == 0, r.output
     assert "checked: fed the measurements of one simulated path of scenario 'manipulator' (seed 2" in r.text
-    assert "within 1e-09 of each signal's largest magnitude" in r.text
+    assert (
+        "within 1e-09 of each one's largest magnitude" in r.text
+        and "init_from_y of the first measurement" in r.text
+    )
     assert (tmp_path / "c" / "fte_manipulator.c").is_file()
 
 
@@ -103,8 +107,11 @@ def test_float_is_reported_not_judged():
 
 def test_check_refuses_what_it_cannot_do_before_writing(manipulator_doc, tmp_path, monkeypatch):
     out = tmp_path / "c"
+    monkeypatch.setattr(replay, "find_compiler", lambda: "cc")  # the refusals below come before any compiling
     r = run("codegen", str(manipulator_doc), "--out", str(out), "--check", "--boundary-layer", "0.1")
     assert r.exit_code == 2 and "--check compares the C with fte simulate's step, which runs sgn(s)" in r.text
+    r = run("codegen", str(manipulator_doc), "--out", str(out), "--check", "--seed", "-1")
+    assert r.exit_code == 2 and "--seed" in r.text
     assert not out.exists() or not any(out.iterdir())
     monkeypatch.setattr(replay, "find_compiler", lambda: None)
     r = run("codegen", str(manipulator_doc), "--out", str(out), "--check")
@@ -112,16 +119,48 @@ def test_check_refuses_what_it_cannot_do_before_writing(manipulator_doc, tmp_pat
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_a_boundary_layer_is_refused_unless_it_is_the_designs_own(real_designs):
+    d = real_designs["manipulator"]
+    own = dataclasses.replace(d, params=dataclasses.replace(d.params, boundary_layer=0.02))
+    replay.require_same_sliding(own, 0.02)  # the simulation runs sat(s / 0.02) too
+    replay.require_same_sliding(own, None)
+    with pytest.raises(
+        replay.CodegenError, match=r"which runs the design's sat\(s / 0.02\); with --boundary-layer 0.1"
+    ):
+        replay.require_same_sliding(own, 0.1)
+
+
+def test_the_horizon_is_whole_samples_and_a_cut_says_what_it_leaves_out(monkeypatch):
+    sc = SCENARIOS["manipulator"]()  # T = 10, fa in [2.5, 5), fs in [7, 10)
+    same, cut = replay._horizon(sc, 0.001)
+    assert same is sc and cut == ""
+    short, cut = replay._horizon(sc, 0.0007)  # 10 is no whole number of 0.0007
+    assert short.T == pytest.approx(14285 * 0.0007) and cut.startswith(
+        "; the scenario cut at t = 9.9995 of 10"
+    )
+    assert "left out" not in cut  # both windows start before the cut
+    monkeypatch.setattr(replay, "MAX_SAMPLES", 6001)
+    short, cut = replay._horizon(sc, 0.001)
+    assert short.T == pytest.approx(6.0) and [f.fault for f in short.faults] == ["fa"]
+    assert cut == "; the scenario cut at t = 6 of 10 (fault windows left out: fs [7, 10))"
+
+
 @needs_cc
 def test_a_noisy_start_is_checked(real_designs, tmp_path):
-    """The three-tank with a noisy level sensor (H != 0): the C, started where the simulation started (its
-    z_0 = xbar0 - H y_0 bit for bit), returns what the simulation applied."""
-    d = real_designs["three-tank"]
+    """The three-tank with a noisy level sensor (H != 0): the C's init_from_y starts where the simulation started
+    (the start the simulation made before 2026-11-29, from y_0 without its noise, was 0.05 and more away: the
+    check would fail on it), and the C then returns what the simulation applied."""
+    d, plant = real_designs["three-tank"], BUILTIN["three-tank"]()
     scenario = dataclasses.replace(SCENARIOS["three-tank"](), measurement_noise=(0.5, 0.5)).until(100.0)
     ts = scenario.dt
     generate_c(d, tmp_path, sample_time=ts)
-    got = check_c(d, BUILTIN["three-tank"](), scenario, tmp_path, sample_time=ts, seed=1)
-    assert got.ok and got.samples == got.total and max(got.relative(k) for k in got.diff) <= replay.TOLERANCE
+    got = check_c(d, plant, scenario, tmp_path, sample_time=ts, seed=1)
+    assert got.ok and got.samples == got.total == 10001
+    assert got.start_relative <= 1e-12 and max(got.relative(k) for k in got.diff) <= replay.TOLERANCE
+    z0 = first_observer_state(d, plant, scenario, dt=ts, seed=1)
+    x0 = np.asarray(simulate(d, plant, scenario, paths=1, seed=1, options=SimulateOptions(
+        record_every=1, record_paths=1, progress=False, detect=False)).run("ftc").x)[0, 0]  # fmt: skip
+    assert np.max(np.abs(observer_start(d, plant, scenario, x0)[0] - z0)) > 0.05  # without the noise: far off
 
 
 def test_the_simulation_starts_its_observer_from_the_first_measurement(real_designs):

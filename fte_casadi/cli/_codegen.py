@@ -29,7 +29,9 @@ from ._targets import _allow_option, _design_or_plant, _need_plant, _plant_optio
     help="Compile the C and feed it the measurements of one simulated path of the plant's scenario (its faulty "
     "run with tolerant control): it must return the inputs and estimates the simulation applied. Exit 1 if not.",
 )  # fmt: skip
-@click.option("--seed", type=int, default=0, show_default=True, help="The simulated path of --check.")
+@click.option(
+    "--seed", type=click.IntRange(min=0), default=0, show_default=True, help="The simulated path of --check."
+)
 @_plant_option
 @_allow_option
 @_guard
@@ -45,9 +47,13 @@ def codegen(target, out_dir, sample_time, sample_time_alias, real, boundary_laye
     _positive("sample-time", sample_time)
     _positive("boundary-layer", boundary_layer)
     _outputs(out_dir)
+    if check:  # a compiler, before a design is made
+        from ..sim import require_compiler
+
+        require_compiler()
     d, spec = _design_or_plant(target, plant=plant_opt, allow_uncertified=allow_uncertified)
-    if check:  # everything --check needs, before any file is written
-        spec = _check_ready(d, spec, real, boundary_layer)
+    if check:  # everything else --check needs, before any file is written
+        spec = _check_ready(d, spec, boundary_layer)
     if fmu:
         check_fmu_target(d, out_dir)  # a compiler, and no foreign file in the way, before any work
     made_for = default_sample_time(d, SCENARIOS[d.plant]().dt if d.plant in SCENARIOS else None)
@@ -72,11 +78,11 @@ def codegen(target, out_dir, sample_time, sample_time_alias, real, boundary_laye
         _check(d, spec, out_dir, sample_time, real, seed)
 
 
-def _check_ready(d, spec, real, boundary_layer) -> str:
-    """The plant spec ``--check`` simulates; a clear error, before any work, for what it cannot do."""
-    from ..sim import require_check_target
+def _check_ready(d, spec, boundary_layer) -> str:
+    """The plant spec ``--check`` simulates; a clear error, before any file is written, for what it cannot do."""
+    from ..sim import require_same_sliding
 
-    require_check_target(real, boundary_layer)
+    require_same_sliding(d, boundary_layer)
     return _need_plant(d, spec, "codegen --check")
 
 

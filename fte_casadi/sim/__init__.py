@@ -20,13 +20,12 @@ Two names for time steps, one meaning each:
 from ._accommodate import accommodated as accommodated
 from ._accommodate import protected as protected
 from ._c_check import check_c as check_c
-from ._c_check import require_check_target as require_check_target
+from ._c_check import require_compiler as require_compiler
+from ._c_check import require_same_sliding as require_same_sliding
 from ._carry import carry_free as carry_free
 from ._detectability import attach as attach
 from ._detectability import detectability as detectability
 from ._engine import calibrate_detection as calibrate_detection
-from ._engine import first_observer_state as first_observer_state
-from ._engine import observer_start as observer_start
 from ._engine import simulate as simulate
 from ._fault_shapes import FaultRows as FaultRows
 from ._fault_shapes import FaultShape as FaultShape

@@ -431,7 +431,7 @@ class Prepared:
     def initial_states(self, paths: np.ndarray, seed: int) -> np.ndarray:
         """(len(paths), ns + nmon): x0 plus its noise (drawn from (seed, path)), observer initialised per
         scenario, the monitor's start."""
-        from ._rng import normal, path_keys, x0_normals
+        from ._rng import noise_normals, x0_normals
 
         plant, sc, lay = self.plant, self.scenario, self.lay
         x0n = np.asarray(plant.x0 if sc.x0 is None else sc.x0, dtype=float)
@@ -440,11 +440,9 @@ class Prepared:
         x0 = x0n + sc.x0_noise * x0_normals(seed, paths, plant.n)
         state = np.zeros((len(paths), lay.ns + self.monitor.nmon))
         v0 = None
-        if lay.nv:  # the first sample's measurement noise, as the engine draws it (counters 2 + ld + j)
-            keys = path_keys(seed, paths)
+        if lay.nv:  # the first sample's measurement noise, as the engine draws it
             c, e = self.cols["vstd"]
-            v0 = np.column_stack([normal(keys, np.array([2 + plant.ld + j], dtype=np.uint64))[:, 0]
-                                  for j in range(lay.nv)]) * self.SH[0, c:e]  # fmt: skip
+            v0 = noise_normals(seed, paths, 0, plant.ld, lay.nv) * self.SH[0, c:e]
         a0 = self.SH[
             0, : plant.lf
         ]  # the faults' additive part at the first sample (a stuck sensor adds 0 there)

@@ -12,9 +12,11 @@ AS 241 (PPND16, relative accuracy about 1e-16; R's ``qnorm``): a rational functi
 rational function of ``sqrt(-log(min(p, 1 - p)))``. Unlike Box-Muller it needs one uniform per
 normal and calls ``log`` and ``sqrt`` for 15 % of the draws only.
 
-Counters of sample ``k`` (``NSLOT = 1 + ld`` per sample): ``k NSLOT + 1`` gives the normal of
-``dW = sqrt(dt) N``, ``k NSLOT + 2 ..`` the unknown inputs (uniform in [-1, 1)). The initial-state
-noise uses the key ``mix(key ^ X0_SALT)`` and counter ``j + 1`` for state j.
+Counters of sample ``k`` (``NSLOT = 1 + ld + nv`` per sample, ``nv`` the outputs with measurement noise, 0
+without): ``k NSLOT + 1`` gives the normal of ``dW = sqrt(dt) N``, ``k NSLOT + 2 ..`` the unknown inputs
+(uniform in [-1, 1)), ``k NSLOT + 2 + ld + j`` the normal of output j's measurement noise
+(:func:`noise_normals`; ``_vector.py`` draws the same in its C). The initial-state noise uses the key
+``mix(key ^ X0_SALT)`` and counter ``j + 1`` for state j.
 
 The numpy twin does the same IEEE operations in the same order and calls the C library's ``log``
 (through :mod:`math`; numpy's own SIMD ``log`` differs in the last bit for some arguments), so it
@@ -172,6 +174,15 @@ def step_numbers(seed: int, paths, k0: int, steps: int, ld: int) -> tuple[np.nda
     d = np.stack([2.0 * uniform(keys, k + np.uint64(2 + j)) - 1.0 for j in range(ld)], axis=-1) if ld else (
         np.zeros((len(keys), steps, 0)))  # fmt: skip
     return n, d
+
+
+def noise_normals(seed: int, paths, k: int, ld: int, nv: int) -> np.ndarray:
+    """Standard normals (paths, nv) of the measurement noise of sample ``k`` — what the generated C draws."""
+    keys = path_keys(seed, paths)
+    base = np.uint64(k) * np.uint64(1 + ld + nv) + np.uint64(2 + ld)
+    return np.column_stack(
+        [normal(keys, np.array([base + np.uint64(j)], dtype=np.uint64))[:, 0] for j in range(nv)]
+    )
 
 
 def x0_normals(seed: int, paths, n: int) -> np.ndarray:
