@@ -121,7 +121,7 @@ def check_c(design: Design, plant, scenario, src_dir, *, sample_time: float, rea
     from ._options import SimulateOptions
 
     scenario, cut = _horizon(scenario, sample_time)
-    opts = SimulateOptions(dt=sample_time, record_every=1, record_paths=1, progress=False, detect=False)
+    opts = SimulateOptions(dt=sample_time, record_every=1, record_all=True, progress=False, detect=False)
     run = simulate(design, plant, scenario, paths=1, seed=seed, options=opts).run("ftc")
     sim = {k: np.asarray(getattr(run, k))[0] for k, _ in SIGNALS}
     y = np.asarray(run.y)[0]
