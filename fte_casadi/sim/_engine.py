@@ -443,9 +443,8 @@ class Prepared:
         if lay.nv:  # the first sample's measurement noise, as the engine draws it
             c, e = self.cols["vstd"]
             v0 = noise_normals(seed, paths, 0, plant.ld, lay.nv) * self.SH[0, c:e]
-        a0 = self.SH[
-            0, : plant.lf
-        ]  # the faults' additive part at the first sample (a stuck sensor adds 0 there)
+        # the faults' additive part at the first sample (a stuck sensor adds 0 there: it holds that reading)
+        a0 = self.SH[0, : plant.lf]
         for r, run in enumerate(RUNS):
             o = r * lay.run_state
             state[:, o : o + plant.n] = x0
