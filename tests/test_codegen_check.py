@@ -185,3 +185,29 @@ def test_the_simulation_starts_its_observer_from_the_first_measurement(real_desi
     z0 = first_observer_state(d, plant, scenario, dt=scenario.dt, seed=4, path=2, run="no_ftc")
     xb = np.asarray(res.run("no_ftc").xbarhat)[2, 0]  # z_0 + H y_0, rounded as the engine rounds it
     np.testing.assert_allclose(z0 + np.asarray(d.H) @ y0["no_ftc"][2], xb, rtol=0, atol=1e-14)
+
+
+@needs_cc
+def test_the_fmu_is_fed_the_same_measurements(manipulator_doc, tmp_path):
+    """With --fmu, the FMU (through FMPy) must return, step by step, what the C started by init_from_y returns."""
+    pytest.importorskip("fmpy")
+    r = run("codegen", str(manipulator_doc), "--out", str(tmp_path / "c"), "--fmu", "--check")
+    assert r.exit_code == 0, r.output
+    said = r.text.split(
+        "the FMU, fed the same through FMPy, returns what the C started by init_from_y returns"
+    )
+    assert len(said) == 2 and said[1].startswith(" (largest difference ")
+    assert float(said[1].split("largest difference ")[1].split(")")[0]) <= 1e-9
+
+
+def test_an_fmu_that_differs_fails_the_check():
+    scale = {"u": 1.0, "xbarhat": 1.0, "yc": 1.0}
+    same = replay.Replay("s", 0, 0.01, 10, 10, "double", dict.fromkeys(scale, 0.0), scale, None, replay.TOLERANCE,
+                         fmu="; the FMU ...", fmu_diff=0.0)  # fmt: skip
+    assert same.ok
+    differs = dataclasses.replace(same, fmu_diff=1e-6)
+    assert (
+        not differs.ok
+        and "the FMU, fed the same through FMPy, does NOT return what the C" in differs.render()
+    )
+    assert dataclasses.replace(same, fmu_diff=None).ok  # FMPy missing: said, not judged

@@ -27,7 +27,8 @@ from ._targets import _allow_option, _design_or_plant, _need_plant, _plant_optio
 @click.option(
     "--check", is_flag=True,
     help="Compile the C and feed it the measurements of one simulated path of the plant's scenario (its faulty "
-    "run with tolerant control): it must return the inputs and estimates the simulation applied. Exit 1 if not.",
+    "run with tolerant control): it must return the inputs and estimates the simulation applied (with --fmu, the "
+    "FMU what the C returns). Exit 1 if not.",
 )  # fmt: skip
 @click.option(
     "--seed", type=click.IntRange(min=0), default=0, show_default=True, help="The simulated path of --check."
@@ -75,7 +76,7 @@ def codegen(target, out_dir, sample_time, sample_time_alias, real, boundary_laye
     for path in files[len(c_files) :]:
         click.echo(f"wrote {path}: FMI 2.0 co-simulation FMU, fixed step Ts = {sample_time:g} (docs/fmu.md)")
     if check:
-        _check(d, spec, out_dir, sample_time, real, seed)
+        _check(d, spec, out_dir, sample_time, real, seed, files[len(c_files)] if fmu else None)
 
 
 def _check_ready(d, spec, boundary_layer) -> str:
@@ -86,13 +87,12 @@ def _check_ready(d, spec, boundary_layer) -> str:
     return _need_plant(d, spec, "codegen --check")
 
 
-def _check(d, spec, out_dir, sample_time, real, seed) -> None:
+def _check(d, spec, out_dir, sample_time, real, seed, fmu_path=None) -> None:
     from ..plants import load_plant, load_scenario
     from ..sim import check_c
 
-    got = check_c(
-        d, load_plant(spec), load_scenario(spec), out_dir, sample_time=sample_time, real=real, seed=seed
-    )
+    got = check_c(d, load_plant(spec), load_scenario(spec), out_dir, sample_time=sample_time, real=real, seed=seed,
+                  fmu=fmu_path)  # fmt: skip
     if not got.ok:
         _fail(got.render(), EXIT_FAILED)
     click.echo("checked: " + got.render())

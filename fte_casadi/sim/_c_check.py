@@ -13,6 +13,7 @@ refuses a measurement (a return code, the state held), the C would not do what t
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tempfile
 from dataclasses import dataclass
@@ -68,6 +69,8 @@ class Replay:
     start: float = 0.0
     start_scale: float = 0.0
     cut: str = ""
+    fmu: str = ""
+    fmu_diff: float | None = None
 
     def relative(self, key: str) -> float:
         return self.diff[key] / self.scale[key] if self.scale[key] > 0 else self.diff[key]
@@ -77,11 +80,28 @@ class Replay:
         return self.start / max(1.0, self.start_scale)
 
     @property
+    def fmu_ok(self) -> bool:
+        """The FMU returns what the C returns (to :data:`TOLERANCE` of the largest signal), or was not judged."""
+        tol = self.tolerance
+        return self.fmu_diff is None or tol is None or self.fmu_diff <= tol * max(1.0, *self.scale.values())
+
+    def _fmu_text(self) -> str:
+        if self.fmu_diff is None:
+            return self.fmu
+        does = "returns" if self.fmu_ok else "does NOT return"
+        return (
+            f"; the FMU, fed the same through FMPy, {does} what the C started by init_from_y returns (largest "
+            f"difference {self.fmu_diff:.3g})"
+        )
+
+    @property
     def ok(self) -> bool:
         if self.refused is not None:
             return False
         if self.tolerance is None:
             return True
+        if not self.fmu_ok:
+            return False
         return self.start_relative <= self.tolerance and all(
             self.relative(k) <= self.tolerance for k, _ in SIGNALS
         )
@@ -102,20 +122,21 @@ class Replay:
         if self.tolerance is None:
             return (f"{head} up to float's rounding, which the sliding term's sign amplifies: largest differences "
                     f"{diffs}; {start} (C in float: reported, not judged; in double they are held to {TOLERANCE:g} "
-                    "of each signal's largest magnitude)")  # fmt: skip
+                    f"of each signal's largest magnitude){self._fmu_text()}")  # fmt: skip
         verdict = "within" if self.ok else "NOT within"
         return (f"{head}, and {start}: {verdict} {self.tolerance:g} of each one's largest magnitude (largest "
-                f"differences {diffs})")  # fmt: skip
+                f"differences {diffs}){self._fmu_text()}")  # fmt: skip
 
 
 def check_c(design: Design, plant, scenario, src_dir, *, sample_time: float, real: str = "double",
-            seed: int = 0) -> Replay:  # fmt: skip
+            seed: int = 0, fmu=None) -> Replay:  # fmt: skip
     """Replay one simulated path of ``scenario`` (``seed``) through the C in ``src_dir`` (module docstring).
 
     Needs a C compiler (:class:`~fte_casadi.errors.CodegenError` naming what to install otherwise); compiles with
     the strict flags and :data:`CHECK_FLAGS`. The path is simulated at ``sample_time``, the C's, in the exact mode,
     over the whole samples of the horizon and at most :data:`MAX_SAMPLES` of them (the report says what a cut
-    leaves out)."""
+    leaves out). With ``fmu`` (the FMU written beside the C), the FMU is fed the same measurements through FMPy
+    and must return what the C started by ``init_from_y`` returns, as the FMU starts (:func:`_fmu_replay`)."""
     from ._c_range import accepted_measurements
     from ._engine import first_observer_state, simulate
     from ._options import SimulateOptions
@@ -129,9 +150,50 @@ def check_c(design: Design, plant, scenario, src_dir, *, sample_time: float, rea
     lo, hi = accepted_measurements(design, sample_time)
     with tempfile.TemporaryDirectory(prefix="fte_check_") as tmp:
         lib = compile_shared(src_dir, Path(tmp) / "libstep.so", extra_flags=CHECK_FLAGS)
-        cstep = CStep(lib, design, real)
-        return _replay(design, cstep, z0, y, sim, scenario=scenario, seed=seed, sample_time=sample_time,
-                       real=real, cut=cut, accepted=(lo, hi))  # fmt: skip
+        got = _replay(design, CStep(lib, design, real), z0, y, sim, scenario=scenario, seed=seed,
+                      sample_time=sample_time, real=real, cut=cut, accepted=(lo, hi))  # fmt: skip
+        if fmu is None or got.refused is not None:
+            return got
+        text, worst = _fmu_replay(fmu, CStep(lib, design, real), y, sample_time)
+        return dataclasses.replace(got, fmu=text, fmu_diff=worst)
+
+
+def _fmu_replay(path, cstep, y, sample_time: float) -> tuple[str, float | None]:
+    """The FMU at ``path`` (FMPy), fed ``y`` step by step (``fmi2SetReal`` of y_k, ``fmi2DoStep`` at t_k, its
+    outputs u, xbarhat, yc read), against ``cstep`` started by ``init_from_y`` as the FMU starts: the report's
+    sentence and the largest difference (None where FMPy is missing: reported, not judged)."""
+    try:
+        import fmpy
+        from fmpy.fmi2 import FMU2Slave
+    except ImportError:
+        return "; the FMU was not checked: FMPy is not installed (pip install fmpy, or the [fmi] extra)", None
+    md = fmpy.read_model_description(str(path))
+    ins = [v.valueReference for v in md.modelVariables if v.causality == "input"]
+    outs = [v.valueReference for v in md.modelVariables if v.causality == "output"]
+    worst = 0.0
+    with tempfile.TemporaryDirectory(prefix="fte_check_fmu_") as tmp:
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=fmpy.extract(str(path), unzipdir=tmp),
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName="check")  # fmt: skip
+        slave.instantiate()
+        try:
+            slave.setupExperiment(startTime=0.0)
+            slave.enterInitializationMode()
+            slave.exitInitializationMode()
+            if cstep.init_from_y(y[0]) != 0:
+                return "; the FMU was not checked: the C's init_from_y refused the first measurement", None
+            for k in range(len(y)):
+                rc, u, xb, yc = cstep.step(y[k])
+                if rc != 0:
+                    break
+                slave.setReal(ins, [float(v) for v in y[k]])
+                slave.doStep(currentCommunicationPoint=k * sample_time, communicationStepSize=sample_time)
+                want = np.concatenate([u, xb, yc])
+                got = np.asarray(slave.getReal(outs[: len(want)]))
+                worst = max(worst, float(np.max(np.abs(got - want))) if want.size else 0.0)
+            slave.terminate()
+        finally:
+            slave.freeInstance()
+    return "", worst
 
 
 def _horizon(scenario, sample_time: float):
