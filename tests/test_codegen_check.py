@@ -2,6 +2,7 @@
 applied; where it does not (a difference, a refused measurement), the check fails and says where."""
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -203,7 +204,7 @@ def test_the_fmu_is_fed_the_same_measurements(manipulator_doc, tmp_path):
 def test_an_fmu_that_differs_fails_the_check():
     scale = {"u": 1.0, "xbarhat": 1.0, "yc": 1.0}
     same = replay.Replay("s", 0, 0.01, 10, 10, "double", dict.fromkeys(scale, 0.0), scale, None, replay.TOLERANCE,
-                         fmu="; the FMU ...", fmu_diff=0.0)  # fmt: skip
+                         fmu="", fmu_diff=0.0)  # fmt: skip
     assert same.ok
     differs = dataclasses.replace(same, fmu_diff=1e-6)
     assert (
@@ -211,3 +212,8 @@ def test_an_fmu_that_differs_fails_the_check():
         and "the FMU, fed the same through FMPy, does NOT return what the C" in differs.render()
     )
     assert dataclasses.replace(same, fmu_diff=None).ok  # FMPy missing: said, not judged
+    failed = dataclasses.replace(same, tolerance=None, fmu="; the FMU does NOT do what the C does: at sample 3 ...",
+                                 fmu_diff=math.inf)  # an FMU error fails the check in float too  # fmt: skip
+    assert not failed.ok and failed.render().endswith(
+        "; the FMU does NOT do what the C does: at sample 3 ..."
+    )

@@ -81,12 +81,15 @@ class Replay:
 
     @property
     def fmu_ok(self) -> bool:
-        """The FMU returns what the C returns (to :data:`TOLERANCE` of the largest signal), or was not judged."""
-        tol = self.tolerance
-        return self.fmu_diff is None or tol is None or self.fmu_diff <= tol * max(1.0, *self.scale.values())
+        """The FMU returns what the C returns (to :data:`TOLERANCE` of the largest signal; in float, without an error),
+        or was not checked."""
+        tol, d = self.tolerance, self.fmu_diff
+        if d is None:
+            return True
+        return math.isfinite(d) and (tol is None or d <= tol * max(1.0, *self.scale.values()))
 
     def _fmu_text(self) -> str:
-        if self.fmu_diff is None:
+        if self.fmu or self.fmu_diff is None:  # not checked, or failed with its own words
             return self.fmu
         does = "returns" if self.fmu_ok else "does NOT return"
         return (
@@ -98,10 +101,10 @@ class Replay:
     def ok(self) -> bool:
         if self.refused is not None:
             return False
-        if self.tolerance is None:
-            return True
         if not self.fmu_ok:
             return False
+        if self.tolerance is None:
+            return True
         return self.start_relative <= self.tolerance and all(
             self.relative(k) <= self.tolerance for k, _ in SIGNALS
         )
@@ -185,10 +188,15 @@ def _fmu_replay(path, cstep, y, sample_time: float) -> tuple[str, float | None]:
                 rc, u, xb, yc = cstep.step(y[k])
                 if rc != 0:
                     break
-                slave.setReal(ins, [float(v) for v in y[k]])
-                slave.doStep(currentCommunicationPoint=k * sample_time, communicationStepSize=sample_time)
+                try:
+                    slave.setReal(ins, [float(v) for v in y[k]])
+                    slave.doStep(currentCommunicationPoint=k * sample_time, communicationStepSize=sample_time)
+                    got = np.asarray(slave.getReal(outs[: len(u) + len(xb) + len(yc)]))
+                except Exception as exc:  # noqa: BLE001 - FMPy raises its own on an FMU's error status
+                    why = " ".join(str(exc).split()) or type(exc).__name__
+                    return f"; the FMU does NOT do what the C does: at sample {k} (t = {k * sample_time:.6g}) {why}", (
+                        math.inf)  # fmt: skip
                 want = np.concatenate([u, xb, yc])
-                got = np.asarray(slave.getReal(outs[: len(want)]))
                 worst = max(worst, float(np.max(np.abs(got - want))) if want.size else 0.0)
             slave.terminate()
         finally:
