@@ -13,8 +13,9 @@ from fte_casadi.cli import main
 from fte_casadi.codegen import find_compiler, generate_c
 from fte_casadi.plants import BUILTIN, SCENARIOS
 from fte_casadi.sim import Bias, SimulateOptions, check_c, simulate
-from fte_casadi.sim._engine import first_observer_state, observer_start
+from fte_casadi.sim._c_check import first_observer_state
 from fte_casadi.sim._result import RUNS
+from fte_casadi.sim._start import observer_start
 
 needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 

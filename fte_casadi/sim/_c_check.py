@@ -141,7 +141,7 @@ def check_c(design: Design, plant, scenario, src_dir, *, sample_time: float, rea
     leaves out). With ``fmu`` (the FMU written beside the C), the FMU is fed the same measurements through FMPy
     and must return what the C started by ``init_from_y`` returns, as the FMU starts (:func:`_fmu_replay`)."""
     from ._c_range import accepted_measurements
-    from ._engine import first_observer_state, simulate
+    from ._engine import simulate
     from ._options import SimulateOptions
 
     scenario, cut = _horizon(scenario, sample_time)
@@ -202,6 +202,19 @@ def _fmu_replay(path, cstep, y, sample_time: float) -> tuple[str, float | None]:
         finally:
             slave.freeInstance()
     return "", worst
+
+
+def first_observer_state(design, plant, scenario, *, dt: float, seed: int, path: int = 0, run: str = "ftc"):
+    """``z_0`` of one path's run as :func:`simulate` (default scales) starts it (:meth:`Prepared.initial_states`,
+    the same numbers bit for bit): for a replay of the path through the generated C (``fte codegen --check``)."""
+    from ._engine import Prepared, _scales
+    from ._result import RUNS
+
+    steps = max(1, int(round(float(scenario.T) / dt)))
+    prep = Prepared(design, plant, scenario, dt, steps, _scales(None, scenario))
+    lay = prep.lay
+    o = RUNS.index(run) * lay.run_state + plant.n
+    return prep.initial_states(np.array([path]), seed)[0, o : o + lay.nbar]
 
 
 def _horizon(scenario, sample_time: float):

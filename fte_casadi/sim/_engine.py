@@ -51,6 +51,7 @@ from ._options import SimulateOptions, check_scales
 from ._reduce import finalize, monitor
 from ._result import RUNS, RunData, SimulationResult
 from ._scenario import FaultSchedule, Scenario, fault_schedule
+from ._start import observer_start
 from ._vector import CHUNK as CHUNK
 from ._vector import auto_chunk as auto_chunk
 
@@ -453,40 +454,6 @@ class Prepared:
                 state[:, o + plant.n : o + plant.n + lay.nbar] = zb
         state[:, lay.ns :] = self.monitor.mon0()[None, :]
         return state
-
-
-def observer_start(design, plant, scenario, x0: np.ndarray, v0=None, a0=None) -> np.ndarray | None:
-    """The observer's start ``z_0`` per path, as the simulation starts it and the generated C's
-    ``init_from_y`` does: from the first measurement, ``z_0 = xbar0 - H y_0``, so that ``xbarhat_0 = xbar0``,
-    ``xbar0 = [x0 nominal; 0]`` the scenario's nominal initial state (the plant's without one). ``y_0 = C x0 +
-    v0 + Df a0``: ``x0`` the plant's initial states (a row per path), ``v0`` the first sample's measurement
-    noise (rows; None: none), ``a0`` the faults' additive part at the first sample (None: none). None where the
-    scenario starts the observer at ``z = 0`` (``observer_init``)."""
-    if scenario.observer_init != "nominal":
-        return None
-    x0n = np.asarray(plant.x0 if scenario.x0 is None else scenario.x0, dtype=float)
-    xb_nom = np.concatenate([x0n, np.zeros(int(design.dims.nbar) - plant.n)])
-    x0 = np.atleast_2d(np.asarray(x0, dtype=float))
-    # a single row would take another BLAS route (a matrix-vector product, rounded differently): a path
-    # alone in its chunk is computed as one of two rows, so its numbers do not depend on the chunk
-    two = (lambda a: np.vstack([a, a])) if len(x0) == 1 else (lambda a: a)  # noqa: E731
-    y0 = two(x0) @ np.asarray(plant.C).T
-    if v0 is not None:
-        y0 = y0 + two(np.atleast_2d(v0))
-    Df = np.asarray(plant.Df, dtype=float)
-    if a0 is not None and np.any(Df @ np.asarray(a0, dtype=float) != 0):
-        y0 = y0 + Df @ np.asarray(a0, dtype=float)
-    return (xb_nom - y0 @ np.asarray(design.H).T)[: len(x0)]
-
-
-def first_observer_state(design, plant, scenario, *, dt: float, seed: int, path: int = 0, run: str = "ftc"):
-    """``z_0`` of one path's run as :func:`simulate` (default scales) starts it (:meth:`Prepared.initial_states`,
-    the same numbers bit for bit): for a replay of the path through the generated C (``fte codegen --check``)."""
-    steps = max(1, int(round(float(scenario.T) / dt)))
-    prep = Prepared(design, plant, scenario, dt, steps, _scales(None, scenario))
-    lay = prep.lay
-    o = RUNS.index(run) * lay.run_state + plant.n
-    return prep.initial_states(np.array([path]), seed)[0, o : o + lay.nbar]
 
 
 def run_paths(prep: Prepared, path0: int, count: int, seed: int, every: int = 0):
