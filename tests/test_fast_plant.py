@@ -68,12 +68,13 @@ def test_the_stable_motor_gets_a_loop_that_acts_and_an_idle_one_is_named(speed_s
     the loop is asked to be faster than the open loop: here 2x its slowest rate asks an observer beyond the
     sample time, so the loop is designed at the lower default rate, 1.25x, and acts (the rate the LMI 'decay'
     certifies, recomputed here from X and K). Asked for no rate (beta = 0) the gain is zero again, and the
-    verdict's "why" says the controller does not act, with max ||B_i K_j|| recomputed here; with the speed
-    sensor's bias the loop acts and nothing is said."""
+    verdict's "why" says the controller does not act, with max ||B_i K_j|| recomputed here, and so does `fte design`'s
+    summary, with the ratio against max ||A_i||; with the speed sensor's bias the loop acts and nothing is said."""
     from plant_pmsm_sensor import pmsm_id_sensor
 
     from fte_casadi.design import design
     from fte_casadi.design._limits import explain_metrics, loop_idle
+    from fte_casadi.design._summary import design_summary
     from fte_casadi.ts import derive
 
     ts = derive(pmsm_id_sensor(), fidelity_samples=300)
@@ -101,3 +102,7 @@ def test_the_stable_motor_gets_a_loop_that_acts_and_an_idle_one_is_named(speed_s
     metrics = {"windows": [{"fault": "i_d_bias", "start": 0.5, "stop": 1.0, "ftc_true_ratio": 1.0}]}
     assert "the controller does not act" in explain_metrics(d, metrics)[0]
     assert loop_idle(speed_sensor) == ""
+    said = [s for s in design_summary(d).splitlines() if "the controller does not act" in s]
+    assert len(said) == 1 and f"max ||B_i K|| / max ||A_i|| = {bk / a:.2g}" in said[0]
+    assert said[0].startswith("  warning: ")
+    assert not any("does not act" in s for t in (acts, speed_sensor) for s in design_summary(t).splitlines())

@@ -21,6 +21,25 @@ def _lmi_keys(checks: dict) -> list[str]:
     return keys
 
 
+def _idle_loop(loop: dict) -> str:
+    """A warning where the controller does not act (``gain_ratio`` below :data:`~._limits.IDLE_GAIN`, as
+    ``fte simulate`` judges it): a stable open loop already decays at the rate the loop is certified for, so
+    step 3's smallest gain is zero in effect. "" where the loop acts."""
+    from ._limits import IDLE_GAIN
+
+    ratio, ol = loop.get("gain_ratio"), loop.get("open_loop_decay")
+    if ratio is None or not ratio < IDLE_GAIN or ol is None or not ol > 0:
+        return ""
+    return (
+        f"  warning: the controller does not act: max ||B_i K|| / max ||A_i|| = {ratio:.2g}. The open loop "
+        f"already decays at {ol:.4g} per rule and the loop is certified for {loop['decay_certified']:.4g} at any "
+        "blending, a rate that asks no feedback: step 3's smallest gain is zero in effect. Without tolerant control the faults "
+        "meet only the plant's own decay; with it they meet Kf fhat alone, and a sensor fault's estimate reaches "
+        "the plant through no term (its windows tie at 1). A rate asked with --beta makes the loop act only where "
+        "the open loop does not already hold it and (45) allows it (the line above says what (45) allowed)"
+    )
+
+
 def _certified_by(checks: dict) -> str:
     """Which certificate holds (:func:`~.core._certify.certified_by`): Theorem 3's (45)-(46), or Theorem 1's (29)
     where they do not (then (46) is shown above but not required)."""
@@ -111,6 +130,9 @@ def design_summary(d) -> str:
             f"{loop['open_loop_decay']:.4g}; max ||B_i K|| / max ||A_i|| = {loop['gain_ratio']:.3g}"
             + (f"; {loop['why']}" if loop.get("why") else "")
         )
+        idle = _idle_loop(loop)
+        if idle:
+            lines.append(idle)
     room = (loop or {}).get("unsaturated")
     if room and room.get("extent"):
         lines.append(_unsaturated_line(room, (d.names or {}).get("states") or []))
