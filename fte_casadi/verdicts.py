@@ -18,6 +18,7 @@ __all__ = [
     "POOR_ESTIMATE",
     "SLOW_OBSERVER",
     "SATURATES_EARLY",
+    "SENSOR_MOTION",
     "verdicts",
     "judged_ftc_ratio",
     "judged_ftc_ratios_per_output",
@@ -40,6 +41,10 @@ SLOW_OBSERVER = 3.0
 #: the design's loop keeps its inputs within their limits only on a set reaching less than this fraction of the
 #: plant's region (``checks.loop.unsaturated.fraction``): the controller saturates for small deviations
 SATURATES_EARLY = 0.01
+#: a sensor fault's window where a TRUE output moves from the fault-free run by more than this times the fault's
+#: peak as that output reads it (RMS over the window, tolerant control on): the loop turns the sensor's error into
+#: a larger motion of the plant
+SENSOR_MOTION = 1.0
 
 
 def window_label(w: dict) -> str:
@@ -175,7 +180,7 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     (over the span from a window's end to the next window or the horizon, ``after_window``), ``worse than none
     after a window on an output``, ``false alarm``,
     ``false-alarm rate``, ``standing alarm``, ``saturated``, ``poor estimate``, ``slow observer``, ``not
-    settled``, ``missed``, ``outside region``, ``C stops``. A ratio is worse than none only when its interval over the
+    settled``, ``missed``, ``sensor fault moves the plant``, ``outside region``, ``C stops``. A ratio is worse than none only when its interval over the
     paths lies above 1 (where the document gives one); a ratio above 1 whose interval holds 1 is a tie. A poor
     estimate likewise needs its interval at or above :data:`POOR_ESTIMATE`."""
     out = []
@@ -193,6 +198,7 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
         _tolerance_verdicts(w, add, faults, outputs, units)
         _after_window_verdicts(w, add, faults, outputs)
         _window_verdicts(m, w, add, inputs)
+        _sensor_motion_verdict(w, add, outputs, units)
     frac = m.get("outside_region")
     if frac is not None and frac > OUTSIDE_REGION:
         add("outside region", "run", frac,
@@ -311,6 +317,29 @@ def _after_cause(w: dict, a: dict, faults) -> str:
     return (f"; tolerant control still adds to u there (RMS {held} per input), compensating estimates that lag "
             f"the fault's end ({lag}) or show another fault's cross-talk, while the run without it only recovers "
             "from the deviation the fault left")  # fmt: skip
+
+
+def _sensor_motion_verdict(w: dict, add, outputs, units) -> None:
+    """A sensor fault's window where a TRUE output moves from the fault-free run (RMS over the window, the run with
+    tolerant control) by more than :data:`SENSOR_MOTION` times the fault's peak as that output reads it
+    (``sensor_fault_peak_per_output``): the fault enters only the measurement, so the plant moves only because u follows
+    the observer's estimate, which the fault throws off."""
+    size, rms = w.get("sensor_fault_peak_per_output"), w.get("ftc_true_rms_per_output") or {}
+    ftc, none = rms.get("ftc") or [], rms.get("no_ftc") or []
+    if not size:
+        return
+    where = window_label(w)
+    for k, s in enumerate(size):
+        if not s or k >= len(ftc) or ftc[k] is None or not ftc[k] > SENSOR_MOTION * s:
+            continue
+        name = outputs[k] if k < len(outputs) else f"output {k}"
+        unit = f" {units[k]}" if k < len(units) and units[k] else ""
+        without = f", {none[k]:.3g}{unit} without" if k < len(none) and none[k] is not None else ""
+        add("sensor fault moves the plant", f"{where}, {name}", ftc[k] / s,
+            f"in {where} the sensor fault moves the plant more than it misreads it: a fault of {s:.3g}{unit} on the "
+            f"reading of {name} moves the TRUE {name} by {ftc[k]:.3g}{unit} RMS over the window ({ftc[k] / s:.3g} x "
+            f"the fault) with tolerant control{without}. The fault enters only the measurement: the plant moves "
+            "because u follows the observer's estimate, which the fault throws off")  # fmt: skip
 
 
 def _window_verdicts(m: dict, w: dict, add, inputs) -> None:

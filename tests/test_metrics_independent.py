@@ -399,6 +399,13 @@ def test_windows(res):
         fh, f = ftc.fhat[..., j], ftc.f[..., j]
         zero = not np.any(f[:, inw])
         check(f"{key}.fault_peak", w["fault_peak"], np.abs(f[:, inw]).max())
+        # the fault as each output reads it, for a fault that enters the measurement only
+        Df = np.asarray(res.design.Df)
+        in_state = any(
+            np.any(np.asarray(getattr(lm, k))[:, j]) for lm in res.design.local_models for k in ("Bf", "Gf")
+        )
+        read = (0.0 if in_state else 1.0) * np.abs(Df[:, j]) * np.abs(f[:, inw]).max()
+        check(f"{key}.sensor_fault_peak_per_output", w["sensor_fault_peak_per_output"], read)
         want = None if zero else ratio(fh[:, inw] - f[:, inw], f[:, inw])
         check(f"{key}.fault_rel_rms_error", w["fault_rel_rms_error"], want)
         want = None if zero else ratio(fh[:, settled] - f[:, settled], f[:, settled])

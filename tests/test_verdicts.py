@@ -286,3 +286,30 @@ def test_a_ratio_just_above_1_is_printed_above_1():
             if v["verdict"] == "worse than none"]  # fmt: skip
     assert "ftc_true_ratio 1.00000012 > 1, 95 % interval 1.00000007-1.00000016" in v["text"], v["text"]
     assert "y1: 1.0000001, y2: 0.99997" in v["text"]
+
+
+def test_a_sensor_fault_that_moves_the_plant_more_than_it_misreads_it_is_said():
+    """The levitation's gap-sensor window (`tests/plant_levitation.py:maglev_near`, 8 paths, seed 1): a 0.2 mm bias
+    moves the true gap by 0.536 mm RMS over the window, with tolerant control and without. The verdict compares each
+    true output's RMS deviation from the fault-free run with the fault as that output reads it
+    (``sensor_fault_peak_per_output``), above :data:`SENSOR_MOTION` times it, per output; nothing for an actuator fault
+    (zeros there) or a motion at the fault's size."""
+    w = {"fault": "fs", "start": 1.75, "stop": 2.25, "sensor_fault_peak_per_output": [0.2, 0.0],
+         "ftc_true_rms_per_output": {"ftc": [0.5355, 0.1412], "no_ftc": [0.5354, 0.1412]}}  # fmt: skip
+    got = [v for v in verdicts.verdicts({"windows": [w]}, [], ["fa", "fs"], ["gap_dev", "i_dev"], ["mm", "A"])
+           if v["verdict"] == "sensor fault moves the plant"]  # fmt: skip
+    assert len(got) == 1 and got[0]["where"] == "the window of fs [1.75, 2.25), gap_dev"
+    assert abs(got[0]["value"] - 0.5355 / 0.2) < 1e-12
+    assert (
+        "a fault of 0.2 mm on the reading of gap_dev moves the TRUE gap_dev by 0.535 mm RMS" in got[0]["text"]
+    )
+    assert "0.535 mm without" in got[0]["text"]
+    at = {
+        **w,
+        "ftc_true_rms_per_output": {"ftc": [0.2, 0.1], "no_ftc": [0.3, 0.1]},
+    }  # at the fault's size: not above
+    actuator = {**w, "sensor_fault_peak_per_output": [0.0, 0.0]}
+    for quiet in (at, actuator):
+        assert not any(
+            v["verdict"] == "sensor fault moves the plant" for v in verdicts.verdicts({"windows": [quiet]})
+        )

@@ -48,7 +48,7 @@ from ._detect import default_rate
 from ._masks import allowances, masks
 from ._options import SCALES as SCALES
 from ._options import SimulateOptions, check_scales
-from ._reduce import finalize, monitor
+from ._reduce import finalize, monitor, sensor_gains
 from ._result import RUNS, RunData, SimulationResult
 from ._scenario import FaultSchedule, Scenario, fault_schedule
 from ._start import observer_start
@@ -677,7 +677,7 @@ def simulate(design: Design, plant: Plant, scenario: Scenario, *, paths: int, se
     meta = {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed, "wall_s": wall, "m": plant.m,
             "thresholds": [float(v) for v in ran.thresholds], "detection": ran.detection,
             "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None,
-            "y_range": prep.y_range}  # fmt: skip
+            "y_range": prep.y_range, "sensor_gains": sensor_gains(design)}  # fmt: skip
     doc = finalize(ran.acc, ran.mon, ran.pm, prep.t, prep.monitor, prep.masks, meta)
     mn = scenario.measurement_noise
     doc["measurement_noise"] = None if mn is None else mn.reported(sc["measurement_noise_scale"])

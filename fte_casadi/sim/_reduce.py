@@ -332,7 +332,8 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
 
     ``meta``: ``paths, dt, T, seed, wall_s``, ``m`` (inputs), ``thresholds`` (per fault, the steady ones; inf:
     none), ``detection`` (the document's ``detection`` entries, thresholds and the asked rate, to complete),
-    ``tau`` (the observer's slowest time constant, or None). The intervals (:mod:`._intervals`) are seeded
+    ``tau`` (the observer's slowest time constant, or None), ``sensor_gains`` (``|Df|``, outputs by faults, zero
+    for a fault that also enters a state equation: how each output reads a sensor fault; optional). The intervals (:mod:`._intervals`) are seeded
     by ``seed`` and depend on the set of paths only."""
     from ._intervals import ratio_intervals
 
@@ -487,6 +488,7 @@ def _window(c: _Columns, w: int) -> tuple[dict, list]:
         "settling_time": settle,
         "release_time": release,
         "fault_peak": float(np.max(mcol[f"pkf{j}"])) if nw else None,
+        "sensor_fault_peak_per_output": _as_read(c.meta.get("sensor_gains"), j, float(np.max(mcol[f"pkf{j}"])) if nw else None),
         "ftc_true_ratio": true_ratio,
         "ftc_true_ratio_per_output": [
             _ratio(_fsum(col[f"at{w}_{k}"]), _fsum(col[f"bt{w}_{k}"])) if rel is not None else None
@@ -519,6 +521,25 @@ def _window(c: _Columns, w: int) -> tuple[dict, list]:
         "why": "; ".join(why) or None,
     }  # fmt: skip
     return entry, pairs
+
+
+def sensor_gains(design) -> list:
+    """``|Df|`` of ``design`` (outputs by faults) with the columns of faults that also enter a state equation (``Bf``
+    or ``Gf`` of some rule) zeroed: how each output reads a fault that enters the measurement only."""
+    g = np.abs(np.asarray(design.Df, float))
+    for j in range(g.shape[1]):
+        if any(np.any(np.asarray(getattr(lm, k))[:, j]) for lm in design.local_models for k in ("Bf", "Gf")):
+            g[:, j] = 0.0
+    return g.tolist()
+
+
+def _as_read(gains, j: int, peak: float | None) -> list[float] | None:
+    """Fault ``j``'s peak as each output reads it, ``|Df[k, j]| peak`` (``gains``: ``|Df|``, outputs by faults, zero
+    for a fault that also enters a state equation): zeros for a fault that does not enter the measurement only;
+    None where the window holds no sample (no peak) or the gains are not known."""
+    if gains is None or peak is None:
+        return None
+    return [float(row[j]) * peak for row in gains]
 
 
 def _after_window(c: _Columns, w: int, entry: dict) -> list:
