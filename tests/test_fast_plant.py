@@ -72,9 +72,8 @@ def test_the_stable_motor_gets_a_loop_that_acts_and_an_idle_one_is_named(speed_s
     summary, with the ratio against max ||A_i||; with the speed sensor's bias the loop acts and nothing is said."""
     from plant_pmsm_sensor import pmsm_id_sensor
 
-    from fte_casadi.design import design
+    from fte_casadi.design import design, design_summary
     from fte_casadi.design._limits import explain_metrics, loop_idle
-    from fte_casadi.design._summary import design_summary
     from fte_casadi.ts import derive
 
     ts = derive(pmsm_id_sensor(), fidelity_samples=300)
