@@ -198,7 +198,7 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
         _tolerance_verdicts(w, add, faults, outputs, units)
         _after_window_verdicts(w, add, faults, outputs)
         _window_verdicts(m, w, add, inputs)
-        _sensor_motion_verdict(w, add, outputs, units)
+        _sensor_motion_verdict(w, m.get("windows", []), add, outputs, units)
     frac = m.get("outside_region")
     if frac is not None and frac > OUTSIDE_REGION:
         add("outside region", "run", frac,
@@ -319,14 +319,18 @@ def _after_cause(w: dict, a: dict, faults) -> str:
             "from the deviation the fault left")  # fmt: skip
 
 
-def _sensor_motion_verdict(w: dict, add, outputs, units) -> None:
+def _sensor_motion_verdict(w: dict, windows: list, add, outputs, units) -> None:
     """A sensor fault's window where a TRUE output moves from the fault-free run (RMS over the window, the run with
     tolerant control) by more than :data:`SENSOR_MOTION` times the fault's peak as that output reads it
     (``sensor_fault_peak_per_output``): the fault enters only the measurement, so the plant moves only because u follows
-    the observer's estimate, which the fault throws off."""
+    the observer's estimate, which the fault throws off. Not judged where another fault's window overlaps it (the
+    motion is then the other fault's too)."""
     size, rms = w.get("sensor_fault_peak_per_output"), w.get("ftc_true_rms_per_output") or {}
     ftc, none = rms.get("ftc") or [], rms.get("no_ftc") or []
-    if not size:
+    a, b = float(w["start"]), float(w["stop"])
+    overlapped = any(v is not w and v.get("fault") != w.get("fault") and float(v["start"]) < b and a < float(v["stop"])
+                     for v in windows)  # fmt: skip
+    if not size or overlapped:
         return
     where = window_label(w)
     for k, s in enumerate(size):

@@ -17,7 +17,7 @@ from scipy import stats
 
 from fte_casadi.design import Design
 from fte_casadi.plants import load_plant, load_scenario
-from fte_casadi.sim import simulate
+from fte_casadi.sim import Bias, simulate
 from fte_casadi.step import step_function
 
 pytestmark = pytest.mark.slow
@@ -36,6 +36,16 @@ CASES = {
     # noise on w_m of 2.5 rad/s against the +/- 6 its generated C accepts: some readings it would refuse
     "manipulator-refused": dict(
         spec="manipulator", design="manipulator", T=None, paths=3, seed=19, noise=(0.05, 2.5, 0.05)
+    ),  # fmt: skip
+    # two more windows of the sensor fault, of other sizes, one of them inside the actuator fault's window: each
+    # window's own peak, and the figures of overlapping windows
+    "manipulator-windows": dict(
+        spec="manipulator",
+        design="manipulator",
+        T=None,
+        paths=3,
+        seed=23,
+        extra=(Bias("fs", 0.01, start=1.0, stop=2.0), Bias("fs", 0.005, start=3.0, stop=4.0)),
     ),  # fmt: skip
     "quadruple-tank-limits": dict(
         spec="quadruple-tank",
@@ -67,6 +77,8 @@ def res(request):
         design = dataclasses.replace(design, input_limits=np.asarray(case["limits"], dtype=float))
     if case["T"] is not None:
         scenario = dataclasses.replace(scenario, T=case["T"])
+    if case.get("extra"):
+        scenario = dataclasses.replace(scenario, faults=scenario.faults + case["extra"])
     run = dict(paths=case["paths"], seed=case["seed"], record_all=True, record_every=1, progress=False)
     if isinstance(case.get("noise"), tuple):
         scenario = dataclasses.replace(scenario, measurement_noise=case["noise"])

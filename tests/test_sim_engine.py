@@ -328,6 +328,10 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
                       "settling_time", "release_time", "detection_delay", "missed_detections"):  # fmt: skip
                 assert (w[k] is None and v[k] is None) or w[k] == pytest.approx(v[k], rel=1e-12)
             np.testing.assert_allclose(w["input_saturation"], v["input_saturation"], rtol=1e-12, atol=0)
+            assert w["fault_peak"] == pytest.approx(v["fault_peak"], rel=1e-12)
+            np.testing.assert_allclose(
+                w["sensor_fault_peak_per_output"], v["sensor_fault_peak_per_output"], rtol=1e-12
+            )
             _same_after_window(w["after_window"], v["after_window"])
         if name == "manipulator":  # fa [2.5, 5) has a span after it, up to fs at 7; fs none before T = 10
             assert [w["after_window"] is not None for w in got["windows"]] == [True, False]

@@ -313,3 +313,27 @@ def test_a_sensor_fault_that_moves_the_plant_more_than_it_misreads_it_is_said():
         assert not any(
             v["verdict"] == "sensor fault moves the plant" for v in verdicts.verdicts({"windows": [quiet]})
         )
+    # another fault's window overlapping it: the motion is that fault's too, and nothing is said; one that only
+    # touches it (ends at its start), or another window of the same fault, does not count
+    for other, said in ((("fa", 2.0, 3.0), False), (("fa", 1.0, 1.75), True), (("fs", 2.0, 2.5), True)):
+        v = {"fault": other[0], "start": other[1], "stop": other[2]}
+        got = verdicts.verdicts({"windows": [w, v]}, [], ["fa", "fs"], ["gap_dev", "i_dev"])
+        assert any(g["verdict"] == "sensor fault moves the plant" for g in got) == said, other
+
+
+def test_a_fault_entering_a_state_equation_is_not_read_as_a_sensor_fault():
+    """``sensor_gains``: |Df| per output and fault, its column zeroed for a fault that also enters a state equation
+    (a column of Bf or Gf nonzero in some rule): the verdict's "the fault enters only the measurement" holds."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from fte_casadi.sim._reduce import sensor_gains
+
+    z = np.zeros((2, 3))
+    rules = [SimpleNamespace(Bf=z.copy(), Gf=z.copy()) for _ in range(2)]
+    rules[1].Bf[0, 1] = 0.5  # fault 1 enters the drift in rule 1
+    rules[0].Gf[1, 2] = 0.1  # fault 2 the diffusion in rule 0
+    Df = np.array([[-2.0, 1.0, 0.0], [0.0, 3.0, 4.0]])
+    got = sensor_gains(SimpleNamespace(Df=Df, local_models=rules))
+    assert got == [[2.0, 0.0, 0.0], [0.0, 0.0, 0.0]]

@@ -22,9 +22,9 @@ def _lmi_keys(checks: dict) -> list[str]:
 
 
 def _idle_loop(loop: dict) -> str:
-    """A warning where the controller does not act (``gain_ratio`` below :data:`~._limits.IDLE_GAIN`, as
-    ``fte simulate`` judges it): a stable open loop already decays at the rate the loop is certified for, so
-    step 3's smallest gain is zero in effect. "" where the loop acts."""
+    """A warning where the controller does not act (``gain_ratio`` below :data:`~._limits.IDLE_GAIN`, the threshold
+    ``fte simulate``'s verdicts use) and the open loop decays: it already holds the rate the loop is certified for,
+    so step 3's smallest gain is zero in effect. "" where the loop acts."""
     from ._limits import IDLE_GAIN
 
     ratio, ol = loop.get("gain_ratio"), loop.get("open_loop_decay")
@@ -33,10 +33,10 @@ def _idle_loop(loop: dict) -> str:
     return (
         f"  warning: the controller does not act: max ||B_i K|| / max ||A_i|| = {ratio:.2g}. The open loop "
         f"already decays at {ol:.4g} per rule and the loop is certified for {loop['decay_certified']:.4g} at any "
-        "blending, a rate that asks no feedback: step 3's smallest gain is zero in effect. Without tolerant control the faults "
-        "meet only the plant's own decay; with it they meet Kf fhat alone, and a sensor fault's estimate reaches "
-        "the plant through no term (its windows tie at 1). A rate asked with --beta makes the loop act only where "
-        "the open loop does not already hold it and (45) allows it (the line above says what (45) allowed)"
+        "blending, a rate that asks no feedback: step 3's smallest gain is zero in effect. Without tolerant control "
+        "the faults meet only the plant's own decay; with it they meet Kf fhat alone, and a sensor fault's own "
+        "estimate enters u through no term. A rate asked with --beta makes the loop act only where the open loop "
+        "does not already hold it and (45) allows it"
     )
 
 

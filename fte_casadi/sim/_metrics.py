@@ -17,7 +17,7 @@ from ..verdicts import SATURATED as SATURATED
 from ..verdicts import WORSE_THAN_NONE as WORSE_THAN_NONE
 from ._intervals import clopper_pearson, rate_intervals, ratio_intervals
 from ._masks import SETTLE_FRACTION, _mask, after_span, allowance_masks, allowances, onset_mask, outside_mask
-from ._reduce import HYSTERESIS, settling_time
+from ._reduce import HYSTERESIS, sensor_gains, settling_time
 from ._result import SimulationResult
 
 __all__ = ["metrics", "metrics_from_arrays", "input_saturation", "alarms"]  # public: docs/api.md
@@ -291,6 +291,7 @@ def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
     on = onset_mask(t, fp.start)
     r = _rms_ratio(e[:, w, j], ftc.f[:, w, j])
     size = float(np.max(np.mean(np.abs(ftc.f[:, w, j]), axis=0))) if w.any() else 0.0
+    peak = float(np.max(np.abs(ftc.f[:, w, j]))) if w.any() else None
     err = np.mean(np.abs(e[:, w, j]), axis=0) if w.any() else np.zeros(0)
     hit_t, standing = _detections(c, fp, j, w)
     tau = c.allow.tau
@@ -302,6 +303,8 @@ def _window_from_arrays(c: _Run, fp, peaks: list[float]) -> tuple[dict, list]:
         "fault_rel_rms_error_settled": _rms_ratio(e[:, ws, j], ftc.f[:, ws, j]),
         "settling_time": settling_time(err, size, t[w], fp.start),
         "release_time": _release(t, result.scenario, fp, np.mean(np.abs(e[:, :, j]), axis=0), size),
+        "fault_peak": peak,
+        "sensor_fault_peak_per_output": None if peak is None else [g[j] * peak for g in sensor_gains(result.design)],
         "ftc_true_ratio": _rms_ratio(dC_ftc[:, w], dC_no[:, w]) if r is not None else None,
         "ftc_true_ratio_per_output": [_rms_ratio(dC_ftc[:, w, k], dC_no[:, w, k]) if r is not None else None
                                       for k in range(p)],

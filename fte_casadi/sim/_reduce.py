@@ -94,7 +94,7 @@ def _monitor_names(lf: int, nw: int) -> list[str]:
     return (
         [f"{k}{j}" for k in ("pko", "tpo", "spo", "pks", "tps", "sps", "pkl", "tpl", "spl", "pkf", "alf", "alc")
          for j in range(lf)]
-        + [f"{k}{w}" for k in ("det", "stw") for w in range(nw)]
+        + [f"{k}{w}" for k in ("det", "stw", "pkw") for w in range(nw)]
         + [f"xt{w}_{j}" for w in range(nw) for j in range(lf)]
         + ["cyt"]
     )  # fmt: skip
@@ -221,6 +221,7 @@ def _window_terms(s: _Terms, w: int, mk: Masks, msk, t, thr, fhat, f, dC: tuple,
         s.add(f"bt{w}_{k}", m_w * dC[1][k] ** 2)
     s.add(f"acw{w}", m_w * dy[0])
     s.add(f"bcw{w}", m_w * dy[1])
+    nxt[f"pkw{w}"] = ca.fmax(slot[f"pkw{w}"], m_w * ca.fabs(f[j]))  # the fault's peak in this window
     # a standing alarm: the FTC run's alarm already on at the window's onset (a false alarm, not a detection);
     # a detection: the alarm rises in the window on a path where it was off at the onset
     al = slot[f"alc{j}"]
@@ -478,6 +479,7 @@ def _window(c: _Columns, w: int) -> tuple[dict, list]:
     bt_ = [col[f"bt{w}_{k}"] for k in range(p_out)]
     true_ratio = _ratio(sum(_fsum(v) for v in at_), sum(_fsum(v) for v in bt_)) if rel is not None else None
     why = _window_why(nw, rel, settle, release, tail.any(), true_ratio, detect and hit.sum() == 0)
+    peak = float(np.max(mcol[f"pkw{w}"])) if nw else None
     # the per-path numerators and denominators of the window's ratios, bootstrapped together
     pairs = [(col[f"ew{w}"], col[f"fw{w}"]), (np.sum(at_, axis=0), np.sum(bt_, axis=0))]
     pairs += [(at_[k], bt_[k]) for k in range(p_out)] + [(col[f"acw{w}"], col[f"bcw{w}"])]
@@ -487,8 +489,8 @@ def _window(c: _Columns, w: int) -> tuple[dict, list]:
         "fault_rel_rms_error_settled": _ratio(_fsum(col[f"ews{w}"]), _fsum(col[f"fws{w}"])),
         "settling_time": settle,
         "release_time": release,
-        "fault_peak": float(np.max(mcol[f"pkf{j}"])) if nw else None,
-        "sensor_fault_peak_per_output": _as_read(c.meta.get("sensor_gains"), j, float(np.max(mcol[f"pkf{j}"])) if nw else None),
+        "fault_peak": peak,
+        "sensor_fault_peak_per_output": _as_read(c.meta.get("sensor_gains"), j, peak),
         "ftc_true_ratio": true_ratio,
         "ftc_true_ratio_per_output": [
             _ratio(_fsum(col[f"at{w}_{k}"]), _fsum(col[f"bt{w}_{k}"])) if rel is not None else None
