@@ -174,7 +174,7 @@ def _rate_verdicts(m: dict, add) -> None:
                     f"promise at the rate asked ({asked:.3g})")  # fmt: skip
 
 
-def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
+def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=(), states=(), state_units=()) -> list[dict]:
     """The verdicts on metrics document ``m``: a list of ``{"verdict", "where", "value", "text"}`` with
     ``verdict`` one of ``worse than none``, ``worse than none on an output``, ``worse than none after a window``
     (over the span from a window's end to the next window or the horizon, ``after_window``), ``worse than none
@@ -203,9 +203,26 @@ def verdicts(m: dict, inputs=(), faults=(), outputs=(), units=()) -> list[dict]:
     if frac is not None and frac > OUTSIDE_REGION:
         add("outside region", "run", frac,
             f"{100 * frac:.1f} % of the samples leave the plant's region, where the T-S model (and the design's "
-            "certificate) is not exact")  # fmt: skip
+            f"certificate) is not exact{_how_far(m, states, state_units)}")  # fmt: skip
     _c_range_verdict(m, add, outputs)
     return out
+
+
+def _how_far(m: dict, states, units) -> str:
+    """Where the runs took the states that left the region (``state_range`` against ``region``), in words; "" where
+    the document has neither."""
+    got, reg = m.get("state_range"), m.get("region")
+    if not got or not reg:
+        return ""
+    out = []
+    for i, (a, b) in enumerate(zip(got["lo"], got["hi"])):
+        lo, hi = reg["lo"][i], reg["hi"][i]
+        if (lo is not None and a < lo) or (hi is not None and b > hi):
+            name = states[i] if i < len(states) else f"state {i}"
+            unit = f" {units[i]}" if i < len(units) and units[i] else ""
+            side = f"{'-inf' if lo is None else f'{lo:.4g}'} to {'inf' if hi is None else f'{hi:.4g}'}"
+            out.append(f"{name} {a:.4g} to {b:.4g}{unit} (region {side})")
+    return f": the runs take {', '.join(out)}" if out else ""
 
 
 def _c_range_verdict(m: dict, add, outputs) -> None:

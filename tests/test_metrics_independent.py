@@ -353,6 +353,12 @@ def test_global_figures(res):
         for r in (free, noftc, ftc):
             out |= np.any((r.x < lo) | (r.x > hi), axis=-1)
         check("outside_region", doc["outside_region"], out.mean())
+        assert doc["region"] == {"lo": [None if np.isinf(v) else v for v in lo.tolist()],
+                                 "hi": [None if np.isinf(v) else v for v in hi.tolist()]}  # fmt: skip
+    # where the plant ran: each state's extremes over the three runs, every path and sample
+    every = np.concatenate([free.x, noftc.x, ftc.x], axis=0)
+    check("state_range.lo", doc["state_range"]["lo"], every.min(axis=(0, 1)), exact=True)
+    check("state_range.hi", doc["state_range"]["hi"], every.max(axis=(0, 1)), exact=True)
     check("input_saturation", doc["input_saturation"], at_limit(res, ftc.u).mean(axis=(0, 1)))
     _check_c_range(res, doc, check)
     check.done()

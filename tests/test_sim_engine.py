@@ -319,6 +319,7 @@ def test_streamed_metrics_equal_the_reference_from_arrays(plants, real_designs, 
         for key in ("ftc_true_ratio", "ftc_compensated_ratio", "outside_region", "transient", "settle_after",
                     "outside_c_range", "outside_c_range_paths"):  # fmt: skip
             assert got[key] == pytest.approx(ref[key], rel=1e-12), key
+        assert got["state_range"] == ref["state_range"] and got["region"] == ref["region"]
         assert got["c_accepted_range"] == ref["c_accepted_range"] and got["outside_c_range_first"] == ref[
             "outside_c_range_first"]  # fmt: skip
         assert len(got["windows"]) == len(sc.faults) == len(ref["windows"])

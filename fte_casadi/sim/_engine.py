@@ -677,7 +677,8 @@ def simulate(design: Design, plant: Plant, scenario: Scenario, *, paths: int, se
     meta = {"paths": paths, "dt": dt, "T": scenario.T, "seed": seed, "wall_s": wall, "m": plant.m,
             "thresholds": [float(v) for v in ran.thresholds], "detection": ran.detection,
             "tau": prep.allowances.tau if math.isfinite(prep.allowances.tau) else None,
-            "y_range": prep.y_range, "sensor_gains": sensor_gains(design)}  # fmt: skip
+            "y_range": prep.y_range, "sensor_gains": sensor_gains(design),
+            "region": (list(plant.region_lo), list(plant.region_hi))}  # fmt: skip
     doc = finalize(ran.acc, ran.mon, ran.pm, prep.t, prep.monitor, prep.masks, meta)
     mn = scenario.measurement_noise
     doc["measurement_noise"] = None if mn is None else mn.reported(sc["measurement_noise_scale"])

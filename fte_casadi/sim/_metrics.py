@@ -175,6 +175,7 @@ def metrics_from_arrays(result: SimulationResult) -> dict:
         "detection": faults["detection"],
         "windows": windows,
         "outside_region": float(_outside_region(result).mean()),
+        **_where_it_ran(result),
         "input_saturation": input_saturation(ftc.u, result.design.input_limits),
         **_outside_c_range(result),
         "wall_s": float(result.wall_s),
@@ -397,6 +398,17 @@ def _outside_region(result: SimulationResult) -> np.ndarray:
         return np.zeros(xs.shape[1:3], bool)
     lo, hi = (np.asarray(v, dtype=float) for v in result.region)
     return np.any((xs < lo) | (xs > hi), axis=(0, 3))
+
+
+def _where_it_ran(result: SimulationResult) -> dict:
+    """Each state's extremes over the three runs (``state_range``) and the plant's region (an open side null)."""
+    xs = np.stack([result.free.x, result.no_ftc.x, result.ftc.x])
+    reg = None
+    if result.region is not None:
+        reg = {side: [float(v) if math.isfinite(float(v)) else None for v in vals]
+               for side, vals in zip(("lo", "hi"), result.region)}  # fmt: skip
+    return {"state_range": {"lo": xs.min(axis=(0, 1, 2)).tolist(), "hi": xs.max(axis=(0, 1, 2)).tolist()},
+            "region": reg}  # fmt: skip
 
 
 def metrics(result: SimulationResult) -> dict:

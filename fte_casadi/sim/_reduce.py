@@ -48,7 +48,7 @@ class Monitor:
     fault-free and FTC runs (off until ``transient``); per window the first time the FTC run's alarm rose in
     it (-1: not yet), whether the alarm was already on at its onset (a standing alarm), and the other faults'
     cross-talk peaks; the first time the FTC run's measurement left the range the generated C accepts (-1:
-    never)."""
+    never); per state its smallest and largest value over the three runs."""
 
     fn: ca.Function
     names: list[str]
@@ -61,7 +61,8 @@ class Monitor:
 
     def mon0(self) -> np.ndarray:
         """The monitor state at t = 0 (one path)."""
-        return np.array([-1.0 if nm.startswith("det") or nm == "cyt" else 0.0 for nm in self.mon_names])
+        start = {"det": -1.0, "cyt": -1.0, "xlo": _UNSEEN, "xhi": -_UNSEEN}
+        return np.array([start.get(nm[:3], 0.0) for nm in self.mon_names])
 
 
 class _Terms:
@@ -89,7 +90,7 @@ class _Terms:
         nxt[f"sp{tag}{j}"] = ca.if_else(new, fhat[j], slot[f"sp{tag}{j}"])
 
 
-def _monitor_names(lf: int, nw: int) -> list[str]:
+def _monitor_names(lf: int, nw: int, n: int = 0) -> list[str]:
     """The monitor state's entries (see :class:`Monitor`)."""
     return (
         [f"{k}{j}" for k in ("pko", "tpo", "spo", "pks", "tps", "sps", "pkl", "tpl", "spl", "pkf", "alf", "alc")
@@ -97,7 +98,13 @@ def _monitor_names(lf: int, nw: int) -> list[str]:
         + [f"{k}{w}" for k in ("det", "stw", "pkw") for w in range(nw)]
         + [f"xt{w}_{j}" for w in range(nw) for j in range(lf)]
         + ["cyt"]
+        + [f"{k}{i}" for k in ("xlo", "xhi") for i in range(n)]
     )  # fmt: skip
+
+
+#: the start of a running minimum (``xlo``) or maximum (``xhi``) of a state: finite, so that ``--fast-math``
+#: (finite-math-only) keeps it
+_UNSEEN = 1e300
 
 
 def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.ndarray] | None,
@@ -118,7 +125,7 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
     after = msk[row("after")]
     dC = (ca.mtimes(C, ftc["x"] - free["x"]), ca.mtimes(C, noftc["x"] - free["x"]))
     dy = (ca.sumsqr(ftc["yc"] - free["y"]), ca.sumsqr(noftc["y"] - free["y"]))
-    mon_names = _monitor_names(lf, mk.nw)
+    mon_names = _monitor_names(lf, mk.nw, n)
     s = _Terms(mon_names)
     xhat = ftc["xbarhat"][:n]
     for j in range(n):
@@ -148,6 +155,10 @@ def monitor(lay, mk: Masks, C: np.ndarray, limits, region: tuple[np.ndarray, np.
         for j in range(lf):
             s.nxt[f"xt{w}_{j}"] = ca.fmax(s.slot[f"xt{w}_{j}"], m_w * ca.fabs(fhat[j]))
     _c_range_terms(s, ftc["y"], y_range, lay.p, t)
+    for i in range(n):  # where the plant ran: each state's extremes over the three runs
+        xs = [r["x"][i] for r in (free, noftc, ftc)]
+        s.nxt[f"xlo{i}"] = ca.fmin(s.slot[f"xlo{i}"], ca.fmin(xs[0], ca.fmin(xs[1], xs[2])))
+        s.nxt[f"xhi{i}"] = ca.fmax(s.slot[f"xhi{i}"], ca.fmax(xs[0], ca.fmax(xs[1], xs[2])))
     mon_next = [s.nxt[k] for k in mon_names]
     _saturation_terms(s, ftc["u"], limits, lay.m, mk, msk)
     s.add("outreg", _outside_region(region, (free, noftc, ftc), n) > 0)
@@ -275,6 +286,19 @@ def _outside_region(region, runs: tuple, n: int):
     return outside
 
 
+def _where_it_ran(c: _Columns) -> dict:
+    """``state_range``: each state's smallest and largest value over the three runs, every path and sample; and the
+    plant's ``region`` beside it (an open side null)."""
+    n = sum(1 for nm in c.mo.mon_names if nm.startswith("xlo"))
+    region = c.meta.get("region")
+    return {
+        "state_range": {"lo": [float(np.min(c.mcol[f"xlo{i}"])) for i in range(n)],
+                        "hi": [float(np.max(c.mcol[f"xhi{i}"])) for i in range(n)]},
+        "region": None if region is None else
+        {side: [float(v) if math.isfinite(float(v)) else None for v in vals] for side, vals in zip(("lo", "hi"), region)},
+    }  # fmt: skip
+
+
 def _fsum(col) -> float:
     return math.fsum(float(v) for v in col)
 
@@ -390,6 +414,7 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
         "detection": _detection(c, n_after * dt, n_out),
         "windows": windows,
         "outside_region": _fsum(col["outreg"]) / (P * nsamp),
+        **_where_it_ran(c),
         "input_saturation": [_fsum(col[f"sat{i}"]) / (P * nsamp) for i in range(int(meta["m"]))],
         **_c_range(c, nsamp),
         "wall_s": float(meta.get("wall_s", 0.0)),
