@@ -263,7 +263,7 @@ def _windows_section(m: dict, plant) -> list[str]:
         )
     out += ["", f"Rule: {(m.get('detection') or [{}])[0].get('rule', 'no detection')}."]
     vs = verdicts(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names),
-                  list(plant.output_units), list(plant.state_names), list(plant.state_units))  # fmt: skip
+                  list(plant.output_units), states=list(plant.state_names), state_units=list(plant.state_units))  # fmt: skip
     if vs:
         out += ["", "Verdicts:", ""] + [f"- **{v['verdict']}**: {v['text']}" for v in vs]
     return out + [""]

@@ -221,8 +221,17 @@ def _how_far(m: dict, states, units) -> str:
             name = states[i] if i < len(states) else f"state {i}"
             unit = f" {units[i]}" if i < len(units) and units[i] else ""
             side = f"{'-inf' if lo is None else f'{lo:.4g}'} to {'inf' if hi is None else f'{hi:.4g}'}"
-            out.append(f"{name} {a:.4g} to {b:.4g}{unit} (region {side})")
+            out.append(f"{name} {_apart(a, lo)} to {_apart(b, hi)}{unit} (region {side})")
     return f": the runs take {', '.join(out)}" if out else ""
+
+
+def _apart(v: float, bound) -> str:
+    """``v`` to 4 significant digits, more where that would print it as its region's ``bound``."""
+    for digits in (4, 8, 17):
+        text = f"{v:.{digits}g}"
+        if bound is None or v == bound or text != f"{bound:.{digits}g}":
+            return text
+    return text
 
 
 def _c_range_verdict(m: dict, add, outputs) -> None:

@@ -353,8 +353,8 @@ def test_global_figures(res):
         for r in (free, noftc, ftc):
             out |= np.any((r.x < lo) | (r.x > hi), axis=-1)
         check("outside_region", doc["outside_region"], out.mean())
-        assert doc["region"] == {"lo": [None if np.isinf(v) else v for v in lo.tolist()],
-                                 "hi": [None if np.isinf(v) else v for v in hi.tolist()]}  # fmt: skip
+        assert doc["region"] == {"lo": [v if np.isfinite(v) else None for v in lo.tolist()],
+                                 "hi": [v if np.isfinite(v) else None for v in hi.tolist()]}  # fmt: skip
     # where the plant ran: each state's extremes over the three runs, every path and sample
     every = np.concatenate([free.x, noftc.x, ftc.x], axis=0)
     check("state_range.lo", doc["state_range"]["lo"], every.min(axis=(0, 1)), exact=True)

@@ -352,3 +352,25 @@ def test_the_region_left_is_said_with_where_the_states_went():
                               "(region -inf to 0.3)")  # fmt: skip
     (old,) = verdicts.verdicts({k: m[k] for k in ("outside_region", "windows")})  # a document without them
     assert old["text"].endswith("is not exact")
+    # an excursion that 4 digits would print as its bound is printed with more
+    near = {**m, "state_range": {"lo": [-0.5, -20.0, -0.2], "hi": [1.00004, 30.0, 0.2]}}
+    (v,) = verdicts.verdicts(near, states=["e", "v", "j"])
+    assert v["text"].endswith(": the runs take e -0.5 to 1.00004 (region -1 to 1)")
+    # fte simulate's warnings pass the plant's state names and units on
+    said = _warnings(m, [], states=["e", "v", "j"], state_units=["mm", "mm/s", "A"])
+    assert said == [
+        "warning: " + verdicts.verdicts(m, states=["e", "v", "j"], state_units=["mm", "mm/s", "A"])[0]["text"]
+    ]
+
+
+def test_an_open_side_of_the_region_is_null_in_the_document():
+    """The builder leaves an open side NaN (an infinite one is open too): the metrics document's ``region`` holds
+    null there, so that it stays JSON, and the verdict reads it as open."""
+    from fte_casadi.sim._reduce import region_doc
+
+    nan, inf = float("nan"), float("inf")
+    assert region_doc(([-1.0, nan, -inf], [1.0, 2.0, nan])) == {
+        "lo": [-1.0, None, None],
+        "hi": [1.0, 2.0, None],
+    }
+    assert region_doc(None) is None

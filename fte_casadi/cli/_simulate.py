@@ -208,7 +208,8 @@ def _warnings(m: dict, inputs, faults=(), outputs=(), units=(), states=(), state
     """The verdicts of :func:`fte_casadi.verdicts.verdicts`, as warnings."""
     from ..verdicts import verdicts
 
-    return ["warning: " + v["text"] for v in verdicts(m, inputs, faults, outputs, units, states, state_units)]
+    return ["warning: " + v["text"]
+            for v in verdicts(m, inputs, faults, outputs, units, states=states, state_units=state_units)]  # fmt: skip
 
 
 def _why(d, m: dict) -> list[str]:
@@ -402,7 +403,7 @@ def _refuse_nonfinite(m: dict) -> None:
 def _say_simulation(d, plant, res, m: dict, as_json: bool) -> None:
     """The metrics (in words, or the document with ``--json``), the notes, the change of step and the warnings."""
     warn = _warnings(m, list(plant.input_names), list(plant.fault_names), list(plant.output_names),
-                     list(plant.output_units), list(plant.state_names), list(plant.state_units))  # fmt: skip
+                     list(plant.output_units), states=list(plant.state_names), state_units=list(plant.state_units))  # fmt: skip
     warn += _why(d, m)
     change = m.get("dt_change")
     if change:  # one step everywhere: a step other than the design's is said, also with --json (on stderr)
@@ -486,5 +487,6 @@ def sweep(
     for p in points:  # the per-window verdicts, as fte simulate gives them, named by their point
         at = ", ".join(f"{k} = {v:g}" for k, v in p["point"].items())
         for w in _warnings(p["metrics"], list(plant.input_names), list(plant.fault_names), list(plant.output_names),
-                           list(plant.output_units), list(plant.state_names), list(plant.state_units)):  # fmt: skip
+                           list(plant.output_units), states=list(plant.state_names),
+                           state_units=list(plant.state_units)):  # fmt: skip
             click.echo(textwrap.fill(f"fte: at {at}: {w}", width=100), err=True)

@@ -17,7 +17,7 @@ from ..verdicts import SATURATED as SATURATED
 from ..verdicts import WORSE_THAN_NONE as WORSE_THAN_NONE
 from ._intervals import clopper_pearson, rate_intervals, ratio_intervals
 from ._masks import SETTLE_FRACTION, _mask, after_span, allowance_masks, allowances, onset_mask, outside_mask
-from ._reduce import HYSTERESIS, sensor_gains, settling_time
+from ._reduce import HYSTERESIS, region_doc, sensor_gains, settling_time
 from ._result import SimulationResult
 
 __all__ = ["metrics", "metrics_from_arrays", "input_saturation", "alarms"]  # public: docs/api.md
@@ -401,14 +401,11 @@ def _outside_region(result: SimulationResult) -> np.ndarray:
 
 
 def _where_it_ran(result: SimulationResult) -> dict:
-    """Each state's extremes over the three runs (``state_range``) and the plant's region (an open side null)."""
+    """Each state's extremes over the three runs (``state_range``: over the recorded paths and samples) and the
+    plant's region (an open side null)."""
     xs = np.stack([result.free.x, result.no_ftc.x, result.ftc.x])
-    reg = None
-    if result.region is not None:
-        reg = {side: [float(v) if math.isfinite(float(v)) else None for v in vals]
-               for side, vals in zip(("lo", "hi"), result.region)}  # fmt: skip
     return {"state_range": {"lo": xs.min(axis=(0, 1, 2)).tolist(), "hi": xs.max(axis=(0, 1, 2)).tolist()},
-            "region": reg}  # fmt: skip
+            "region": region_doc(result.region)}  # fmt: skip
 
 
 def metrics(result: SimulationResult) -> dict:

@@ -102,8 +102,7 @@ def _monitor_names(lf: int, nw: int, n: int = 0) -> list[str]:
     )  # fmt: skip
 
 
-#: the start of a running minimum (``xlo``) or maximum (``xhi``) of a state: finite, so that ``--fast-math``
-#: (finite-math-only) keeps it
+#: the start of a running minimum (``xlo``) or maximum (``xhi``) of a state (any value seen replaces it)
 _UNSEEN = 1e300
 
 
@@ -290,13 +289,21 @@ def _where_it_ran(c: _Columns) -> dict:
     """``state_range``: each state's smallest and largest value over the three runs, every path and sample; and the
     plant's ``region`` beside it (an open side null)."""
     n = sum(1 for nm in c.mo.mon_names if nm.startswith("xlo"))
-    region = c.meta.get("region")
     return {
         "state_range": {"lo": [float(np.min(c.mcol[f"xlo{i}"])) for i in range(n)],
                         "hi": [float(np.max(c.mcol[f"xhi{i}"])) for i in range(n)]},
-        "region": None if region is None else
-        {side: [float(v) if math.isfinite(float(v)) else None for v in vals] for side, vals in zip(("lo", "hi"), region)},
+        "region": region_doc(c.meta.get("region")),
     }  # fmt: skip
+
+
+def region_doc(region) -> dict | None:
+    """The plant's region ``(lo, hi)`` as the metrics document holds it: an open side (inf or NaN) null."""
+    if region is None:
+        return None
+    return {
+        side: [float(v) if math.isfinite(float(v)) else None for v in vals]
+        for side, vals in zip(("lo", "hi"), region)
+    }
 
 
 def _fsum(col) -> float:
