@@ -255,7 +255,8 @@ def _c_range_verdict(m: dict, add, outputs) -> None:
         f"{when}): there `fte codegen`'s step returns 3 and changes nothing, while this simulation's step runs on, "
         "so the C would not do what this run shows. The range is C x over the plant's region, widened on each side "
         "by 10 % of its width (100 % on an output with a sensor fault; less where the step is not finite): keep the plant in its region, or widen the region (b.region) "
-        "to where it runs and design again")  # fmt: skip
+        "to where it runs and design again, then simulate again: a design for a wider region is another loop, and "
+        "may run wider still")  # fmt: skip
 
 
 def _tolerance_verdicts(w: dict, add, faults, outputs, units) -> None:
