@@ -61,7 +61,9 @@ fault-free within 0.1-0.25 s. ``maglev_near`` is the same plant with its region 
 reaching 7.6 % of the region; at the default rate 42.7/s it was 0.34 %), and `fte simulate --paths 8 --seed 1`
 measures the coil at a limit 2.2 % of the time, the actuator window's ``ftc_true_ratio`` 0.715 and the gap-sensor
 fault's estimate missing it (relative error 1.07: the outputs respond to it first the wrong way).
-Its sensor window measures 1.00000017 (tolerant control applies nothing there; the runs enter it 3e-6 mm apart).
+Its sensor window measures 1.00000017 (tolerant control applies nothing there; the runs enter it 3e-6 mm apart), and
+the 0.2 mm bias moves the true gap 0.536 mm RMS over it, with tolerant control and without (`fte simulate` warns:
+"sensor fault moves the plant"; docs/design.md, 2026-11-29).
 `fte tune tests/plant_levitation.py:maglev_near --trials 90 --seed 1` (12 min, measured 2026-11-29): 51 trials
 failed (infeasible, or the simulation diverged); of the 39 designed, only the default keeps the actuator window
 below 0.6, and those whose sensor window measures below 1 either leave the actuator window at 0.84-0.99 (tolerant
