@@ -365,7 +365,8 @@ def finalize(acc: np.ndarray, mon: np.ndarray, pm: np.ndarray, t: np.ndarray, mo
     ``meta``: ``paths, dt, T, seed, wall_s``, ``m`` (inputs), ``thresholds`` (per fault, the steady ones; inf:
     none), ``detection`` (the document's ``detection`` entries, thresholds and the asked rate, to complete),
     ``tau`` (the observer's slowest time constant, or None), ``sensor_gains`` (``|Df|``, outputs by faults, zero
-    for a fault that also enters a state equation: how each output reads a sensor fault; optional). The intervals (:mod:`._intervals`) are seeded
+    for a fault that also enters a state equation: how each output reads a sensor fault; optional), ``region``
+    (the plant's ``(lo, hi)``, written beside ``state_range``; optional). The intervals (:mod:`._intervals`) are seeded
     by ``seed`` and depend on the set of paths only."""
     from ._intervals import ratio_intervals
 
